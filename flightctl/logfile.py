@@ -1,0 +1,180 @@
+"""The measured-data files of `measured-data.md`: reading with one-line errors, and the flight log writer.
+
+Every reader returns a `Table`: float columns (empty cells and `nan` are NaN) plus the `# key: value`
+metadata. Errors name the file, the row (line number in the file) or column, and what is wrong.
+"""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+
+from flightctl.errors import InputError
+
+FLIGHT_COLUMNS = ("t", "P1", "P2", "P3", "P4", "gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z",
+                  "range", "battery_v", "roll", "pitch", "yaw", "alt",
+                  "roll_sp", "pitch_sp", "yaw_sp", "alt_sp")
+MAG_COLUMNS = ("mag_x", "mag_y", "mag_z")
+# Columns that may be empty on most rows: range is only written on rows where an echo arrived.
+SPARSE_COLUMNS = ("range",) + MAG_COLUMNS
+BENCH_COLUMNS = ("motor", "P", "thrust", "omega", "voltage", "current")
+YAW_DRAG_COLUMNS = ("torque", "yaw_rate")
+PENDULUM_COLUMNS = ("axis", "pivot_distance", "period")
+
+
+@dataclass
+class Table:
+    path: str
+    columns: dict[str, np.ndarray]
+    meta: dict[str, str] = field(default_factory=dict)
+    lines: np.ndarray | None = None  # file line number of each row, for error messages
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.columns[name]
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.columns
+
+    def __len__(self) -> int:
+        return len(self.lines) if self.lines is not None else 0
+
+    def row_line(self, i: int) -> int:
+        return int(self.lines[i])
+
+    def fail(self, what: str, row: int | None = None, column: str | None = None):
+        where = [self.path]
+        if row is not None:
+            where.append(f"row {self.row_line(row)}")
+        if column is not None:
+            where.append(f"column {column!r}")
+        raise InputError(f"{': '.join(where)}: {what}")
+
+
+def read_table(path: str | Path, required: tuple[str, ...], text_columns: tuple[str, ...] = (),
+               optional: tuple[str, ...] = (), min_rows: int = 1,
+               allow_missing: tuple[str, ...] = ()) -> Table:
+    """Read a CSV with a header row. `required` columns must be present; cells in them must be
+    numbers (or, in `allow_missing`, empty/nan). `text_columns` are kept as strings."""
+    path = str(path)
+    try:
+        f = open(path, newline="")
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.strerror})") from None
+    meta: dict[str, str] = {}
+    with f:
+        header, header_line = None, 0
+        rows, lines = [], []
+        for lineno, raw in enumerate(f, start=1):
+            s = raw.strip()
+            if not s:
+                continue
+            if s.startswith("#"):
+                key, sep, value = s[1:].partition(":")
+                if sep:
+                    meta[key.strip()] = value.strip()
+                continue
+            cells = next(csv.reader([raw]))
+            if header is None:
+                header, header_line = [c.strip() for c in cells], lineno
+                continue
+            rows.append(cells)
+            lines.append(lineno)
+    if header is None:
+        raise InputError(f"{path}: no header row (the file is empty)")
+    index = {name: i for i, name in enumerate(header)}
+    for name in required:
+        if name not in index:
+            raise InputError(f"{path}: missing column {name!r} (line {header_line} has: {', '.join(header)})")
+    if len(rows) < min_rows:
+        raise InputError(f"{path}: too short: {len(rows)} data rows, at least {min_rows} needed")
+    columns: dict[str, np.ndarray] = {}
+    for name in tuple(required) + tuple(c for c in optional if c in index):
+        i = index[name]
+        if name in text_columns:
+            columns[name] = np.array([(r[i].strip() if i < len(r) else "") for r in rows])
+            continue
+        values = np.empty(len(rows))
+        for k, r in enumerate(rows):
+            cell = r[i].strip() if i < len(r) else ""
+            if cell == "" or cell.lower() == "nan":
+                if name not in allow_missing:
+                    raise InputError(f"{path}: row {lines[k]}: column {name!r} is empty")
+                values[k] = math.nan
+                continue
+            try:
+                v = float(cell)
+            except ValueError:
+                raise InputError(f"{path}: row {lines[k]}: column {name!r}: {cell!r} is not a number") from None
+            if not math.isfinite(v):
+                raise InputError(f"{path}: row {lines[k]}: column {name!r}: {cell!r} is not finite")
+            values[k] = v
+        columns[name] = values
+    return Table(path, columns, meta, np.array(lines))
+
+
+def read_flight_log(path: str | Path, min_seconds: float = 0.0, min_rows: int = 2) -> Table:
+    """A flight log as the contract defines it; time must be strictly increasing."""
+    table = read_table(path, FLIGHT_COLUMNS, optional=MAG_COLUMNS, min_rows=min_rows,
+                       allow_missing=SPARSE_COLUMNS + ("battery_v",))
+    t = table["t"]
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        table.fail(f"time is not increasing (t = {t[k]:g} s after {t[k - 1]:g} s)", row=k, column="t")
+    if t[-1] - t[0] < min_seconds:
+        table.fail(f"too short to judge: {t[-1] - t[0]:.2f} s of data, at least {min_seconds:g} s needed")
+    return table
+
+
+class FlightLogWriter:
+    """Writes the contract flight log. Rows are kept as tuples and written in chunks (once a second
+    at the loop rate), so the loop pays one tuple per iteration and a crash loses at most a chunk.
+
+    A row is `FLIGHT_COLUMNS` order plus `extra` columns; `range` is passed as a string ('' when no
+    echo arrived on that row) so that formatting costs nothing on the 9 rows out of 10 without one.
+    """
+
+    def __init__(self, out: str | Path | IO[str], meta: dict[str, str], extra: tuple[str, ...] = (),
+                 chunk: int = 450):
+        self._own = not hasattr(out, "write")
+        self._f = open(out, "w") if self._own else out
+        for key, value in meta.items():
+            for line in str(value).splitlines() or [""]:
+                self._f.write(f"# {key}: {line}\n")
+        self.columns = FLIGHT_COLUMNS + tuple(extra)
+        self._f.write(",".join(self.columns) + "\n")
+        fmts = {"t": "%.6f", "range": "%s"}
+        self._fmt = ",".join(fmts.get(c, "%.6g") for c in self.columns) + "\n"
+        self._rows: list[tuple] = []
+        self._chunk = chunk
+        self.count = 0
+
+    def append(self, row: tuple) -> None:
+        self._rows.append(row)
+        if len(self._rows) >= self._chunk:
+            self.flush()
+
+    def flush(self) -> None:
+        fmt = self._fmt
+        self._f.write("".join([fmt % r for r in self._rows]))
+        self.count += len(self._rows)
+        self._rows.clear()
+        self._f.flush()
+
+    def close(self) -> None:
+        if self._f is None:
+            return
+        self.flush()
+        if self._own:
+            self._f.close()
+        self._f = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

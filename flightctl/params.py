@@ -1,0 +1,196 @@
+"""Parameters as a schema: default, range, unit and source for each, loaded from TOML.
+
+A parameter file is flat TOML for the airframe (the names of ``conventions.md``) with two optional
+tables, ``[gains]`` and ``[filters]``. Anything unknown, mistyped or out of range is refused with
+one line that names the key: the program never flies with a bad file.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from flightctl.errors import InputError
+
+
+INERTIA_TOLERANCE = 0.10  # accepted excess of one principal inertia over the sum of the others
+
+
+def _p(default, unit, lo, hi, source, doc=""):
+    """One schema entry: stored as dataclass field metadata."""
+    return field(default=default, metadata=dict(unit=unit, lo=lo, hi=hi, source=source, doc=doc))
+
+
+@dataclass(frozen=True)
+class Airframe:
+    """The reference airframe (DJI Flame Wheel 450, E600 propulsion), conventions.md."""
+    M: float = _p(1.645, "kg", 0.05, 50.0, "paper, Table 2", "total mass")
+    l: float = _p(0.2475, "m", 0.02, 2.0, "paper, Table 2", "arm length, centre to motor axis")
+    g: float = _p(9.80665, "m/s^2", 9.7, 9.9, "paper, Table 2", "gravity")
+    Jxx: float = _p(0.014002764, "kg m^2", 1e-6, 10.0, "paper, Table 2", "roll inertia")
+    Jyy: float = _p(0.014267729, "kg m^2", 1e-6, 10.0, "paper, Table 2", "pitch inertia")
+    Jzz: float = _p(0.029487252, "kg m^2", 1e-6, 10.0, "paper, Table 2", "yaw inertia")
+    Jp: float = _p(2.66838e-4, "kg m^2", 0.0, 0.1, "paper, Table 2", "rotor (motor + propeller) inertia, eq. 19-21")
+    gamma1: float = _p(4.86291e-4, "N m/(rad/s)^2", 0.0, 1.0, "paper, Table 2", "quadratic yaw drag, eq. 6")
+    gamma2: float = _p(1.22958e-3, "N m", 0.0, 1.0, "paper, Table 2",
+                       "bearing friction of the yaw-drag rig, eq. 6; 0 in free flight")
+    h1: float = _p(1.49e-3, "N", 1e-7, 1.0, "plausible default (hover at P = 172)", "eq. 26 gain")
+    h2: float = _p(120.0, "P units", 0.0, 250.0, "plausible default", "eq. 26 dead zone")
+    c1: float = _p(1.47e-5, "N/(rad/s)^2", 1e-9, 1e-2, "plausible default (hover near 5000 RPM)", "eq. 27")
+    g1: float = _p(0.020, "N m/N", 0.0, 1.0, "plausible default", "eq. 28 slope")
+    g2: float = _p(0.002, "N m", -0.1, 0.1, "plausible default", "eq. 28 offset")
+    rotor_radius: float = _p(0.1524, "m", 0.005, 1.0, "12-inch propeller", "for ground effect")
+    battery_nominal_v: float = _p(14.8, "V", 1.0, 60.0, "4S LiPo", "voltage of the propeller identification")
+    loop_hz: float = _p(450.0, "Hz", 50.0, 2000.0, "paper, sections 3.3 and 4.4.1", "control loop rate")
+    esc_pwm_hz: float = _p(449.0, "Hz", 30.0, 450.0, "paper, section 4.4.1", "ESC signal frequency")
+    sonar_hz: float = _p(45.0, "Hz", 5.0, 60.0, "paper, section 4.2", "ultrasonic trigger rate")
+
+    def check(self) -> None:
+        """Physical consistency beyond the ranges: principal inertias obey the triangle inequality.
+
+        Measured inertias carry error: the paper's own Table 2 has Jzz 4.3 % above Jxx + Jyy (a flat
+        frame would have them equal), so a violation of up to INERTIA_TOLERANCE is accepted.
+        """
+        a, b, c = self.Jxx, self.Jyy, self.Jzz
+        for name, lhs, rhs in (("Jzz", a + b, c), ("Jyy", a + c, b), ("Jxx", b + c, a)):
+            if lhs * (1 + INERTIA_TOLERANCE) < rhs:
+                raise InputError(f"{name}: inertia {rhs:g} kg m^2 is not physical "
+                                 f"(a principal inertia cannot exceed the sum of the other two, {lhs:g})")
+        if self.esc_pwm_hz > self.loop_hz:
+            raise InputError("esc_pwm_hz: the ESC frequency cannot exceed the loop rate")
+
+    @property
+    def B(self) -> float:
+        """Base thrust per motor, M g / 4 (eq. 25)."""
+        return self.M * self.g / 4.0
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.loop_hz
+
+
+@dataclass(frozen=True)
+class Gains:
+    """PID gains of eq. 24. Defaults: Table 6 (flight); `TABLE4` keeps the simulation gains."""
+    kp_z: float = _p(2.4, "N/m", 0.0, 100.0, "paper, Table 6")
+    ki_z: float = _p(0.0, "N/(m s)", 0.0, 100.0, "paper, Table 6")
+    kd_z: float = _p(0.14, "N s/m", 0.0, 100.0, "paper, Table 6")
+    kp_phi: float = _p(4.48, "N/rad", 0.0, 100.0, "paper, Table 6")
+    ki_phi: float = _p(0.0045, "N/(rad s)", 0.0, 100.0, "paper, Table 6")
+    kd_phi: float = _p(0.221, "N s/rad", 0.0, 100.0, "paper, Table 6")
+    kp_theta: float = _p(4.12, "N/rad", 0.0, 100.0, "paper, Table 6")
+    ki_theta: float = _p(0.0045, "N/(rad s)", 0.0, 100.0, "paper, Table 6")
+    kd_theta: float = _p(0.13, "N s/rad", 0.0, 100.0, "paper, Table 6")
+    kp_psi: float = _p(7.55, "N/rad", 0.0, 100.0, "paper, Table 6")
+    ki_psi: float = _p(0.0, "N/(rad s)", 0.0, 100.0, "paper, Table 6")
+    kd_psi: float = _p(0.248, "N s/rad", 0.0, 100.0, "paper, Table 6")
+
+
+TABLE6 = Gains()
+TABLE4 = Gains(kp_z=1.9, ki_z=0.0, kd_z=1.6, kp_phi=17.1, ki_phi=0.0, kd_phi=1.3,
+               kp_theta=17.2, ki_theta=0.0, kd_theta=1.3, kp_psi=7.7, ki_psi=0.0, kd_psi=2.7)
+GAIN_SETS = {"table6": TABLE6, "table4": TABLE4}
+
+
+@dataclass(frozen=True)
+class Filters:
+    """Table 5: every value there is a power-of-two time constant in loop periods."""
+    alpha_ema: float = _p(1.0 - math.exp(-1.0 / 128.0), "-", 1e-6, 1.0, "paper, Table 5 (eq. 39, tau = 128 dt)")
+    alpha_roll_pitch: float = _p(128.0 / 129.0, "-", 0.0, 1.0, "paper, Table 5 (tau = 128 dt)")
+    alpha_yaw: float = _p(64.0 / 65.0, "-", 0.0, 1.0, "paper, Table 5 (tau = 64 dt)")
+
+
+@dataclass(frozen=True)
+class Params:
+    airframe: Airframe = Airframe()
+    gains: Gains = TABLE6
+    filters: Filters = Filters()
+
+
+def schema(cls) -> list[dataclasses.Field]:
+    return list(dataclasses.fields(cls))
+
+
+def _build(cls, table: dict, where: str, base=None):
+    base = base if base is not None else cls()
+    known = {f.name: f for f in dataclasses.fields(cls)}
+    values = {}
+    for key, value in table.items():
+        name = f"{where}{key}"
+        if key not in known:
+            raise InputError(f"{name}: unknown parameter (known: {', '.join(sorted(known))})")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(f"{name}: expected a number, got {type(value).__name__} {value!r}")
+        value = float(value)
+        meta = known[key].metadata
+        if not math.isfinite(value) or not meta["lo"] <= value <= meta["hi"]:
+            raise InputError(f"{name}: {value:g} {meta['unit']} is out of range "
+                             f"[{meta['lo']:g}, {meta['hi']:g}]")
+        values[key] = value
+    return dataclasses.replace(base, **values)
+
+
+def from_dict(data: dict, gains: Gains | None = None) -> Params:
+    """Validate a parsed TOML document. `gains` picks the base gain set that [gains] overrides."""
+    data = dict(data)
+    tables = {"gains": (Gains, gains or TABLE6), "filters": (Filters, Filters())}
+    built = {}
+    for name, (cls, base) in tables.items():
+        table = data.pop(name, {})
+        if not isinstance(table, dict):
+            raise InputError(f"{name}: expected a table [{name}]")
+        preset = table.pop("preset", None) if cls is Gains else None
+        if preset is not None:
+            if preset not in GAIN_SETS:
+                raise InputError(f"gains.preset: unknown gain set {preset!r} (known: {', '.join(GAIN_SETS)})")
+            base = GAIN_SETS[preset]
+        built[name] = _build(cls, table, f"{name}.", base)
+    airframe = _build(Airframe, data, "")
+    airframe.check()
+    return Params(airframe=airframe, **built)
+
+
+def load(path: str | Path | None, gains: Gains | None = None) -> Params:
+    """Load and validate a parameter file; None gives the shipped reference airframe."""
+    if path is None:
+        return from_dict({}, gains)
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.strerror})") from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"{path}: not valid TOML ({e})") from None
+    try:
+        return from_dict(data, gains)
+    except InputError as e:
+        raise InputError(f"{path}: {e}") from None
+
+
+def dumps(params: Params, sources: dict[str, str] | None = None) -> str:
+    """TOML text of a parameter set, with unit and source of each value as comments."""
+    sources = sources or {}
+    lines = ["# flightctl parameter file (SI units; see conventions.md)"]
+
+    def emit(obj):
+        for f in dataclasses.fields(obj):
+            source = sources.get(f.name, f.metadata["source"])
+            lines.append(f"{f.name} = {getattr(obj, f.name)!r}  # {f.metadata['unit']}; {source}")
+
+    emit(params.airframe)
+    for name in ("gains", "filters"):
+        lines.append(f"\n[{name}]")
+        emit(getattr(params, name))
+    return "\n".join(lines) + "\n"
+
+
+def update_file(path: str | Path, values: dict[str, float], source: str) -> Params:
+    """Write fitted airframe values into a parameter file (created if missing), validated first."""
+    path = Path(path)
+    data = tomllib.loads(path.read_text()) if path.exists() else {}
+    data.update(values)
+    params = from_dict(data)
+    path.write_text(dumps(params, {k: source for k in values}))
+    return params
