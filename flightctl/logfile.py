@@ -91,8 +91,38 @@ def read_table(path: str | Path, required: tuple[str, ...], text_columns: tuple[
             raise InputError(f"{path}: missing column {name!r} (line {header_line} has: {', '.join(header)})")
     if len(rows) < min_rows:
         raise InputError(f"{path}: too short: {len(rows)} data rows, at least {min_rows} needed")
+    wanted = tuple(required) + tuple(c for c in optional if c in index)
+    columns = {} if text_columns else _fast_columns(rows, index, wanted, allow_missing)
+    if columns is None or text_columns:
+        columns = _checked_columns(path, rows, lines, index, wanted, text_columns, allow_missing)
+    return Table(path, columns, meta, np.array(lines))
+
+
+def _fast_columns(rows, index, wanted, allow_missing):
+    """All numeric, no missing cell where one is not allowed: one numpy conversion per column.
+    None sends the caller to the cell-by-cell path, which finds and names what is wrong."""
+    try:
+        width = len(index)
+        if any(len(r) != width for r in rows):
+            return None
+        out = {}
+        for name in wanted:
+            i = index[name]
+            cells = [r[i] for r in rows]
+            if name in allow_missing:
+                cells = [c if c.strip() else "nan" for c in cells]
+            values = np.array(cells, dtype=float)
+            if not np.isfinite(values).all() and (name not in allow_missing or np.isinf(values).any()):
+                return None
+            out[name] = values
+        return out
+    except ValueError:
+        return None
+
+
+def _checked_columns(path, rows, lines, index, wanted, text_columns, allow_missing):
     columns: dict[str, np.ndarray] = {}
-    for name in tuple(required) + tuple(c for c in optional if c in index):
+    for name in wanted:
         i = index[name]
         if name in text_columns:
             columns[name] = np.array([(r[i].strip() if i < len(r) else "") for r in rows])
@@ -113,12 +143,14 @@ def read_table(path: str | Path, required: tuple[str, ...], text_columns: tuple[
                 raise InputError(f"{path}: row {lines[k]}: column {name!r}: {cell!r} is not finite")
             values[k] = v
         columns[name] = values
-    return Table(path, columns, meta, np.array(lines))
+    return columns
 
 
-def read_flight_log(path: str | Path, min_seconds: float = 0.0, min_rows: int = 2) -> Table:
-    """A flight log as the contract defines it; time must be strictly increasing."""
-    table = read_table(path, FLIGHT_COLUMNS, optional=MAG_COLUMNS, min_rows=min_rows,
+def read_flight_log(path: str | Path, min_seconds: float = 0.0, min_rows: int = 2,
+                    extra: tuple[str, ...] = ()) -> Table:
+    """A flight log as the contract defines it; time must be strictly increasing. `extra` names
+    further columns to keep when present."""
+    table = read_table(path, FLIGHT_COLUMNS, optional=MAG_COLUMNS + tuple(extra), min_rows=min_rows,
                        allow_missing=SPARSE_COLUMNS + ("battery_v",))
     t = table["t"]
     bad = np.flatnonzero(np.diff(t) <= 0)

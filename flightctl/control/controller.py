@@ -1,0 +1,65 @@
+"""The flight controller: estimator, four PIDs (eq. 24) and the mixer (eq. 25-26). No I/O: the loop
+feeds it IMU samples, echoes and setpoints and sends the PWM counts it leaves in `counts`."""
+from __future__ import annotations
+
+from math import cos
+
+from flightctl.control.estimator import AttitudeEstimator
+from flightctl.control.mixer import Mixer
+from flightctl.control.pid import Pid
+from flightctl.hal import ImuSample
+from flightctl.params import Params
+
+
+class FlightController:
+    __slots__ = ("est", "mixer", "pid_z", "pid_roll", "pid_pitch", "pid_yaw", "counts",
+                 "uz", "alt", "alt_prev", "alt_sp", "alt_t", "sonar_period")
+
+    def __init__(self, params: Params, estimator=None, structure: str = "flight"):
+        a, g = params.airframe, params.gains
+        B = a.B  # Table 3: every u within [-B, B]
+        self.est = estimator if estimator is not None else AttitudeEstimator(params.filters, structure)
+        self.mixer = Mixer(a)
+        self.pid_z = Pid(g.kp_z, g.ki_z, g.kd_z, B)
+        self.pid_roll = Pid(g.kp_phi, g.ki_phi, g.kd_phi, B)
+        self.pid_pitch = Pid(g.kp_theta, g.ki_theta, g.kd_theta, B)
+        self.pid_yaw = Pid(g.kp_psi, g.ki_psi, g.kd_psi, B, angle=True)
+        self.counts = [0, 0, 0, 0]
+        self.sonar_period = 1.0 / a.sonar_hz
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the state on the ground before take-off."""
+        for pid in (self.pid_z, self.pid_roll, self.pid_pitch, self.pid_yaw):
+            pid.reset()
+        self.uz = 0.0
+        self.alt = self.alt_prev = 0.0
+        self.alt_sp = 0.0
+        self.alt_t = None
+
+    def on_range(self, distance: float, t: float) -> None:
+        """The altitude task, run on each echo (about 45 Hz): the range along -z_b, levelled by the
+        estimated tilt, is the altitude. A failed measurement (NaN: no echo, or closer than the
+        sensor's 2 cm, as on the floor) holds the last altitude and the task still runs, so a rising
+        setpoint lifts the vehicle off the floor."""
+        if distance == distance:
+            est = self.est
+            self.alt = distance * cos(est.roll) * cos(est.pitch)
+        dt = t - self.alt_t if self.alt_t is not None else self.sonar_period
+        self.alt_t = t
+        if dt > 0.0:   # eq. 24: the derivative is the difference quotient of the altitude
+            self.uz = self.pid_z.update(self.alt_sp, self.alt, (self.alt - self.alt_prev) / dt, dt)
+            self.alt_prev = self.alt
+
+    def step(self, s: ImuSample, dt: float, roll_sp: float, pitch_sp: float, yaw_sp: float,
+             alt_sp: float) -> list[int]:
+        est = self.est
+        est.update(s, dt)
+        self.alt_sp = alt_sp
+        roll, pitch = est.roll, est.pitch
+        self.mixer.mix(self.uz,
+                       self.pid_roll.update(roll_sp, roll, est.droll, dt),
+                       self.pid_pitch.update(pitch_sp, pitch, est.dpitch, dt),
+                       self.pid_yaw.update(yaw_sp, est.yaw, est.dyaw, dt),
+                       roll, pitch, self.counts)
+        return self.counts

@@ -1,0 +1,133 @@
+"""Attitude from the IMU: EMA on the gyro (eq. 36-39), tilt from the accelerometer (eq. 30-31), yaw
+from the magnetometer (eq. 32 restated for this project's frames), fused by complementary filters
+(eq. 33-35) with the values of Table 5; plus the still-average bias calibration of section 4.4.4.
+"""
+from __future__ import annotations
+
+from math import atan2, cos, pi, sin, sqrt
+
+from flightctl.control.pid import wrap
+from flightctl.hal import ImuSample
+from flightctl.params import Filters
+
+
+def tilt_from_accel(ax: float, ay: float, az: float) -> tuple[float, float]:
+    """Eq. 30-31: roll = atan2(a_y, a_z), pitch = atan2(-a_x, sqrt(a_y^2 + a_z^2))."""
+    return atan2(ay, az), atan2(-ax, sqrt(ay * ay + az * az))
+
+
+def heading_from_mag(mx: float, my: float, mz: float, roll: float, pitch: float) -> float:
+    """Eq. 32 for a body frame x forward, y left, z up (the paper's is North-East-Down): level the
+    body-frame field with Ry(pitch) Rx(roll), then yaw = atan2(-m_y, m_x) of the levelled field."""
+    sr, cr, sp, cp = sin(roll), cos(roll), sin(pitch), cos(pitch)
+    lx = cp * mx + sp * (sr * my + cr * mz)
+    ly = cr * my - sr * mz
+    return atan2(-ly, lx)
+
+
+ESTIMATORS = ("flight", "paper")
+
+
+class AttitudeEstimator:
+    """The onboard estimator. `update` runs once per loop; the controller reads `roll, pitch, yaw`
+    and their rates `droll, dpitch, dyaw` (the measured derivative of eq. 24's D term).
+
+    Two structures, both with the constants of Table 5 (see docs/estimator.md for why):
+    - "paper", section 4.4 read literally: the EMA-filtered gyro is integrated in the complementary
+      filter, the D term differentiates the fused angle, the accelerometer corrects tilt always.
+    - "flight" (the default): the calibrated gyro is integrated unfiltered, the D term takes the
+      EMA-filtered gyro (eq. 36-38) as the measured rate, and the accelerometer corrects tilt only
+      while the vehicle is not flying. In flight the accelerometer of a multirotor reads thrust
+      (and drag), not tilt: with the correction on, a held 5 degree command makes the true tilt
+      ramp at 5 deg / 0.28 s, and the 0.28 s EMA inside the angle loop leaves Table 6 unstable.
+    """
+    __slots__ = ("a_ema", "a_rp", "a_yaw", "paper", "in_flight", "p", "q", "r", "roll", "pitch", "yaw",
+                 "droll", "dpitch", "dyaw", "tilt_bias", "yaw_bias", "use_mag")
+
+    def __init__(self, filters: Filters, structure: str = "flight"):
+        if structure not in ESTIMATORS:
+            raise ValueError(f"unknown estimator {structure!r} (known: {', '.join(ESTIMATORS)})")
+        self.a_ema, self.a_rp, self.a_yaw = filters.alpha_ema, filters.alpha_roll_pitch, filters.alpha_yaw
+        self.paper = structure == "paper"
+        self.in_flight = False
+        self.set_reference((0.0, 0.0), 0.0, False)
+
+    def set_reference(self, tilt_bias: tuple[float, float], yaw_bias: float, use_mag: bool) -> None:
+        """The calibration's accelerometer-angle biases and magnetic heading reference; restarts."""
+        self.tilt_bias, self.yaw_bias, self.use_mag = tilt_bias, yaw_bias, use_mag
+        self.roll = self.pitch = self.yaw = 0.0
+        self.p = self.q = self.r = 0.0
+        self.droll = self.dpitch = self.dyaw = 0.0
+
+    def update(self, s: ImuSample, dt: float) -> None:
+        """One loop: `s` holds calibrated gyro rates (bias removed)."""
+        a = self.a_ema
+        b = 1.0 - a
+        p = self.p = a * s.gx + b * self.p      # eq. 36-38
+        q = self.q = a * s.gy + b * self.q
+        r = self.r = a * s.gz + b * self.r
+        roll, pitch, yaw = self.roll, self.pitch, self.yaw
+        sr, cr, sp, cp = sin(roll), cos(roll), sin(pitch), cos(pitch)
+        # Euler-angle rates (Z-Y-X) of the filtered rates: the D term's measurement ("flight")
+        w = q * sr + r * cr
+        self.droll, self.dpitch, self.dyaw = p + w * sp / cp, q * cr - r * sr, w / cp
+        if not self.paper:   # the propagation integrates the unfiltered rates
+            w = s.gy * sr + s.gz * cr
+            p, q, r = s.gx, s.gy, s.gz
+        roll_g = roll + (p + w * sp / cp) * dt
+        pitch_g = pitch + (q * cr - r * sr) * dt
+        yaw_g = yaw + w / cp * dt
+        a = self.a_rp
+        if self.paper or not self.in_flight:
+            ax, ay, az = s.ax, s.ay, s.az
+            roll_g = a * roll_g + (1.0 - a) * (atan2(ay, az) - self.tilt_bias[0])        # eq. 30, 33
+            pitch_g = a * pitch_g + (1.0 - a) * (atan2(-ax, sqrt(ay * ay + az * az))     # eq. 31, 34
+                                                 - self.tilt_bias[1])
+        if self.use_mag and s.mag_fresh:         # eq. 35, the difference taken across +-pi
+            yaw_mag = heading_from_mag(s.mx, s.my, s.mz, roll_g, pitch_g) - self.yaw_bias
+            yaw_g += (1.0 - self.a_yaw) * ((yaw_mag - yaw_g + pi) % (2 * pi) - pi)
+        yaw_g = (yaw_g + pi) % (2 * pi) - pi
+        if self.paper:   # eq. 24 literally: the difference quotient of the fused angles
+            self.droll, self.dpitch = (roll_g - roll) / dt, (pitch_g - pitch) / dt
+            self.dyaw = ((yaw_g - yaw + pi) % (2 * pi) - pi) / dt
+        self.roll, self.pitch, self.yaw = roll_g, pitch_g, yaw_g
+
+
+class Calibration:
+    """Section 4.4.4: sit still, average the gyro (its bias), the accelerometer angles (their bias)
+    and the magnetometer heading (the yaw reference). The paper sat for 1 minute."""
+
+    def __init__(self):
+        self.n = self.n_mag = 0
+        self.sums = [0.0] * 7   # gx, gy, gz, roll, pitch, cos(heading), sin(heading)
+        self.gyro_bias = (0.0, 0.0, 0.0)
+
+    def add(self, s: ImuSample) -> None:
+        self.n += 1
+        m = self.sums
+        m[0] += s.gx
+        m[1] += s.gy
+        m[2] += s.gz
+        roll, pitch = tilt_from_accel(s.ax, s.ay, s.az)
+        m[3] += roll
+        m[4] += pitch
+        if s.mag_fresh:
+            h = heading_from_mag(s.mx, s.my, s.mz, roll, pitch)
+            self.n_mag += 1
+            m[5] += cos(h)
+            m[6] += sin(h)
+
+    def apply(self, estimator) -> None:
+        """Fix the gyro bias (subtract it with `correct`) and give the estimator its references."""
+        if self.n == 0:
+            raise RuntimeError("calibration took no IMU samples")
+        m, n = self.sums, self.n
+        self.gyro_bias = (m[0] / n, m[1] / n, m[2] / n)
+        use_mag = self.n_mag > 0
+        estimator.set_reference((m[3] / n, m[4] / n), atan2(m[6], m[5]) if use_mag else 0.0, use_mag)
+
+    def correct(self, s: ImuSample) -> None:
+        b = self.gyro_bias
+        s.gx -= b[0]
+        s.gy -= b[1]
+        s.gz -= b[2]

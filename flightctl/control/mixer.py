@@ -1,0 +1,39 @@
+"""The mixer of eq. 25 with the tilt correction of u_z and the limits of Table 3, then eq. 26
+inverted (thrust -> command value P) and P -> PWM counts on pigpio's 0..40000 range."""
+from __future__ import annotations
+
+from math import cos, sqrt
+
+from flightctl.hal import PWM_RANGE
+from flightctl.params import Airframe
+
+MIN_TILT_COSINE = 0.5  # beyond 60 degrees of tilt the u_z correction is held (and the vehicle is lost)
+
+
+class Mixer:
+    __slots__ = ("B", "fmax", "h1", "h2", "scale", "f")
+
+    def __init__(self, a: Airframe):
+        self.B = a.B                       # base thrust M g / 4 (eq. 25)
+        self.fmax = 2.0 * a.B              # Table 3: 0 <= f_i <= 2B
+        self.h1, self.h2 = a.h1, a.h2
+        self.scale = PWM_RANGE / 255.0     # P (0..255) -> counts, conventions.md
+        self.f = [0.0, 0.0, 0.0, 0.0]      # the last thrusts, N (for logs and tests)
+
+    def mix(self, uz: float, uphi: float, utheta: float, upsi: float, roll: float, pitch: float,
+            counts: list[int]) -> None:
+        """Eq. 25: f = B + u_z / (cos(roll) cos(pitch)) + [-u_t, +u_p, +u_t, -u_p] + [+u_y, -u_y, +u_y, -u_y],
+        each u already within [-B, B] (the PIDs' limit), each f clipped to [0, 2B]; written as counts."""
+        c = cos(roll) * cos(pitch)
+        base = self.B + uz / (c if c > MIN_TILT_COSINE else MIN_TILT_COSINE)
+        f = self.f
+        f[0] = base - utheta + upsi
+        f[1] = base + uphi - upsi
+        f[2] = base + utheta + upsi
+        f[3] = base - uphi - upsi
+        fmax, h1, h2, scale = self.fmax, self.h1, self.h2, self.scale
+        for i in range(4):
+            fi = f[i]
+            fi = 0.0 if fi < 0.0 else fmax if fi > fmax else fi
+            f[i] = fi
+            counts[i] = int(scale * (h2 + sqrt(fi / h1)) + 0.5)   # eq. 26 inverted, then rounded counts

@@ -1,0 +1,111 @@
+"""MPU-9250 over SPI (spidev), with the AK8963 magnetometer read through the MPU's I2C master.
+
+Frames: the chip is mounted with its x toward motor 1 and z up, so accelerometer and gyro axes are
+the body axes. The AK8963 axes are (x_mpu = y_ak, y_mpu = x_ak, z_mpu = -z_ak); the driver converts
+once, here, and reports the field in the body frame (x forward, y left, z up) in tesla.
+"""
+from __future__ import annotations
+
+import math
+import struct
+import time
+
+from flightctl.drivers import mpu9250_regs as reg
+from flightctl.hal import ImuSample, SpiDevice
+
+G = 9.80665
+_HEAD = struct.Struct(">7h")    # accel x y z, temperature, gyro x y z: big-endian int16
+_MAG = struct.Struct("<3hB")     # then the AK8963 data, little-endian int16, and ST2
+
+
+class ImuError(Exception):
+    """The IMU is absent, the wrong chip, or not answering."""
+
+
+class Mpu9250:
+    """`start()` configures the chip; `read(sample)` does one burst read and fills the sample in SI."""
+
+    def __init__(self, spi: SpiDevice, accel_fs: int = 2, gyro_fs: int = 1, dlpf: int = 1,
+                 sleep=time.sleep):
+        if accel_fs not in range(4) or gyro_fs not in range(4):
+            raise ValueError("full-scale selections are 0..3")
+        self.spi = spi
+        self.accel_fs, self.gyro_fs, self.dlpf = accel_fs, gyro_fs, dlpf
+        self._sleep = sleep
+        self._a = G / reg.ACCEL_LSB_PER_G[accel_fs]                  # m/s^2 per LSB
+        self._g = math.radians(1.0) / reg.GYRO_LSB_PER_DPS[gyro_fs]   # rad/s per LSB
+        self._tx = [reg.READ | reg.ACCEL_XOUT_H] + [0] * reg.BURST_LEN
+        self.has_mag = False
+        self.temperature = 0.0
+
+    # --- register access -------------------------------------------------------------------
+    def write(self, register: int, value: int) -> None:
+        self.spi.xfer2([register & 0x7F, value & 0xFF])
+
+    def read_reg(self, register: int) -> int:
+        return self.spi.xfer2([reg.READ | register, 0])[1]
+
+    def _ak_write(self, register: int, value: int) -> None:
+        self.write(reg.I2C_SLV0_ADDR, reg.AK8963_ADDR)
+        self.write(reg.I2C_SLV0_REG, register)
+        self.write(reg.I2C_SLV0_DO, value)
+        self.write(reg.I2C_SLV0_CTRL, reg.SLV_EN | 1)
+        self._sleep(0.01)
+
+    def _ak_read(self, register: int) -> int:
+        self.write(reg.I2C_SLV0_ADDR, reg.READ | reg.AK8963_ADDR)
+        self.write(reg.I2C_SLV0_REG, register)
+        self.write(reg.I2C_SLV0_CTRL, reg.SLV_EN | 1)
+        self._sleep(0.01)
+        return self.read_reg(reg.EXT_SENS_DATA_00)
+
+    # --- lifecycle ---------------------------------------------------------------------------
+    def start(self) -> None:
+        self.spi.max_speed_hz = reg.SETUP_SPI_HZ
+        self.write(reg.PWR_MGMT_1, reg.H_RESET)
+        self._sleep(0.1)
+        self.write(reg.PWR_MGMT_1, reg.CLKSEL_PLL)
+        who = self.read_reg(reg.WHO_AM_I)
+        if who != reg.WHO_AM_I_MPU9250:
+            raise ImuError(f"IMU: WHO_AM_I returned 0x{who:02X}, expected 0x{reg.WHO_AM_I_MPU9250:02X} "
+                           "(MPU-9250); wrong chip or no chip on the SPI bus")
+        self.write(reg.USER_CTRL, reg.I2C_IF_DIS | reg.I2C_MST_EN)
+        self.write(reg.PWR_MGMT_2, 0x00)
+        self.write(reg.SMPLRT_DIV, 0)
+        self.write(reg.CONFIG, self.dlpf)
+        self.write(reg.GYRO_CONFIG, self.gyro_fs << 3)
+        self.write(reg.ACCEL_CONFIG, self.accel_fs << 3)
+        self.write(reg.ACCEL_CONFIG2, self.dlpf)
+        for r, v in ((reg.GYRO_CONFIG, self.gyro_fs << 3), (reg.ACCEL_CONFIG, self.accel_fs << 3)):
+            if self.read_reg(r) != v:
+                raise ImuError(f"IMU: register 0x{r:02X} reads back 0x{self.read_reg(r):02X} after writing 0x{v:02X}")
+        self.write(reg.I2C_MST_CTRL, reg.I2C_MST_400KHZ)
+        self._ak_write(reg.AK_CNTL2, 0x01)
+        self.has_mag = self._ak_read(reg.AK_WIA) == reg.AK_WIA_VALUE
+        if self.has_mag:
+            self._ak_write(reg.AK_CNTL1, reg.AK_CNTL1_16BIT_100HZ)
+            self.write(reg.I2C_SLV0_ADDR, reg.READ | reg.AK8963_ADDR)   # from now on, every sample
+            self.write(reg.I2C_SLV0_REG, reg.AK_HXL)
+            self.write(reg.I2C_SLV0_CTRL, reg.SLV_EN | reg.MAG_READ_LEN)
+        self.spi.max_speed_hz = reg.READ_SPI_HZ
+
+    def read(self, out: ImuSample) -> bool:
+        """One burst read from ACCEL_XOUT_H; False (sample untouched) on a bus-error frame."""
+        rx = self.spi.xfer2(self._tx)
+        data = bytes(rx)
+        head = data[1:15]
+        if head == b"\x00" * 14 or head == b"\xff" * 14:
+            return False
+        ax, ay, az, temp, gx, gy, gz = _HEAD.unpack_from(data, 1)
+        mx, my, mz, st2 = _MAG.unpack_from(data, 15)
+        a, g = self._a, self._g
+        out.ax, out.ay, out.az = ax * a, ay * a, az * a
+        out.gx, out.gy, out.gz = gx * g, gy * g, gz * g
+        self.temperature = temp / reg.TEMP_LSB_PER_C + reg.TEMP_OFFSET_C
+        if self.has_mag and not st2 & reg.AK_ST2_HOFL:
+            m = reg.AK_TESLA_PER_LSB
+            out.mx, out.my, out.mz = my * m, mx * m, -mz * m   # AK8963 axes -> body axes
+            out.mag_fresh = True
+        else:
+            out.mag_fresh = False
+        return True

@@ -1,0 +1,112 @@
+"""`flightctl identify`: fit the paper's models (sections 3.2 and 4.1) to measured data.
+
+    flightctl identify bench|yaw-drag|pendulum|rotor FILE.csv --json OUT.json
+                       [--params P.toml] [--write-params P.toml] [--plot OUT.png]
+    flightctl identify rcbenchmark RUN.csv [RUN.csv ...] --out bench.csv
+    flightctl identify real-data [--data DIR] --out DIR
+
+Everything is read, checked and fitted, and the figure rendered, before the first file is written:
+bad input writes nothing (one line on stderr, exit status 2, see flightctl.cli).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import tomllib
+from pathlib import Path
+
+from flightctl import params as paramfile
+from flightctl.errors import InputError
+from flightctl.logfile import BENCH_COLUMNS, PENDULUM_COLUMNS, YAW_DRAG_COLUMNS, read_table
+from sim.identify import inertia, propeller, yaw_drag
+from sim.identify.fits import Identified
+
+KINDS = {  # kind: (help, columns, text columns, identify)
+    "bench": ("eq. 26-28 from one steady point per row and motor", BENCH_COLUMNS, (), propeller.identify),
+    "yaw-drag": ("eq. 6 from steady spins on the bearing", YAW_DRAG_COLUMNS, (), yaw_drag.identify),
+    "pendulum": ("eq. 17-18: Jxx, Jyy, Jzz from pendulum periods", PENDULUM_COLUMNS, ("axis",),
+                 inertia.identify_pendulum),
+    "rotor": ("eq. 19-21: Jp from blade and motor masses and radii", inertia.ROTOR_COLUMNS, ("part",),
+              inertia.identify_rotor),
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise InputError(message)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="flightctl identify", description="Fit the paper's models to measured data "
+                     "(formats: measured-data.md; the rotor format: docs/identification.md).")
+    sub = parser.add_subparsers(dest="kind", required=True, metavar="KIND")
+    for kind, (doc, *_rest) in KINDS.items():
+        p = sub.add_parser(kind, help=doc, description=doc)
+        p.add_argument("file", metavar="FILE.csv")
+        p.add_argument("--json", required=True, metavar="OUT.json", help="the fitted parameters with stderr")
+        p.add_argument("--params", metavar="P.toml", help="parameter file (the pendulum takes M and g from it)")
+        p.add_argument("--write-params", metavar="P.toml", help="write the fitted values into this parameter file")
+        p.add_argument("--plot", metavar="OUT.png", help="data, fit and residuals like the paper's figures 6-9")
+    p = sub.add_parser("rcbenchmark", help="convert RCbenchmark stand exports (one per motor, at most 4) "
+                       "to a bench.csv")
+    p.add_argument("runs", nargs="+", metavar="RUN.csv")
+    p.add_argument("--out", required=True, metavar="bench.csv")
+    p = sub.add_parser("real-data", help="report: the paper's propeller method against real thrust-stand data")
+    p.add_argument("--data", metavar="DIR", help="the real data (default: ../shared/data/real from the repo root)")
+    p.add_argument("--out", required=True, metavar="DIR", help="where the figures and identification.md go")
+    return parser
+
+
+def _check_writable(path: str) -> None:
+    parent = Path(path).resolve().parent
+    if not parent.is_dir():
+        raise InputError(f"{path}: cannot write, no directory {parent}")
+
+
+def _check_params_update(path: str, values: dict[str, float]) -> None:
+    """What `params.update_file` will do, without writing: refuse before anything is written."""
+    target = Path(path)
+    data = {}
+    if target.exists():
+        paramfile.load(target)
+        data = tomllib.loads(target.read_text())
+    try:
+        paramfile.from_dict({**data, **values})
+    except InputError as e:
+        raise InputError(f"{path}: the fitted values are refused by the parameter schema: {e}") from None
+
+
+def identify(args) -> Identified:
+    _doc, columns, text, fit = KINDS[args.kind]
+    airframe = paramfile.load(args.params).airframe
+    table = read_table(args.file, columns, text_columns=text)
+    result = fit(table, airframe)
+    for path in (args.json, args.write_params, args.plot):
+        if path:
+            _check_writable(path)
+    if args.write_params:
+        _check_params_update(args.write_params, result.values)
+    image = None
+    if args.plot:
+        from sim.identify.plots import png
+        image = png(result.figure())
+    Path(args.json).write_text(json.dumps(result.report, indent=2) + "\n")
+    if args.write_params:
+        paramfile.update_file(args.write_params, result.values, f"flightctl identify {args.kind} {args.file}")
+    if image is not None:
+        Path(args.plot).write_bytes(image)
+    return result
+
+
+def main(argv: list[str]) -> int:
+    args = _parser().parse_args(argv)
+    if args.kind == "rcbenchmark":
+        from sim.identify import realdata
+        lines = realdata.convert(args.runs, args.out)
+    elif args.kind == "real-data":
+        from sim.identify import realdata
+        lines = realdata.report(args.data, args.out)
+    else:
+        lines = identify(args).summary
+    print("\n".join(lines))
+    return 0

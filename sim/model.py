@@ -1,0 +1,204 @@
+"""The paper's identified dynamic model: 6-DOF rigid body (eq. 7, vector form), yaw drag (eq. 6),
+rotor gyroscopic term (eq. 9) and propellers (eq. 26-28), with a seam for the candidate extensions.
+
+One signature for the base model and every extension: `Model.f(t, x, u) -> xdot`, i.e.
+`f(t, x, u, params)` with the parameters bound in the `Model`. The state is
+
+    x = [x, y, z, vx, vy, vz, phi, theta, psi, p, q, r] + states of the extensions
+
+(position and velocity inertial, x North, y West, z Up; Z-Y-X Euler angles; body rates), and the
+input is `u = (P1, P2, P3, P4, battery_v)`: the command values of eq. 26 and the battery voltage.
+The arithmetic works on floats (the simulator, fast scalar code) and on numpy arrays (fitting many
+samples at once): trigonometry is taken from `math` or `numpy` by the type of the state.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from math import cos, sin, sqrt
+
+from flightctl.params import Airframe
+
+N_RIGID = 12
+_ZERO = (0.0, 0.0, 0.0)
+X, Y, Z, VX, VY, VZ, PHI, THETA, PSI, P, Q, R = range(N_RIGID)
+
+
+def _trig(v):
+    return np if isinstance(v, np.ndarray) else math
+
+
+def thrust_from_command(P, h1: float, h2: float):
+    """Eq. 26: f = h1 (P - h2)^2 above the dead zone, 0 below it. Floats or arrays."""
+    d = P - h2
+    d = (d + abs(d)) * 0.5  # max(d, 0) for both floats and arrays
+    return h1 * d * d
+
+
+def command_from_thrust(f: float, h1: float, h2: float) -> float:
+    """Eq. 26 inverted (the controller's side): the command that gives thrust f >= 0."""
+    return h2 + math.sqrt(f / h1) if f > 0.0 else 0.0
+
+
+def rotor_torque(f, g1: float, g2: float):
+    """Eq. 28: tau = (g1 f + g2) sgn(f); thrust is never negative, so sgn(f) is 1 for f > 0, else 0."""
+    return (g1 * f + g2) * (f > 0)
+
+
+def rotor_speed(f, c1: float):
+    """Eq. 27 inverted: omega = sqrt(f / c1)."""
+    return (f / c1) ** 0.5
+
+
+def yaw_drag(r, gamma1: float, gamma2: float):
+    """Eq. 6: tau_d = (gamma1 r^2 + gamma2) sgn(r)."""
+    sgn = 1.0 * (r > 0) - 1.0 * (r < 0)
+    return (gamma1 * r * r + gamma2) * sgn
+
+
+def body_torques(f1, f2, f3, f4, t1, t2, t3, t4, l: float):
+    """Roll, pitch and yaw torques of the "+" configuration (conventions.md, eq. 25 layout)."""
+    return l * (f2 - f4), l * (f3 - f1), t1 - t2 + t3 - t4
+
+
+def angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, a: Airframe):
+    """Eq. 7 (vector form): J dw/dt = tau - w x (J w + Jp Omega z_b) - tau_d z_b.
+
+    Eq. 8 as printed has the q row wrong (sign and Jxx for Jyy); this is the correct expansion."""
+    Jxx, Jyy, Jzz, Jp = a.Jxx, a.Jyy, a.Jzz, a.Jp
+    hz = Jzz * r + Jp * Omega
+    dp = (tau_phi - (q * hz - r * Jyy * q)) / Jxx
+    dq = (tau_theta - (r * Jxx * p - p * hz)) / Jyy
+    dr = (tau_psi - (p * Jyy * q - q * Jxx * p) - tau_d) / Jzz
+    return dp, dq, dr
+
+
+def rotation(phi, theta, psi):
+    """R = Rz(psi) Ry(theta) Rx(phi), body to inertial, as nine entries row by row."""
+    m = _trig(phi)
+    sf, cf, st, ct, sp, cp = m.sin(phi), m.cos(phi), m.sin(theta), m.cos(theta), m.sin(psi), m.cos(psi)
+    return (cp * ct, cp * st * sf - sp * cf, cp * st * cf + sp * sf,
+            sp * ct, sp * st * sf + cp * cf, sp * st * cf - cp * sf,
+            -st, ct * sf, ct * cf)
+
+
+class Effect:
+    """A candidate extension (measured-data.md). It plugs into the model at one or more hooks:
+
+    - `delay`: the commands reach the motors this much later (applied by the plant to `u`);
+    - `rotor(t, x, f_cmd, xdot)`: its own states (`n_states`, placed at `offset`) turn the
+      commanded thrusts into rotor thrusts, writing their derivatives into `xdot`;
+    - `scale(t, x, u, s)`: multiplies each rotor's thrust and torque (list `s` of four);
+    - `wrench(t, x, f, vb, force, torque)`: adds a body-frame force and torque (lists of three),
+      given the thrusts `f` and the body-frame velocity `vb`.
+    Subclasses in `sim.effects` override what they need; the base does nothing at every hook.
+    """
+    cause = "none"
+    n_states = 0
+    offset = 0
+    delay = 0.0
+    uses_rotor = uses_scale = uses_wrench = False
+
+    def __init__(self, **parameters: float):
+        self.parameters = dict(parameters)
+
+    def initial_states(self, f_cmd: list[float]) -> list[float]:
+        return []
+
+    def __repr__(self):
+        args = ",".join(f"{k}={v:g}" for k, v in self.parameters.items())
+        return f"{self.cause}:{args}" if args else self.cause
+
+
+class Model:
+    """The base model with extensions bound: `f(t, x, u)` is the one model signature."""
+
+    def __init__(self, airframe: Airframe, effects: tuple[Effect, ...] = (), bearing: bool = False):
+        self.a = airframe
+        self.effects = tuple(effects)
+        n = N_RIGID
+        for e in self.effects:
+            e.offset = n
+            n += e.n_states
+        self.n = n
+        self.delay = sum(e.delay for e in self.effects)
+        self._rotor = [e for e in self.effects if e.uses_rotor]
+        self._scale = [e for e in self.effects if e.uses_scale]
+        self._wrench = [e for e in self.effects if e.uses_wrench]
+        # gamma2 is the friction of the yaw-drag test bearing: zero in free flight (eq. 6).
+        self.gamma2 = airframe.gamma2 if bearing else 0.0
+
+    def initial_state(self, u) -> list[float]:
+        x = [0.0] * N_RIGID
+        f_cmd = self._commanded(u)
+        for e in self.effects:
+            x += e.initial_states(f_cmd)
+        return x
+
+    def _commanded(self, u):
+        a = self.a
+        return [thrust_from_command(u[i], a.h1, a.h2) for i in range(4)]
+
+    def forces(self, t, x, u, xdot=None):
+        """Per-rotor thrusts and torques (eq. 26, 28 and the extensions) and the extra body wrench."""
+        a = self.a
+        h1, h2 = a.h1, a.h2
+        f = [thrust_from_command(u[0], h1, h2), thrust_from_command(u[1], h1, h2),
+             thrust_from_command(u[2], h1, h2), thrust_from_command(u[3], h1, h2)]
+        for e in self._rotor:
+            f = e.rotor(t, x, f, xdot)
+        g1, g2 = a.g1, a.g2
+        tau = [(g1 * fi + g2) if fi > 0.0 else 0.0 for fi in f]  # eq. 28
+        if self._scale:
+            s = [1.0, 1.0, 1.0, 1.0]
+            for e in self._scale:
+                e.scale(t, x, u, s)
+            f = [f[i] * s[i] for i in range(4)]
+            tau = [tau[i] * s[i] for i in range(4)]
+        if not self._wrench:
+            return f, tau, _ZERO, _ZERO
+        force, torque = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        Rm = rotation(x[PHI], x[THETA], x[PSI])
+        vx, vy, vz = x[VX], x[VY], x[VZ]
+        vb = (Rm[0] * vx + Rm[3] * vy + Rm[6] * vz, Rm[1] * vx + Rm[4] * vy + Rm[7] * vz,
+              Rm[2] * vx + Rm[5] * vy + Rm[8] * vz)
+        for e in self._wrench:
+            e.wrench(t, x, f, vb, force, torque)
+        return f, tau, force, torque
+
+    def f(self, t, x, u):
+        """xdot = f(t, x, u): M dv/dt = R (F_ext + sum f z_b) - M g z, and eq. 7. Scalar code (fast);
+        the functions above it take arrays too, for fitting."""
+        a = self.a
+        xdot = [0.0] * self.n
+        (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque = self.forces(t, x, u, xdot)
+        phi, theta, psi, p, q, r = x[6:12]
+        sf, cf, st, ct, sp, cp = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
+        fx, fy, fz = force[0], force[1], force[2] + f1 + f2 + f3 + f4
+        iM = 1.0 / a.M
+        # R = Rz(psi) Ry(theta) Rx(phi) applied to the body force (fx, fy, fz)
+        bx = ct * fx + st * (sf * fy + cf * fz)
+        by = cf * fy - sf * fz
+        xdot[0], xdot[1], xdot[2] = x[3], x[4], x[5]
+        xdot[3] = (cp * bx - sp * by) * iM
+        xdot[4] = (sp * bx + cp * by) * iM
+        xdot[5] = (-st * fx + ct * (sf * fy + cf * fz)) * iM - a.g
+        w = q * sf + r * cf
+        xdot[6] = p + w * st / ct       # Z-Y-X Euler-angle kinematics
+        xdot[7] = q * cf - r * sf
+        xdot[8] = w / ct
+        l, c1 = a.l, a.c1
+        # eq. 9: Omega = -w1 + w2 - w3 + w4 (motors 1 and 3 turn clockwise), w from eq. 27
+        Omega = (-sqrt(f1 / c1) + sqrt(f2 / c1) - sqrt(f3 / c1) + sqrt(f4 / c1))
+        tau_d = (a.gamma1 * r * r + self.gamma2) * ((r > 0.0) - (r < 0.0))  # eq. 6
+        xdot[9], xdot[10], xdot[11] = angular_acceleration(
+            p, q, r, l * (f2 - f4) + torque[0], l * (f3 - f1) + torque[1],
+            t1 - t2 + t3 - t4 + torque[2], Omega, tau_d, a)
+        return xdot
+
+    def specific_force(self, t, x, u):
+        """What an accelerometer at the centre of mass reads, body frame: (sum f z_b + F_ext) / M."""
+        f, _, force, _ = self.forces(t, x, u)
+        M = self.a.M
+        return force[0] / M, force[1] / M, (force[2] + f[0] + f[1] + f[2] + f[3]) / M

@@ -1,0 +1,88 @@
+"""The simulated quadcopter: the model integrated with fixed-step RK4, a floor, and a delayed input.
+
+The controller holds its commands for one loop period (zero-order hold), so the plant integrates
+each period in `substeps` RK4 steps with the input constant across a step; an actuation delay is
+realised on the substep grid. The floor: the vehicle rests on z = 0 until its thrust lifts it, and
+a touchdown stops it (level, at rest), recording the touchdown speed.
+"""
+from __future__ import annotations
+
+from collections import deque
+
+from sim.model import PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Model, P
+
+
+class Plant:
+    def __init__(self, model: Model, dt: float, substeps: int = 2, battery_v: float = 16.0):
+        self.model = model
+        self.h = dt / substeps
+        self.substeps = substeps
+        self.t = 0.0
+        self.u = (0.0, 0.0, 0.0, 0.0, battery_v)
+        self.x = model.initial_state(self.u)
+        self.on_ground = True
+        self.touchdowns: list[tuple[float, float]] = []  # (time, vertical speed at contact)
+        self._lag = round(model.delay / self.h)           # delay in substeps
+        self._queue: deque = deque([self.u] * self._lag)
+
+    def command(self, P1: float, P2: float, P3: float, P4: float, battery_v: float) -> None:
+        """The input from now on (after the actuation delay, if any)."""
+        self._next = (P1, P2, P3, P4, battery_v)
+
+    def advance(self, dt: float) -> None:
+        """Integrate over one loop period with the last command held."""
+        u_new = getattr(self, "_next", self.u)
+        f, h = self.model.f, self.h
+        for _ in range(self.substeps):
+            if self._lag:
+                self._queue.append(u_new)
+                self.u = self._queue.popleft()
+            else:
+                self.u = u_new
+            x, t, u = self.x, self.t, self.u
+            if self.on_ground and not self._lifts(x, u):
+                self.t = t + h
+                continue
+            self.on_ground = False
+            k1 = f(t, x, u)
+            x2 = [a + 0.5 * h * b for a, b in zip(x, k1)]
+            k2 = f(t + 0.5 * h, x2, u)
+            x3 = [a + 0.5 * h * b for a, b in zip(x, k2)]
+            k3 = f(t + 0.5 * h, x3, u)
+            x4 = [a + h * b for a, b in zip(x, k3)]
+            k4 = f(t + h, x4, u)
+            h6 = h / 6.0
+            self.x = [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
+            self.t = t + h
+            if self.x[Z] < 0.0:
+                self._touch_down()
+
+    def _lifts(self, x, u) -> bool:
+        """On the floor the vehicle stays put until the vertical thrust exceeds its weight."""
+        _, _, fz = self.model.specific_force(self.t, x, u)
+        return fz > self.model.a.g
+
+    def _touch_down(self) -> None:
+        x = self.x
+        self.touchdowns.append((self.t, x[VZ]))
+        for i in (Z, VX, VY, VZ, PHI, THETA, P, Q, R):
+            x[i] = 0.0
+        self.on_ground = True
+
+    def specific_force(self) -> tuple[float, float, float]:
+        """Accelerometer truth: on the floor the reaction of the floor, (0, 0, g)."""
+        if self.on_ground:
+            return 0.0, 0.0, self.model.a.g
+        return self.model.specific_force(self.t, self.x, self.u)
+
+    @property
+    def position(self):
+        return self.x[X], self.x[Y], self.x[Z]
+
+    @property
+    def attitude(self):
+        return self.x[PHI], self.x[THETA], self.x[PSI]
+
+    @property
+    def rates(self):
+        return self.x[P], self.x[Q], self.x[R]
