@@ -171,7 +171,7 @@ class FlightLogWriter:
     """
 
     def __init__(self, out: str | Path | IO[str], meta: dict[str, str], extra: tuple[str, ...] = (),
-                 chunk: int = 450):
+                 chunk: int = 450, keep: bool = False):
         self._own = not hasattr(out, "write")
         self._f = open(out, "w") if self._own else out
         for key, value in meta.items():
@@ -184,6 +184,9 @@ class FlightLogWriter:
         self._rows: list[tuple] = []
         self._chunk = chunk
         self.count = 0
+        self.path = str(out) if self._own else getattr(out, "name", "<log>")
+        self.meta = {k: str(v) for k, v in meta.items()}
+        self._kept: list[tuple] | None = [] if keep else None
 
     def append(self, row: tuple) -> None:
         self._rows.append(row)
@@ -193,9 +196,21 @@ class FlightLogWriter:
     def flush(self) -> None:
         fmt = self._fmt
         self._f.write("".join([fmt % r for r in self._rows]))
+        if self._kept is not None:
+            self._kept.extend(self._rows)
         self.count += len(self._rows)
         self._rows.clear()
         self._f.flush()
+
+    def table(self) -> Table:
+        """What was written, as read back (needs `keep=True`), without parsing the file again."""
+        rows = self._kept
+        k = self.columns.index("range")
+        ranges = np.array([float(r[k]) if r[k] else math.nan for r in rows])
+        data = np.array([r[:k] + (0.0,) + r[k + 1:] for r in rows], dtype=float).reshape(len(rows), -1)
+        columns = {name: data[:, i] for i, name in enumerate(self.columns)}
+        columns["range"] = ranges
+        return Table(self.path, columns, dict(self.meta), np.arange(len(rows)) + 2 + len(self.meta))
 
     def close(self) -> None:
         if self._f is None:

@@ -18,6 +18,7 @@ import random
 import struct
 from dataclasses import dataclass
 
+import numpy as np
 import pigpio
 
 from flightctl.drivers import mpu9250_regs as reg
@@ -49,6 +50,26 @@ class SensorNoise:
         return SensorNoise(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
+class NoisePool:
+    """Standard normal numbers drawn in blocks by numpy: the per-sample cost of `next()` is an index."""
+
+    def __init__(self, seed: int, block: int = 1 << 16):
+        self._gen = np.random.default_rng(seed)
+        self._block = block
+        self._refill()
+
+    def _refill(self) -> None:
+        self._values = self._gen.standard_normal(self._block).tolist()
+        self._i = 0
+
+    def take(self, n: int) -> list[float]:
+        if self._i + n > self._block:
+            self._refill()
+        i = self._i
+        self._i = i + n
+        return self._values[i:i + n]
+
+
 class World:
     """The plant, its environment and the true sensor values."""
 
@@ -57,6 +78,7 @@ class World:
         self.a = airframe
         self.dt = airframe.dt
         self.rng = random.Random(seed)
+        self.normal = NoisePool(seed)
         self.noise = noise
         self.battery = SimBattery(self, battery_soc)
         self.plant = Plant(Model(airframe, effects), self.dt, substeps, self.battery.voltage)
@@ -88,6 +110,7 @@ class SimMpu9250:
     """The chip behind `spidev.SpiDev.xfer2`. `fault` = 'zeros' or 'ones' makes every read a bus-error frame."""
     _HEAD = struct.Struct(">7h")
     _MAG = struct.Struct("<3hB")
+    MAG_EVERY = 4   # burst reads per magnetometer sample: 450 Hz / 4, near the AK8963's 100 Hz
 
     def __init__(self, world: World, who_am_i: int = reg.WHO_AM_I_MPU9250, has_mag: bool = True):
         self.world = world
@@ -108,6 +131,7 @@ class SimMpu9250:
         self.ak = bytearray(0x13)
         self.ak[reg.AK_WIA] = reg.AK_WIA_VALUE if self.has_mag else 0x00
         self._slv0_read = 0   # bytes the I2C master copies from the AK8963 on every sample
+        self._mag_count = self.MAG_EVERY
 
     def xfer2(self, data: list[int]) -> list[int]:
         r = data[0] & 0x7F
@@ -142,29 +166,33 @@ class SimMpu9250:
 
     def _sample(self) -> None:
         w = self.world
-        n, gauss = w.noise, w.rng.gauss
+        n = w.noise
         fx, fy, fz = w.plant.specific_force()
         p, q, r = w.plant.rates
         ab, gb = self.accel_bias, self.gyro_bias
         a_lsb = reg.ACCEL_LSB_PER_G[(self.regs[reg.ACCEL_CONFIG] >> 3) & 3] / G
         g_lsb = reg.GYRO_LSB_PER_DPS[(self.regs[reg.GYRO_CONFIG] >> 3) & 3] * (180.0 / math.pi)
         sa, sg = n.accel_sigma, n.gyro_sigma
+        e = w.normal.take(6)
         self._HEAD.pack_into(self.regs, reg.ACCEL_XOUT_H,
-                             _i16((fx + ab[0] + gauss(0, sa)) * a_lsb), _i16((fy + ab[1] + gauss(0, sa)) * a_lsb),
-                             _i16((fz + ab[2] + gauss(0, sa)) * a_lsb), _i16(10.0 * reg.TEMP_LSB_PER_C),
-                             _i16((p + gb[0] + gauss(0, sg)) * g_lsb), _i16((q + gb[1] + gauss(0, sg)) * g_lsb),
-                             _i16((r + gb[2] + gauss(0, sg)) * g_lsb))
-        if self._slv0_read and self.ak[reg.AK_CNTL1]:
+                             _i16((fx + ab[0] + sa * e[0]) * a_lsb), _i16((fy + ab[1] + sa * e[1]) * a_lsb),
+                             _i16((fz + ab[2] + sa * e[2]) * a_lsb), _i16(10.0 * reg.TEMP_LSB_PER_C),
+                             _i16((p + gb[0] + sg * e[3]) * g_lsb), _i16((q + gb[1] + sg * e[4]) * g_lsb),
+                             _i16((r + gb[2] + sg * e[5]) * g_lsb))
+        self._mag_count += 1
+        if self._slv0_read and self.ak[reg.AK_CNTL1] and self._mag_count >= self.MAG_EVERY:
+            self._mag_count = 0   # the AK8963 measures at 100 Hz (continuous mode 2)
             bx, by, bz = w.magnetic_field_body()
             sm, lsb = n.mag_sigma, 1.0 / reg.AK_TESLA_PER_LSB
+            e = w.normal.take(3)
             # body (x fwd, y left, z up) -> AK8963 axes (x_ak = y_mpu, y_ak = x_mpu, z_ak = -z_mpu)
-            self._MAG.pack_into(self.ak, reg.AK_HXL, _i16((by + gauss(0, sm)) * lsb),
-                                _i16((bx + gauss(0, sm)) * lsb), _i16(-(bz + gauss(0, sm)) * lsb), 0x10)
+            self._MAG.pack_into(self.ak, reg.AK_HXL, _i16((by + sm * e[0]) * lsb),
+                                _i16((bx + sm * e[1]) * lsb), _i16(-(bz + sm * e[2]) * lsb), 0x10)
             self._copy_ext()
 
 
 def _i16(v: float) -> int:
-    v = int(round(v))
+    v = int(v + 0.5) if v >= 0.0 else -int(0.5 - v)
     return 32767 if v > 32767 else -32768 if v < -32768 else v
 
 

@@ -42,7 +42,7 @@ class GroundEffect(Effect):
 
     The formula diverges at z = R / 4; it is held at its value for z = R / 2 (factor 4/3) below that,
     where it is no longer valid anyway."""
-    cause, uses_scale = "ground_effect", True
+    cause, uses_scale, state_dependent = "ground_effect", True, True
     required = {"rotor_radius": (0.005, 1.0)}
 
     def scale(self, t, x, u, s):

@@ -99,6 +99,7 @@ class Effect:
     offset = 0
     delay = 0.0
     uses_rotor = uses_scale = uses_wrench = False
+    state_dependent = False   # its `scale` reads the state (the model then cannot cache the forces)
 
     def __init__(self, **parameters: float):
         self.parameters = dict(parameters)
@@ -126,6 +127,11 @@ class Model:
         self._rotor = [e for e in self.effects if e.uses_rotor]
         self._scale = [e for e in self.effects if e.uses_scale]
         self._wrench = [e for e in self.effects if e.uses_wrench]
+        # without rotor states, state-dependent scales or wrenches, the forces depend on the input
+        # only, which is constant across an integration step: compute them once per input
+        self._cacheable = not (self._rotor or self._wrench or any(e.state_dependent for e in self._scale))
+        self._cached_u = None
+        self._cached = None
         # gamma2 is the friction of the yaw-drag test bearing: zero in free flight (eq. 6).
         self.gamma2 = airframe.gamma2 if bearing else 0.0
 
@@ -172,7 +178,12 @@ class Model:
         the functions above it take arrays too, for fitting."""
         a = self.a
         xdot = [0.0] * self.n
-        (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque = self.forces(t, x, u, xdot)
+        if self._cacheable:
+            if u is not self._cached_u:
+                self._cached_u, self._cached = u, self.forces(t, x, u)
+            (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque = self._cached
+        else:
+            (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque = self.forces(t, x, u, xdot)
         phi, theta, psi, p, q, r = x[6:12]
         sf, cf, st, ct, sp, cp = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
         fx, fy, fz = force[0], force[1], force[2] + f1 + f2 + f3 + f4

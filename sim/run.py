@@ -9,7 +9,7 @@ from pathlib import Path
 from flightctl import __version__
 from flightctl.boards import sim_board
 from flightctl.control.controller import FlightController
-from flightctl.logfile import MAG_COLUMNS, FlightLogWriter, Table, read_flight_log
+from flightctl.logfile import MAG_COLUMNS, FlightLogWriter, Table
 from flightctl.loop import FlightLoop, FlightResult
 from flightctl.params import Params, dumps
 from sim.devices import SensorNoise, TruthEstimator, TruthRangefinder
@@ -47,10 +47,9 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
     meta = {"software": f"flightctl {__version__}", "board": "sim", "scenario": scenario.name,
             "path": "perfect state feedback" if truth else f"full onboard path ({estimator} estimator)",
             "calibrate_s": calibrate_s, "params": dumps(params)}
-    log = FlightLogWriter(log_path, meta, extra=MAG_COLUMNS + TRUTH_COLUMNS)
+    log = FlightLogWriter(log_path, meta, extra=MAG_COLUMNS + TRUTH_COLUMNS, keep=True)
     scenario.plan.restart()
     loop = FlightLoop(hal, params, scenario.plan, log, FlightController(params, truth_est, estimator),
                       calibrate_s=calibrate_s, extra_row=true_state)
     result = loop.run()
-    table = read_flight_log(log_path, extra=TRUTH_COLUMNS)
-    return Flight(scenario, table, result, x.touchdowns, calibrate_s)
+    return Flight(scenario, log.table(), result, x.touchdowns, calibrate_s)

@@ -19,7 +19,7 @@ from flightctl import params as paramfile
 from flightctl.errors import InputError
 from flightctl.logfile import BENCH_COLUMNS, PENDULUM_COLUMNS, YAW_DRAG_COLUMNS, read_table
 from sim.identify import inertia, propeller, yaw_drag
-from sim.identify.fits import Identified
+from sim.identify.fits import FitError, Identified
 
 KINDS = {  # kind: (help, columns, text columns, identify)
     "bench": ("eq. 26-28 from one steady point per row and motor", BENCH_COLUMNS, (), propeller.identify),
@@ -61,6 +61,8 @@ def _check_writable(path: str) -> None:
     parent = Path(path).resolve().parent
     if not parent.is_dir():
         raise InputError(f"{path}: cannot write, no directory {parent}")
+    if Path(path).is_dir():
+        raise InputError(f"{path}: cannot write, it is a directory")
 
 
 def _check_params_update(path: str, values: dict[str, float]) -> None:
@@ -80,7 +82,10 @@ def identify(args) -> Identified:
     _doc, columns, text, fit = KINDS[args.kind]
     airframe = paramfile.load(args.params).airframe
     table = read_table(args.file, columns, text_columns=text)
-    result = fit(table, airframe)
+    try:
+        result = fit(table, airframe)
+    except FitError as e:
+        table.fail(str(e))
     for path in (args.json, args.write_params, args.plot):
         if path:
             _check_writable(path)

@@ -11,6 +11,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from sim.identify.propeller import FITS, predict
+from sim.identify.yaw_drag import drag_torque
 
 AVERAGE = "goldenrod"  # the paper draws its averaged model in yellow
 
@@ -56,7 +57,6 @@ def bench(result) -> Figure:
 
 
 def yaw_drag(r, tau, fit) -> Figure:
-    from sim.identify.yaw_drag import drag_torque
     fig, axes = _with_residuals(1, width=5.5)
     grid = np.linspace(r.min(), r.max(), 400)
     axes[0, 0].plot(r, tau, ".", label="steady spins")

@@ -57,6 +57,9 @@ def motor_points(P, thrust, omega, voltage, current) -> dict[str, tuple[np.ndarr
 def fit_motor(points) -> dict[str, Fit]:
     P, f = points["thrust_P"]
     check_count(len(P), FITS["thrust_P"])
+    if len(np.unique(P)) < 3:
+        raise FitError(f"the points do not determine h1, h2: {len(np.unique(P))} distinct P values above "
+                       "the dead zone, at least 3 needed")
     slope, intercept = np.polyfit(P, np.sqrt(f), 1)  # start: sqrt(f) = sqrt(h1) (P - h2)
     if not slope > 0:
         raise FitError("thrust does not rise with P above the dead zone: eq. 26 cannot be fitted")

@@ -16,6 +16,7 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.logfile import BENCH_COLUMNS, read_table
 from flightctl.params import Airframe
+from sim.identify.fits import rms
 from sim.identify.propeller import torque_from_power
 
 RCB = {"esc": "ESC signal (µs)", "torque": "Torque (N·m)", "thrust": "Thrust (gf)",
@@ -24,7 +25,9 @@ GF = 9.80665e-3                 # N per gram-force
 RPM = 2 * np.pi / 60            # rad/s per rev/min
 ESC_HZ = Airframe().esc_pwm_hz  # 449 Hz: P = pulse_s * 449 * 255 (conventions.md)
 ESC_OFF_US = 1000.0             # at or below this pulse width the ESC holds the motor off
-UIUC_COLUMNS = ("volume", "PropName", "N_rpm", "CT")
+UIUC_COLUMNS = ("volume", "PropName", "D_in", "N_rpm", "CT")
+LARGE_IN = 11.0                 # propellers this large (inches) or more are like the reference 12-inch one
+MIN_STEPS = 9                   # steps a run needs to hold out a third and still fit every model
 BEGIN, END = "<!-- real-data:begin -->", "<!-- real-data:end -->"
 
 
@@ -58,10 +61,9 @@ def read_rcbenchmark(path: str | Path) -> Run:
         x = table[RCB[column]]
         return np.array([x[keep & (step == i)].mean() for i in ids])
     torque = mean("torque")
-    sign = np.sign(np.median(torque)) if torque.size else 1.0
+    sign = -1.0 if torque.size and np.median(torque) < 0 else 1.0
     return Run(Path(path).name, len(table), P=mean("esc") * 1e-6 * ESC_HZ * 255, thrust=mean("thrust") * GF,
-               omega=mean("rpm") * RPM, voltage=mean("voltage"), current=mean("current"),
-               torque=torque * (sign or 1.0))
+               omega=mean("rpm") * RPM, voltage=mean("voltage"), current=mean("current"), torque=sign * torque)
 
 
 def convert(paths: list[str], out: str) -> list[str]:
@@ -91,13 +93,13 @@ def efficiency(run: Run) -> np.ndarray:
     return run.torque * run.omega / (run.voltage * run.current)
 
 
-def held_out(n_or_speed: np.ndarray, split: str) -> np.ndarray:
-    """Mask of the held-out points: every third step ('interleaved') or the top third of the speeds
-    ('extrapolation')."""
-    n = len(n_or_speed)
+def held_out(speed: np.ndarray, split: str) -> np.ndarray:
+    """Mask of the held-out points of a sweep in step order: every third step ('interleaved') or the
+    fastest third ('extrapolation')."""
+    n = len(speed)
     if split == "interleaved":
         return np.arange(n) % 3 == 1
-    return np.argsort(np.argsort(n_or_speed)) >= n - n // 3
+    return np.argsort(np.argsort(speed)) >= n - n // 3
 
 
 SPLITS = ("interleaved", "extrapolation")
@@ -109,20 +111,29 @@ THRUST_MODELS = {  # name: columns of f = columns @ theta
 BASE_THRUST, EXT_THRUST = "c1 w^2 (eq. 27)", "c1 w^2 + c2 w"
 
 
+def lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.linalg.lstsq(A, y, rcond=None)[0]
+
+
+def losses(run: Run) -> np.ndarray:
+    """Electrical power not turned into reaction torque: V I - tau w (W)."""
+    return run.voltage * run.current - run.torque * run.omega
+
+
 def thrust_predictions(w, f, test) -> dict[str, np.ndarray]:
     """Each thrust model fitted on the points not in `test`, predicted at the held-out points."""
     out = {}
     for name, columns in THRUST_MODELS.items():
         A = columns(w)
-        theta = np.linalg.lstsq(A[~test], f[~test], rcond=None)[0]
-        out[name] = A[test] @ theta
+        out[name] = A[test] @ lstsq(A[~test], f[~test])
     return out
 
 
 LOSS_MODELS = {  # name: columns of the loss V I - tau w = columns @ theta
     "loss R I^2 + P0": lambda run: np.column_stack([run.current ** 2, np.ones(run.steps)]),
-    "loss R I^2 + k w + P0": lambda run: np.column_stack([run.current ** 2, run.omega, np.ones(run.steps)]),
+    "loss R I^2 + k w + P0": lambda run: np.column_stack([run.current ** 2, np.ones(run.steps), run.omega]),
 }
+SPEED_LOSS = "loss R I^2 + k w + P0"
 BASE_TORQUE, EXT_TORQUE = "paper: eq. 28 on V I / w", "loss R I^2 + P0"
 SENSOR_TORQUE = "eq. 28 on the torque sensor"
 
@@ -136,11 +147,10 @@ def torque_predictions(run: Run, test) -> dict[str, np.ndarray]:
     out = {BASE_TORQUE: g1 * run.thrust[test] + g2}
     g1, g2 = np.polyfit(run.thrust[~test], run.torque[~test], 1)
     out[SENSOR_TORQUE] = g1 * run.thrust[test] + g2
-    loss = run.voltage * run.current - run.torque * run.omega
+    loss = losses(run)
     for name, columns in LOSS_MODELS.items():
         A = columns(run)
-        theta = np.linalg.lstsq(A[~test], loss[~test], rcond=None)[0]
-        out[name] = (run.voltage * run.current - A @ theta)[test] / run.omega[test]
+        out[name] = (run.voltage * run.current - A @ lstsq(A[~test], loss[~test]))[test] / run.omega[test]
     return out
 
 
@@ -150,26 +160,22 @@ def ct_change(speed: np.ndarray, ct: np.ndarray) -> float:
     return float(slope * (speed.max() - speed.min()) / ct.mean())
 
 
-def read_uiuc(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Propeller -> (RPM, CT) sorted by speed; a propeller is one name in one data volume."""
+def read_uiuc(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray, float]]:
+    """Propeller -> (RPM, CT, diameter in inches), sorted by speed; a propeller is one name in one data volume."""
     table = read_table(path, UIUC_COLUMNS, text_columns=("PropName",))
     keys = np.array([f"{name} (vol. {v:g})" for name, v in zip(table["PropName"], table["volume"])])
     props = {}
     for key in dict.fromkeys(keys):
         k = keys == key
         order = np.argsort(table["N_rpm"][k])
-        props[str(key)] = (table["N_rpm"][k][order], table["CT"][k][order])
+        props[str(key)] = (table["N_rpm"][k][order], table["CT"][k][order], float(table["D_in"][k][0]))
     return props
-
-
-def rms(x) -> float:
-    return float(np.sqrt(np.mean(np.square(x))))
 
 
 def analyse(data: Path) -> dict:
     runs = [read_rcbenchmark(p) for p in sorted((data / "rcbenchmark").glob("*.csv"))]
-    used = [r for r in runs if r.steps >= 9]  # enough steps to hold out a third and still fit
-    res: dict = {"skipped": [(r.name, r.rows, r.steps) for r in runs if r.steps < 9], "runs": {}}
+    used = [r for r in runs if r.steps >= MIN_STEPS]
+    res: dict = {"skipped": [(r.name, r.rows, r.steps) for r in runs if r.steps < MIN_STEPS], "runs": {}}
     for r in used:
         eta = efficiency(r)
         k_f = r.thrust / r.omega ** 2
@@ -177,9 +183,12 @@ def analyse(data: Path) -> dict:
         one = {"steps": r.steps, "volts": float(np.median(r.voltage)), "rpm": (r.omega.min() / RPM, r.omega.max() / RPM),
                "eta": eta, "eta_min": float(eta.min()), "eta_median": float(np.median(eta)), "eta_max": float(eta.max()),
                "g1_ratio": float(np.polyfit(r.thrust, tau_e, 1)[0] / np.polyfit(r.thrust, r.torque, 1)[0]),
-               "kf_change": ct_change(r.omega, k_f), "rmse": {},
-               "loss": np.linalg.lstsq(LOSS_MODELS[EXT_TORQUE](r), r.voltage * r.current - r.torque * r.omega,
-                                       rcond=None)[0]}
+               "kf_change": ct_change(r.omega, k_f),
+               # fitted to all steps: (c1, c2); (R, P0); (R, P0, k)
+               "c2": lstsq(THRUST_MODELS[EXT_THRUST](r.omega), r.thrust)[1],
+               "loss": lstsq(LOSS_MODELS[EXT_TORQUE](r), losses(r)),
+               "loss_speed": lstsq(LOSS_MODELS[SPEED_LOSS](r), losses(r)),
+               "rmse": {}}
         for split in SPLITS:
             test = held_out(r.omega, split)
             one["rmse"][split] = {
@@ -188,8 +197,9 @@ def analyse(data: Path) -> dict:
         res["runs"][r.name] = one
     res["run_data"] = used
     props = read_uiuc(data / "uiuc-static" / "static_tests.csv")
-    uiuc = {"change": [], "rel": {m: [] for m in THRUST_MODELS}, "curves": props}
-    for rpm, ct in props.values():
+    uiuc = {"change": [], "rel": {m: [] for m in THRUST_MODELS}, "curves": props,
+            "large": np.array([d >= LARGE_IN for _rpm, _ct, d in props.values()])}
+    for rpm, ct, _d in props.values():
         uiuc["change"].append(ct_change(rpm, ct))
         w, f = rpm * RPM, ct * rpm ** 2  # thrust up to the constant rho D^4 / 3600
         test = held_out(w, "interleaved")
@@ -272,7 +282,10 @@ def markdown(res: dict, data: str | None) -> str:
              f"Efficiency `eta = tau_meas w / (V I)` over all {len(eta)} steps: median **{np.median(eta):.2f}**, "
              f"range {eta.min():.2f} to {eta.max():.2f}; so `V I / w` overstates the reaction torque by a factor "
              f"{1 / np.median(eta):.1f} at the median step and by up to {1 / eta.min():.0f} at the slowest steps. "
-             "`g1 ratio` is the slope of eq. 28 fitted to `V I / w` over the slope fitted to the measured torque; "
+             "`g1 ratio` is the slope of eq. 28 fitted to `V I / w` over the slope fitted to the measured torque, "
+             f"median **{np.median([r['g1_ratio'] for r in runs.values()]):.2f}**: the excess is mostly an offset "
+             "(large `g2`), and the slope, which is all that yaw control sees (g2 cancels in "
+             "`tau_psi = tau_1 - tau_2 + tau_3 - tau_4`), comes out too small. "
              "`R`, `P0` are the loss model `V I = tau w + R I^2 + P0` fitted to all steps of the file.", "",
              *_table(["file", "steps", "V", "RPM", "eta min", "eta median", "eta max", "g1 ratio", "R (ohm)", "P0 (W)"],
                      [[short[n], str(r["steps"]), f"{r['volts']:.1f}", f"{r['rpm'][0]:.0f}-{r['rpm'][1]:.0f}",
@@ -284,10 +297,13 @@ def markdown(res: dict, data: str | None) -> str:
              f"UIUC: CT changes over each propeller's tested speeds by a median **{100 * np.median(u['change']):+.1f} %** "
              f"(5th to 95th percentile {100 * np.percentile(u['change'], 5):+.1f} % to "
              f"{100 * np.percentile(u['change'], 95):+.1f} %); more than 5 % for "
-             f"{100 * np.mean(np.abs(u['change']) > 0.05):.0f} % of the propellers. "
+             f"{100 * np.mean(np.abs(u['change']) > 0.05):.0f} % of the propellers; for the {np.sum(u['large'])} "
+             f"propellers of {LARGE_IN:g} inches or more (the reference airframe flies 12-inch ones) the median is "
+             f"{100 * np.median(u['change'][u['large']]):+.1f} %. "
              "RCbenchmark: `f / w^2` changes from the slowest to the fastest step by a median "
              f"**{100 * np.median([r['kf_change'] for r in runs.values()]):+.1f} %** "
-             "(straight-line fit over speed, relative to the mean).", "",
+             "(straight-line fit over speed, relative to the mean); fitted to all steps, `f = c1 w^2 + c2 w` has "
+             f"`c2 < 0` in {sum(r['c2'] < 0 for r in runs.values())} of {len(runs)} files.", "",
              "UIUC held out every third speed, relative thrust RMSE, median over propellers: "
              + ", ".join(f"{m} **{100 * np.median(v):.1f} %**" for m, v in u["rel"].items()) + ".", "",
              "![CT](real_ct.png)", "",
@@ -296,9 +312,9 @@ def markdown(res: dict, data: str | None) -> str:
              "third ESC step, `extrapolation` holds out the fastest third. Thrust RMSE in mN, torque RMSE in mN m. "
              f"The torque baseline is the paper's pipeline (eq. 28 fitted to `V I / w`, no torque sensor); "
              f"`{EXT_TORQUE}` fits `V I = tau w + R I^2 + P0` to the training steps' measured torque; "
-             f"`{SENSOR_TORQUE}` refits eq. 28 to the torque sensor.", ""]
-    models = [BASE_THRUST, EXT_THRUST, "c1 w^2 + c3 w^3 (CT linear in w)",
-              BASE_TORQUE, EXT_TORQUE, "loss R I^2 + k w + P0", SENSOR_TORQUE]
+             f"`{SENSOR_TORQUE}` refits eq. 28 to the torque sensor. Fitted to all steps, `{SPEED_LOSS}` gives a "
+             f"negative R in {sum(r['loss_speed'][0] < 0 for r in runs.values())} of {len(runs)} files.", ""]
+    models = [*THRUST_MODELS, BASE_TORQUE, *LOSS_MODELS, SENSOR_TORQUE]
     for split in SPLITS:
         lines += [f"`{split}`:", ""]
         lines += _table(["file", *models],

@@ -38,7 +38,7 @@ def torque(res) -> bytes:
 def ct(res) -> bytes:
     fig = Figure(figsize=(10, 4.2), layout="constrained")
     left, right = fig.subplots(1, 2)
-    for rpm, c in res["uiuc"]["curves"].values():
+    for rpm, c, _diameter in res["uiuc"]["curves"].values():
         left.plot(rpm, c / c.mean(), "-", color="0.4", lw=0.4, alpha=0.5)
     left.axhline(1, color="goldenrod", lw=2, label="eq. 27: CT constant")
     left.set(title=f"(b) UIUC static tests: CT / mean, {len(res['uiuc']['curves'])} propellers",

@@ -1,0 +1,86 @@
+"""Benchmark (figures, not a test): how many times faster than real time `flightctl sim paper` flies,
+and what one control-loop iteration costs, decode to PWM counts, against the 2222 us loop period.
+
+    python scripts/benchmark.py [--repeat N]
+
+The iteration is timed on the onboard code only: `Mpu9250.read` decoding a 22-byte burst (from a
+fixed frame, so the simulated chip's cost is not counted), the calibration, the estimator, the four
+PIDs, the mixer and eq. 26 inverted to counts. Targets: >= 30x real time, < 3 % of the period.
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+from flightctl.control.controller import FlightController
+from flightctl.control.estimator import Calibration
+from flightctl.drivers.mpu9250 import Mpu9250
+from flightctl.hal import ImuSample
+from flightctl.params import load
+from sim.devices import SensorNoise, SimMpu9250, World
+from sim.run import fly
+from sim.scenarios import SCENARIOS
+
+
+class FrozenSpi:
+    """Answers every transfer with one burst captured from the simulated chip."""
+    max_speed_hz = 0
+
+    def __init__(self, frame):
+        self.frame = frame
+
+    def xfer2(self, data):
+        return self.frame
+
+
+def iteration_us(n: int = 20000) -> float:
+    params = load(None)
+    chip = SimMpu9250(World(params.airframe, noise=SensorNoise()))
+    imu = Mpu9250(chip, sleep=lambda s: None)
+    imu.start()
+    frame = chip.xfer2(list(imu._tx))
+    imu.spi = FrozenSpi(frame)
+    ctl = FlightController(params)
+    cal = Calibration()
+    sample = ImuSample()
+    imu.read(sample)
+    cal.add(sample)
+    cal.apply(ctl.est)
+    ctl.est.in_flight = True
+    dt = params.airframe.dt
+    read, correct, step = imu.read, cal.correct, ctl.step
+    start = time.perf_counter()
+    for _ in range(n):
+        read(sample)
+        correct(sample)
+        step(sample, dt, 0.01, -0.02, 0.1, 1.5)
+    return (time.perf_counter() - start) / n * 1e6
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    params = load(None)
+    out = Path(tempfile.mkdtemp())
+    for label, kw in (("full onboard path", {}), ("perfect state feedback", {"truth": True})):
+        ratios = []
+        for _ in range(args.repeat):
+            start = time.perf_counter()
+            flight = fly(SCENARIOS["paper"](), params, out / "paper.csv", **kw)
+            wall = time.perf_counter() - start
+            ratios.append(flight.log["t"][-1] / wall)
+        print(f"flightctl sim paper, {label}: {statistics.median(ratios):.1f}x real time "
+              f"(median of {args.repeat}; {min(ratios):.1f}x to {max(ratios):.1f}x), target >= 30x")
+    period_us = 1e6 * params.airframe.dt
+    costs = [iteration_us() for _ in range(args.repeat)]
+    us = min(costs)
+    print(f"control iteration (decode -> PWM counts): {us:.1f} us = {100 * us / period_us:.2f} % of the "
+          f"{period_us:.0f} us loop period (best of {args.repeat}), target < 3 %")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,79 @@
+"""Step-response metrics of a flight, on the true response (what the vehicle did) and on the
+controller's own estimate (what it believed): rise time, overshoot, settling time, steady error and
+cross-coupling into the other channels."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from flightctl.logfile import Table
+from sim.scenarios import Step
+
+TRUE = {"roll": "true_roll", "pitch": "true_pitch", "yaw": "true_yaw", "alt": "true_z"}
+ANGLES = ("roll", "pitch", "yaw")
+SETTLING_BAND = 0.05      # of the step size
+STEADY_WINDOW_S = 1.0     # the last second of the step's window
+
+
+@dataclass
+class StepMetrics:
+    step: Step
+    rise_s: float           # 10 % to 90 % of the change
+    overshoot: float        # fraction of the change beyond the target
+    settling_s: float       # last exit from the +-5 % band, after the step
+    steady_error: float     # mean error over the last second (rad or m)
+    coupling: dict[str, float]   # largest departure of each other channel from its setpoint
+
+    def row(self) -> str:
+        s = self.step
+        unit, k = ("deg", 180 / math.pi) if s.channel in ANGLES else ("m", 1.0)
+        couple = ", ".join(f"{c} {v * (180 / math.pi if c in ANGLES else 1):.2f}"
+                           for c, v in self.coupling.items())
+        return (f"{s.channel:>5} {s.start * k:+6.1f} -> {s.end * k:+6.1f} {unit:<3}  rise {self.rise_s:5.2f} s  "
+                f"overshoot {100 * self.overshoot:5.1f} %  settling {self.settling_s:5.2f} s  "
+                f"steady error {self.steady_error * k:+7.3f} {unit}  coupling: {couple}")
+
+
+def _error(channel: str, y: np.ndarray, target) -> np.ndarray:
+    e = y - target
+    return (e + np.pi) % (2 * np.pi) - np.pi if channel == "yaw" else e
+
+
+def step_metrics(log: Table, step: Step, t_arm: float, source: str = "true") -> StepMetrics:
+    t = log["t"] - t_arm
+    sel = (t >= step.t) & (t <= step.t + step.window)
+    ts = t[sel] - step.t
+    col = TRUE[step.channel] if source == "true" else step.channel
+    y = log[col][sel]
+    change = step.end - step.start
+    progress = _error(step.channel, y, step.start) / change          # 0 at the start, 1 at the target
+
+    def first(cond):
+        idx = np.flatnonzero(cond)
+        return ts[idx[0]] if idx.size else math.nan
+
+    rise = first(progress >= 0.9) - first(progress >= 0.1)
+    overshoot = max(float(np.max(progress)) - 1.0, 0.0) if progress.size else math.nan
+    outside = np.flatnonzero(np.abs(progress - 1.0) > SETTLING_BAND)
+    settling = ts[outside[-1]] if outside.size else 0.0
+    if outside.size and outside[-1] == len(ts) - 1:
+        settling = math.inf   # never settled within the window
+    last = ts >= step.window - STEADY_WINDOW_S
+    steady = float(np.mean(_error(step.channel, y[last], step.end))) if last.any() else math.nan
+    coupling = {}
+    for other in ("roll", "pitch", "yaw", "alt"):
+        if other == step.channel:
+            continue
+        col = TRUE[other] if source == "true" else other
+        err = np.abs(_error(other, log[col][sel], log[f"{other}_sp"][sel]))
+        coupling[other] = float(np.max(err)) if err.size else math.nan
+    return StepMetrics(step, rise, overshoot, settling, steady, coupling)
+
+
+def hold_metrics(log: Table, last_s: float = 10.0) -> dict[str, float]:
+    """Over the last `last_s` seconds: the largest altitude error (m) and tilt (rad), true values."""
+    sel = log["t"] >= log["t"][-1] - last_s
+    return {"alt_error": float(np.max(np.abs(log["true_z"][sel] - log["alt_sp"][sel]))),
+            "tilt": float(np.max(np.maximum(np.abs(log["true_roll"][sel]), np.abs(log["true_pitch"][sel]))))}

@@ -1,0 +1,613 @@
+"""sim.model, sim.effects and sim.plant against values worked out by hand from the paper's equations
+(eq. 6-9, 26-28) and conventions.md. Every expected value is written out here from the formulas and
+the reference-airframe numbers of conventions.md, never taken from the code under test.
+"""
+import math
+from collections import deque
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from flightctl.errors import InputError
+from flightctl.params import Airframe
+from sim import effects as fx
+from sim.model import (Model, angular_acceleration, body_torques, command_from_thrust, rotation,
+                       rotor_speed, rotor_torque, thrust_from_command, yaw_drag)
+from sim.plant import Plant
+
+# conventions.md, reference airframe (Table 2 and the plausible propeller defaults)
+M, L, G = 1.645, 0.2475, 9.80665
+JXX, JYY, JZZ, JP = 0.014002764, 0.014267729, 0.029487252, 2.66838e-4
+GAMMA1, GAMMA2 = 4.86291e-4, 1.22958e-3
+H1, H2, C1, G1, G2 = 1.49e-3, 120.0, 1.47e-5, 0.020, 0.002
+ROTOR_R, V_NOM = 0.1524, 14.8
+
+FH = M * G / 4                      # hover thrust per motor, N
+D = math.sqrt(FH / H1)              # P - h2 at hover (eq. 26 inverted)
+PH = H2 + D                         # hover command, about 172.03
+TAU_H = G1 * FH + G2                # eq. 28 at hover
+BATT = 16.0
+
+
+def hover_u(dP=(0.0, 0.0, 0.0, 0.0), v=BATT):
+    return (PH + dP[0], PH + dP[1], PH + dP[2], PH + dP[3], v)
+
+
+def state(**kw):
+    names = ["x", "y", "z", "vx", "vy", "vz", "phi", "theta", "psi", "p", "q", "r"]
+    x = [0.0] * 12
+    for k, v in kw.items():
+        x[names.index(k)] = float(v)
+    return x
+
+
+def Rx(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def Ry(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def Rz(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def R_hand(phi, theta, psi):
+    return Rz(psi) @ Ry(theta) @ Rx(phi)
+
+
+def test_hover_command_is_about_172():
+    # conventions.md: h1, h2 give hover at P ~ 172
+    assert PH == pytest.approx(172.03, abs=0.01)
+
+
+# --- propeller: eq. 26-28 ------------------------------------------------------------------------
+
+def test_thrust_from_command_eq26_floats():
+    assert thrust_from_command(130.0, H1, H2) == pytest.approx(1.49e-3 * 10.0 ** 2)
+    assert thrust_from_command(255.0, H1, H2) == pytest.approx(1.49e-3 * 135.0 ** 2)   # 27.15 N
+    assert thrust_from_command(PH, H1, H2) == pytest.approx(FH, rel=1e-12)
+    # dead zone: no thrust at or below h2, never negative (the parabola would rise again)
+    assert thrust_from_command(120.0, H1, H2) == 0.0
+    assert thrust_from_command(100.0, H1, H2) == 0.0
+    assert thrust_from_command(0.0, H1, H2) == 0.0
+
+
+def test_thrust_from_command_eq26_arrays():
+    P = np.array([0.0, 100.0, 120.0, 121.0, 130.0, 255.0])
+    want = np.array([0.0, 0.0, 0.0, 1.49e-3 * 1.0, 1.49e-3 * 100.0, 1.49e-3 * 135.0 ** 2])
+    got = thrust_from_command(P, H1, H2)
+    assert isinstance(got, np.ndarray)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=0)
+
+
+def test_command_from_thrust_inverts_eq26():
+    assert command_from_thrust(4.0, H1, H2) == pytest.approx(120.0 + math.sqrt(4.0 / 1.49e-3))
+    assert command_from_thrust(FH, H1, H2) == pytest.approx(PH)
+    for f in (0.01, 1.0, 4.0, 8.0, 20.0):
+        assert thrust_from_command(command_from_thrust(f, H1, H2), H1, H2) == pytest.approx(f, rel=1e-12)
+    assert thrust_from_command(command_from_thrust(0.0, H1, H2), H1, H2) == 0.0
+
+
+def test_rotor_torque_eq28():
+    assert rotor_torque(2.0, G1, G2) == pytest.approx(0.020 * 2.0 + 0.002)
+    assert rotor_torque(FH, G1, G2) == pytest.approx(0.020 * FH + 0.002)
+    assert rotor_torque(0.0, G1, G2) == 0.0      # sgn(0) = 0: a stopped rotor has no torque
+    got = rotor_torque(np.array([0.0, 1.0, 5.0]), G1, G2)
+    np.testing.assert_allclose(got, [0.0, 0.022, 0.102], rtol=1e-12)
+
+
+def test_rotor_speed_eq27():
+    assert rotor_speed(4.0, C1) == pytest.approx(math.sqrt(4.0 / 1.47e-5))
+    # conventions.md: hover near 5000 RPM
+    assert rotor_speed(FH, C1) * 60 / (2 * math.pi) == pytest.approx(5000, rel=0.01)
+    np.testing.assert_allclose(rotor_speed(np.array([0.0, 1.47e-5 * 100 ** 2]), C1), [0.0, 100.0])
+
+
+def test_yaw_drag_eq6():
+    assert yaw_drag(2.0, GAMMA1, GAMMA2) == pytest.approx(4.86291e-4 * 4.0 + 1.22958e-3)
+    assert yaw_drag(-2.0, GAMMA1, GAMMA2) == pytest.approx(-(4.86291e-4 * 4.0 + 1.22958e-3))
+    assert yaw_drag(0.0, GAMMA1, GAMMA2) == 0.0
+    assert yaw_drag(3.0, GAMMA1, 0.0) == pytest.approx(4.86291e-4 * 9.0)
+    np.testing.assert_allclose(yaw_drag(np.array([-1.0, 0.0, 1.0]), GAMMA1, GAMMA2),
+                               [-(GAMMA1 + GAMMA2), 0.0, GAMMA1 + GAMMA2])
+
+
+def test_body_torques_plus_configuration():
+    tp, tt, ty = body_torques(1.0, 2.0, 3.0, 4.0, 0.1, 0.2, 0.3, 0.4, L)
+    assert tp == pytest.approx(0.2475 * (2.0 - 4.0))     # l (f2 - f4)
+    assert tt == pytest.approx(0.2475 * (3.0 - 1.0))     # l (f3 - f1)
+    assert ty == pytest.approx(0.1 - 0.2 + 0.3 - 0.4)    # tau1 - tau2 + tau3 - tau4
+
+
+def test_body_torques_match_r_cross_f():
+    # the conventions.md motor positions, torque = sum r_i x (0, 0, f_i)
+    pos = [(L, 0, 0), (0, L, 0), (-L, 0, 0), (0, -L, 0)]
+    f = [1.3, 2.9, 3.7, 0.4]
+    tau = sum(np.cross(p, (0, 0, fi)) for p, fi in zip(pos, f))
+    tp, tt, _ = body_torques(*f, 0, 0, 0, 0, L)
+    assert (tp, tt) == pytest.approx((tau[0], tau[1]))
+    assert tau[2] == pytest.approx(0.0)
+
+
+# --- eq. 7 and the errata for eq. 8 ---------------------------------------------------------------
+
+def test_angular_acceleration_eq7_by_hand_with_errata():
+    a = Airframe()
+    p, q, r = 0.5, -0.7, 1.1
+    tp, tt, ty, Om, td = 0.01, -0.02, 0.005, 30.0, 0.001
+    dp, dq, dr = angular_acceleration(p, q, r, tp, tt, ty, Om, td, a)
+    # eq. 8 rows, with the q row as corrected in conventions.md
+    want_dp = tp / JXX - (JZZ - JYY) / JXX * q * r - JP / JXX * q * Om
+    want_dq = tt / JYY - (JXX - JZZ) / JYY * p * r + JP / JYY * p * Om
+    want_dr = ty / JZZ - (JYY - JXX) / JZZ * p * q - td / JZZ
+    assert dp == pytest.approx(want_dp, rel=1e-12)
+    assert dq == pytest.approx(want_dq, rel=1e-12)
+    assert dr == pytest.approx(want_dr, rel=1e-12)
+    # the q row as printed in eq. 8 (-Jp/Jxx p Omega) is NOT what is implemented
+    printed_dq = tt / JYY - (JXX - JZZ) / JYY * p * r - JP / JXX * p * Om
+    assert dq - printed_dq == pytest.approx(JP * p * Om * (1 / JYY + 1 / JXX), rel=1e-9)
+    assert dq - printed_dq > 0.5
+
+
+def test_angular_acceleration_matches_vector_form_cross_product():
+    a = Airframe()
+    J = np.diag([JXX, JYY, JZZ])
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        w = rng.uniform(-3, 3, 3)
+        tau = rng.uniform(-0.5, 0.5, 3)
+        Om, td = rng.uniform(-200, 200), rng.uniform(-0.01, 0.01)
+        # eq. 7: J dw/dt = tau - w x (J w + Jp Omega z_b) - tau_d z_b
+        want = np.linalg.solve(J, tau - np.cross(w, J @ w + JP * Om * np.array([0, 0, 1.0]))
+                               - td * np.array([0, 0, 1.0]))
+        got = angular_acceleration(*w, *tau, Om, td, a)
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+
+
+def test_angular_acceleration_on_arrays():
+    a = Airframe()
+    p = np.array([0.0, 1.0])
+    z = np.zeros(2)
+    dp, dq, dr = angular_acceleration(p, z, z, z, z, z, np.array([10.0, 10.0]), z, a)
+    np.testing.assert_allclose(dq, [0.0, JP * 1.0 * 10.0 / JYY])
+
+
+# --- rotation ------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("phi,theta,psi", [(0.0, 0.0, 0.0), (0.3, -0.2, 1.0), (-1.2, 0.7, -2.9),
+                                           (2.0, 1.4, 3.1)])
+def test_rotation_is_rz_ry_rx(phi, theta, psi):
+    Rm = np.array(rotation(phi, theta, psi)).reshape(3, 3)
+    np.testing.assert_allclose(Rm, R_hand(phi, theta, psi), atol=1e-15)
+    np.testing.assert_allclose(Rm @ Rm.T, np.eye(3), atol=1e-14)
+    assert np.linalg.det(Rm) == pytest.approx(1.0, abs=1e-14)
+
+
+def test_rotation_specific_cases():
+    def R(*e):
+        return np.array(rotation(*e)).reshape(3, 3)
+    # yaw 90 deg: the nose (x_b, motor 1) points West (+y inertial)
+    np.testing.assert_allclose(R(0, 0, math.pi / 2) @ [1, 0, 0], [0, 1, 0], atol=1e-15)
+    # roll 90 deg: the left arm (y_b, motor 2) points up
+    np.testing.assert_allclose(R(math.pi / 2, 0, 0) @ [0, 1, 0], [0, 0, 1], atol=1e-15)
+    # pitch +90 deg about y_b (West): the nose goes down
+    np.testing.assert_allclose(R(0, math.pi / 2, 0) @ [1, 0, 0], [0, 0, -1], atol=1e-15)
+    # a small roll tilts the thrust axis toward -y (East): (0, -sin phi, cos phi)
+    np.testing.assert_allclose(R(0.1, 0, 0) @ [0, 0, 1], [0, -math.sin(0.1), math.cos(0.1)], atol=1e-15)
+
+
+def test_rotation_on_arrays():
+    phi = np.array([0.0, 0.3])
+    th = np.array([0.0, -0.2])
+    ps = np.array([0.0, 1.0])
+    got = np.array(rotation(phi, th, ps))            # 9 x 2
+    np.testing.assert_allclose(got[:, 1], R_hand(0.3, -0.2, 1.0).ravel(), atol=1e-15)
+    np.testing.assert_allclose(got[:, 0], np.eye(3).ravel(), atol=1e-15)
+
+
+# --- Model.f --------------------------------------------------------------------------------------
+
+def test_hover_equilibrium():
+    m = Model(Airframe())
+    xd = m.f(0.0, state(z=3.0), hover_u())
+    assert xd[:3] == [0.0, 0.0, 0.0]
+    np.testing.assert_allclose(xd[3:12], 0.0, atol=1e-12)
+
+
+def test_roll_motor2_more_than_motor4():
+    m = Model(Airframe())
+    xd = m.f(0.0, state(z=3.0), hover_u((0, +4, 0, -4)))
+    # f2 - f4 = h1 ((D + 4)^2 - (D - 4)^2) = 16 h1 D
+    f2, f4 = H1 * (D + 4) ** 2, H1 * (D - 4) ** 2
+    assert xd[9] == pytest.approx(L * (f2 - f4) / JXX, rel=1e-12)
+    assert xd[9] == pytest.approx(L * 16 * H1 * D / JXX, rel=1e-12)
+    assert xd[9] > 20.0                  # about 21.9 rad/s^2: positive roll
+    assert xd[10] == pytest.approx(0.0, abs=1e-12)
+    # the two counter-clockwise rotors now make f2 + f4 = 2 FH + 32 h1: net reaction torque -32 g1 h1
+    assert xd[11] == pytest.approx(-32 * G1 * H1 / JZZ, rel=1e-9)
+    assert xd[5] == pytest.approx(32 * H1 / M, rel=1e-9)
+
+
+def test_pitch_motor3_more_than_motor1():
+    m = Model(Airframe())
+    xd = m.f(0.0, state(z=3.0), hover_u((-4, 0, +4, 0)))
+    assert xd[10] == pytest.approx(L * 16 * H1 * D / JYY, rel=1e-12)
+    assert xd[10] > 20.0
+    assert xd[9] == pytest.approx(0.0, abs=1e-12)
+    assert xd[11] == pytest.approx(+32 * G1 * H1 / JZZ, rel=1e-9)
+
+
+def test_yaw_motors13_more_than_24():
+    m = Model(Airframe())
+    xd = m.f(0.0, state(z=3.0), hover_u((+4, -4, +4, -4)))
+    # tau1 - tau2 + tau3 - tau4 = g1 (f1 + f3 - f2 - f4) = g1 h1 (2 (D+4)^2 - 2 (D-4)^2) = 32 g1 h1 D
+    assert xd[11] == pytest.approx(32 * G1 * H1 * D / JZZ, rel=1e-12)
+    assert xd[11] > 0.0
+    assert xd[9] == pytest.approx(0.0, abs=1e-12)
+    assert xd[10] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_rotor_momentum_sign_eq9():
+    """Omega = -w1 + w2 - w3 + w4: with motors 2 and 4 faster, Omega > 0, so a roll rate p gives
+    q-dot = +Jp p Omega / Jyy (eq. 7), and a pitch rate q gives p-dot = -Jp q Omega / Jxx."""
+    m = Model(Airframe())
+    u = hover_u((0, +6, 0, +6))
+    f_hi = H1 * (D + 6) ** 2
+    Om = 2 * (math.sqrt(f_hi / C1) - math.sqrt(FH / C1))
+    assert Om > 0
+    xd = m.f(0.0, state(z=3.0, p=1.0), u)
+    assert xd[10] == pytest.approx(JP * 1.0 * Om / JYY, rel=1e-9)
+    assert xd[9] == pytest.approx(0.0, abs=1e-12)
+    xd = m.f(0.0, state(z=3.0, q=1.0), u)
+    assert xd[9] == pytest.approx(-JP * 1.0 * Om / JXX, rel=1e-9)
+    # the clockwise pair faster: Omega < 0, the sign flips
+    xd = m.f(0.0, state(z=3.0, p=1.0), hover_u((+6, 0, +6, 0)))
+    assert xd[10] == pytest.approx(-JP * 1.0 * Om / JYY, rel=1e-9)
+
+
+def test_inertia_coupling_in_model():
+    # equal rotors (Omega = 0): only the (J..-J..) terms; q-dot = -(Jxx - Jzz)/Jyy p r
+    m = Model(Airframe())
+    xd = m.f(0.0, state(z=3.0, p=0.5, r=2.0), hover_u())
+    assert xd[10] == pytest.approx(-(JXX - JZZ) / JYY * 0.5 * 2.0, rel=1e-9)
+    assert xd[10] > 0
+
+
+def test_yaw_drag_zero_gamma2_in_flight_and_used_on_bearing():
+    a = Airframe()
+    xd = Model(a).f(0.0, state(z=3.0, r=2.0), hover_u())
+    assert xd[11] == pytest.approx(-(GAMMA1 * 2.0 ** 2) / JZZ, rel=1e-12)
+    xd = Model(a, bearing=False).f(0.0, state(z=3.0, r=-2.0), hover_u())
+    assert xd[11] == pytest.approx(+(GAMMA1 * 2.0 ** 2) / JZZ, rel=1e-12)
+    xd = Model(a, bearing=True).f(0.0, state(z=3.0, r=2.0), hover_u())
+    assert xd[11] == pytest.approx(-(GAMMA1 * 2.0 ** 2 + GAMMA2) / JZZ, rel=1e-12)
+    xd = Model(a, bearing=True).f(0.0, state(z=3.0, r=-0.5), hover_u())
+    assert xd[11] == pytest.approx(+(GAMMA1 * 0.25 + GAMMA2) / JZZ, rel=1e-12)
+    xd = Model(a, bearing=True).f(0.0, state(z=3.0), hover_u())
+    assert xd[11] == pytest.approx(0.0, abs=1e-12)   # no friction at rest
+
+
+def skew(w):
+    return np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+
+
+@pytest.mark.parametrize("att,rates", [((0.1, 0.2, 0.3), (0.3, -0.4, 0.5)),
+                                       ((-0.8, 0.6, 2.5), (-1.0, 0.7, 0.2)),
+                                       ((0.0, 0.0, 0.0), (0.4, 0.5, 0.6))])
+def test_euler_kinematics_agree_with_rotation(att, rates):
+    """dR/dt = R [w]x for body rates w: differentiate the hand-built R along the model's Euler rates."""
+    m = Model(Airframe())
+    x = state(z=3.0, phi=att[0], theta=att[1], psi=att[2], p=rates[0], q=rates[1], r=rates[2])
+    eta_dot = np.array(m.f(0.0, x, hover_u())[6:9])
+    eta = np.array(att)
+    eps = 1e-6
+    dR = (R_hand(*(eta + eps * eta_dot)) - R_hand(*(eta - eps * eta_dot))) / (2 * eps)
+    np.testing.assert_allclose(R_hand(*eta).T @ dR, skew(rates), atol=1e-8)
+    # the level case is the identity map
+    if att == (0.0, 0.0, 0.0):
+        np.testing.assert_allclose(eta_dot, rates, atol=1e-15)
+
+
+def test_translation_with_tilt():
+    phi, theta, psi = 0.2, -0.1, 0.7
+    m = Model(Airframe())
+    x = state(z=3.0, phi=phi, theta=theta, psi=psi, vx=1.0, vy=-2.0, vz=0.5)
+    xd = m.f(0.0, x, hover_u())
+    # total thrust M g along z_b: a = g R[:, 2] - (0, 0, g)
+    sf, cf, st, ct, sp, cp = (math.sin(phi), math.cos(phi), math.sin(theta), math.cos(theta),
+                              math.sin(psi), math.cos(psi))
+    want = (G * (cp * st * cf + sp * sf), G * (sp * st * cf - cp * sf), G * ct * cf - G)
+    assert xd[3:6] == pytest.approx(want, rel=1e-12, abs=1e-12)
+    assert xd[0:3] == [1.0, -2.0, 0.5]
+
+
+def test_specific_force_without_effects():
+    m = Model(Airframe())
+    u = (130.0, 140.0, 150.0, 110.0, BATT)
+    total = H1 * (10 ** 2 + 20 ** 2 + 30 ** 2 + 0)
+    x = state(z=3.0, phi=0.4, theta=-0.3, psi=1.0, p=1.0, vx=3.0)
+    sfx, sfy, sfz = m.specific_force(0.0, x, u)
+    assert (sfx, sfy) == (0.0, 0.0)
+    assert sfz == pytest.approx(total / M, rel=1e-12)
+
+
+def test_model_f_accepts_a_numpy_state():
+    """solve_ivp (and any vectorised caller) hands f an ndarray: its entries are numpy scalars."""
+    m = Model(Airframe())
+    x = np.array(state(z=3.0, r=2.0))
+    xd = m.f(0.0, x, hover_u())
+    assert xd[11] == pytest.approx(-(GAMMA1 * 4.0) / JZZ, rel=1e-12)
+
+
+def test_model_f_is_a_function_of_its_arguments():
+    """The same list object with new values must give the new answer (f(t, x, u) is pure)."""
+    m = Model(Airframe())
+    u = list(hover_u())
+    xd0 = m.f(0.0, state(z=3.0), u)
+    assert xd0[9] == pytest.approx(0.0, abs=1e-12)
+    u[1] = PH + 4.0
+    u[3] = PH - 4.0
+    xd1 = m.f(0.0, state(z=3.0), u)
+    assert xd1[9] == pytest.approx(L * 16 * H1 * D / JXX, rel=1e-12)
+
+
+# --- effects --------------------------------------------------------------------------------------
+
+def test_effect_rotor_drag():
+    m = Model(Airframe(), (fx.make("rotor_drag", k=0.3),))
+    # yawed 90 deg (nose West), moving North at 2 m/s: the body sees (0, -2, 0), drag (0, +0.6, 0) N,
+    # which in the inertial frame is (-0.6, 0, 0): against the motion
+    x = state(z=3.0, psi=math.pi / 2, vx=2.0)
+    u = (0.0, 0.0, 0.0, 0.0, BATT)
+    xd = m.f(0.0, x, u)
+    assert xd[3] == pytest.approx(-0.3 * 2.0 / M, rel=1e-12)
+    assert xd[4] == pytest.approx(0.0, abs=1e-12)
+    assert xd[5] == pytest.approx(-G, rel=1e-12)
+    assert m.specific_force(0.0, x, u) == pytest.approx((0.0, 0.3 * 2.0 / M, 0.0), abs=1e-12)
+    # no torque from it
+    assert xd[9:12] == pytest.approx([0.0, 0.0, 0.0], abs=1e-12)
+
+
+def test_effect_com_offset():
+    m = Model(Airframe(), (fx.make("com_offset", dx=0.01, dy=-0.02),))
+    xd = m.f(0.0, state(z=3.0), hover_u())
+    F = 4 * FH  # = M g
+    assert xd[9] == pytest.approx(-(-0.02) * F / JXX, rel=1e-12)   # +0.02 F about x_b
+    assert xd[10] == pytest.approx(0.01 * F / JYY, rel=1e-12)
+    assert xd[9] == pytest.approx(0.02 * M * G / JXX, rel=1e-12)   # about 23 rad/s^2
+    assert xd[11] == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(xd[3:6], 0.0, atol=1e-12)
+
+
+def test_effect_motor_weak():
+    m = Model(Airframe(), (fx.make("motor_weak", motor=2, scale=0.5),))
+    xd = m.f(0.0, state(z=3.0), hover_u())
+    assert xd[9] == pytest.approx(L * (0.5 * FH - FH) / JXX, rel=1e-12)      # motor 2 weaker: roll -
+    assert xd[10] == pytest.approx(0.0, abs=1e-12)
+    # its reaction torque is halved too: tau1 - tau2/2 + tau3 - tau4 = tau_h / 2
+    assert xd[11] == pytest.approx(0.5 * TAU_H / JZZ, rel=1e-12)
+    assert xd[5] == pytest.approx(3.5 * FH / M - G, rel=1e-12)             # = -g/8
+    assert xd[5] == pytest.approx(-G / 8, rel=1e-12)
+
+
+def test_effect_battery_sag():
+    m = Model(Airframe(), (fx.make("battery_sag", v_nominal=14.8),))
+    k = (12.0 / 14.8) ** 2
+    xd = m.f(0.0, state(z=3.0), hover_u(v=12.0))
+    assert xd[5] == pytest.approx(k * 4 * FH / M - G, rel=1e-12)
+    assert xd[5] == pytest.approx(G * (k - 1), rel=1e-12)
+    xd = m.f(0.0, state(z=3.0), hover_u(v=14.8))
+    assert xd[5] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_effect_ground_effect():
+    m = Model(Airframe(), (fx.make("ground_effect", rotor_radius=ROTOR_R),))
+    for z in (0.5, 0.2, 2.0):
+        k = 1.0 / (1.0 - (ROTOR_R / (4 * z)) ** 2)
+        xd = m.f(0.0, state(z=z), hover_u())
+        assert xd[5] == pytest.approx(G * (k - 1), rel=1e-10)
+    # below z = R/2 it is held at 1/(1 - 1/4) = 4/3
+    xd = m.f(0.0, state(z=0.01), hover_u())
+    assert xd[5] == pytest.approx(G * (4 / 3 - 1), rel=1e-10)
+    # far from the ground, nothing
+    xd = m.f(0.0, state(z=100.0), hover_u())
+    assert xd[5] == pytest.approx(G * (1 / (1 - (ROTOR_R / 400) ** 2) - 1), rel=1e-6)
+
+
+def test_effect_linear_yaw_drag():
+    m = Model(Airframe(), (fx.make("linear_yaw_drag", gamma0=0.01),))
+    xd = m.f(0.0, state(z=3.0, r=2.0), hover_u())
+    assert xd[11] == pytest.approx((-0.01 * 2.0 - GAMMA1 * 4.0) / JZZ, rel=1e-12)
+    xd = m.f(0.0, state(z=3.0, r=-1.0), hover_u())
+    assert xd[11] == pytest.approx((+0.01 * 1.0 + GAMMA1 * 1.0) / JZZ, rel=1e-12)
+
+
+def test_effect_motor_lag():
+    e = fx.make("motor_lag", tau=0.05)
+    m = Model(Airframe(), (e,))
+    assert m.n == 16 and e.offset == 12
+    # initial rotor states are the commanded thrusts
+    assert m.initial_state(hover_u())[12:] == pytest.approx([FH] * 4, rel=1e-12)
+    x = state(z=3.0) + [1.0, 2.0, 3.0, 4.0]
+    xd = m.f(0.0, x, hover_u())
+    assert xd[12:16] == pytest.approx([(FH - 1.0) / 0.05, (FH - 2.0) / 0.05,
+                                       (FH - 3.0) / 0.05, (FH - 4.0) / 0.05], rel=1e-12)
+    # the thrusts acting are the lagged ones
+    assert xd[5] == pytest.approx((1.0 + 2.0 + 3.0 + 4.0) / M - G, rel=1e-12)
+    assert xd[9] == pytest.approx(L * (2.0 - 4.0) / JXX, rel=1e-12)
+    assert xd[10] == pytest.approx(L * (3.0 - 1.0) / JYY, rel=1e-12)
+
+
+def test_parse_effect():
+    e = fx.parse("motor_lag:tau=0.05")
+    assert e.cause == "motor_lag" and e.parameters == {"tau": 0.05}
+    e = fx.parse(" com_offset : dx=0.01 , dy=-0.02")
+    assert e.cause == "com_offset" and e.parameters == {"dx": 0.01, "dy": -0.02}
+    e = fx.parse("actuation_delay:delay=0.02")
+    assert e.delay == 0.02
+    assert Model(Airframe(), (e,)).delay == 0.02
+
+
+@pytest.mark.parametrize("text,words", [
+    ("warp_drive:k=1", ["unknown effect", "warp_drive"]),
+    ("motor_lag", ["motor_lag", "missing tau"]),
+    ("motor_lag:tau=0.05,k=1", ["unknown k"]),
+    ("motor_lag:tau=10", ["tau=10", "out of range"]),
+    ("motor_lag:tau=-1", ["out of range"]),
+    ("motor_lag:tau=nan", ["out of range"]),
+    ("motor_lag:tau", ["bad item", "'tau'"]),
+    ("motor_lag:tau=fast", ["bad item", "'tau=fast'"]),
+    ("motor_weak:motor=2.5,scale=0.5", ["motor must be"]),
+    ("motor_weak:motor=5,scale=0.5", ["motor=5", "out of range"]),
+])
+def test_parse_effect_errors(text, words):
+    with pytest.raises(InputError) as e:
+        fx.parse(text)
+    for w in words:
+        assert w in str(e.value)
+
+
+# --- plant: RK4, floor, delay ---------------------------------------------------------------------
+
+def open_loop_input(k, dt):
+    t = k * dt
+    d = 1.5 * math.sin(2 * math.pi * 2.0 * t)
+    e = 1.0 * math.cos(2 * math.pi * 1.3 * t)
+    return (PH + 1 + e, PH + d, PH - e + 1.5, PH - d, BATT)
+
+
+def test_rk4_against_solve_ivp():
+    """Fixed-step RK4 against an accurate reference (DOP853, rtol 1e-10) for the same zero-order-hold
+    input, over 1 s airborne, at h = dt and dt/2.
+
+    Error bound: RK4 matches the Taylor series through h^4, so the local error per step is about
+    h^5 |x^(5)| / 120 and over T/h steps the global error is about T h^4 |x^(5)| / 120. Here the
+    input is constant within a step and the fastest motion is the rotation: velocity is thrust/M
+    (about g) turned by the attitude, whose rate of change is bounded by Lam = max|w| + sqrt(max|dw/dt|),
+    so |x^(5)| <~ g Lam^4, and err <= T g Lam^4 h^4 / 120. Halving h must divide it by 2^4 = 16.
+    """
+    a = Airframe()
+    dt, T = 0.01, 1.0
+    N = round(T / dt)
+    m = Model(a)
+    x = np.array(state(z=5.0))
+    ref = [x.copy()]
+    wmax = amax = 0.0
+    for k in range(N):
+        u = open_loop_input(k, dt)
+        s = solve_ivp(lambda t, y: m.f(t, y.tolist(), u), (k * dt, (k + 1) * dt), x, method="DOP853",
+                      rtol=1e-10, atol=1e-12)
+        x = s.y[:, -1]
+        ref.append(x.copy())
+        wmax = max(wmax, np.abs(x[9:12]).max())
+        amax = max(amax, np.abs(m.f(0.0, x.tolist(), u)[9:12]).max())
+    ref = np.array(ref)
+    assert ref[:, 2].min() > 1.0       # airborne throughout
+    assert np.abs(ref[-1, 6:9]).max() > 0.1   # and it really turned (the test is not trivial)
+    lam = wmax + math.sqrt(amax)
+    errs = {}
+    for sub in (1, 2):
+        plant = Plant(Model(a), dt, sub)
+        plant.on_ground = False
+        plant.x[2] = 5.0
+        got = [list(plant.x)]
+        for k in range(N):
+            plant.command(*open_loop_input(k, dt))
+            plant.advance(dt)
+            got.append(list(plant.x))
+        h = dt / sub
+        err = np.abs(np.array(got) - ref).max()
+        bound = T * G * lam ** 4 * h ** 4 / 120
+        assert err < bound, (sub, err, bound)
+        errs[sub] = err
+        assert plant.t == pytest.approx(T)
+        assert not plant.touchdowns
+    assert 16 / 1.5 < errs[1] / errs[2] < 16 * 1.5
+
+
+def fresh_plant(effects=(), dt=1 / 450, substeps=2):
+    return Plant(Model(Airframe(), effects), dt, substeps)
+
+
+def test_floor_holds_below_hover_and_lifts_above():
+    dt = 1 / 450
+    plant = fresh_plant(dt=dt)
+    for _ in range(45):
+        plant.command(*hover_u((-0.5,) * 4))
+        plant.advance(dt)
+    assert plant.on_ground
+    assert plant.x == [0.0] * 12
+    assert plant.t == pytest.approx(45 * dt)
+    assert plant.specific_force() == (0.0, 0.0, G)
+    # above hover: constant acceleration a from the first substep, z = a t^2 / 2 (RK4 is exact here)
+    n = 90
+    for _ in range(n):
+        plant.command(*hover_u((2.0,) * 4))
+        plant.advance(dt)
+    acc = 4 * H1 * (D + 2) ** 2 / M - G
+    assert not plant.on_ground
+    assert plant.x[2] == pytest.approx(acc * (n * dt) ** 2 / 2, rel=1e-9)
+    assert plant.x[5] == pytest.approx(acc * n * dt, rel=1e-9)
+
+
+def test_touchdown_recorded():
+    dt = 1 / 450
+    plant = fresh_plant(dt=dt)
+    plant.on_ground = False
+    plant.x[2] = 0.1
+    plant.x[8] = 0.4          # heading is kept through a touchdown
+    for _ in range(90):       # 0.2 s, motors off: free fall from 0.1 m
+        plant.command(0.0, 0.0, 0.0, 0.0, BATT)
+        plant.advance(dt)
+    t_hit = math.sqrt(2 * 0.1 / G)       # 0.1428 s
+    v_hit = math.sqrt(2 * G * 0.1)       # 1.40 m/s
+    h = dt / 2
+    assert len(plant.touchdowns) == 1
+    t, vz = plant.touchdowns[0]
+    assert t_hit <= t <= t_hit + h + 1e-12
+    assert -v_hit - G * h - 1e-9 <= vz <= -v_hit
+    assert plant.on_ground
+    assert plant.x[2] == 0.0 and plant.x[5] == 0.0
+    assert plant.x[8] == 0.4
+    assert plant.specific_force() == (0.0, 0.0, G)
+
+
+def test_motor_lag_vehicle_can_take_off():
+    """With rotor states, the floor must still let the rotors spin up: a command well above hover
+    lifts the vehicle once the lagged thrust exceeds the weight (here after -0.05 ln(1 - FH / h1 (D + 10)^2) = 0.061 s)."""
+    dt = 1 / 450
+    plant = fresh_plant((fx.make("motor_lag", tau=0.05),), dt=dt)
+    for _ in range(225):      # 0.5 s
+        plant.command(*hover_u((10.0,) * 4))
+        plant.advance(dt)
+    assert not plant.on_ground
+    assert plant.x[2] > 0.0
+
+
+def test_actuation_delay_shifts_response_quantised_to_substep():
+    """delay 7 ms at h = dt/3 = 1/1350 s is 9.45 substeps, realised as 9 substeps = 3 loop periods."""
+    dt, sub = 1 / 450, 3
+    assert round(0.007 / (dt / sub)) == 9
+    runs = []
+    for eff in ((), (fx.make("actuation_delay", delay=0.007),)):
+        plant = fresh_plant(eff, dt=dt, substeps=sub)
+        zs, ps = [], []
+        for k in range(60):
+            u = hover_u((0.0,) * 4) if k < 10 else hover_u((3.0, 5.0, 3.0, 1.0))
+            plant.command(*u)
+            plant.advance(dt)
+            zs.append(plant.x[2])
+            ps.append(plant.x[9])
+        runs.append((zs, ps))
+    (z0, p0), (z1, p1) = runs
+    assert z0[9] == 0.0 and z0[10] > 0.0            # lifts in the first period of the step
+    assert z1[12] == 0.0 and z1[13] > 0.0           # three periods later
+    assert z1[3:] == pytest.approx(z0[:-3], rel=1e-12, abs=0)
+    assert p1[3:] == pytest.approx(p0[:-3], rel=1e-12, abs=0)
+    assert p0[20] > 0.0                              # and it rolls (f2 > f4)
