@@ -48,8 +48,9 @@ def main() -> None:
                 worst = max(m.coupling.items(), key=lambda kv: kv[1] * (180 / math.pi if kv[0] != "alt" else 100))
                 wk, wu = (180 / math.pi, "deg") if worst[0] != "alt" else (100.0, "cm")
                 outcome = flight.result.reason
-                if flight.touchdowns and name != "step_alt":
-                    outcome += f"; touched down at {abs(flight.touchdowns[0][1]):.1f} m/s"
+                hard = [abs(vz) for _, vz in flight.touchdowns if abs(vz) > 1.0]
+                if hard:
+                    outcome = f"crashed: hit the floor at {max(hard):.1f} m/s"
                 print(f"| {gains} | {label} | {sc.steps[0].channel} {sc.steps[0].end * k:+g} {unit} | {fmt(m.rise_s)} | "
                       f"{fmt(m.overshoot, 100, 1)} | {fmt(m.settling_s)} | {fmt(m.steady_error, k, 3)} {unit} | "
                       f"{worst[0]} {fmt(worst[1], wk, 2)} {wu} | {outcome} |", flush=True)

@@ -173,6 +173,16 @@ class Model:
             e.wrench(t, x, f, vb, force, torque)
         return f, tau, force, torque
 
+    def _aggregate(self, t, x, u, xdot=None):
+        """Body force and torques, eq. 9's Omega: what the rigid body needs from the rotors."""
+        a = self.a
+        (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque = self.forces(t, x, u, xdot)
+        c1, l = a.c1, a.l
+        # eq. 9: Omega = -w1 + w2 - w3 + w4 (motors 1 and 3 turn clockwise), w from eq. 27
+        Omega = -sqrt(f1 / c1) + sqrt(f2 / c1) - sqrt(f3 / c1) + sqrt(f4 / c1)
+        return (force[0], force[1], force[2] + f1 + f2 + f3 + f4, l * (f2 - f4) + torque[0],
+                l * (f3 - f1) + torque[1], t1 - t2 + t3 - t4 + torque[2], Omega)
+
     def f(self, t, x, u):
         """xdot = f(t, x, u): M dv/dt = R (F_ext + sum f z_b) - M g z, and eq. 7. Scalar code (fast);
         the functions above it take arrays too, for fitting."""
@@ -180,32 +190,27 @@ class Model:
         xdot = [0.0] * self.n
         if self._cacheable:
             if u is not self._cached_u:
-                self._cached_u, self._cached = u, self.forces(t, x, u)
-            (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque = self._cached
+                self._cached_u, self._cached = u, self._aggregate(t, x, u)
+            fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._cached
         else:
-            (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque = self.forces(t, x, u, xdot)
+            fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._aggregate(t, x, u, xdot)
         phi, theta, psi, p, q, r = x[6:12]
         sf, cf, st, ct, sp, cp = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
-        fx, fy, fz = force[0], force[1], force[2] + f1 + f2 + f3 + f4
         iM = 1.0 / a.M
         # R = Rz(psi) Ry(theta) Rx(phi) applied to the body force (fx, fy, fz)
-        bx = ct * fx + st * (sf * fy + cf * fz)
+        up = sf * fy + cf * fz
+        bx = ct * fx + st * up
         by = cf * fy - sf * fz
         xdot[0], xdot[1], xdot[2] = x[3], x[4], x[5]
         xdot[3] = (cp * bx - sp * by) * iM
         xdot[4] = (sp * bx + cp * by) * iM
-        xdot[5] = (-st * fx + ct * (sf * fy + cf * fz)) * iM - a.g
+        xdot[5] = (-st * fx + ct * up) * iM - a.g
         w = q * sf + r * cf
         xdot[6] = p + w * st / ct       # Z-Y-X Euler-angle kinematics
         xdot[7] = q * cf - r * sf
         xdot[8] = w / ct
-        l, c1 = a.l, a.c1
-        # eq. 9: Omega = -w1 + w2 - w3 + w4 (motors 1 and 3 turn clockwise), w from eq. 27
-        Omega = (-sqrt(f1 / c1) + sqrt(f2 / c1) - sqrt(f3 / c1) + sqrt(f4 / c1))
         tau_d = (a.gamma1 * r * r + self.gamma2) * ((r > 0.0) - (r < 0.0))  # eq. 6
-        xdot[9], xdot[10], xdot[11] = angular_acceleration(
-            p, q, r, l * (f2 - f4) + torque[0], l * (f3 - f1) + torque[1],
-            t1 - t2 + t3 - t4 + torque[2], Omega, tau_d, a)
+        xdot[9], xdot[10], xdot[11] = angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, a)
         return xdot
 
     def specific_force(self, t, x, u):

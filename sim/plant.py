@@ -44,13 +44,11 @@ class Plant:
                 self.t = t + h
                 continue
             self.on_ground = False
+            hh = 0.5 * h
             k1 = f(t, x, u)
-            x2 = [a + 0.5 * h * b for a, b in zip(x, k1)]
-            k2 = f(t + 0.5 * h, x2, u)
-            x3 = [a + 0.5 * h * b for a, b in zip(x, k2)]
-            k3 = f(t + 0.5 * h, x3, u)
-            x4 = [a + h * b for a, b in zip(x, k3)]
-            k4 = f(t + h, x4, u)
+            k2 = f(t + hh, [a + hh * b for a, b in zip(x, k1)], u)
+            k3 = f(t + hh, [a + hh * b for a, b in zip(x, k2)], u)
+            k4 = f(t + h, [a + h * b for a, b in zip(x, k3)], u)
             h6 = h / 6.0
             self.x = [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
             self.t = t + h

@@ -149,16 +149,15 @@ def load_file(table: Table, a: Airframe) -> FileData:
     gyro = np.vstack([table[c] for c in ("gyro_x", "gyro_y", "gyro_z")])
     acc = np.vstack([table[c] for c in ("acc_x", "acc_y", "acc_z")])
     notes = []
-    on = (P > a.h2 + MOTOR_ON_MARGIN).all(axis=0)
-    # at rest before the first take-off: the residual gyro bias and the initial tilt
+    on = (P > a.h2 + MOTOR_ON_MARGIN).any(axis=0)
+    # at rest before the first take-off: the initial tilt
     first_on = int(np.argmax(on)) if on.any() else n
     still = slice(0, first_on)
     if first_on >= 20:
-        bias = gyro[:, still].mean(axis=1)
-        gyro = gyro - bias[:, None]
+        # the gyro is calibrated by contract (bias removed): only the initial tilt is taken here
         R0 = _tilt_rotation(acc[:, still].mean(axis=1))
     else:
-        notes.append("no rest before the motors start: gyro bias and initial tilt taken as zero")
+        notes.append("no rest before the motors start: initial tilt taken as zero")
         R0 = np.eye(3)
     Rm = _rotations(t, gyro, R0)
     rng = table["range"]
@@ -569,7 +568,7 @@ class RotorDrag(GridCandidate):
             ah = np.vstack([f.Rm[2] * f.acc[2], f.Rm[5] * f.acc[2]])   # (R a)_x, (R a)_y, a = (0,0,a_z)
             dt = np.diff(f.t, append=f.t[-1] + 1.0 / ds.fs)
             v = np.zeros_like(ah)
-            flying = (f.P > ds.a.h2 + MOTOR_ON_MARGIN).all(axis=0)
+            flying = (f.P > ds.a.h2 + MOTOR_ON_MARGIN).any(axis=0)
             for s0, s1 in _stretches(flying):
                 if k > 0:
                     a = math.exp(-k / M / ds.fs)
