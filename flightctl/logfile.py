@@ -75,7 +75,8 @@ def read_table(path: str | Path, required: tuple[str, ...], text_columns: tuple[
             if s.startswith("#"):
                 key, sep, value = s[1:].partition(":")
                 if sep:
-                    meta[key.strip()] = value.strip()
+                    key, value = key.strip(), value.strip()   # FlightLogWriter writes a multi-line value as repeated keys
+                    meta[key] = f"{meta[key]}\n{value}" if key in meta else value
                 continue
             cells = next(csv.reader([raw]))
             if header is None:
@@ -186,6 +187,7 @@ class FlightLogWriter:
         self.count = 0
         self.path = str(out) if self._own else getattr(out, "name", "<log>")
         self.meta = {k: str(v) for k, v in meta.items()}
+        self._meta_lines = sum(len(str(v).splitlines()) or 1 for v in meta.values())
         self._kept: list[tuple] | None = [] if keep else None
 
     def append(self, row: tuple) -> None:
@@ -210,7 +212,7 @@ class FlightLogWriter:
         data = np.array([r[:k] + (0.0,) + r[k + 1:] for r in rows], dtype=float).reshape(len(rows), -1)
         columns = {name: data[:, i] for i, name in enumerate(self.columns)}
         columns["range"] = ranges
-        return Table(self.path, columns, dict(self.meta), np.arange(len(rows)) + 2 + len(self.meta))
+        return Table(self.path, columns, dict(self.meta), np.arange(len(rows)) + 2 + self._meta_lines)
 
     def close(self) -> None:
         if self._f is None:

@@ -134,7 +134,7 @@ def _build(cls, table: dict, where: str, base=None):
 
 def from_dict(data: dict, gains: Gains | None = None) -> Params:
     """Validate a parsed TOML document. `gains` picks the base gain set that [gains] overrides."""
-    data = dict(data)
+    data = {k: dict(v) if isinstance(v, dict) else v for k, v in data.items()}  # never mutate the caller's tables
     tables = {"gains": (Gains, gains or TABLE6), "filters": (Filters, Filters())}
     built = {}
     for name, (cls, base) in tables.items():
@@ -143,7 +143,7 @@ def from_dict(data: dict, gains: Gains | None = None) -> Params:
             raise InputError(f"{name}: expected a table [{name}]")
         preset = table.pop("preset", None) if cls is Gains else None
         if preset is not None:
-            if preset not in GAIN_SETS:
+            if not isinstance(preset, str) or preset not in GAIN_SETS:
                 raise InputError(f"gains.preset: unknown gain set {preset!r} (known: {', '.join(GAIN_SETS)})")
             base = GAIN_SETS[preset]
         built[name] = _build(cls, table, f"{name}.", base)

@@ -8,8 +8,8 @@ One signature for the base model and every extension: `Model.f(t, x, u) -> xdot`
 
 (position and velocity inertial, x North, y West, z Up; Z-Y-X Euler angles; body rates), and the
 input is `u = (P1, P2, P3, P4, battery_v)`: the command values of eq. 26 and the battery voltage.
-The arithmetic works on floats (the simulator, fast scalar code) and on numpy arrays (fitting many
-samples at once): trigonometry is taken from `math` or `numpy` by the type of the state.
+`Model.f` is scalar code (the simulator's inner loop); the functions before it take numpy arrays
+too, so that fits evaluate the same equations on many samples at once.
 """
 from __future__ import annotations
 
@@ -189,8 +189,9 @@ class Model:
         a = self.a
         xdot = [0.0] * self.n
         if self._cacheable:
-            if u is not self._cached_u:
-                self._cached_u, self._cached = u, self._aggregate(t, x, u)
+            key = tuple(u)   # by value: a list changed in place must not return stale forces
+            if key != self._cached_u:
+                self._cached_u, self._cached = key, self._aggregate(t, x, u)
             fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._cached
         else:
             fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._aggregate(t, x, u, xdot)
@@ -209,7 +210,7 @@ class Model:
         xdot[6] = p + w * st / ct       # Z-Y-X Euler-angle kinematics
         xdot[7] = q * cf - r * sf
         xdot[8] = w / ct
-        tau_d = (a.gamma1 * r * r + self.gamma2) * ((r > 0.0) - (r < 0.0))  # eq. 6
+        tau_d = (a.gamma1 * r * r + self.gamma2) * (1.0 if r > 0.0 else -1.0 if r < 0.0 else 0.0)  # eq. 6
         xdot[9], xdot[10], xdot[11] = angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, a)
         return xdot
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections import deque
 
-from sim.model import PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Model, P
+from sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Model, P
 
 
 class Plant:
@@ -32,7 +32,7 @@ class Plant:
     def advance(self, dt: float) -> None:
         """Integrate over one loop period with the last command held."""
         u_new = getattr(self, "_next", self.u)
-        f, h = self.model.f, self.h
+        h = self.h
         for _ in range(self.substeps):
             if self._lag:
                 self._queue.append(u_new)
@@ -41,19 +41,24 @@ class Plant:
                 self.u = u_new
             x, t, u = self.x, self.t, self.u
             if self.on_ground and not self._lifts(x, u):
+                if len(x) > N_RIGID:   # the extensions' own states (motor lag) run on the ground too
+                    self.x = x[:N_RIGID] + self._rk4(x, t, u, h)[N_RIGID:]
                 self.t = t + h
                 continue
             self.on_ground = False
-            hh = 0.5 * h
-            k1 = f(t, x, u)
-            k2 = f(t + hh, [a + hh * b for a, b in zip(x, k1)], u)
-            k3 = f(t + hh, [a + hh * b for a, b in zip(x, k2)], u)
-            k4 = f(t + h, [a + h * b for a, b in zip(x, k3)], u)
-            h6 = h / 6.0
-            self.x = [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
+            self.x = self._rk4(x, t, u, h)
             self.t = t + h
             if self.x[Z] < 0.0:
                 self._touch_down()
+
+    def _rk4(self, x, t, u, h):
+        f, hh = self.model.f, 0.5 * h
+        k1 = f(t, x, u)
+        k2 = f(t + hh, [a + hh * b for a, b in zip(x, k1)], u)
+        k3 = f(t + hh, [a + hh * b for a, b in zip(x, k2)], u)
+        k4 = f(t + h, [a + h * b for a, b in zip(x, k3)], u)
+        h6 = h / 6.0
+        return [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
 
     def _lifts(self, x, u) -> bool:
         """On the floor the vehicle stays put until the vertical thrust exceeds its weight."""

@@ -538,19 +538,22 @@ def fresh_plant(effects=(), dt=1 / 450, substeps=2):
 def test_floor_holds_below_hover_and_lifts_above():
     dt = 1 / 450
     plant = fresh_plant(dt=dt)
-    for _ in range(45):
-        plant.command(*hover_u((-0.5,) * 4))
+    for _ in range(45):             # 0.1 % short of the weight: 4 h1 (D - 0.02)^2 = 0.9992 M g
+        plant.command(*hover_u((-0.02,) * 4))
         plant.advance(dt)
     assert plant.on_ground
+    assert not plant.touchdowns     # it never left the floor
     assert plant.x == [0.0] * 12
     assert plant.t == pytest.approx(45 * dt)
     assert plant.specific_force() == (0.0, 0.0, G)
-    # above hover: constant acceleration a from the first substep, z = a t^2 / 2 (RK4 is exact here)
+    # 0.1 % above the weight: constant acceleration a from the first substep, z = a t^2 / 2 (RK4 is
+    # exact for a quadratic)
     n = 90
     for _ in range(n):
-        plant.command(*hover_u((2.0,) * 4))
+        plant.command(*hover_u((0.02,) * 4))
         plant.advance(dt)
-    acc = 4 * H1 * (D + 2) ** 2 / M - G
+    acc = 4 * H1 * (D + 0.02) ** 2 / M - G
+    assert 0.007 < acc < 0.008
     assert not plant.on_ground
     assert plant.x[2] == pytest.approx(acc * (n * dt) ** 2 / 2, rel=1e-9)
     assert plant.x[5] == pytest.approx(acc * n * dt, rel=1e-9)

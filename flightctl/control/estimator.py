@@ -84,7 +84,10 @@ class AttitudeEstimator:
             pitch_g = a * pitch_g + (1.0 - a) * (atan2(-ax, sqrt(ay * ay + az * az))     # eq. 31, 34
                                                  - self.tilt_bias[1])
         if self.use_mag and s.mag_fresh:         # eq. 35, the difference taken across +-pi
-            yaw_mag = heading_from_mag(s.mx, s.my, s.mz, roll_g, pitch_g) - self.yaw_bias
+            # level the field with the chip's own tilt (estimate plus mounting bias), as the
+            # calibration did when it took the heading reference
+            yaw_mag = heading_from_mag(s.mx, s.my, s.mz, roll_g + self.tilt_bias[0],
+                                       pitch_g + self.tilt_bias[1]) - self.yaw_bias
             yaw_g += (1.0 - self.a_yaw) * ((yaw_mag - yaw_g + pi) % (2 * pi) - pi)
         yaw_g = (yaw_g + pi) % (2 * pi) - pi
         if self.paper:   # eq. 24 literally: the difference quotient of the fused angles

@@ -14,9 +14,15 @@ Counts: `write(counts)` takes the paper's duty on 0..PWM_RANGE (40000) of the pe
 h2 = 120 is 1048 us), and a signal that never goes high would look like a lost signal to the ESC.
 
 Changing the command: a new wave is built and sent with REPEAT_SYNC, so pigpio switches at the end
-of the running cycle and no pulse is ever cut. A replaced wave is deleted only once `wave_tx_at()`
-shows that a later one is on the pins (deleting a wave still queued or running would hand its DMA
-blocks to the next wave). A command equal to the last one (at 1 us resolution) sends nothing.
+of the running cycle and no pulse is ever cut. pigpio (gpioWaveTxSend) links the end of the wave
+sent *last* to the new one, so a wave sent before its predecessor started would queue behind it for
+a full cycle; the loop (450 Hz) is slightly faster than the ESC period (449.03 Hz), and such a queue
+would grow by one period of lag every second. So a new wave is sent only once `wave_tx_at()` shows
+the last one on the pins; otherwise the command waits for the next write (the ESC takes one command
+per period anyway): at most one wave is ever queued, the lag stays under two periods. Replaced waves
+are deleted once a later one is on the pins (deleting a wave still queued or running would hand its
+DMA blocks to the next wave). A command equal to the last one (at 1 us resolution) sends nothing.
+Cost per changed command: five pigpiod round trips (tx_at, delete, add, create, send).
 
 Reading the frequency back (`arm()` refuses with `ArmingRefused` naming both frequencies): pigpio's own
 account of the built wave (`wave_get_micros`) must equal the period, and the real output is measured
@@ -58,7 +64,7 @@ FREQUENCY_TOLERANCE_HZ = 0.5
 WIDTH_TOLERANCE_US = 12.0   # pigpio samples edges every 5 us by default
 MEASURE_S = 0.15            # ~67 periods per pin
 MIN_PERIODS = 10
-MAX_RETIRED = 8             # replaced waves awaiting deletion before the output counts as stuck
+STUCK_S = 0.05              # a wave sent this long ago and still not on the pins: output stuck
 SCRIPT_SLOTS = 32           # pigpiod's script table
 
 
@@ -119,6 +125,8 @@ class PigpioEsc:
         self._current: int | None = None    # the wave last sent
         self._retired: list[int] = []       # replaced waves, in the order sent, not yet deleted
         self._on: list[int] | None = None   # on-times (us) of the wave last sent
+        self._t_sent = 0.0                  # when the wave last sent was sent
+        self.deferred = 0                   # writes deferred so far (one per second at 450 Hz is normal)
         self._sid: int | None = None        # the dead-man script while armed
         self._last_refresh = 0.0
         self.built_period_us: int | None = None
@@ -143,6 +151,7 @@ class PigpioEsc:
         self._stop_wid = pi.wave_create()
         pi.wave_send_using_mode(self._stop_wid, pigpio.WAVE_MODE_REPEAT_SYNC)
         self._current, self._retired, self._on = self._stop_wid, [], [self.stop_us] * 4
+        self._t_sent = self._clock()
         self._started = True
         self.waves_sent += 1
 
@@ -188,6 +197,7 @@ class PigpioEsc:
             self.pi.wave_send_using_mode(self._stop_wid, pigpio.WAVE_MODE_REPEAT_SYNC)
             self._retired.append(self._current)
             self._current, self._on = self._stop_wid, [self.stop_us] * 4
+            self._t_sent = self._clock()
             self.waves_sent += 1
         if self._sid is not None:
             sid, self._sid = self._sid, None
@@ -208,29 +218,26 @@ class PigpioEsc:
         return None if self._on is None else list(self._on)
 
     def _send(self, on: list[int]) -> None:
-        if len(self._retired) >= 2:
-            self._reap()
         pi = self.pi
+        at = pi.wave_tx_at()
+        if at != self._current:          # the wave sent last is still queued: this command waits
+            self.deferred += 1
+            waited = self._clock() - self._t_sent
+            if waited > STUCK_S:
+                raise EscError(f"ESC output stuck: pigpiod transmits wave {at}, not wave {self._current} "
+                               f"sent {waited * 1e3:.0f} ms ago")
+            return
+        for wid in self._retired:        # all sent before the one now on the pins: finished
+            pi.wave_delete(wid)
+        self._retired.clear()
         pi.wave_add_generic(wave_pulses(self.pins, on, self.period_us))
         wid = pi.wave_create()
         pi.wave_send_using_mode(wid, pigpio.WAVE_MODE_REPEAT_SYNC)
         if self._current != self._stop_wid:
             self._retired.append(self._current)
         self._current, self._on = wid, on
+        self._t_sent = self._clock()
         self.waves_sent += 1
-
-    def _reap(self) -> None:
-        """Delete the replaced waves sent before the one now on the pins."""
-        at = self.pi.wave_tx_at()
-        chain = self._retired + [self._current]
-        if at in chain:
-            k = chain.index(at)
-            for wid in self._retired[:k]:
-                self.pi.wave_delete(wid)
-            del self._retired[:k]
-        if len(self._retired) > MAX_RETIRED:
-            raise EscError(f"ESC output stuck: pigpiod still transmits wave {at} after {len(self._retired)} "
-                           "newer waves were sent")
 
     # --- checks ----------------------------------------------------------------------------------
     def measure(self, duration: float | None = None) -> dict[int, tuple[float, float, int]]:

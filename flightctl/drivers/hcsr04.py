@@ -24,6 +24,7 @@ class HcSr04:
         self._rise = None       # tick of the rising echo edge
         self._waiting = False   # a trigger was sent and its echo has not ended
         self._result = None     # distance (m), NaN for a failed measurement, None for nothing new
+        self._t_trigger = 0     # tick of the last trigger
         self.failures = 0       # consecutive failed measurements
         self._cb = None
 
@@ -44,6 +45,7 @@ class HcSr04:
         if self._waiting:
             return
         self._waiting = True
+        self._t_trigger = self.gpio.get_current_tick()
         self.gpio.gpio_trigger(self.trigger_pin, 10, 1)
 
     def _edge(self, gpio: int, level: int, tick: int) -> None:
@@ -55,8 +57,10 @@ class HcSr04:
             self._waiting = False
             distance = width_us / US_PER_M
             self._finish(distance if MIN_RANGE_M <= distance <= MAX_RANGE_M else math.nan)
-        elif level == pigpio.TIMEOUT and self._waiting:
-            # no edge for WATCHDOG_MS: no echo came back, or the echo line is stuck high
+        elif level == pigpio.TIMEOUT and self._waiting and (
+                self._rise is not None or pigpio.tickDiff(self._t_trigger, tick) >= 1000 * WATCHDOG_MS):
+            # no edge for WATCHDOG_MS since the trigger: no echo came back, or the echo line is stuck
+            # high (pigpio repeats the report on a quiet line, so one may land just after a trigger)
             self._rise = None
             self._waiting = False
             self._finish(math.nan)

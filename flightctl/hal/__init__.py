@@ -21,7 +21,7 @@ class ImuSample:
         self.ax = self.ay = self.az = 0.0  # specific force, m/s^2 (level at rest: (0, 0, +g))
         self.gx = self.gy = self.gz = 0.0  # body rates p, q, r in rad/s
         self.mx = self.my = self.mz = 0.0  # magnetic field, body frame, T
-        self.mag_fresh = False             # a new magnetometer sample is in mx..mz
+        self.mag_fresh = False             # mx..mz hold a valid field (the AK8963 updates at 100 Hz: repeats)
 
 
 @runtime_checkable

@@ -1,0 +1,420 @@
+"""`flightctl run`: the onboard service (systemd/flightctl.service runs it on the quadcopter).
+
+    flightctl run --board pi  [--board-file B.toml] [--params P.toml] --plan-queue DIR --log DIR
+    flightctl run --board pi|sim --plan PLAN.toml|SCENARIO [--params P.toml] --log DIR [--calibrate S]
+    flightctl run --board pi --stop-motors        (the unit's ExecStopPost)
+
+Lifecycle: the board comes up with the ESCs at the stop pulse (disarmed). Pre-arm checks follow,
+each with a named reason: IMU frames good and the vehicle at rest (|a| near g), battery above the
+threshold, ESC output really at the ESC frequency (`Motors.arm()` measures it; then `stop()` again).
+Then READY=1 to systemd, and the service waits, disarmed, for a plan:
+- `--plan` flies that plan once and exits;
+- `--plan-queue DIR` takes the oldest `*.toml` in DIR by renaming it into the log directory
+  (atomic: a plan is flown at most once), flies it, and waits for the next one. A restarted service
+  finds no plan and stays disarmed: a restart can never re-arm.
+- neither: stays disarmed (stop pulse) until stopped.
+A flight is `FlightLoop`: calibrate sitting still, arm, fly, land, at 450 Hz on the deadline-keeping
+wall clock (`--board sim` paces the simulator with the same clock, in real time), writing the
+contract flight log (DIR/flight-<UTC time>.csv) and a summary (…-summary.json). WATCHDOG=1 comes
+from the loop (`on_tick`, every 0.5 s at most) and from the wait for a plan.
+
+SIGTERM or SIGINT set the stop flag: the loop ends at its next iteration, the motors get zero thrust
+(the loop's `finally`, then once more here), the log gets a last row with P1..P4 = 0 (the stop
+command that was sent), STOPPING=1, exit 0. Any exception: zero thrust, then exit 1. Nothing can fly
+(a device missing, a pre-arm check failed, arming refused): exit 3 (the unit does not restart on it).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import os
+import signal
+import sys
+import threading
+import tomllib
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable
+
+from flightctl import __version__
+from flightctl.clock import PacedClock, freeze_gc
+from flightctl.control.controller import FlightController
+from flightctl.errors import InputError
+from flightctl.hal import ArmingRefused, Hal, ImuSample
+from flightctl.logfile import MAG_COLUMNS, FlightLogWriter
+from flightctl.loop import CELLS, FlightLoop, FlightResult
+from flightctl.params import Params, dumps, load
+from flightctl.plan import CHANNELS, Move, Plan
+from flightctl.sdnotify import Notifier
+
+EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_REFUSED = 0, 1, 2, 3
+PI_CALIBRATE_S = 60.0          # the paper sat still for 60 s
+SIM_CALIBRATE_S = 2.0
+MIN_CELL_V = 3.6               # refuse to arm below this per cell (the loop lands below 3.5 V)
+MAX_PLAN_ALT_M = 3.0           # the HC-SR04 reads to 4 m
+MAX_PLAN_TILT_DEG = 30.0
+PLAN_POLL_S = 0.5
+REST_ACCEL = (0.8, 1.2)        # |a| / g at rest, for the pre-arm IMU check
+
+log = logging.getLogger("flightctl.run")
+
+
+# --- plans ---------------------------------------------------------------------------------------
+def load_plan(spec: str) -> Plan:
+    """A plan TOML file, or the name of a scenario of `sim.scenarios`.
+
+    A plan file (SI units; angles may be given in degrees as `value_deg`):
+
+        name = "hover-test"
+        duration = 30.0                  # s since arming
+        [[move]]
+        t = 0.0                          # s since arming
+        channel = "alt"                  # roll, pitch, yaw (rad) or alt (m)
+        value = 1.0
+        ramp = 4.0                       # s, raised-cosine; 0 = step
+    """
+    path = Path(spec)
+    if path.suffix == ".toml" or path.exists():
+        return _plan_file(path)
+    from sim.scenarios import SCENARIOS
+
+    if spec not in SCENARIOS:
+        raise InputError(f"--plan {spec}: neither a plan file nor a scenario (scenarios: {', '.join(SCENARIOS)})")
+    return SCENARIOS[spec]().plan
+
+
+def _plan_file(path: Path) -> Plan:
+    try:
+        data = tomllib.loads(path.read_text())
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.strerror})") from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"{path}: not valid TOML ({e})") from None
+    unknown = set(data) - {"name", "duration", "move"}
+    if unknown:
+        raise InputError(f"{path}: unknown key {sorted(unknown)[0]!r} (known: name, duration, move)")
+    duration = data.get("duration")
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not 0 < duration <= 3600:
+        raise InputError(f"{path}: duration: a number of seconds in (0, 3600] is needed, got {duration!r}")
+    moves = []
+    for k, m in enumerate(data.get("move", []), start=1):
+        where = f"{path}: move {k}"
+        if not isinstance(m, dict):
+            raise InputError(f"{where}: expected a [[move]] table")
+        unknown = set(m) - {"t", "channel", "value", "value_deg", "ramp"}
+        if unknown:
+            raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r}")
+        channel = m.get("channel")
+        if channel not in CHANNELS:
+            raise InputError(f"{where}: channel must be one of {', '.join(CHANNELS)}, got {channel!r}")
+        if ("value" in m) == ("value_deg" in m):
+            raise InputError(f"{where}: give exactly one of value, value_deg")
+        if "value_deg" in m and channel == "alt":
+            raise InputError(f"{where}: alt is in metres (value), not degrees")
+        nums = {}
+        for key in ("t", "value", "value_deg", "ramp"):
+            v = m.get(key, 0.0 if key == "ramp" else None)
+            if key in ("value", "value_deg") and key not in m:
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise InputError(f"{where}: {key}: expected a number, got {v!r}")
+            nums[key] = float(v)
+        value = math.radians(nums["value_deg"]) if "value_deg" in nums else nums["value"]
+        if nums["t"] < 0 or nums["ramp"] < 0:
+            raise InputError(f"{where}: t and ramp must not be negative")
+        if channel == "alt" and not 0.0 <= value <= MAX_PLAN_ALT_M:
+            raise InputError(f"{where}: altitude {value:g} m outside [0, {MAX_PLAN_ALT_M:g}] m")
+        if channel in ("roll", "pitch") and abs(value) > math.radians(MAX_PLAN_TILT_DEG):
+            raise InputError(f"{where}: {channel} {math.degrees(value):g} deg beyond +-{MAX_PLAN_TILT_DEG:g} deg")
+        moves.append(Move(nums["t"], channel, value, nums["ramp"]))
+    name = data.get("name", path.stem)
+    plan = Plan(moves, float(duration), str(name))
+    if not plan.lands():
+        log.warning("plan %s does not end at altitude 0: the loop stops the motors when it ends", plan.name)
+    return plan
+
+
+# --- the flight log with its teardown row --------------------------------------------------------
+class TeardownLog(FlightLogWriter):
+    """The contract log, plus one last row at close: the stop command (P1..P4 = 0) that the loop's
+    `finally` sent after its last iteration, one period later, the other columns as last seen."""
+
+    def __init__(self, out, meta, extra=(), period: float = 1 / 450.0):
+        super().__init__(out, meta, extra)
+        self.period = period
+        self.last: tuple | None = None
+
+    def append(self, row: tuple) -> None:
+        self.last = row
+        super().append(row)
+
+    def close(self) -> None:
+        last = self.last
+        if self._f is not None and last is not None and any(last[1:5]):
+            self.last = None
+            super().append((last[0] + self.period, 0.0, 0.0, 0.0, 0.0) + last[5:11] + ("",) + last[12:])
+        super().close()
+
+
+# --- boards --------------------------------------------------------------------------------------
+@dataclass
+class Board:
+    hal: Hal
+    name: str
+    min_battery_v: float
+    calibrate_s: float
+    close: Callable[[], None] = lambda: None
+    extra_columns: tuple[str, ...] = ()
+    extra_row: Callable[[], tuple] | None = None
+    meta: dict[str, str] = field(default_factory=dict)
+
+
+def _pi(args, params: Params) -> Board:
+    from flightctl.pi import open_pi_board
+
+    b = open_pi_board(params, args.board_file)
+    return Board(b.hal, "pi", b.config.checks.min_battery_v, PI_CALIBRATE_S, b.close,
+                 meta={"board_file": b.config.path, "esc_pins": str(list(b.config.esc.pins))})
+
+
+def _sim(args, params: Params) -> Board:
+    from flightctl.boards import sim_board
+    from sim.run import TRUTH_COLUMNS
+
+    hal, world = sim_board(params, seed=args.seed)
+    hal.clock = PacedClock(hal.clock)      # the simulated world, paced by the wall clock
+    x = world.plant
+
+    def truth() -> tuple:
+        s = x.x
+        return s[0], s[1], s[2], s[6], s[7], (s[8] + math.pi) % (2 * math.pi) - math.pi
+
+    return Board(hal, "sim", MIN_CELL_V * CELLS, SIM_CALIBRATE_S, extra_columns=TRUTH_COLUMNS, extra_row=truth,
+                 meta={"seed": str(args.seed), "clock": "simulator paced by the wall clock (real time)"})
+
+
+BOARDS = {"pi": _pi, "sim": _sim}
+
+
+# --- checks --------------------------------------------------------------------------------------
+def prearm(hal: Hal, params: Params, min_battery_v: float) -> list[str]:
+    """Named reasons not to arm; empty when the vehicle may fly. Leaves the motors stopped."""
+    reasons = []
+    sample, good = ImuSample(), 0
+    for _ in range(5):
+        good += hal.imu.read(sample)
+    if not good:
+        reasons.append("IMU: every frame bad (all 0x00 or 0xFF): no IMU on the bus")
+    else:
+        a = math.sqrt(sample.ax ** 2 + sample.ay ** 2 + sample.az ** 2) / params.airframe.g
+        if not REST_ACCEL[0] <= a <= REST_ACCEL[1]:
+            reasons.append(f"IMU: |a| = {a:.2f} g at rest (expected 1 g): vehicle moving or IMU faulty")
+    v, _ = hal.power.read()
+    if not v >= min_battery_v:
+        reasons.append(f"battery {v:.2f} V below {min_battery_v:.2f} V")
+    try:
+        hal.motors.arm()
+    except ArmingRefused as e:
+        reasons.append(str(e))
+    finally:
+        hal.motors.stop()
+    return reasons
+
+
+# --- the service ---------------------------------------------------------------------------------
+class Service:
+    def __init__(self, args, params: Params, board: Board, notifier: Notifier, stop: threading.Event):
+        self.args, self.params, self.board, self.notifier, self.stop = args, params, board, notifier, stop
+        self.log_dir = Path(args.log)
+        self.calibrate_s = args.calibrate if args.calibrate is not None else board.calibrate_s
+        self.min_battery_v = args.min_battery_v if args.min_battery_v is not None else board.min_battery_v
+        self.flights: list[FlightResult] = []
+
+    def check(self) -> None:
+        reasons = prearm(self.board.hal, self.params, self.min_battery_v)
+        if reasons:
+            raise ArmingRefused("; ".join(reasons))
+
+    def run(self, plan: Plan | None) -> None:
+        self.check()
+        self.notifier.ready(f"disarmed, {self.board.name} board, pre-arm checks passed")
+        log.info("ready: disarmed, ESCs at the stop pulse")
+        if plan is not None:
+            self.fly(plan)
+        elif self.args.plan_queue:
+            self.serve_queue(Path(self.args.plan_queue))
+        else:
+            log.info("no plan: holding the stop pulse until stopped")
+            while not self.stop.wait(PLAN_POLL_S):
+                self.notifier.tick()
+
+    def serve_queue(self, queue: Path) -> None:
+        queue.mkdir(parents=True, exist_ok=True)
+        while not self.stop.is_set():
+            self.notifier.tick()
+            claimed = self.claim(queue)
+            if claimed is None:
+                self.stop.wait(PLAN_POLL_S)
+                continue
+            try:
+                plan = _plan_file(claimed)
+            except InputError as e:
+                log.error("plan refused: %s", e)
+                continue
+            self.check()
+            self.fly(plan, plan_file=claimed)
+
+    def claim(self, queue: Path) -> Path | None:
+        """Move the oldest queued plan into the log directory; None if there is none."""
+        plans = sorted(queue.glob("*.toml"), key=lambda p: (p.stat().st_mtime, p.name))
+        for p in plans:
+            target = self._new_path("plan", p.name)
+            try:
+                os.rename(p, target)
+            except OSError:
+                continue      # taken away meanwhile
+            log.info("plan %s claimed as %s", p.name, target)
+            return target
+        return None
+
+    def _new_path(self, kind: str, suffix: str) -> Path:
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        for k in range(1000):
+            p = self.log_dir / f"{kind}-{stamp}{'-%d' % k if k else ''}-{suffix}"
+            if not p.exists():
+                return p
+        raise RuntimeError(f"{self.log_dir}: cannot name a new {kind} file")
+
+    def fly(self, plan: Plan, plan_file: Path | None = None) -> FlightResult:
+        params, board, hal = self.params, self.board, self.board.hal
+        plan.restart()
+        path = self._new_path("flight", f"{plan.name}.csv")
+        meta = {"software": f"flightctl {__version__}", "board": board.name, "plan": plan.name,
+                "plan_file": str(plan_file or self.args.plan), "calibrate_s": self.calibrate_s,
+                "loop_hz": params.airframe.loop_hz, "esc_pwm_hz": params.airframe.esc_pwm_hz,
+                "started": datetime.now(timezone.utc).isoformat(timespec="seconds"), **board.meta,
+                "params": dumps(params)}
+        flight_log = TeardownLog(path, meta, MAG_COLUMNS + board.extra_columns, params.airframe.dt)
+        loop = FlightLoop(hal, params, plan, flight_log, FlightController(params), calibrate_s=self.calibrate_s,
+                          stop=self.stop, on_tick=self.notifier.tick, extra_row=board.extra_row)
+        self.notifier.status(f"flying {plan.name}: calibrating {self.calibrate_s:g} s, then arming")
+        log.info("flight %s: calibrating %g s, log %s", plan.name, self.calibrate_s, path)
+        freeze_gc()
+        result = loop.run()
+        result.overruns = getattr(hal.clock, "overruns", 0)
+        for t, what in result.events:
+            log.info("  %8.3f s  %s", t, what)
+        log.info("flight %s ended: %s (%d iterations, %d overruns)", plan.name, result.reason,
+                 result.iterations, result.overruns)
+        summary = {"plan": plan.name, "log": path.name, "reason": result.reason, "events": result.events,
+                   "iterations": result.iterations, "overruns": result.overruns,
+                   "max_late_s": getattr(getattr(hal.clock, "wall", hal.clock), "max_late_s", None)}
+        path.with_name(path.stem + "-summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+        self.notifier.status(f"disarmed after {plan.name}: {result.reason}")
+        self.flights.append(result)
+        return result
+
+
+def stop_motors_main(args, params: Params) -> int:
+    """The stop pulse on every ESC, whatever the last controller left in pigpiod (ExecStopPost)."""
+    from flightctl.drivers.esc import stop_motors
+    from flightctl.pi import BoardUnavailable, connect_pigpio, load_board
+
+    if args.board != "pi":
+        log.info("stop-motors: nothing to do on the %s board", args.board)
+        return EXIT_OK
+    config = load_board(args.board_file)
+    try:
+        pi = connect_pigpio(config)
+    except BoardUnavailable as e:
+        log.error("stop-motors: %s", e)
+        return EXIT_ERROR
+    try:
+        stop_motors(pi, config.esc.pins, params.airframe.esc_pwm_hz, config.esc.stop_us)
+        log.info("stop-motors: stop pulse (%d us) on GPIO %s", config.esc.stop_us, list(config.esc.pins))
+    finally:
+        pi.stop()
+    return EXIT_OK
+
+
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="flightctl run", description=__doc__.split("\n\n")[0])
+    p.add_argument("--board", choices=sorted(BOARDS), default="pi")
+    p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
+    p.add_argument("--board-file", help="pi board wiring (TOML); default: the shipped flightctl/board_pi.toml")
+    p.add_argument("--plan", help="a plan TOML file, or a scenario name (hover, paper, ...)")
+    p.add_argument("--plan-queue", metavar="DIR", help="fly each plan file put into DIR, once, in turn")
+    p.add_argument("--log", default=".", metavar="DIR", help="directory for flight logs (default: .)")
+    p.add_argument("--calibrate", type=float, metavar="S",
+                   help=f"seconds sitting still before arming (default {PI_CALIBRATE_S:g} on pi, {SIM_CALIBRATE_S:g} on sim)")
+    p.add_argument("--min-battery-v", type=float, metavar="V", help="refuse to arm below this battery voltage")
+    p.add_argument("--seed", type=int, default=0, help="simulator seed (--board sim)")
+    p.add_argument("--stop-motors", action="store_true", help="only put the stop pulse on the ESCs and exit")
+    args = p.parse_args(argv)
+    if args.plan and args.plan_queue:
+        p.error("--plan and --plan-queue exclude each other")
+    if args.calibrate is not None and not 0 <= args.calibrate <= 600:
+        p.error("--calibrate: 0..600 s")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(list(sys.argv[1:] if argv is None else argv))
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.INFO, format="flightctl run: %(message)s", stream=sys.stderr)
+    params = load(args.params)
+    if args.stop_motors:
+        return stop_motors_main(args, params)
+    plan = load_plan(args.plan) if args.plan else None
+
+    stop = threading.Event()
+
+    def on_signal(signum, frame):
+        log.info("%s: stopping", signal.Signals(signum).name)
+        stop.set()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
+    notifier = Notifier.from_env()
+    board = None
+    try:
+        try:
+            board = BOARDS[args.board](args, params)
+        except Exception as e:
+            from flightctl.drivers.esc import EscError
+            from flightctl.drivers.ina219 import PowerMonitorError
+            from flightctl.drivers.mpu9250 import ImuError
+            from flightctl.pi import BoardUnavailable
+
+            if isinstance(e, (ImuError, PowerMonitorError, EscError, BoardUnavailable, ArmingRefused)):
+                log.error("not flying: %s", e)
+                return EXIT_REFUSED
+            raise
+        service = Service(args, params, board, notifier, stop)
+        try:
+            service.run(plan)
+        except ArmingRefused as e:
+            log.error("not flying: %s", e)
+            return EXIT_REFUSED
+        return EXIT_OK
+    except Exception:
+        log.exception("stopping on an error")
+        return EXIT_ERROR
+    finally:
+        if board is not None:
+            try:
+                board.hal.motors.stop()
+            except Exception:
+                log.exception("zero thrust could not be sent")
+            board.close()
+        notifier.stopping()
+        notifier.close()
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
