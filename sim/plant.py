@@ -67,7 +67,8 @@ class Plant:
 
     def _touch_down(self) -> None:
         x = self.x
-        self.touchdowns.append((self.t, x[VZ]))
+        if x[VZ] < -0.01:   # not the hop of a thrust that only just equals the weight
+            self.touchdowns.append((self.t, x[VZ]))
         for i in (Z, VX, VY, VZ, PHI, THETA, P, Q, R):
             x[i] = 0.0
         self.on_ground = True
