@@ -9,8 +9,9 @@ each with a named reason: IMU frames good and the vehicle at rest (|a| near g), 
 threshold, ESC output really at the ESC frequency (`Motors.arm()` measures it; then `stop()` again).
 Then READY=1 to systemd, and the service waits, disarmed, for a plan:
 - `--plan` flies that plan once and exits;
-- `--plan-queue DIR` takes the oldest `*.toml` in DIR by renaming it into the log directory
-  (atomic: a plan is flown at most once), flies it, and waits for the next one. A restarted service
+- `--plan-queue DIR` takes the oldest `*.toml` in DIR (untouched for PLAN_SETTLE_S, so a copy in
+  progress is not read half-written) by renaming it into the log directory (atomic: a plan is flown
+  at most once), flies it, and waits for the next one. A restarted service
   finds no plan and stays disarmed: a restart can never re-arm.
 - neither: stays disarmed (stop pulse) until stopped.
 A flight is `FlightLoop`: calibrate sitting still, arm, fly, land, at 450 Hz on the deadline-keeping
@@ -33,6 +34,7 @@ import os
 import signal
 import sys
 import threading
+import time
 import tomllib
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -57,6 +59,7 @@ MIN_CELL_V = 3.6               # refuse to arm below this per cell (the loop lan
 MAX_PLAN_ALT_M = 3.0           # the HC-SR04 reads to 4 m
 MAX_PLAN_TILT_DEG = 30.0
 PLAN_POLL_S = 0.5
+PLAN_SETTLE_S = 0.5            # a plan file must be this old before it is claimed (a copy in progress)
 REST_ACCEL = (0.8, 1.2)        # |a| / g at rest, for the pre-arm IMU check
 
 log = logging.getLogger("flightctl.run")
@@ -264,13 +267,26 @@ class Service:
             except InputError as e:
                 log.error("plan refused: %s", e)
                 continue
-            self.check()
+            try:
+                self.check()
+            except ArmingRefused as e:      # this plan is not flown; the service stays up, disarmed
+                log.error("plan %s not flown: %s", plan.name, e)
+                self.notifier.status(f"disarmed: plan {plan.name} refused: {e}")
+                continue
             self.fly(plan, plan_file=claimed)
 
     def claim(self, queue: Path) -> Path | None:
         """Move the oldest queued plan into the log directory; None if there is none."""
-        plans = sorted(queue.glob("*.toml"), key=lambda p: (p.stat().st_mtime, p.name))
-        for p in plans:
+        now = time.time()
+        plans = []
+        for p in queue.glob("*.toml"):
+            try:
+                mtime = p.stat().st_mtime
+            except OSError:
+                continue
+            if now - mtime >= PLAN_SETTLE_S:       # not while it is still being written
+                plans.append((mtime, p.name, p))
+        for _, _, p in sorted(plans):
             target = self._new_path("plan", p.name)
             try:
                 os.rename(p, target)

@@ -29,7 +29,6 @@ import math
 import signal
 import sys
 import threading
-import time
 from pathlib import Path
 from typing import Callable
 

@@ -94,10 +94,6 @@ def deadman_script(pins: Sequence[int], stop_wid: int, tick_ms: int = DEADMAN_TI
     return f"tag 0 mils {tick_ms} dcr p0 jp 0 wvhlt {lows} wvtxr {stop_wid} halt"
 
 
-def _mask(pins: Sequence[int]) -> int:
-    return sum(1 << p for p in pins)
-
-
 class PigpioEsc:
     """`Motors` on four GPIOs (motor 1..4 in conventions.md order) of a `pigpio.pi`."""
 
@@ -223,6 +219,10 @@ class PigpioEsc:
         if at != self._current:          # the wave sent last is still queued: this command waits
             self.deferred += 1
             waited = self._clock() - self._t_sent
+            if (at == self._stop_wid and self._sid is not None and self._current != self._stop_wid
+                    and waited > 2e-6 * self.period_us):
+                raise EscError(f"the pigpiod dead-man stopped the motors: no command reached it for "
+                               f"{self.deadman_ms} ms (the loop stalled)")
             if waited > STUCK_S:
                 raise EscError(f"ESC output stuck: pigpiod transmits wave {at}, not wave {self._current} "
                                f"sent {waited * 1e3:.0f} ms ago")

@@ -1,0 +1,93 @@
+"""The paper's open question (docs/diagnose.md): which extension, at which size, makes the simulation
+gains of Table 4 unflyable and the flight gains of Table 6 flyable?
+
+Flies the `step_roll` scenario (figure 14: hover at 1.5 m, a +5 degree roll step) with Table 4 and
+Table 6, through perfect state feedback (the paper's own simulation) and through the full onboard
+path (simulated sensors, drivers, the "flight" estimator), with an actuation delay or a motor lag of
+increasing size hidden in the plant, and records the largest true roll angle (60 degrees = crash).
+
+    python scripts/open_question.py [--out docs/open-question.png] [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from flightctl.params import TABLE4, load
+from sim import effects
+from sim.run import fly
+from sim.scenarios import SCENARIOS
+
+CRASH_DEG = 60.0
+SIZES_MS = {"actuation_delay": [0, 2.5, 5, 7.5, 10, 15, 20, 30, 40, 50],
+            "motor_lag": [0, 5, 10, 15, 20, 30, 40, 60, 80, 100]}
+PARAM = {"actuation_delay": "delay", "motor_lag": "tau"}
+CASES = [("Table 4", "truth"), ("Table 6", "truth"), ("Table 4", "flight"), ("Table 6", "flight"),
+         ("Table 4", "paper"), ("Table 6", "paper")]
+
+
+def one(gains: str, path: str, cause: str, ms: float, log: Path, seed: int = 0) -> float:
+    params = load(None, TABLE4 if gains == "Table 4" else None)
+    eff = (effects.make(cause, **{PARAM[cause]: ms / 1e3}),) if ms > 0 else ()
+    kw = {"truth": True} if path == "truth" else {"estimator": path}
+    try:
+        f = fly(SCENARIOS["step_roll"](), params, log, effects=eff, noise=True, seed=seed, **kw)
+    except (ValueError, OverflowError):      # the state diverged to NaN/inf: a crash
+        return CRASH_DEG
+    roll = np.degrees(np.abs(np.concatenate([f.log["true_roll"], f.log["true_pitch"]])))
+    worst = float(np.nanmax(roll)) if roll.size else CRASH_DEG
+    return CRASH_DEG if f.result.reason.startswith("stopped: crash") else min(worst, CRASH_DEG)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="docs/open-question.png")
+    ap.add_argument("--quick", action="store_true", help="three sizes per effect (a smoke run)")
+    args = ap.parse_args(argv)
+    log = Path(args.out).with_suffix(".tmp.csv")
+    results = {}
+    for cause, sizes in SIZES_MS.items():
+        sizes = sizes[::4] if args.quick else sizes
+        for gains, path in CASES:
+            row = []
+            for ms in sizes:
+                row.append(one(gains, path, cause, ms, log))
+                print(f"{cause:16s} {gains} {path:6s} {ms:5.1f} ms: max tilt {row[-1]:5.1f} deg", file=sys.stderr,
+                      flush=True)
+            results[f"{cause}|{gains}|{path}"] = dict(zip(map(str, sizes), row))
+    log.unlink(missing_ok=True)
+    Path(args.out).with_suffix(".json").write_text(json.dumps(results, indent=1) + "\n")
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), sharey=True)
+    style = {"truth": "-", "flight": "--", "paper": ":"}
+    label = {"truth": "perfect state feedback", "flight": "full path, flight estimator",
+             "paper": "full path, paper estimator"}
+    color = {"Table 4": "tab:red", "Table 6": "tab:blue"}
+    for ax, cause in zip(axes, SIZES_MS):
+        for gains, path in CASES:
+            r = results[f"{cause}|{gains}|{path}"]
+            ax.plot([float(s) for s in r], list(r.values()), style[path], marker="o", ms=3, color=color[gains],
+                    label=f"{gains}, {label[path]}")
+        ax.axhline(CRASH_DEG, color="k", lw=0.5)
+        ax.set_xlabel(f"{cause} {PARAM[cause]} [ms]")
+        ax.set_yscale("log")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("largest roll/pitch in a 5 deg roll step [deg]\n(60 = crash)", fontsize=8)
+    axes[0].legend(fontsize=6, loc="lower right")
+    fig.suptitle("Which hidden effect makes Table 4 unflyable and Table 6 flyable? (step_roll, figure 14)",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(args.out, dpi=80)
+    print(f"wrote {args.out}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Fakes that speak the real protocols, for the real client libraries (pigpio, smbus2-like buses)."""

@@ -1,0 +1,184 @@
+"""On the quadcopter itself: `python -m pytest -m hardware tests/hardware -v` on the Pi, pigpiod running,
+PROPELLERS OFF. Deselected by default (pyproject: -m 'not hardware'); skips itself without
+/dev/spidev0.0 or a reachable pigpiod. Set FLIGHTCTL_BOARD_FILE to use another wiring than the
+shipped flightctl/board_pi.toml.
+
+No test here spins a motor: the ESC outputs carry the stop pulse or pulses below eq. 26's dead zone
+(h2 = 120, 1048 us). What they check is what the fakes cannot: the real 449 Hz on the pins, pigpiod
+accepting the dead-man script, the real chips answering, the loop's timing on the Pi's CPU.
+"""
+from __future__ import annotations
+
+import math
+import os
+import socket
+import statistics
+import time
+from pathlib import Path
+
+import pytest
+
+BOARD_FILE = os.environ.get("FLIGHTCTL_BOARD_FILE")
+
+
+def _pigpiod_reachable(host: str = "127.0.0.1", port: int = 8888) -> bool:
+    try:
+        with socket.create_connection((host, port), timeout=0.5):
+            return True
+    except OSError:
+        return False
+
+
+pytestmark = [
+    pytest.mark.hardware,
+    pytest.mark.skipif(not Path("/dev/spidev0.0").exists(), reason="no /dev/spidev0.0 (not on the quadcopter)"),
+    pytest.mark.skipif(not _pigpiod_reachable(), reason="pigpiod not reachable on 127.0.0.1:8888"),
+]
+
+
+@pytest.fixture(scope="module")
+def config():
+    from flightctl.pi import load_board
+
+    return load_board(BOARD_FILE)
+
+
+@pytest.fixture
+def pi(config):
+    from flightctl.pi import connect_pigpio
+
+    p = connect_pigpio(config)
+    yield p
+    p.stop()
+
+
+@pytest.fixture
+def esc(pi, config):
+    from flightctl.drivers.esc import PigpioEsc
+
+    e = PigpioEsc(pi, config.esc.pins, 449.0, config.esc.stop_us, config.esc.max_us, config.esc.deadman_ms,
+                  config.esc.tolerance_hz)
+    e.start()
+    yield e
+    e.stop()
+
+
+def test_pigpiod_is_bound_to_localhost_only():
+    import subprocess
+
+    out = subprocess.run(["ss", "-ltnH", "sport = :8888"], capture_output=True, text=True).stdout
+    assert out.strip(), "nothing listens on port 8888"
+    assert all(("127.0.0.1:8888" in line or "[::1]:8888" in line) for line in out.strip().splitlines()), out
+
+
+def test_esc_outputs_run_at_449hz_with_the_stop_pulse(esc):
+    measured = esc.measure(0.5)
+    for pin, (freq, high, n) in measured.items():
+        assert abs(freq - 449.0) < 0.5, (pin, freq)
+        assert abs(high - esc.stop_us) < 12, (pin, high)
+        assert n > 200
+
+
+def test_arming_check_and_the_deadman_script_are_accepted_by_pigpiod(esc, pi):
+    import pigpio
+
+    esc.arm()
+    assert esc.armed and esc._sid is not None
+    status, _ = pi.script_status(esc._sid)
+    assert status in (pigpio.PI_SCRIPT_RUNNING, pigpio.PI_SCRIPT_WAITING)
+    below_dead_zone = round(1030 / 2227 * 40000)          # 1030 us: under h2, the motors do not turn
+    t_end = time.monotonic() + 0.3
+    while time.monotonic() < t_end:
+        esc.write([below_dead_zone] * 4)
+        time.sleep(1 / 450)
+    assert abs(esc.measure(0.1)[esc.pins[0]][1] - 1030) < 12
+    time.sleep(0.3)                                       # no writes: the dead-man fires
+    status, _ = pi.script_status(esc._sid)
+    assert status == pigpio.PI_SCRIPT_HALTED
+    for pin, (freq, high, n) in esc.measure(0.2).items():
+        assert abs(high - esc.stop_us) < 12, (pin, high)
+
+
+def test_imu_is_an_mpu9250_and_reads_one_g_at_rest(config):
+    import spidev
+
+    from flightctl.drivers.mpu9250 import Mpu9250
+    from flightctl.hal import ImuSample
+
+    spi = spidev.SpiDev()
+    spi.open(config.imu.spi_bus, config.imu.spi_device)
+    spi.mode = config.imu.spi_mode
+    try:
+        imu = Mpu9250(spi)
+        imu.start()
+        s = ImuSample()
+        good = sum(imu.read(s) for _ in range(100))
+        assert good == 100
+        assert math.sqrt(s.ax ** 2 + s.ay ** 2 + s.az ** 2) == pytest.approx(9.81, abs=0.8)
+    finally:
+        spi.close()
+
+
+def test_power_monitor_reads_a_battery(config):
+    import smbus2
+
+    from flightctl.drivers.ina219 import Ina219
+
+    bus = smbus2.SMBus(config.power.i2c_bus)
+    try:
+        ina = Ina219(bus, config.power.address, config.power.shunt_ohm, config.power.max_current_a)
+        ina.start()
+        v, i = ina.read()
+        assert 5.0 < v < 26.0 and abs(i) < config.power.max_current_a
+    finally:
+        bus.close()
+
+
+def test_sonar_answers(pi, config):
+    from flightctl.drivers.hcsr04 import HcSr04
+
+    sonar = HcSr04(pi, config.sonar.trigger_pin, config.sonar.echo_pin)
+    sonar.start()
+    try:
+        results = []
+        for _ in range(10):
+            sonar.trigger()
+            time.sleep(0.05)
+            r = sonar.poll()
+            if r is not None:
+                results.append(r)
+        assert results and any(not math.isnan(r) for r in results), results
+    finally:
+        sonar.stop()
+
+
+def test_the_loop_keeps_450hz_with_imu_and_esc_io(esc, config):
+    """The inner loop's I/O at 450 Hz for 3 s: IMU burst read + ESC write per tick (no control math)."""
+    import spidev
+
+    from flightctl.clock import WallClock
+    from flightctl.drivers.mpu9250 import Mpu9250
+    from flightctl.hal import ImuSample
+
+    spi = spidev.SpiDev()
+    spi.open(config.imu.spi_bus, config.imu.spi_device)
+    spi.mode = config.imu.spi_mode
+    try:
+        imu = Mpu9250(spi)
+        imu.start()
+        s = ImuSample()
+        clock = WallClock(1 / 450)
+        lates = []
+        below = [round(1030 / 2227 * 40000) + k % 3 for k in range(4)]
+        for k in range(450 * 3):
+            t = clock.wait_next()
+            lates.append(clock.now() - t)
+            imu.read(s)
+            esc.write([c + k % 2 for c in below])          # a new command every tick: the worst case
+        lates.sort()
+        p99 = lates[int(0.99 * len(lates))]
+        print(f"\nloop: {clock.overruns} overruns in {len(lates)} ticks, p99 lateness {p99 * 1e3:.3f} ms, "
+              f"median {statistics.median(lates) * 1e3:.3f} ms, {esc.deferred} commands deferred")
+        assert clock.overruns < 0.01 * len(lates)
+    finally:
+        spi.close()

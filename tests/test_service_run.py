@@ -1,0 +1,186 @@
+"""`flightctl run`: the service path on the simulator in real time, in a subprocess, with a local
+socket standing for systemd's NOTIFY_SOCKET; SIGTERM mid-flight; the plan queue that a restart cannot
+re-fly; pre-arm refusal; plan files; the ExecStopPost `--stop-motors` against the fake pigpiod."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from fakes.pigpiod import running
+from flightctl.drivers.esc import PigpioEsc
+from flightctl.errors import InputError
+from flightctl.logfile import MAG_COLUMNS, read_flight_log
+from flightctl.service import TeardownLog, load_plan, main
+from sim.run import TRUTH_COLUMNS
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+class Service:
+    """`flightctl run ...` in a subprocess, its notify datagrams collected."""
+
+    def __init__(self, tmp_path: Path, *args: str):
+        self.sock_path = str(tmp_path / f"notify-{time.monotonic_ns()}.sock")
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self.sock.bind(self.sock_path)
+        self.messages: list[str] = []
+        env = dict(os.environ, NOTIFY_SOCKET=self.sock_path, PYTHONPATH=str(ROOT))
+        self.proc = subprocess.Popen([sys.executable, "-m", "flightctl.cli", "run", *args], cwd=tmp_path, env=env,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def wait_for(self, message: str, timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if any(message in m for m in self.messages):
+                return True
+            self.sock.settimeout(0.1)
+            try:
+                self.messages.append(self.sock.recv(4096).decode())
+            except socket.timeout:
+                if self.proc.poll() is not None and not self._drain():
+                    return any(message in m for m in self.messages)
+        return False
+
+    def _drain(self) -> bool:
+        self.sock.settimeout(0.01)
+        try:
+            self.messages.append(self.sock.recv(4096).decode())
+            return True
+        except socket.timeout:
+            return False
+
+    def stop(self, timeout: float = 15.0) -> tuple[int, str]:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+        try:
+            _, err = self.proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            _, err = self.proc.communicate()
+        while self._drain():
+            pass
+        self.sock.close()
+        return self.proc.returncode, err
+
+
+def test_sigterm_in_flight_writes_zero_thrust_and_exits_0(tmp_path):
+    svc = Service(tmp_path, "--board", "sim", "--plan", "hover", "--log", "logs", "--calibrate", "0.5")
+    try:
+        assert svc.wait_for("READY=1", 30), svc.stop()[1]
+        time.sleep(3.0)                          # 0.5 s calibrating, then 2.5 s of take-off in real time
+    finally:
+        rc, err = svc.stop()
+    assert rc == 0, err
+    assert "SIGTERM" in err
+    assert any("WATCHDOG=1" in m for m in svc.messages) and any("STOPPING=1" in m for m in svc.messages)
+    logs = sorted((tmp_path / "logs").glob("flight-*-hover.csv"))
+    assert len(logs) == 1
+    log = read_flight_log(logs[0], extra=MAG_COLUMNS + TRUTH_COLUMNS)
+    P = [log[c] for c in ("P1", "P2", "P3", "P4")]
+    assert [p[-1] for p in P] == [0.0, 0.0, 0.0, 0.0]          # the last motor command: zero
+    assert min(p[-2] for p in P) > 100                          # ... sent while flying
+    assert log["true_z"][-1] > 0.05                             # in the air when SIGTERM came
+    assert log["t"][-1] - log["t"][0] == pytest.approx(3.0, abs=1.0)   # real time
+    summary = json.loads(logs[0].with_name(logs[0].stem + "-summary.json").read_text())
+    assert summary["reason"] == "stopped: stop requested"
+
+
+def test_a_queued_plan_is_flown_once_and_a_restart_does_not_re_arm(tmp_path):
+    queue, logs = tmp_path / "plans", tmp_path / "logs"
+    queue.mkdir()
+    svc = Service(tmp_path, "--board", "sim", "--plan-queue", str(queue), "--log", str(logs), "--calibrate", "0.2")
+    try:
+        assert svc.wait_for("READY=1", 30), svc.stop()[1]
+        (queue / "hop.toml").write_text('name = "hop"\nduration = 1.5\n'
+                                        '[[move]]\nt = 0.0\nchannel = "alt"\nvalue = 0.3\nramp = 0.5\n'
+                                        '[[move]]\nt = 0.7\nchannel = "alt"\nvalue = 0.0\nramp = 0.5\n')
+        assert svc.wait_for("disarmed after hop", 15), svc.messages
+    finally:
+        rc, err = svc.stop()
+    assert rc == 0, err
+    assert list(queue.iterdir()) == []                            # claimed: gone from the queue
+    assert len(list(logs.glob("plan-*-hop.toml"))) == 1          # ... kept beside its log
+    assert len(list(logs.glob("flight-*-hop.csv"))) == 1
+    # the service restarts (crash, watchdog, reboot): the queue is empty, it stays disarmed
+    again = Service(tmp_path, "--board", "sim", "--plan-queue", str(queue), "--log", str(logs), "--calibrate", "0.2")
+    try:
+        assert again.wait_for("READY=1", 30)
+        time.sleep(1.0)
+    finally:
+        rc, err = again.stop()
+    assert rc == 0, err
+    assert len(list(logs.glob("flight-*.csv"))) == 1             # no second flight
+
+
+def test_prearm_refusal_exits_3_naming_the_reason(tmp_path):
+    svc = Service(tmp_path, "--board", "sim", "--plan", "hover", "--log", "logs", "--min-battery-v", "30")
+    svc.proc.wait(timeout=30)
+    rc, err = svc.stop()
+    assert rc == 3
+    assert "not flying: battery" in err and "below 30.00 V" in err
+    assert not any("READY=1" in m for m in svc.messages)
+    assert not (tmp_path / "logs").exists()
+
+
+def test_plan_files_are_checked(tmp_path):
+    good = tmp_path / "good.toml"
+    good.write_text('duration = 10\n[[move]]\nt = 0\nchannel = "alt"\nvalue = 1.0\nramp = 2\n'
+                    '[[move]]\nt = 3\nchannel = "roll"\nvalue_deg = 5\n[[move]]\nt = 6\nchannel = "alt"\nvalue = 0\n')
+    plan = load_plan(str(good))
+    assert plan.name == "good" and plan.duration == 10 and plan.lands()
+    assert plan.moves[1].value == pytest.approx(0.0872665, rel=1e-5)       # degrees at the edge, rad inside
+    assert load_plan("hover").name == "hover"
+    for text, message in [('duration = 5\nspeed = 3\n', "unknown key 'speed'"),
+                          ('[[move]]\nt = 0\nchannel = "alt"\nvalue = 1\n', "duration"),
+                          ('duration = 5\n[[move]]\nt = 0\nchannel = "alt"\nvalue = 9\n', "outside"),
+                          ('duration = 5\n[[move]]\nt = 0\nchannel = "roll"\nvalue_deg = 45\n', "beyond"),
+                          ('duration = 5\n[[move]]\nt = 0\nchannel = "up"\nvalue = 1\n', "channel")]:
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        with pytest.raises(InputError, match=message):
+            load_plan(str(bad))
+    with pytest.raises(InputError, match="neither a plan file nor a scenario"):
+        load_plan("no-such-plan")
+
+
+def test_teardown_row_records_the_stop_command(tmp_path):
+    path = tmp_path / "f.csv"
+    log = TeardownLog(path, {"k": "v"}, MAG_COLUMNS, period=0.01)
+    row = (0.5, 170.0, 171.0, 170.0, 171.0, 0.1, 0.2, 0.3, 0.0, 0.0, 9.8, "1.0000", 16.0,
+           0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+    log.append(row)
+    log.close()
+    table = read_flight_log(path, min_rows=2)
+    assert list(table["t"]) == [0.5, 0.51]
+    assert [table[c][-1] for c in ("P1", "P2", "P3", "P4")] == [0, 0, 0, 0]
+    assert table["gyro_z"][-1] == pytest.approx(0.3)
+
+
+def test_stop_motors_puts_the_stop_pulse_on_whatever_a_dead_controller_left(tmp_path):
+    with running() as (fake, pi):
+        dead = PigpioEsc(pi, (17, 27, 22, 25), deadman_ms=10_000)
+        dead.arm()
+        dead.write([38000] * 4)
+        board = tmp_path / "board.toml"
+        board.write_text(f'[pigpio]\nhost = "127.0.0.1"\nport = {fake.port}\n')
+        assert main(["--board", "pi", "--board-file", str(board), "--stop-motors"]) == 0
+        assert fake.live_wave().on_times() == {17: 1000, 27: 1000, 22: 1000, 25: 1000}
+        assert fake.scripts == {}
+
+
+def test_stop_motors_without_pigpiod_fails_loudly(tmp_path):
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()                                   # nothing listens there
+    board = tmp_path / "board.toml"
+    board.write_text(f"[pigpio]\nport = {port}\n")
+    assert main(["--board", "pi", "--board-file", str(board), "--stop-motors"]) == 1
