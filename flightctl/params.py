@@ -12,7 +12,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from flightctl.errors import InputError
+from flightctl.errors import InputError, read_toml
 
 
 INERTIA_TOLERANCE = 0.10  # accepted excess of one principal inertia over the sum of the others
@@ -156,13 +156,7 @@ def load(path: str | Path | None, gains: Gains | None = None) -> Params:
     """Load and validate a parameter file; None gives the shipped reference airframe."""
     if path is None:
         return from_dict({}, gains)
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as e:
-        raise InputError(f"{path}: cannot read ({e.strerror})") from None
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{path}: not valid TOML ({e})") from None
+    data = read_toml(path)
     try:
         return from_dict(data, gains)
     except InputError as e:

@@ -11,7 +11,6 @@ be passed in (`pi=`, `spi=`, `smbus=`), which is how the tests wire this board t
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -21,7 +20,7 @@ from flightctl.drivers.esc import PigpioEsc
 from flightctl.drivers.hcsr04 import HcSr04
 from flightctl.drivers.ina219 import Ina219
 from flightctl.drivers.mpu9250 import Mpu9250
-from flightctl.errors import InputError
+from flightctl.errors import InputError, read_toml
 from flightctl.hal import Hal
 from flightctl.params import Params
 
@@ -106,17 +105,11 @@ def _value(where: str, f: dataclasses.Field, value):
 def load_board(path: str | Path | None = None) -> BoardConfig:
     """Read and check a board file; None reads the shipped flightctl/board_pi.toml."""
     if path is None:
-        text, name = resources.files("flightctl").joinpath(DEFAULT_BOARD_FILE).read_text(), DEFAULT_BOARD_FILE
+        name = DEFAULT_BOARD_FILE
+        data = read_toml(name, resources.files("flightctl").joinpath(DEFAULT_BOARD_FILE).read_text())
     else:
         name = str(path)
-        try:
-            text = Path(path).read_text()
-        except OSError as e:
-            raise InputError(f"{name}: cannot read ({e.strerror})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{name}: not valid TOML ({e})") from None
+        data = read_toml(name)
     sections = {f.name: f for f in dataclasses.fields(BoardConfig) if f.name != "path"}
     built = {}
     for section, table in data.items():

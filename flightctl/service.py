@@ -35,7 +35,6 @@ import signal
 import sys
 import threading
 import time
-import tomllib
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -44,7 +43,7 @@ from typing import Callable
 from flightctl import __version__
 from flightctl.clock import PacedClock, freeze_gc
 from flightctl.control.controller import FlightController
-from flightctl.errors import InputError
+from flightctl.errors import InputError, read_toml
 from flightctl.hal import ArmingRefused, Hal, ImuSample
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter
 from flightctl.loop import CELLS, FlightLoop, FlightResult
@@ -90,12 +89,7 @@ def load_plan(spec: str) -> Plan:
 
 
 def _plan_file(path: Path) -> Plan:
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as e:
-        raise InputError(f"{path}: cannot read ({e.strerror})") from None
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{path}: not valid TOML ({e})") from None
+    data = read_toml(path)
     unknown = set(data) - {"name", "duration", "move"}
     if unknown:
         raise InputError(f"{path}: unknown key {sorted(unknown)[0]!r} (known: name, duration, move)")

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from math import atan2, cos, pi, sin, sqrt
 
-from flightctl.control.pid import wrap
 from flightctl.hal import ImuSample
 from flightctl.params import Filters
 
