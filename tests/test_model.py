@@ -3,7 +3,6 @@
 the reference-airframe numbers of conventions.md, never taken from the code under test.
 """
 import math
-from collections import deque
 
 import numpy as np
 import pytest
