@@ -4,7 +4,7 @@
     -> Motors.write(counts) -> log row; the altitude task runs on rangefinder echoes (~45 Hz).
 
 Lifecycle: calibrate sitting still (motors stopped), arm (the motors refuse for a named reason),
-fly the plan, disarm on touchdown. Checks, each with a named reason: IMU frames going bad, a crash
+fly the plan, disarm on touchdown. The log starts at arming (its gyro columns are calibrated). Checks, each with a named reason: IMU frames going bad, a crash
 (tilt past 60 degrees), a low battery (land), the altitude lost (descend slowly). Whatever ends the
 loop - the plan, a stop request (SIGTERM), an exception - the motors are stopped last.
 """
@@ -127,7 +127,7 @@ class FlightLoop:
                 if flying:
                     counts = ctl.step(sample, dt, sp[0], sp[1], sp[2], sp[3])
                     est = ctl.est
-                    if abs(est.roll) > CRASH_TILT or abs(est.pitch) > CRASH_TILT:
+                    if not (abs(est.roll) <= CRASH_TILT and abs(est.pitch) <= CRASH_TILT):   # NaN too
                         res.reason = "stopped: crash (tilt past 60 degrees)"
                         self._event(t - t0, res.reason)
                         break
@@ -155,9 +155,9 @@ class FlightLoop:
                     break
             if flying:
                 motors.write(counts)
-            if log_append is not None:
+            if log_append is not None and armed:   # the log starts at arming, with the gyro calibrated
                 est = ctl.est
-                row = (t - t0, counts[0] * p_per_count, counts[1] * p_per_count, counts[2] * p_per_count,
+                row = (t - t_arm, counts[0] * p_per_count, counts[1] * p_per_count, counts[2] * p_per_count,
                        counts[3] * p_per_count, sample.gx, sample.gy, sample.gz, sample.ax, sample.ay, sample.az, range_cell, battery_v,
                        est.roll, est.pitch, est.yaw, ctl.alt, sp[0], sp[1], sp[2], sp[3],
                        sample.mx, sample.my, sample.mz)

@@ -7,10 +7,8 @@ of +-4 degrees (horizontal speed: rotor drag; sharp command edges: lag against d
 """
 from __future__ import annotations
 
-from math import radians
-
 from flightctl.plan import Move, Plan
-from sim.scenarios import Scenario, Step, _angle_steps
+from sim.scenarios import Scenario, _angle_steps
 
 
 def excite() -> Scenario:
@@ -32,4 +30,3 @@ def hover_low() -> Scenario:
 
 
 SCENARIOS = {"excite": excite, "hover_low": hover_low}
-__all__ = ["SCENARIOS", "excite", "hover_low", "Step", "radians"]

@@ -25,7 +25,7 @@ class Flight:
     log: Table
     result: FlightResult
     touchdowns: list[tuple[float, float]]
-    t_arm: float
+    t_arm: float   # log time of arming (the log starts there)
 
 
 def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), noise: bool = True,
@@ -52,4 +52,4 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
     loop = FlightLoop(hal, params, scenario.plan, log, FlightController(params, truth_est, estimator),
                       calibrate_s=calibrate_s, extra_row=true_state)
     result = loop.run()
-    return Flight(scenario, log.table(), result, x.touchdowns, calibrate_s)
+    return Flight(scenario, log.table(), result, x.touchdowns, 0.0)

@@ -34,6 +34,6 @@ class Mixer:
         fmax, h1, h2, scale = self.fmax, self.h1, self.h2, self.scale
         for i in range(4):
             fi = f[i]
-            fi = 0.0 if fi < 0.0 else fmax if fi > fmax else fi
+            fi = fmax if fi > fmax else fi if fi > 0.0 else 0.0   # NaN -> 0: never a NaN command
             f[i] = fi
             counts[i] = int(scale * (h2 + sqrt(fi / h1)) + 0.5)   # eq. 26 inverted, then rounded counts

@@ -51,11 +51,14 @@ CAUSES = ("motor_lag", "actuation_delay", "ground_effect", "battery_sag", "linea
 LOWPASS_HZ = 12.0        # zero-phase low-pass applied to every residual (2nd-order Butterworth, twice)
 N_BLOCKS = 8             # blocked cross-validation
 MIN_GAIN = 0.01          # effect-size floor on the held-out gain (docs/diagnose.md)
-T_CRIT = 3.0             # standard errors of the block log-likelihood gains (docs/diagnose.md)
+T_CRIT = 3.0             # Diebold-Mariano t on the held-out loss differential (docs/diagnose.md)
+MIN_TIMING_PERIODS = 1.5  # lag or delay shorter than this many loop periods is not named
+DM_WINDOW_S = 1.0        # s: windows of the loss differential for that test (at most; at least
+DM_MIN_WINDOWS = 30      # this many windows, each no shorter than 0.1 s)
 Z_AIRBORNE = 0.10        # m: below this the legs may touch and the range is near its 2 cm limit
-EDGE_S = 0.2             # s trimmed at both ends of each airborne stretch
-MIN_STRETCH_S = 1.0      # s: shorter airborne stretches are dropped
-MIN_AIRBORNE_S = 5.0     # s of airborne data needed in total to judge anything
+EDGE_S = 0.1             # s trimmed at both ends of each airborne stretch
+MIN_STRETCH_S = 0.5      # s: shorter airborne stretches are dropped
+MIN_AIRBORNE_S = 1.0     # s of airborne data needed in total to judge anything
 RANGE_GAP_S = 0.25       # s: a range older than this does not give the altitude
 MOTOR_ON_MARGIN = 1.0    # P units above the dead zone h2 for a motor to count as running
 GE_MAX_Z = 0.6           # m: ground effect is judged only with airborne time below this
@@ -159,7 +162,11 @@ def load_file(table: Table, a: Airframe) -> FileData:
     else:
         notes.append("no rest before the motors start: initial tilt taken as zero")
         R0 = np.eye(3)
-    Rm = _rotations(t, gyro, R0)
+    # attitude: the gyro integrated from the first motor start (at rest before it: R0)
+    Rm = np.empty((9, n))
+    Rm[:, :first_on] = R0.reshape(9, 1)
+    if first_on < n:
+        Rm[:, first_on:] = _rotations(t[first_on:], gyro[:, first_on:], R0)
     rng = table["range"]
     have = np.isfinite(rng)
     z = np.full(n, np.nan)
@@ -231,6 +238,8 @@ class DataSet:
         self.block = np.zeros(self.n, int)
         for b in range(N_BLOCKS):
             self.block[edges[b]:edges[b + 1]] = b
+        self.block_edges = list(zip(edges[:-1], edges[1:]))
+        self.block_counts = np.diff(edges).astype(float)
 
     # -- helpers over stretches
     def flat(self, per_file):
@@ -302,6 +311,26 @@ def _offsets(res, mask):
     return m
 
 
+def block_stats(ds: "DataSet", res):
+    """(2, B, C): per block and channel, the sum and the sum of squares of a residual."""
+    out = np.zeros((2, N_BLOCKS, C))
+    for b, (i0, i1) in enumerate(ds.block_edges):
+        r = res[:, i0:i1]
+        out[0, b] = r.sum(axis=1)
+        out[1, b] = np.einsum("cn,cn->c", r, r)
+    return out
+
+
+def stats_objective(st, test_block, counts):
+    """`objective` on all blocks but one, from `block_stats` and the samples per block."""
+    keep = np.arange(N_BLOCKS) != test_block
+    n = counts[keep].sum()
+    s1, s2 = st[0, keep].sum(axis=0), st[1, keep].sum(axis=0)
+    rss = s2 - np.where(OFFSET, s1 * s1 / n, 0.0)
+    return float(np.log(np.maximum(rss, 1e-300)).sum())
+
+
+
 def objective(res, mask):
     """Gaussian log-likelihood with one variance per channel (up to constants): sum_c log RSS_c."""
     return float(np.log(_rss(res, mask, _offsets(res, mask)) + 1e-300).sum())
@@ -311,6 +340,7 @@ def objective(res, mask):
 class Score:
     rss: np.ndarray          # (N_BLOCKS, C) held-out residual sums of squares
     count: np.ndarray        # (N_BLOCKS,) samples per block
+    residual: np.ndarray     # (C, n) held-out residual (each block predicted by the fit on the others)
 
     def rmse(self):
         return np.sqrt(self.rss.sum(axis=0) / self.count.sum())
@@ -320,12 +350,20 @@ def heldout(ds: DataSet, residual_for_fold) -> Score:
     """`residual_for_fold(train_mask) -> (C, n) residual` of the model fitted on train_mask."""
     rss = np.zeros((N_BLOCKS, C))
     count = np.zeros(N_BLOCKS)
+    out = np.empty((C, ds.n))
     for b in range(N_BLOCKS):
         test = ds.block == b
         res = residual_for_fold(~test)
-        rss[b] = _rss(res, test, _offsets(res, ~test))
+        out[:, test] = res[:, test] - _offsets(res, ~test)[:, None]
+        rss[b] = np.einsum("cn,cn->c", out[:, test], out[:, test])
         count[b] = test.sum()
-    return Score(rss, count)
+    return Score(rss, count, out)
+
+
+def _num(x, digits=5):
+    """A JSON-safe number: non-finite values become None."""
+    x = float(x)
+    return round(x, digits) if math.isfinite(x) else None
 
 
 def geomean(x):
@@ -398,10 +436,12 @@ class GridCandidate(Candidate):
     def run(self) -> Result:
         ds = self.ds
         deltas = [self.delta(th) for th in self.grid]
+        stats = np.stack([block_stats(ds, ds.r_base - d) for d in deltas])    # (J, 2, B, C)
         folds = []
 
         def fold(train):
-            objs = [objective(ds.r_base - d, train) for d in deltas]
+            test_block = int(ds.block[~train][0])
+            objs = [stats_objective(st, test_block, ds.block_counts) for st in stats]
             j = int(np.argmin(objs))
             folds.append(float(self.grid[j]))
             return ds.r_base - deltas[j]
@@ -549,57 +589,127 @@ class GroundEffect(GridCandidate):
         return self.ds.z
 
 
-class RotorDrag(GridCandidate):
+class RotorDrag(Candidate):
     """Horizontal drag -k (u, v) in the body frame. The body velocity is not logged; it is
     reconstructed by the model itself: the horizontal inertial acceleration is the horizontal part
-    of R (0, 0, a_z) (a_z the measured specific force along z_b) minus k v / M, so the horizontal
-    velocity is that acceleration through a first-order filter with pole k / M, started at rest at
-    take-off (small-tilt approximation for the drag direction). Its body-frame (u, v) gives the
-    predicted accelerometer x, y: -k (u, v) / M."""
+    of R (0, 0, a_z) (a_z the measured specific force along z_b, R the integrated gyro) minus
+    k v / M, so the horizontal velocity is that acceleration through a first-order filter with pole
+    k / M, started at rest at take-off (small-tilt approximation for the drag direction). Its
+    body-frame (u, v) gives the predicted accelerometer x, y: -k (u, v) / M. The initial tilt is
+    known only to the accelerometer's bias, which leaks g times the tilt error into the horizontal
+    acceleration as an unknown constant in the inertial frame: two nuisance parameters (b_x, b_y),
+    fitted with the offsets by least squares for each k on the training blocks."""
     cause, name = "rotor_drag", "k"
     explains = "reconstructed body velocity u (m/s)"
-    grid = np.concatenate([[0.0], np.geomspace(0.01, 3.0, 40)])
-    round_to = 3
+    grid = np.concatenate([[0.0], np.geomspace(0.01, 3.0, 36)])
 
-    def velocity(self, k):
+    def _filtered(self, k, inputs):
+        """Per file: the body-frame (2, n) response -k/M R^T LPF_k(x) of inertial horizontal x (2, n)."""
         ds, M = self.ds, self.ds.a.M
         out = []
-        for f in ds.files:
-            ah = np.vstack([f.Rm[2] * f.acc[2], f.Rm[5] * f.acc[2]])   # (R a)_x, (R a)_y, a = (0,0,a_z)
-            dt = np.diff(f.t, append=f.t[-1] + 1.0 / ds.fs)
-            v = np.zeros_like(ah)
+        for f, x in zip(ds.files, inputs):
+            v = np.zeros_like(x)
             flying = (f.P > ds.a.h2 + MOTOR_ON_MARGIN).any(axis=0)
+            a = math.exp(-k / M / ds.fs)
+            g = (1.0 - a) * M / k if k > 0 else 1.0 / ds.fs
             for s0, s1 in _stretches(flying):
-                if k > 0:
-                    a = math.exp(-k / M / ds.fs)
-                    g = (1.0 - a) * M / k
-                else:
-                    a, g = 1.0, 1.0 / ds.fs
-                v[:, s0:s1] = signal.lfilter([0.0, g], [1.0, -a], ah[:, s0:s1], axis=1)
-            u = f.Rm[0] * v[0] + f.Rm[3] * v[1]     # R^T v, body x
+                v[:, s0:s1] = signal.lfilter([0.0, g], [1.0, -a], x[:, s0:s1], axis=1)
+            u = f.Rm[0] * v[0] + f.Rm[3] * v[1]     # R^T v, body x (horizontal v)
             w = f.Rm[1] * v[0] + f.Rm[4] * v[1]     # body y
-            out.append(np.vstack([u, w]))
+            d = np.zeros((2, x.shape[1]))
+            d[:, :-1] = -k / M * np.vstack([u, w])[:, 1:]     # the accelerometer row k + 1
+            out.append(d)
         return out
 
-    def delta(self, k):
+    def columns(self, k):
+        """Filtered (3, 2, n): the drag prediction and the responses to unit inertial biases."""
         ds = self.ds
-        if k <= 0:
-            return np.zeros((C, ds.n))
-        d = []
-        for vb in self.velocity(k):
-            x = np.zeros((C, vb.shape[1]))
-            x[3:5, :-1] = -k * vb[:, 1:] / ds.a.M     # accelerometer row k+1
-            d.append(x)
-        return ds.flat_filtered(d)
+        ah = [np.vstack([f.Rm[2] * f.acc[2], f.Rm[5] * f.acc[2]]) for f in ds.files]
+        ones = [np.ones(f.t.size) for f in ds.files]
+        zero = [np.zeros(f.t.size) for f in ds.files]
+        cols = []
+        for x in (ah, [np.vstack([o, z]) for o, z in zip(ones, zero)], [np.vstack([z, o]) for o, z in zip(ones, zero)]):
+            cols.append(ds.flat_filtered(self._filtered(k, x)))
+        return np.stack(cols)
+
+    def _stats(self, cols):
+        """Per block: sums and cross-products of e = r - drag prediction and the bias columns, x and y."""
+        ds = self.ds
+        e = ds.r_base[3:5] - cols[0]
+        A = np.stack([cols[1], cols[2]], axis=-1)          # (2, n, 2)
+        st = []
+        for i0, i1 in ds.block_edges:
+            eb, Ab = e[:, i0:i1], A[:, i0:i1]
+            st.append((eb.sum(axis=1), Ab.sum(axis=1), np.einsum("cn,cn->c", eb, eb),
+                       np.einsum("cnp,cn->cp", Ab, eb), np.einsum("cnp,cnq->cpq", Ab, Ab)))
+        return st
+
+    @staticmethod
+    def _solve(st, keep, n):
+        """Weighted LSQ of the two inertial biases from the training blocks' statistics (offsets
+        centred); returns (sum_c log RSS_c of x and y, b)."""
+        se = sum(st[b][0] for b in keep)
+        sA = sum(st[b][1] for b in keep)
+        ee = sum(st[b][2] for b in keep) - se * se / n
+        Ae = sum(st[b][3] for b in keep) - sA * se[:, None] / n
+        AA = sum(st[b][4] for b in keep) - sA[:, :, None] * sA[:, None, :] / n
+        w = 1.0 / np.maximum(ee, 1e-300)
+        b = np.zeros(2)
+        for _ in range(3):
+            M = np.einsum("c,cpq->pq", w, AA)
+            h = np.einsum("c,cp->p", w, Ae)
+            b = np.linalg.lstsq(M + 1e-12 * np.trace(M) * np.eye(2), h, rcond=None)[0]
+            rss = ee - 2.0 * Ae @ b + np.einsum("p,cpq,q->c", b, AA, b)
+            w = 1.0 / np.maximum(rss, 1e-300)
+        return float(np.log(np.maximum(rss, 1e-300)).sum()), b
+
+    def _residual(self, cols, b):
+        res = self.ds.r_base.copy()
+        res[3:5] = res[3:5] - cols[0] - b[0] * cols[1] - b[1] * cols[2]
+        return res
+
+    def run(self) -> Result:
+        ds = self.ds
+        counts = ds.block_counts
+        zero = np.zeros((3, 2, ds.n))
+        table = [self.columns(k) if k > 0 else zero for k in self.grid]
+        stats = [self._stats(cols) for cols in table]
+
+        def best(keep):
+            n = counts[keep].sum()
+            out = [self._solve(st, keep, n) for st in stats]
+            j = int(np.argmin([o[0] for o in out]))
+            return j, out[j][1]
+
+        folds = []
+
+        def fold(train):
+            test_block = int(ds.block[~train][0])
+            j, b = best([x for x in range(N_BLOCKS) if x != test_block])
+            folds.append(float(self.grid[j]))
+            return self._residual(table[j], b)
+
+        score = heldout(ds, fold)
+        allb = list(range(N_BLOCKS))
+        j, b = best(allb)
+        k = float(self.grid[j])
+        if 0 < j < len(self.grid) - 1:     # refine between the neighbours
+            lo, hi = self.grid[j - 1], self.grid[j + 1]
+            opt = optimize.minimize_scalar(lambda kk: self._solve(self._stats(self.columns(kk)), allb, ds.n)[0],
+                                           bounds=(lo, hi), method="bounded", options={"xatol": 1e-3})
+            k = float(opt.x)
+        cols = self.columns(k) if k > 0 else zero
+        b = self._solve(self._stats(cols), allb, ds.n)[1]
+        self._k = k
+        return Result(self.cause, {"k": round(k, 3)}, score, self._residual(cols, b), explains=self.explains,
+                      folds=folds)
 
     def explanatory(self):
-        v = self.velocity(self._k if hasattr(self, "_k") else 0.3)
-        return self.ds.flat([x[0] for x in v])
-
-    def run(self):
-        res = super().run()
-        self._k = max(res.parameters["k"], 1e-3)
-        return res
+        k = max(getattr(self, "_k", 0.0), 1e-3)
+        ds = self.ds
+        ah = [np.vstack([f.Rm[2] * f.acc[2], f.Rm[5] * f.acc[2]]) for f in ds.files]
+        d = self._filtered(k, ah)
+        return ds.flat([x[0] * (-ds.a.M / k) for x in d])
 
 
 class BatterySag(AffineCandidate):
@@ -744,23 +854,23 @@ class Diagnosis:
     def report(self) -> dict:
         cands = []
         for r in self.results:
-            cands.append({"cause": r.cause, "parameters": r.parameters, "gain": round(r.gain, 5),
-                          "rmse_extended": round(geomean(r.score.rmse()), 6),
-                          "t_stat": round(r.t_stat, 2), "significant": r.cause in self.significant,
-                          "block_gains": [round(float(g), 4) for g in r.block_gain]})
+            cands.append({"cause": r.cause, "parameters": r.parameters, "gain": _num(r.gain),
+                          "rmse_extended": _num(geomean(r.score.rmse()), 6),
+                          "t_stat": _num(r.t_stat, 2), "significant": r.cause in self.significant,
+                          "block_gains": [_num(g, 4) for g in r.block_gain]})
         base_rmse = self.base.score.rmse()
         best = next((r for r in self.results if r.cause == self.cause), None)
         ext_rmse = best.score.rmse() if best is not None else base_rmse
         return {
             "cause": self.cause,
             "parameters": self.parameters,
-            "rmse_base": round(self.rmse_base, 6),
-            "rmse_extended": round(self.rmse_extended, 6),
-            "gain": round(self.gain, 5),
+            "rmse_base": _num(self.rmse_base, 6),
+            "rmse_extended": _num(self.rmse_extended, 6),
+            "gain": _num(self.gain),
             "metric": self.metric,
             "candidates": cands,
             "not_judged": self.not_judged,
-            "channels": {c: {"unit": u, "rmse_base": round(float(b), 6), "rmse_extended": round(float(e), 6)}
+            "channels": {c: {"unit": u, "rmse_base": _num(b, 6), "rmse_extended": _num(e, 6)}
                          for c, u, b, e in zip(CHANNELS, UNITS, base_rmse, ext_rmse)},
             "significance": {"min_gain": MIN_GAIN, "t_crit": T_CRIT, "blocks": N_BLOCKS},
             "data": {"files": [f.path for f in self.ds.files], "airborne_s": round(self.ds.seconds, 2),
@@ -775,15 +885,40 @@ METRIC = ("geometric mean over 6 channels of the held-out RMSE of the one-loop-p
           f"{N_BLOCKS}-block cross-validation over the airborne data")
 
 
-def significance(res: Result, base: Score):
-    """Per-block held-out gains and the t statistic of the per-block log-likelihood gains
-    sum_c log(RSS_base / RSS_ext) / (2 C) (what the geometric-mean gain is made of)."""
+def significance(res: Result, base: Score, ds: DataSet):
+    """Per-block held-out gains, and a Diebold-Mariano-type test of equal predictive accuracy on
+    the held-out residuals. The held-out data are cut into windows of DM_WINDOW_S (much longer than
+    the correlation time of the low-passed residual, so that windows are close to independent); in
+    each window the loss differential is the metric's own, mean_c log(RSS_base,c / RSS_ext,c) (a
+    log ratio, so that a few violent windows, a touchdown or a crash, cannot swamp the others). t is
+    its mean over the windows in standard errors; when the candidate predicts no better than the
+    base model, t is about N(0, 1) or below, and T_CRIT = 3 is a one-sided 0.1 % level."""
     ratio = res.score.rss / base.rss                       # (B, C)
     res.block_gain = 1.0 - np.exp(0.5 * np.log(ratio).mean(axis=1))
     res.gain = 1.0 - geomean(res.score.rmse()) / geomean(base.rmse())
-    ll = -0.5 * np.log(ratio).mean(axis=1)                  # per-block log gain
-    se = ll.std(ddof=1) / math.sqrt(len(ll))
-    res.t_stat = float(ll.mean() / se) if se > 0 else (math.inf if ll.mean() > 0 else 0.0)
+    win = min(DM_WINDOW_S, max(0.1, ds.seconds / DM_MIN_WINDOWS))
+    per = max(2, int(round(win * ds.fs)))
+    m = ds.n // per
+    if m < 2:
+        res.t_stat = 0.0
+        return
+    eb = (base.residual[:, :m * per] ** 2).reshape(C, m, per).sum(axis=2)
+    ee = (res.score.residual[:, :m * per] ** 2).reshape(C, m, per).sum(axis=2)
+    w = np.log((eb + 1e-300) / (ee + 1e-300)).mean(axis=0)
+    se = w.std(ddof=1) / math.sqrt(m)
+    res.t_stat = float(w.mean() / se) if se > 0 else (math.inf if w.mean() > 0 else 0.0)
+
+
+def _too_small(r: Result, ds: DataSet) -> str | None:
+    """Sizes the data cannot tell from the log's own timing or from nothing (not significant)."""
+    if r.cause in ("motor_lag", "actuation_delay"):
+        v = next(iter(r.parameters.values()))
+        if v < MIN_TIMING_PERIODS / ds.fs and r.gain >= MIN_GAIN:
+            return (f"{r.cause}: {v * 1e3:.1f} ms is within {MIN_TIMING_PERIODS:g} loop periods, the timing "
+                    f"uncertainty of a log (sensor filters, when in the period the sample is taken): not named")
+    if r.cause == "battery_sag" and r.parameters.get("v_nominal") is None:
+        return "battery_sag: the fit wants no voltage dependence (1/v_nominal^2 <= 0): not named"
+    return None
 
 
 def diagnose(tables: list[Table], a: Airframe, progress=say) -> Diagnosis:
@@ -817,12 +952,18 @@ def diagnose(tables: list[Table], a: Airframe, progress=say) -> Diagnosis:
             progress(f"{cand.cause}: not judged ({why})")
             continue
         r = cand.run()
-        significance(r, base.score)
+        significance(r, base.score, ds)
         r.explanatory = cand.explanatory()
         results.append(r)
         progress(f"{cand.cause}: {r.parameters} held-out gain {r.gain:+.4f} (t = {r.t_stat:.1f})")
     results.sort(key=lambda r: -r.gain)
-    significant = [r.cause for r in results if r.gain >= MIN_GAIN and r.t_stat >= T_CRIT]
+    significant = []
+    for r in results:
+        why = _too_small(r, ds)
+        if why:
+            notes.append(why)
+        elif r.gain >= MIN_GAIN and r.t_stat >= T_CRIT:
+            significant.append(r.cause)
     rb = geomean(base.score.rmse())
     best = next((r for r in results if r.cause in significant), None)
     if best is None:

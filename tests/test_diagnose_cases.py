@@ -1,0 +1,85 @@
+"""Hidden-effect cases for the diagnose tests: draw one effect (or none) and its size from a seeded
+numpy Generator, fly it through the full onboard path with sensor noise, and diagnose the log
+alone through the CLI. The tolerances (docs/diagnose.md) are about three times the spread of the
+recovered values seen over the slow sweep, and never tighter than the grid or rounding."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from flightctl.cli import main
+from flightctl.params import load
+from sim import effects
+from sim.excitation import excite
+from sim.run import fly
+
+V_TYPICAL = 16.0   # V: the simulated 4S pack in flight (it starts at 90 % charge)
+CAUSES = ("motor_lag", "actuation_delay", "ground_effect", "battery_sag", "linear_yaw_drag", "rotor_drag",
+          "com_offset", "motor_weak")
+
+
+def draw(rng: np.random.Generator, cause: str | None = None) -> tuple[str, dict]:
+    """A cause (uniform over the 8 and none, unless given) and a realistic size."""
+    if cause is None:
+        cause = str(rng.choice(("none",) + CAUSES))
+    if cause == "none":
+        return cause, {}
+    if cause == "motor_lag":
+        return cause, {"tau": float(rng.uniform(0.02, 0.1))}
+    if cause == "actuation_delay":
+        return cause, {"delay": float(rng.uniform(0.01, 0.05))}
+    if cause == "ground_effect":
+        return cause, {"rotor_radius": float(rng.uniform(0.1, 0.2))}
+    if cause == "battery_sag":
+        # thrust changes by 5-20 % at the typical voltage, either way
+        s = float(rng.uniform(1.05, 1.2)) if rng.random() < 0.5 else float(rng.uniform(0.85, 0.95))
+        return cause, {"v_nominal": V_TYPICAL / math.sqrt(s)}
+    if cause == "linear_yaw_drag":
+        # gamma0 r against gamma1 r^2 at the 1.5 rad/s of the yaw steps: 50 % to 200 %
+        return cause, {"gamma0": float(rng.uniform(0.5, 2.0) * 4.86291e-4 * 1.5)}
+    if cause == "rotor_drag":
+        return cause, {"k": float(rng.uniform(0.1, 0.5))}
+    if cause == "com_offset":
+        d, a = float(rng.uniform(0.005, 0.02)), float(rng.uniform(0, 2 * math.pi))
+        return cause, {"dx": d * math.cos(a), "dy": d * math.sin(a)}
+    if cause == "motor_weak":
+        return cause, {"motor": float(rng.integers(1, 5)), "scale": float(rng.uniform(0.8, 0.95))}
+    raise ValueError(cause)
+
+
+def close_enough(cause: str, truth: dict, got: dict) -> tuple[bool, str]:
+    """The tolerances of docs/diagnose.md."""
+    if cause == "none":
+        return got == {}, "no parameters"
+    if cause == "motor_lag":
+        return abs(got["tau"] - truth["tau"]) <= 0.15 * truth["tau"] + 0.002, "tau within 15 % + 2 ms"
+    if cause == "actuation_delay":
+        return abs(got["delay"] - truth["delay"]) <= 0.15 * truth["delay"] + 0.002, "delay within 15 % + 2 ms"
+    if cause == "ground_effect":
+        return abs(got["rotor_radius"] / truth["rotor_radius"] - 1) <= 0.15, "rotor_radius within 15 %"
+    if cause == "battery_sag":
+        return abs(got["v_nominal"] / truth["v_nominal"] - 1) <= 0.02, "v_nominal within 2 %"
+    if cause == "linear_yaw_drag":
+        return abs(got["gamma0"] / truth["gamma0"] - 1) <= 0.2, "gamma0 within 20 %"
+    if cause == "rotor_drag":
+        return abs(got["k"] / truth["k"] - 1) <= 0.25, "k within 25 %"
+    if cause == "com_offset":
+        e = math.hypot(got["dx"] - truth["dx"], got["dy"] - truth["dy"])
+        return e <= 0.002, "(dx, dy) within 2 mm"
+    if cause == "motor_weak":
+        return (got["motor"] == truth["motor"] and abs(got["scale"] - truth["scale"]) <= 0.02,
+                "the motor, and scale within 0.02")
+    raise ValueError(cause)
+
+
+def run_case(tmp: Path, cause: str, parameters: dict, seed: int) -> dict:
+    """Fly with the effect hidden in the plant, then diagnose the log file alone through the CLI."""
+    log = tmp / f"flight_{cause}_{seed}.csv"
+    eff = (effects.make(cause, **parameters),) if cause != "none" else ()
+    fly(excite(), load(None), log, effects=eff, noise=True, seed=seed)
+    out = tmp / f"report_{cause}_{seed}.json"
+    assert main(["diagnose", str(log), "--json", str(out), "--quiet"]) == 0
+    return json.loads(out.read_text())

@@ -1,0 +1,129 @@
+"""`flightctl diagnose` on bad or thin input: one line naming file, row or column, exit status 2,
+nothing written; and candidates the data cannot judge are listed with the reason, not guessed."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from flightctl.cli import main
+from flightctl.params import load
+from sim import effects
+from sim.excitation import excite
+from sim.run import fly
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    path = tmp_path_factory.mktemp("diag") / "flight.csv"
+    fly(excite(), load(None), path, effects=(effects.make("com_offset", dx=0.01, dy=0.0),), noise=True, seed=5)
+    return path
+
+
+def _lines(path):
+    return path.read_text().splitlines(keepends=True)
+
+
+def _header_index(lines):
+    return next(i for i, s in enumerate(lines) if not s.startswith("#"))
+
+
+def _rewrite(src, dst, edit):
+    lines = _lines(src)
+    h = _header_index(lines)
+    header = lines[h].rstrip("\n").split(",")
+    rows = [s.rstrip("\n").split(",") for s in lines[h + 1:]]
+    header, rows = edit(header, rows)
+    dst.write_text("".join(lines[:h]) + ",".join(header) + "\n" + "".join(",".join(r) + "\n" for r in rows))
+    return dst
+
+
+def _fails(tmp_path, capsys, log, *words):
+    out = tmp_path / "out.json"
+    assert main(["diagnose", str(log), "--json", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert str(log) in err
+    for w in words:
+        assert w in err, err
+    assert not out.exists()
+
+
+def test_missing_column_is_named(tmp_path, capsys, flight):
+    def drop(header, rows):
+        i = header.index("gyro_y")
+        return header[:i] + header[i + 1:], [r[:i] + r[i + 1:] for r in rows]
+    _fails(tmp_path, capsys, _rewrite(flight, tmp_path / "f.csv", drop), "gyro_y")
+
+
+def test_non_numeric_cell_names_row_and_column(tmp_path, capsys, flight):
+    def spoil(header, rows):
+        rows[500][header.index("acc_z")] = "abc"
+        return header, rows
+    _fails(tmp_path, capsys, _rewrite(flight, tmp_path / "f.csv", spoil), "acc_z", "row")
+
+
+def test_time_not_increasing_is_named(tmp_path, capsys, flight):
+    def spoil(header, rows):
+        i = header.index("t")
+        rows[800][i] = rows[798][i]
+        return header, rows
+    _fails(tmp_path, capsys, _rewrite(flight, tmp_path / "f.csv", spoil), "'t'", "row")
+
+
+def test_too_short_log(tmp_path, capsys, flight):
+    _fails(tmp_path, capsys, _rewrite(flight, tmp_path / "f.csv", lambda h, r: (h, r[:300])), "too short")
+
+
+def test_motors_off_on_the_ground_is_too_short_to_judge(tmp_path, capsys, flight):
+    def ground(header, rows):
+        rows = rows[:1500]   # 3.3 s on the ground: motors off
+        for k in ("P1", "P2", "P3", "P4"):
+            i = header.index(k)
+            for r in rows:
+                r[i] = "0"
+        return header, rows
+    _fails(tmp_path, capsys, _rewrite(flight, tmp_path / "f.csv", ground), "too short to judge", "airborne")
+
+
+def test_missing_output_directory_writes_nothing(tmp_path, capsys, flight):
+    out = tmp_path / "nowhere" / "out.json"
+    assert main(["diagnose", str(flight), "--json", str(out), "--quiet"]) == 2
+    assert "nowhere" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_no_range_and_constant_battery_are_not_judged(tmp_path, capsys, flight):
+    def strip(header, rows):
+        ir, ib = header.index("range"), header.index("battery_v")
+        for r in rows:
+            r[ir] = ""
+            r[ib] = "15.9"
+        return header, rows
+    log = _rewrite(flight, tmp_path / "f.csv", strip)
+    out = tmp_path / "out.json"
+    assert main(["diagnose", str(log), "--json", str(out), "--quiet"]) == 0
+    rep = json.loads(out.read_text())
+    skipped = {c["cause"]: c["why"] for c in rep["not_judged"]}
+    assert set(skipped) == {"ground_effect", "battery_sag"}
+    assert "range" in skipped["ground_effect"] and "battery_v" in skipped["battery_sag"]
+    assert rep["cause"] == "com_offset"
+
+
+def test_two_logs_and_plots(tmp_path, capsys, flight):
+    def second_half(header, rows):   # a second file: the same flight's log from t = 0 again
+        return header, rows
+    other = _rewrite(flight, tmp_path / "g.csv", second_half)
+    out, prefix = tmp_path / "out.json", tmp_path / "diag"
+    assert main(["diagnose", str(flight), str(other), "--json", str(out), "--plot", str(prefix), "--quiet"]) == 0
+    rep = json.loads(out.read_text())
+    assert rep["cause"] == "com_offset" and abs(rep["parameters"]["dx"] - 0.01) < 0.002
+    assert set(rep) >= {"cause", "parameters", "rmse_base", "rmse_extended", "gain", "metric", "candidates"}
+    assert [c["gain"] for c in rep["candidates"]] == sorted((c["gain"] for c in rep["candidates"]), reverse=True)
+    assert np.isclose(rep["gain"], 1 - rep["rmse_extended"] / rep["rmse_base"], atol=1e-4)
+    for k in ("residuals", "explained"):
+        png = tmp_path / f"diag-{k}.png"
+        assert png.read_bytes()[:4] == b"\x89PNG"
+    text = capsys.readouterr().out
+    assert "verdict: com_offset" in text and "Ljung-Box" in text
