@@ -19,6 +19,7 @@ class Plant:
         self.substeps = substeps
         self.t = 0.0
         self.u = (0.0, 0.0, 0.0, 0.0, battery_v)
+        self._next = self.u                               # the last command, applied from now on
         self.x = model.initial_state(self.u)
         self.on_ground = True
         self.touchdowns: list[tuple[float, float]] = []  # (time, vertical speed at contact)
@@ -31,7 +32,7 @@ class Plant:
 
     def advance(self, dt: float) -> None:
         """Integrate over one loop period with the last command held."""
-        u_new = getattr(self, "_next", self.u)
+        u_new = self._next
         h = self.h
         for _ in range(self.substeps):
             if self._lag:

@@ -12,6 +12,7 @@ from flightctl.control.pid import Pid, wrap
 from flightctl.hal import ImuSample
 from flightctl.params import Airframe, Filters, Params
 from sim.model import Model
+from hand import R_hand
 
 M, G, L = 1.645, 9.80665, 0.2475
 H1, H2 = 1.49e-3, 120.0
@@ -25,15 +26,6 @@ ALPHA_RP, ALPHA_YAW = 128 / 129, 64 / 65
 def counts_of(f):
     """eq. 26 inverted, then P (0..255) -> counts on 0..40000 (conventions.md)."""
     return round((H2 + math.sqrt(f / H1)) / 255 * 40000)
-
-
-def R_hand(phi, theta, psi):
-    cf, sf, ct, st, cp, sp = (math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta),
-                              math.cos(psi), math.sin(psi))
-    Rx = np.array([[1, 0, 0], [0, cf, -sf], [0, sf, cf]])
-    Ry = np.array([[ct, 0, st], [0, 1, 0], [-st, 0, ct]])
-    Rz = np.array([[cp, -sp, 0], [sp, cp, 0], [0, 0, 1]])
-    return Rz @ Ry @ Rx
 
 
 def sample(acc=(0.0, 0.0, G), gyro=(0.0, 0.0, 0.0), mag=None):

@@ -14,6 +14,7 @@ from flightctl.hal import ImuSample
 from flightctl.params import Airframe
 from sim.devices import SensorNoise, SimGpio, SimMpu9250, World
 from sim.effects import make
+from hand import R_hand
 
 G = 9.80665
 M = 1.645
@@ -28,15 +29,6 @@ ECHO, TRIG = 24, 23
 
 def no_sleep(_):
     pass
-
-
-def R_hand(phi, theta, psi):
-    cf, sf, ct, st, cp, sp = (math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta),
-                              math.cos(psi), math.sin(psi))
-    Rx = np.array([[1, 0, 0], [0, cf, -sf], [0, sf, cf]])
-    Ry = np.array([[ct, 0, st], [0, 1, 0], [-st, 0, ct]])
-    Rz = np.array([[cp, -sp, 0], [sp, cp, 0], [0, 0, 1]])
-    return Rz @ Ry @ Rx
 
 
 def quiet_world(effects=()):
