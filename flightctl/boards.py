@@ -13,7 +13,7 @@ SONAR_TRIGGER_PIN, SONAR_ECHO_PIN = 23, 24
 def sim_board(params: Params, effects=(), noise=None, seed: int = 0, substeps: int = 2):
     """The simulated quadcopter: the real MPU-9250 and HC-SR04 drivers on simulated chips and pins.
     Returns the Hal and the simulated world (for its true values)."""
-    from sim.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, World
+    from flightctl.sim.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, World
 
     world = World(params.airframe, tuple(effects), noise if noise is not None else SensorNoise(), seed, substeps)
     imu = Mpu9250(SimMpu9250(world), sleep=lambda s: None)

@@ -7,11 +7,11 @@ import sys
 from flightctl.errors import InputError
 
 COMMANDS = {
-    "sim": ("sim.cli", "fly the onboard control code against the simulated quadcopter"),
-    "identify": ("sim.identify.cli", "fit the paper's models to bench, yaw-drag, pendulum or rotor data; real-data report"),
-    "diagnose": ("sim.identify.diagnose_cli", "name what the model gets wrong in flight logs"),
+    "sim": ("flightctl.sim.cli", "fly the onboard control code against the simulated quadcopter"),
+    "identify": ("flightctl.sim.identify.cli", "fit the paper's models to bench, yaw-drag, pendulum or rotor data; real-data report"),
+    "diagnose": ("flightctl.sim.identify.diagnose_cli", "name what the model gets wrong in flight logs"),
     "run": ("flightctl.service", "the onboard service: fly on the quadcopter (or --board sim)"),
-    "bench": ("hil.bench", "spin one motor at a time for identification"),
+    "bench": ("flightctl.hil.bench", "spin one motor at a time for identification"),
 }
 
 

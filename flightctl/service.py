@@ -81,7 +81,7 @@ def load_plan(spec: str) -> Plan:
     path = Path(spec)
     if path.suffix == ".toml" or path.exists():
         return _plan_file(path)
-    from sim.scenarios import SCENARIOS
+    from flightctl.sim.scenarios import SCENARIOS
 
     if spec not in SCENARIOS:
         raise InputError(f"--plan {spec}: neither a plan file nor a scenario (scenarios: {', '.join(SCENARIOS)})")
@@ -179,7 +179,7 @@ def _pi(args, params: Params) -> Board:
 
 def _sim(args, params: Params) -> Board:
     from flightctl.boards import sim_board
-    from sim.run import TRUTH_COLUMNS
+    from flightctl.sim.run import TRUTH_COLUMNS
 
     hal, world = sim_board(params, seed=args.seed)
     hal.clock = PacedClock(hal.clock)      # the simulated world, paced by the wall clock

@@ -20,9 +20,9 @@ from flightctl.control.estimator import Calibration
 from flightctl.drivers.mpu9250 import Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.params import load
-from sim.devices import SensorNoise, SimMpu9250, World
-from sim.run import fly
-from sim.scenarios import SCENARIOS
+from flightctl.sim.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.run import fly
+from flightctl.sim.scenarios import SCENARIOS
 
 
 class FrozenSpi:

@@ -123,13 +123,13 @@ else
         install -d -o "$USER_NAME" -g "$USER_NAME" -m 0750 "$STATE_DIR" "$STATE_DIR/plans" "$STATE_DIR/logs"
 fi
 
-# 4. the package in a venv under the prefix (pip upgrades in place: idempotent)
+# 4. the package with its Pi-only libraries (the `pi` extra) in a venv under the prefix (pip upgrades in place: idempotent)
 if [ -x "$VENV/bin/python" ]; then
     skip "venv $VENV exists"
 else
     step "create venv $VENV" -- python3 -m venv "$VENV"
 fi
-step "install flightctl from $SOURCE into $VENV" -- "$VENV/bin/pip" install --quiet --upgrade "$SOURCE"
+step "install flightctl from $SOURCE into $VENV" -- "$VENV/bin/pip" install --quiet --upgrade "$SOURCE[pi]"
 step "install docs/pi.md as $PREFIX/share/pi.md" -- install -D -m 0644 "$SOURCE/docs/pi.md" "$PREFIX/share/pi.md"
 
 # 5. systemd units

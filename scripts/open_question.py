@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from flightctl.params import TABLE4, load
-from sim import effects
-from sim.run import fly
-from sim.scenarios import SCENARIOS
+from flightctl.sim import effects
+from flightctl.sim.run import fly
+from flightctl.sim.scenarios import SCENARIOS
 
 CRASH_DEG = 60.0
 SIZES_MS = {"actuation_delay": [0, 1, 2, 3, 4, 5, 6, 7.5, 10, 15, 20, 30, 35, 40, 45, 50],

@@ -13,9 +13,9 @@ import tempfile
 from pathlib import Path
 
 from flightctl.params import GAIN_SETS, load
-from sim.metrics import step_metrics
-from sim.run import fly
-from sim.scenarios import SCENARIOS
+from flightctl.sim.metrics import step_metrics
+from flightctl.sim.run import fly
+from flightctl.sim.scenarios import SCENARIOS
 
 PATHS = [("perfect state feedback", dict(truth=True)),
          ("full path, flight estimator", dict(estimator="flight")),

@@ -10,9 +10,9 @@ from pathlib import Path
 from flightctl.control.estimator import ESTIMATORS
 from flightctl.errors import InputError
 from flightctl.params import GAIN_SETS, load
-from sim import effects as fx
-from sim.metrics import hold_metrics, step_metrics
-from sim.scenarios import SCENARIOS
+from flightctl.sim import effects as fx
+from flightctl.sim.metrics import hold_metrics, step_metrics
+from flightctl.sim.scenarios import SCENARIOS
 
 
 def parser() -> argparse.ArgumentParser:
@@ -39,7 +39,7 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str]) -> int:
-    from sim.run import fly
+    from flightctl.sim.run import fly
 
     args = parser().parse_args(argv)
     if args.substeps < 1:
@@ -74,7 +74,7 @@ def main(argv: list[str]) -> int:
         print("  " + step_metrics(log, step, flight.t_arm).row())
     if not args.no_plot:
         png = Path(args.plot) if args.plot else log_path.with_suffix(".png")
-        from sim.plots import plot_flight
+        from flightctl.sim.plots import plot_flight
         plot_flight(log, png, f"flightctl sim {scenario.name}: {args.gains}, {path}")
         print(f"  plot -> {png}")
     return 0

@@ -25,8 +25,8 @@ from flightctl.drivers import mpu9250_regs as reg
 from flightctl.drivers.hcsr04 import US_PER_M
 from flightctl.hal import PWM_RANGE
 from flightctl.params import Airframe
-from sim.model import Effect, Model, rotation
-from sim.plant import Plant
+from flightctl.sim.model import Effect, Model, rotation
+from flightctl.sim.plant import Plant
 
 G = 9.80665
 EARTH_FIELD_T = (20e-6, 0.0, -40e-6)  # North, West, Up: a mid-latitude field, dipping down

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 
 from flightctl.errors import InputError
-from sim.model import R, Z, Effect
+from flightctl.sim.model import R, Z, Effect
 
 
 class MotorLag(Effect):

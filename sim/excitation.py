@@ -8,7 +8,7 @@ of +-4 degrees (horizontal speed: rotor drag; sharp command edges: lag against d
 from __future__ import annotations
 
 from flightctl.plan import Move, Plan
-from sim.scenarios import Scenario, _angle_steps
+from flightctl.sim.scenarios import Scenario, _angle_steps
 
 
 def excite() -> Scenario:

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flightctl.logfile import Table
-from sim.scenarios import Step
+from flightctl.sim.scenarios import Step
 
 TRUE = {"roll": "true_roll", "pitch": "true_pitch", "yaw": "true_yaw", "alt": "true_z"}
 ANGLES = ("roll", "pitch", "yaw")

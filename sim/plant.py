@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections import deque
 
-from sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Model, P
+from flightctl.sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Model, P
 
 
 class Plant:

@@ -12,8 +12,8 @@ from flightctl.control.controller import FlightController
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter, Table
 from flightctl.loop import FlightLoop, FlightResult
 from flightctl.params import Params, dumps
-from sim.devices import SensorNoise, TruthEstimator, TruthRangefinder
-from sim.scenarios import Scenario
+from flightctl.sim.devices import SensorNoise, TruthEstimator, TruthRangefinder
+from flightctl.sim.scenarios import Scenario
 
 TRUTH_COLUMNS = ("true_x", "true_y", "true_z", "true_roll", "true_pitch", "true_yaw")
 SIM_CALIBRATE_S = 2.0   # the paper sat still for 60 s; the simulated gyro bias is constant

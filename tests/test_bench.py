@@ -14,8 +14,8 @@ from flightctl.errors import InputError
 from flightctl.logfile import BENCH_COLUMNS, read_table
 from flightctl.params import load
 from flightctl.pi import open_pi_board
-from hil import bench
-from sim.devices import SensorNoise, SimMpu9250, World
+from flightctl.hil import bench
+from flightctl.sim.devices import SensorNoise, SimMpu9250, World
 
 
 def test_sim_bench_writes_the_models_truth(tmp_path):

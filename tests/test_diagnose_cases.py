@@ -12,9 +12,9 @@ import numpy as np
 
 from flightctl.cli import main
 from flightctl.params import load
-from sim import effects
-from sim.excitation import excite
-from sim.run import fly
+from flightctl.sim import effects
+from flightctl.sim.excitation import excite
+from flightctl.sim.run import fly
 
 V_TYPICAL = 16.0   # V: the simulated 4S pack in flight (it starts at 90 % charge)
 CAUSES = ("motor_lag", "actuation_delay", "ground_effect", "battery_sag", "linear_yaw_drag", "rotor_drag",

@@ -9,9 +9,9 @@ import pytest
 
 from flightctl.cli import main
 from flightctl.params import load
-from sim import effects
-from sim.excitation import excite
-from sim.run import fly
+from flightctl.sim import effects
+from flightctl.sim.excitation import excite
+from flightctl.sim.run import fly
 
 
 @pytest.fixture(scope="module")

@@ -12,8 +12,8 @@ from flightctl.drivers.hcsr04 import HcSr04
 from flightctl.drivers.mpu9250 import ImuError, Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.params import Airframe
-from sim.devices import SensorNoise, SimGpio, SimMpu9250, World
-from sim.effects import make
+from flightctl.sim.devices import SensorNoise, SimGpio, SimMpu9250, World
+from flightctl.sim.effects import make
 from hand import R_hand
 
 G = 9.80665

@@ -11,7 +11,7 @@ import pytest
 from flightctl import params
 from flightctl.cli import main
 from flightctl.logfile import BENCH_COLUMNS, Table
-from sim.identify.propeller import fit_bench, fit_motor, motor_points
+from flightctl.sim.identify.propeller import fit_bench, fit_motor, motor_points
 
 Z = 5.0  # standard errors allowed: a false failure about once in a million checks
 TRUE = {"h1": 1.49e-3, "h2": 120.0, "c1": 1.47e-5, "g1": 0.020, "g2": 0.002}  # conventions.md defaults

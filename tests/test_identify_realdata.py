@@ -6,7 +6,7 @@ import pytest
 
 from flightctl.cli import main
 from flightctl.logfile import read_table
-from sim.identify import realdata
+from flightctl.sim.identify import realdata
 
 DATA = realdata.default_data_dir()
 pytestmark = pytest.mark.skipif(not (DATA / "rcbenchmark").is_dir(), reason=f"no real data at {DATA}")

@@ -7,7 +7,7 @@ from flightctl import params
 from flightctl.cli import main
 from flightctl.logfile import Table
 from flightctl.params import Airframe
-from sim.identify import yaw_drag
+from flightctl.sim.identify import yaw_drag
 
 Z = 5.0
 GAMMA1, GAMMA2 = 4.86291e-4, 1.22958e-3  # paper, Table 2

@@ -10,10 +10,10 @@ from scipy.integrate import solve_ivp
 
 from flightctl.errors import InputError
 from flightctl.params import Airframe
-from sim import effects as fx
-from sim.model import (Model, angular_acceleration, body_torques, command_from_thrust, rotation,
+from flightctl.sim import effects as fx
+from flightctl.sim.model import (Model, angular_acceleration, body_torques, command_from_thrust, rotation,
                        rotor_speed, rotor_torque, thrust_from_command, yaw_drag)
-from sim.plant import Plant
+from flightctl.sim.plant import Plant
 
 # conventions.md, reference airframe (Table 2 and the plausible propeller defaults)
 M, L, G = 1.645, 0.2475, 9.80665

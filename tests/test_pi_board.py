@@ -16,7 +16,7 @@ from flightctl.errors import InputError
 from flightctl.hal import ImuSample
 from flightctl.params import load
 from flightctl.pi import BoardConfig, load_board, open_pi_board
-from sim.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.devices import SensorNoise, SimMpu9250, World
 
 
 def test_the_shipped_board_file_is_the_defaults():

@@ -11,8 +11,8 @@ from flightctl.drivers.mpu9250 import ImuError, Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.loop import MAX_BAD_IMU_FRAMES, FlightLoop
 from flightctl.params import load
-from sim.devices import SensorNoise, SimMpu9250, World
-from sim.scenarios import SCENARIOS
+from flightctl.sim.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.scenarios import SCENARIOS
 
 
 @pytest.fixture

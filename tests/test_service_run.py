@@ -19,7 +19,7 @@ from flightctl.drivers.esc import PigpioEsc
 from flightctl.errors import InputError
 from flightctl.logfile import MAG_COLUMNS, read_flight_log
 from flightctl.service import TeardownLog, load_plan, main
-from sim.run import TRUTH_COLUMNS
+from flightctl.sim.run import TRUTH_COLUMNS
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from flightctl.params import TABLE4, TABLE6, load
-from sim.metrics import hold_metrics, step_metrics
-from sim.run import fly
-from sim.scenarios import SCENARIOS
+from flightctl.sim.metrics import hold_metrics, step_metrics
+from flightctl.sim.run import fly
+from flightctl.sim.scenarios import SCENARIOS
 
 
 def second_order(wn2: float, two_zeta_wn: float):

@@ -18,8 +18,8 @@ from pathlib import Path
 from flightctl import params as paramfile
 from flightctl.errors import InputError
 from flightctl.logfile import BENCH_COLUMNS, PENDULUM_COLUMNS, YAW_DRAG_COLUMNS, read_table
-from sim.identify import inertia, propeller, yaw_drag
-from sim.identify.fits import FitError, Identified
+from flightctl.sim.identify import inertia, propeller, yaw_drag
+from flightctl.sim.identify.fits import FitError, Identified
 
 KINDS = {  # kind: (help, columns, text columns, identify)
     "bench": ("eq. 26-28 from one steady point per row and motor", BENCH_COLUMNS, (), propeller.identify),
@@ -93,7 +93,7 @@ def identify(args) -> Identified:
         _check_params_update(args.write_params, result.values)
     image = None
     if args.plot:
-        from sim.identify.plots import png
+        from flightctl.sim.identify.plots import png
         image = png(result.figure())
     Path(args.json).write_text(json.dumps(result.report, indent=2) + "\n")
     if args.write_params:
@@ -106,10 +106,10 @@ def identify(args) -> Identified:
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
     if args.kind == "rcbenchmark":
-        from sim.identify import realdata
+        from flightctl.sim.identify import realdata
         lines = realdata.convert(args.runs, args.out)
     elif args.kind == "real-data":
-        from sim.identify import realdata
+        from flightctl.sim.identify import realdata
         lines = realdata.report(args.data, args.out)
     else:
         lines = identify(args).summary

@@ -39,7 +39,7 @@ from scipy import optimize, signal
 from flightctl.errors import InputError
 from flightctl.logfile import Table
 from flightctl.params import Airframe
-from sim.model import angular_acceleration, body_torques, rotor_torque, thrust_from_command, yaw_drag
+from flightctl.sim.model import angular_acceleration, body_torques, rotor_torque, thrust_from_command, yaw_drag
 
 CHANNELS = ("p_dot", "q_dot", "r_dot", "acc_x", "acc_y", "acc_z")
 UNITS = ("rad/s^2", "rad/s^2", "rad/s^2", "m/s^2", "m/s^2", "m/s^2")

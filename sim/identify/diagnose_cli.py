@@ -17,7 +17,7 @@ from pathlib import Path
 from flightctl import params as paramfile
 from flightctl.errors import InputError
 from flightctl.logfile import read_flight_log
-from sim.identify import diagnose as dg
+from flightctl.sim.identify import diagnose as dg
 
 MIN_LOG_S = 2.0   # a log shorter than this cannot hold a take-off and a flight: too short to judge
 
@@ -66,7 +66,7 @@ def main(argv: list[str]) -> int:
         progress(f"reading {log}")
         tables.append(read_flight_log(log, min_seconds=MIN_LOG_S, min_rows=10))
     d = dg.diagnose(tables, params.airframe, progress)
-    from sim.identify import diagnose_report
+    from flightctl.sim.identify import diagnose_report
     report_text = diagnose_report.text(d)
     images = diagnose_report.figures(d) if plots else {}
     report = d.report()

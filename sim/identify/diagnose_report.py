@@ -7,7 +7,7 @@ import io
 
 import numpy as np
 
-from sim.identify.diagnose import CHANNELS, UNITS, C, Diagnosis, Result
+from flightctl.sim.identify.diagnose import CHANNELS, UNITS, C, Diagnosis, Result
 
 LB_LAGS = 10          # Ljung-Box lags, on the residual decimated to the low-pass bandwidth
 XCORR_MAX_S = 0.25    # cross-correlations are searched over lags within +-this

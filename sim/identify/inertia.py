@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.identify.fits import Identified, require, whole_numbers
+from flightctl.sim.identify.fits import Identified, require, whole_numbers
 
 AXES = {"x": "Jxx", "y": "Jyy", "z": "Jzz"}
 ROTOR_COLUMNS = ("rotor", "part", "mass", "radius")
@@ -56,7 +56,7 @@ def identify_pendulum(table, airframe) -> Identified:
     lines += [f"  {k} = {p['value']:.5g} ± {p['stderr']:.2g} kg m^2 ({len(groups[k])} trials)" for k, p in params.items()]
 
     def figure():
-        from sim.identify import plots
+        from flightctl.sim.identify import plots
         return plots.per_group("Pendulum inertia per trial (eq. 17-18)", "J_C (kg m^2)", groups, params)
     return Identified(report, lines, {k: p["value"] for k, p in params.items()}, figure)
 
@@ -85,7 +85,7 @@ def identify_rotor(table, airframe) -> Identified:
              f"  Jp = {params['Jp']['value']:.4g} ± {params['Jp']['stderr']:.2g} kg m^2"]
 
     def figure():
-        from sim.identify import plots
+        from flightctl.sim.identify import plots
         return plots.per_group("Rotor inertia per rotor (eq. 19-21)", "Jp (kg m^2)", {"Jp": Jp}, params,
                                labels=[f"rotor {i}" for i in rotors])
     return Identified(report, lines, {"Jp": params["Jp"]["value"]}, figure)

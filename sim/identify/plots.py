@@ -10,8 +10,8 @@ import io
 import numpy as np
 from matplotlib.figure import Figure
 
-from sim.identify.propeller import FITS, predict
-from sim.identify.yaw_drag import drag_torque
+from flightctl.sim.identify.propeller import FITS, predict
+from flightctl.sim.identify.yaw_drag import drag_torque
 
 AVERAGE = "goldenrod"  # the paper draws its averaged model in yellow
 

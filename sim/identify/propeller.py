@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.identify.fits import (Fit, FitError, Identified, check_count, linear_fit, nonlinear_fit, r_squared,
+from flightctl.sim.identify.fits import (Fit, FitError, Identified, check_count, linear_fit, nonlinear_fit, r_squared,
                                require, rms, whole_numbers)
 
 FITS = {"thrust_P": ("h1", "h2"), "thrust_omega": ("c1",), "torque": ("g1", "g2")}
@@ -142,6 +142,6 @@ def identify(table, airframe) -> Identified:
         lines.append(f"  {fit:<12} {params}; rms {report['residual_rms'][fit]:.3g}, R^2 {report['r2'][fit]:.4f}")
 
     def figure():
-        from sim.identify import plots
+        from flightctl.sim.identify import plots
         return plots.bench(result)
     return Identified(report, lines, dict(result.value), figure)

@@ -16,8 +16,8 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.logfile import BENCH_COLUMNS, read_table
 from flightctl.params import Airframe
-from sim.identify.fits import rms
-from sim.identify.propeller import torque_from_power
+from flightctl.sim.identify.fits import rms
+from flightctl.sim.identify.propeller import torque_from_power
 
 RCB = {"esc": "ESC signal (µs)", "torque": "Torque (N·m)", "thrust": "Thrust (gf)",
        "voltage": "Voltage (V)", "current": "Current (A)", "rpm": "Motor Electrical Speed (RPM)"}
@@ -226,7 +226,7 @@ def report(data: str | None, out: str) -> list[str]:
     if not out_dir.is_dir():
         raise InputError(f"{out}: not a directory")
     res = analyse(data_dir)
-    from sim.identify import realplots
+    from flightctl.sim.identify import realplots
     images = {"real_torque.png": realplots.torque(res), "real_ct.png": realplots.ct(res),
               "real_heldout.png": realplots.held_out(res)}
     block = markdown(res, data)

@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from sim.identify.plots import png
-from sim.identify.propeller import torque_from_power
-from sim.identify.realdata import (BASE_THRUST, BASE_TORQUE, EXT_THRUST, EXT_TORQUE, RPM, SPLITS,
+from flightctl.sim.identify.plots import png
+from flightctl.sim.identify.propeller import torque_from_power
+from flightctl.sim.identify.realdata import (BASE_THRUST, BASE_TORQUE, EXT_THRUST, EXT_TORQUE, RPM, SPLITS,
                                    efficiency)
 
 DPI = 80

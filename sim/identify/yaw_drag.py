@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.identify.fits import Identified, linear_fit, require
+from flightctl.sim.identify.fits import Identified, linear_fit, require
 
 
 def drag_torque(r, gamma1, gamma2):
@@ -25,6 +25,6 @@ def identify(table, airframe) -> Identified:
              f"rms {fit.rms:.3g} N m, R^2 {fit.r2:.4f}"]
 
     def figure():
-        from sim.identify import plots
+        from flightctl.sim.identify import plots
         return plots.yaw_drag(r, tau, fit)
     return Identified(report, lines, {"gamma1": fit["gamma1"], "gamma2": fit["gamma2"]}, figure)
