@@ -1,33 +1,120 @@
-"""The one place where a board is wired into a `Hal`: "sim" (the simulated quadcopter) or "pi"
-(the quadcopter's drivers). No other module asks which board it runs on."""
+"""The board registry: every board by name, resolved like the CLI's command table, so that the
+onboard package names the simulator without importing it (layers import one way, docs/architecture.md).
+
+    board = open_board("sim", params, BoardOptions(seed=3))     # or "pi"
+    ... board.hal ...; board.close()
+
+An opener `open_board(params, options) -> Board` wires the drivers (or the simulated devices) into a
+`Hal` and says what the commands need to know about the board: its name, the battery voltage below
+which it refuses to arm, how long it sits still calibrating, extra log columns (the simulator's
+truth) and metadata. `flightctl run`, `flightctl sim` and `flightctl bench` open boards only through
+this; no other module asks which board it runs on. Adding a board: one module with an opener (and,
+if it drives real ESCs, a `stop_motors`), and one line in BOARDS.
+"""
 from __future__ import annotations
 
-from flightctl.drivers.hcsr04 import HcSr04
-from flightctl.drivers.mpu9250 import Mpu9250
+import importlib
+from dataclasses import dataclass, field
+from typing import Callable, NamedTuple
+
+from flightctl.errors import InputError
 from flightctl.hal import Hal
+from flightctl.loop import CELLS
 from flightctl.params import Params
 
-SONAR_TRIGGER_PIN, SONAR_ECHO_PIN = 23, 24
+MIN_CELL_V = 3.6                        # V per cell: refuse to arm below this (the loop lands below 3.5 V)
+MIN_BATTERY_V = MIN_CELL_V * CELLS      # the default pre-arm threshold of every board
 
 
-def sim_board(params: Params, effects=(), noise=None, seed: int = 0, substeps: int = 2):
-    """The simulated quadcopter: the real MPU-9250 and HC-SR04 drivers on simulated chips and pins.
-    Returns the Hal and the simulated world (for its true values)."""
-    from flightctl.sim.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, World
-
-    world = World(params.airframe, tuple(effects), noise if noise is not None else SensorNoise(), seed, substeps)
-    imu = Mpu9250(SimMpu9250(world), sleep=lambda s: None)
-    sonar = HcSr04(world.gpio, SONAR_TRIGGER_PIN, SONAR_ECHO_PIN)
-    hal = Hal(imu=imu, motors=SimMotors(world), rangefinder=sonar, power=world.battery, clock=SimClock(world))
-    imu.start()
-    sonar.start()
-    return hal, world
+class Entry(NamedTuple):
+    opener: str                     # "module:function" -> Board
+    doc: str
+    stop_motors: str | None = None  # "module:function" -> what was done; the unit's ExecStopPost
+    install: str = ""               # how to get what the board's module imports
 
 
-def make_hal(board: str, params: Params, **options) -> Hal:
-    if board == "sim":
-        return sim_board(params, **options)[0]
-    if board == "pi":
-        from flightctl.pi import pi_board
-        return pi_board(params, **options)
-    raise ValueError(f"unknown board {board!r} (known: sim, pi)")
+BOARDS = {
+    "pi": Entry("flightctl.pi:open_board", "the quadcopter: the drivers wired from the board file",
+                "flightctl.pi:stop_motors", "install the Pi libraries with pip install 'flightctl[pi]'"),
+    "sim": Entry("flightctl.sim.board:open_board",
+                 "the simulated quadcopter behind the real IMU and sonar drivers"),
+}
+
+
+class BoardUnavailable(Exception):
+    """The board cannot be brought up: a library missing, a device not reachable (pigpiod not
+    running, no SPI or I2C device node), or the wrong device answering."""
+
+
+@dataclass(frozen=True)
+class BoardOptions:
+    """What a command may ask of a board; each board uses the fields that concern it."""
+    board_file: str | None = None   # pi: the wiring file (default: the shipped flightctl/board_pi.toml)
+    seed: int = 0                   # sim: the sensor-noise seed
+    realtime: bool = False          # sim: pace the world by the wall clock (flightctl run) instead of lock-step
+    effects: tuple = ()             # sim: extensions of the plant (flightctl.sim.causes)
+    noise: object = None            # sim: a SensorNoise; None: the default noise
+    substeps: int = 2               # sim: plant integration steps per loop period
+    devices: dict = field(default_factory=dict)   # pi: devices to use instead of opening them (pi, spi, smbus)
+
+
+@dataclass
+class Board:
+    """An open board. `close()` leaves the motors at zero thrust and releases the devices."""
+    hal: Hal
+    name: str
+    min_battery_v: float
+    calibrate_s: float                                  # s sitting still before arming
+    close: Callable[[], None] = lambda: None
+    extra_columns: tuple[str, ...] = ()                 # log columns after the contract's
+    extra_row: Callable[[], tuple] | None = None        # their values, once per loop
+    meta: dict[str, str] = field(default_factory=dict)  # `# key: value` lines of the log
+    world: object | None = None                         # the simulated world (true state); None on hardware
+
+
+def missing_module(name: str, e: ModuleNotFoundError) -> Exception:
+    """What to raise when board `name` cannot import a library: BoardUnavailable saying how to get
+    it; our own module missing is a bug and stays itself."""
+    if not e.name or e.name.split(".")[0] == "flightctl":
+        return e
+    install = BOARDS[name].install
+    return BoardUnavailable(f"the {name} board needs the Python module {e.name!r}, which is not installed"
+                            + (f" ({install})" if install else ""))
+
+
+def _resolve(name: str, target: str):
+    module, _, function = target.partition(":")
+    try:
+        return getattr(importlib.import_module(module), function)
+    except ModuleNotFoundError as e:
+        raise missing_module(name, e) from None
+
+
+def _entry(name: str) -> Entry:
+    if name not in BOARDS:
+        raise InputError(f"unknown board {name!r} (known: {', '.join(BOARDS)})")
+    return BOARDS[name]
+
+
+def opener(name: str) -> Callable[[Params, BoardOptions], Board]:
+    """The opener of a board; InputError for an unknown name, BoardUnavailable if its module cannot
+    be imported here (a laptop has no pigpio)."""
+    return _resolve(name, _entry(name).opener)
+
+
+def described() -> str:
+    """The boards for a --help text."""
+    return "; ".join(f"{name}: {entry.doc}" for name, entry in BOARDS.items())
+
+
+def open_board(name: str, params: Params, options: BoardOptions = BoardOptions()) -> Board:
+    return opener(name)(params, options)
+
+
+def stop_motors(name: str, params: Params, options: BoardOptions = BoardOptions()) -> str:
+    """Put the stop pulse on the board's ESCs whatever state a dead controller left them in; returns
+    what was done (a board without ESCs has nothing to do)."""
+    entry = _entry(name)
+    if entry.stop_motors is None:
+        return f"nothing to do on the {name} board"
+    return _resolve(name, entry.stop_motors)(params, options)

@@ -9,9 +9,10 @@ from flightctl.errors import InputError
 COMMANDS = {
     "sim": ("flightctl.sim.cli", "fly the onboard control code against the simulated quadcopter"),
     "identify": ("flightctl.sim.identify.cli", "fit the paper's models to bench, yaw-drag, pendulum or rotor data; real-data report"),
-    "diagnose": ("flightctl.sim.identify.diagnose_cli", "name what the model gets wrong in flight logs"),
+    "diagnose": ("flightctl.sim.identify.diagnose.cli", "name what the model gets wrong in flight logs"),
     "run": ("flightctl.service", "the onboard service: fly on the quadcopter (or --board sim)"),
     "bench": ("flightctl.hil.bench", "spin one motor at a time for identification"),
+    "analyze": ("flightctl.sim.analyze", "linear analysis of each loop about hover: margins, damping, steps"),
 }
 
 

@@ -1,7 +1,8 @@
 """Loop clocks: the deadline-keeping wall clock of the quadcopter, and the simulator paced by it.
 
-`WallClock` keeps a fixed grid of deadlines `t0 + k * period`: it sleeps until about `spin_s`
-(200 us) before the deadline and then spins on the monotonic clock, which on Linux hits the deadline
+`WallClock` keeps a fixed grid of deadlines `t1 + k * period` (t1 the first deadline), each computed
+from the integer k, never summed, so that the grid does not drift by rounding. It sleeps until about
+`spin_s` (200 us) before the deadline and then spins on the monotonic clock, which on Linux hits the deadline
 with a p99 error near 0.1 ms where a plain `time.sleep` misses it by ~0.8 ms. A loop body that runs
 past its deadline is an overrun: it is counted, the next deadline is served at once if it is still
 within one period, and whole missed periods are skipped (never a burst of catch-up iterations).
@@ -35,8 +36,9 @@ class WallClock:
         self.spin_s = spin_s
         self._now, self._sleep = now, sleep
         self._t0 = now()
-        self._deadline: float | None = None
-        self.ticks = 0
+        self._t1: float | None = None   # the first deadline
+        self._k = 0                     # index of the next deadline on the grid t1 + k * period
+        self.ticks = 0                  # deadlines served (skipped ones not counted)
         self.overruns = 0           # deadlines the loop body ran past
         self.skipped = 0            # whole periods dropped after long overruns
         self.max_late_s = 0.0       # worst lateness at the return of wait_next (spin error or overrun)
@@ -48,15 +50,16 @@ class WallClock:
         """Block until the next deadline; return the deadline (s since the clock was made)."""
         now, period = self._now, self.period
         t = now()
-        if self._deadline is None:
-            self._deadline = t + period
-        deadline = self._deadline
+        if self._t1 is None:
+            self._t1 = t + period
+        deadline = self._t1 + self._k * period
         if t > deadline:
             self.overruns += 1
             behind = int((t - deadline) / period)
             if behind:
                 self.skipped += behind
-                deadline += behind * period
+                self._k += behind
+                deadline = self._t1 + self._k * period
         else:
             remaining = deadline - t
             if remaining > self.spin_s:
@@ -66,7 +69,7 @@ class WallClock:
         late = now() - deadline
         if late > self.max_late_s:
             self.max_late_s = late
-        self._deadline = deadline + period
+        self._k += 1
         self.ticks += 1
         return deadline - self._t0
 

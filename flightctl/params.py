@@ -1,12 +1,15 @@
 """Parameters as a schema: default, range, unit and source for each, loaded from TOML.
 
 A parameter file is flat TOML for the airframe (the names of ``conventions.md``) with two optional
-tables, ``[gains]`` and ``[filters]``. Anything unknown, mistyped or out of range is refused with
+tables, ``[gains]`` and ``[filters]``, and any number of ``[[effect]]`` tables: model extensions
+(measured-data.md) that the simulator and diagnose carry into the base model. ``--params NAME``
+also takes the name of a shipped vehicle file (``flightctl/vehicles/NAME.toml``). Anything unknown, mistyped or out of range is refused with
 one line that names the key: the program never flies with a bad file.
 """
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -100,6 +103,20 @@ class Filters:
     alpha_ema: float = _p(1.0 - math.exp(-1.0 / 128.0), "-", 1e-6, 1.0, "paper, Table 5 (eq. 39, tau = 128 dt)")
     alpha_roll_pitch: float = _p(128.0 / 129.0, "-", 0.0, 1.0, "paper, Table 5 (tau = 128 dt)")
     alpha_yaw: float = _p(64.0 / 65.0, "-", 0.0, 1.0, "paper, Table 5 (tau = 64 dt)")
+    tau_tilt_air: float = _p(0.0, "s", 0.0, 600.0,
+                             "flightctl (docs/estimator.md): the in-flight accelerometer correction; 0 = off, "
+                             "as the base model has no rotor drag, so its accelerometer reads no tilt in flight",
+                             "a vehicle with rotor drag sets it long beside M/k (the as-flown file: 8192 dt)")
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """A model extension carried by a parameter file (measured-data.md: an identified model grows
+    as its errors are found). The onboard code only reads and writes it; the simulator and diagnose
+    build the term from its `cause` (their registry checks the name and parameters)."""
+    cause: str
+    parameters: tuple[tuple[str, float], ...]
+    source: str = ""
 
 
 @dataclass(frozen=True)
@@ -107,6 +124,10 @@ class Params:
     airframe: Airframe = Airframe()
     gains: Gains = TABLE6
     filters: Filters = Filters()
+    effects: tuple[EffectSpec, ...] = ()
+
+
+VEHICLES = Path(__file__).parent / "vehicles"   # shipped parameter files, by name (`--params NAME`)
 
 
 def schema(cls) -> list[dataclasses.Field]:
@@ -147,15 +168,47 @@ def from_dict(data: dict, gains: Gains | None = None) -> Params:
                 raise InputError(f"gains.preset: unknown gain set {preset!r} (known: {', '.join(GAIN_SETS)})")
             base = GAIN_SETS[preset]
         built[name] = _build(cls, table, f"{name}.", base)
+    effects = _effects(data.pop("effect", []))
     airframe = _build(Airframe, data, "")
     airframe.check()
-    return Params(airframe=airframe, **built)
+    return Params(airframe=airframe, effects=effects, **built)
+
+
+def _effects(items) -> tuple[EffectSpec, ...]:
+    """`[[effect]]` tables: `cause = "name"`, optional `source = "..."`, numeric parameters."""
+    if not isinstance(items, list):
+        raise InputError("effect: expected [[effect]] tables")
+    specs = []
+    for k, item in enumerate(items, start=1):
+        where = f"effect {k}"
+        if not isinstance(item, dict):
+            raise InputError(f"{where}: expected an [[effect]] table")
+        item = dict(item)
+        cause, source = item.pop("cause", None), item.pop("source", "")
+        if not isinstance(cause, str) or not cause:
+            raise InputError(f"{where}: cause: a cause name is needed (measured-data.md)")
+        if not isinstance(source, str):
+            raise InputError(f"{where}: source: expected text")
+        for key, value in item.items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise InputError(f"{where} ({cause}): {key}: expected a finite number, got {value!r}")
+        specs.append(EffectSpec(cause, tuple((key, float(v)) for key, v in item.items()), source))
+    return tuple(specs)
+
+
+def resolve(spec: str | Path) -> Path:
+    """A parameter file's path, or the name of a shipped vehicle (`paper-as-flown`)."""
+    path = Path(spec)
+    if path.suffix != ".toml" and not path.exists() and (VEHICLES / f"{spec}.toml").is_file():
+        return VEHICLES / f"{spec}.toml"
+    return path
 
 
 def load(path: str | Path | None, gains: Gains | None = None) -> Params:
     """Load and validate a parameter file; None gives the shipped reference airframe."""
     if path is None:
         return from_dict({}, gains)
+    path = resolve(path)
     data = read_toml(path)
     try:
         return from_dict(data, gains)
@@ -163,8 +216,9 @@ def load(path: str | Path | None, gains: Gains | None = None) -> Params:
         raise InputError(f"{path}: {e}") from None
 
 
-def dumps(params: Params, sources: dict[str, str] | None = None) -> str:
-    """TOML text of a parameter set, with unit and source of each value as comments."""
+def dumps(params: Params, sources: dict[str, str] | None = None, tables=("gains", "filters")) -> str:
+    """TOML text of a parameter set, with unit and source of each value as comments. A vehicle file
+    leaves out [gains] so that `--gains` chooses them."""
     sources = sources or {}
     lines = ["# flightctl parameter file (SI units; see conventions.md)"]
 
@@ -174,9 +228,15 @@ def dumps(params: Params, sources: dict[str, str] | None = None) -> str:
             lines.append(f"{f.name} = {getattr(obj, f.name)!r}  # {f.metadata['unit']}; {source}")
 
     emit(params.airframe)
-    for name in ("gains", "filters"):
+    for name in tables:
         lines.append(f"\n[{name}]")
         emit(getattr(params, name))
+    for e in params.effects:
+        lines.append("\n[[effect]]")
+        lines.append(f"cause = {json.dumps(e.cause)}")
+        lines += [f"{k} = {v!r}" for k, v in e.parameters]
+        if e.source:
+            lines.append(f"source = {json.dumps(e.source)}")
     return "\n".join(lines) + "\n"
 
 

@@ -1,8 +1,11 @@
 """`flightctl run`: the onboard service (systemd/flightctl.service runs it on the quadcopter).
 
     flightctl run --board pi  [--board-file B.toml] [--params P.toml] --plan-queue DIR --log DIR
-    flightctl run --board pi|sim --plan PLAN.toml|SCENARIO [--params P.toml] --log DIR [--calibrate S]
+    flightctl run --board pi|sim --plan PLAN.toml|NAME [--params P.toml] --log DIR [--calibrate S]
     flightctl run --board pi --stop-motors        (the unit's ExecStopPost)
+
+The board is opened by name through the registry (flightctl/boards.py); a plan is a plan file or a
+named plan (flightctl/plans.py).
 
 Lifecycle: the board comes up with the ESCs at the stop pulse (disarmed). Pre-arm checks follow,
 each with a named reason: IMU frames good and the vehicle at rest (|a| near g), battery above the
@@ -35,103 +38,28 @@ import signal
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Callable
 
 from flightctl import __version__
-from flightctl.clock import PacedClock, freeze_gc
+from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, opener, stop_motors
+from flightctl.clock import freeze_gc
 from flightctl.control.controller import FlightController
-from flightctl.errors import InputError, read_toml
+from flightctl.errors import InputError
 from flightctl.hal import ArmingRefused, Hal, ImuSample
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter
-from flightctl.loop import CELLS, FlightLoop, FlightResult
+from flightctl.loop import FlightLoop, FlightResult
 from flightctl.params import Params, dumps, load
-from flightctl.plan import CHANNELS, Move, Plan
+from flightctl.plan import Plan, read_plan_file
+from flightctl.plans import load_plan
 from flightctl.sdnotify import Notifier
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_REFUSED = 0, 1, 2, 3
-PI_CALIBRATE_S = 60.0          # the paper sat still for 60 s
-SIM_CALIBRATE_S = 2.0
-MIN_CELL_V = 3.6               # refuse to arm below this per cell (the loop lands below 3.5 V)
-MAX_PLAN_ALT_M = 3.0           # the HC-SR04 reads to 4 m
-MAX_PLAN_TILT_DEG = 30.0
 PLAN_POLL_S = 0.5
 PLAN_SETTLE_S = 0.5            # a plan file must be this old before it is claimed (a copy in progress)
 REST_ACCEL = (0.8, 1.2)        # |a| / g at rest, for the pre-arm IMU check
 
 log = logging.getLogger("flightctl.run")
-
-
-# --- plans ---------------------------------------------------------------------------------------
-def load_plan(spec: str) -> Plan:
-    """A plan TOML file, or the name of a scenario of `sim.scenarios`.
-
-    A plan file (SI units; angles may be given in degrees as `value_deg`):
-
-        name = "hover-test"
-        duration = 30.0                  # s since arming
-        [[move]]
-        t = 0.0                          # s since arming
-        channel = "alt"                  # roll, pitch, yaw (rad) or alt (m)
-        value = 1.0
-        ramp = 4.0                       # s, raised-cosine; 0 = step
-    """
-    path = Path(spec)
-    if path.suffix == ".toml" or path.exists():
-        return _plan_file(path)
-    from flightctl.sim.scenarios import SCENARIOS
-
-    if spec not in SCENARIOS:
-        raise InputError(f"--plan {spec}: neither a plan file nor a scenario (scenarios: {', '.join(SCENARIOS)})")
-    return SCENARIOS[spec]().plan
-
-
-def _plan_file(path: Path) -> Plan:
-    data = read_toml(path)
-    unknown = set(data) - {"name", "duration", "move"}
-    if unknown:
-        raise InputError(f"{path}: unknown key {sorted(unknown)[0]!r} (known: name, duration, move)")
-    duration = data.get("duration")
-    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not 0 < duration <= 3600:
-        raise InputError(f"{path}: duration: a number of seconds in (0, 3600] is needed, got {duration!r}")
-    moves = []
-    for k, m in enumerate(data.get("move", []), start=1):
-        where = f"{path}: move {k}"
-        if not isinstance(m, dict):
-            raise InputError(f"{where}: expected a [[move]] table")
-        unknown = set(m) - {"t", "channel", "value", "value_deg", "ramp"}
-        if unknown:
-            raise InputError(f"{where}: unknown key {sorted(unknown)[0]!r}")
-        channel = m.get("channel")
-        if channel not in CHANNELS:
-            raise InputError(f"{where}: channel must be one of {', '.join(CHANNELS)}, got {channel!r}")
-        if ("value" in m) == ("value_deg" in m):
-            raise InputError(f"{where}: give exactly one of value, value_deg")
-        if "value_deg" in m and channel == "alt":
-            raise InputError(f"{where}: alt is in metres (value), not degrees")
-        nums = {}
-        for key in ("t", "value", "value_deg", "ramp"):
-            v = m.get(key, 0.0 if key == "ramp" else None)
-            if key in ("value", "value_deg") and key not in m:
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise InputError(f"{where}: {key}: expected a number, got {v!r}")
-            nums[key] = float(v)
-        value = math.radians(nums["value_deg"]) if "value_deg" in nums else nums["value"]
-        if nums["t"] < 0 or nums["ramp"] < 0:
-            raise InputError(f"{where}: t and ramp must not be negative")
-        if channel == "alt" and not 0.0 <= value <= MAX_PLAN_ALT_M:
-            raise InputError(f"{where}: altitude {value:g} m outside [0, {MAX_PLAN_ALT_M:g}] m")
-        if channel in ("roll", "pitch") and abs(value) > math.radians(MAX_PLAN_TILT_DEG):
-            raise InputError(f"{where}: {channel} {math.degrees(value):g} deg beyond +-{MAX_PLAN_TILT_DEG:g} deg")
-        moves.append(Move(nums["t"], channel, value, nums["ramp"]))
-    name = data.get("name", path.stem)
-    plan = Plan(moves, float(duration), str(name))
-    if not plan.lands():
-        log.warning("plan %s does not end at altitude 0: the loop stops the motors when it ends", plan.name)
-    return plan
 
 
 # --- the flight log with its teardown row --------------------------------------------------------
@@ -154,46 +82,6 @@ class TeardownLog(FlightLogWriter):
             self.last = None
             super().append((last[0] + self.period, 0.0, 0.0, 0.0, 0.0) + last[5:11] + ("",) + last[12:])
         super().close()
-
-
-# --- boards --------------------------------------------------------------------------------------
-@dataclass
-class Board:
-    hal: Hal
-    name: str
-    min_battery_v: float
-    calibrate_s: float
-    close: Callable[[], None] = lambda: None
-    extra_columns: tuple[str, ...] = ()
-    extra_row: Callable[[], tuple] | None = None
-    meta: dict[str, str] = field(default_factory=dict)
-
-
-def _pi(args, params: Params) -> Board:
-    from flightctl.pi import open_pi_board
-
-    b = open_pi_board(params, args.board_file)
-    return Board(b.hal, "pi", b.config.checks.min_battery_v, PI_CALIBRATE_S, b.close,
-                 meta={"board_file": b.config.path, "esc_pins": str(list(b.config.esc.pins))})
-
-
-def _sim(args, params: Params) -> Board:
-    from flightctl.boards import sim_board
-    from flightctl.sim.run import TRUTH_COLUMNS
-
-    hal, world = sim_board(params, seed=args.seed)
-    hal.clock = PacedClock(hal.clock)      # the simulated world, paced by the wall clock
-    x = world.plant
-
-    def truth() -> tuple:
-        s = x.x
-        return s[0], s[1], s[2], s[6], s[7], (s[8] + math.pi) % (2 * math.pi) - math.pi
-
-    return Board(hal, "sim", MIN_CELL_V * CELLS, SIM_CALIBRATE_S, extra_columns=TRUTH_COLUMNS, extra_row=truth,
-                 meta={"seed": str(args.seed), "clock": "simulator paced by the wall clock (real time)"})
-
-
-BOARDS = {"pi": _pi, "sim": _sim}
 
 
 # --- checks --------------------------------------------------------------------------------------
@@ -257,7 +145,7 @@ class Service:
                 self.stop.wait(PLAN_POLL_S)
                 continue
             try:
-                plan = _plan_file(claimed)
+                plan = read_plan_file(claimed)
             except InputError as e:
                 log.error("plan refused: %s", e)
                 continue
@@ -301,6 +189,8 @@ class Service:
 
     def fly(self, plan: Plan, plan_file: Path | None = None) -> FlightResult:
         params, board, hal = self.params, self.board, self.board.hal
+        if not plan.lands():
+            log.warning("plan %s does not end at altitude 0: the loop stops the motors when it ends", plan.name)
         plan.restart()
         path = self._new_path("flight", f"{plan.name}.csv")
         meta = {"software": f"flightctl {__version__}", "board": board.name, "plan": plan.name,
@@ -331,36 +221,29 @@ class Service:
 
 def stop_motors_main(args, params: Params) -> int:
     """The stop pulse on every ESC, whatever the last controller left in pigpiod (ExecStopPost)."""
-    from flightctl.drivers.esc import stop_motors
-    from flightctl.pi import BoardUnavailable, connect_pigpio, load_board
-
-    if args.board != "pi":
-        log.info("stop-motors: nothing to do on the %s board", args.board)
-        return EXIT_OK
-    config = load_board(args.board_file)
     try:
-        pi = connect_pigpio(config)
+        done = stop_motors(args.board, params, _options(args))
     except BoardUnavailable as e:
         log.error("stop-motors: %s", e)
         return EXIT_ERROR
-    try:
-        stop_motors(pi, config.esc.pins, params.airframe.esc_pwm_hz, config.esc.stop_us)
-        log.info("stop-motors: stop pulse (%d us) on GPIO %s", config.esc.stop_us, list(config.esc.pins))
-    finally:
-        pi.stop()
+    log.info("stop-motors: %s", done)
     return EXIT_OK
+
+
+def _options(args) -> BoardOptions:
+    return BoardOptions(board_file=args.board_file, seed=args.seed, realtime=True)
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="flightctl run", description=__doc__.split("\n\n")[0])
-    p.add_argument("--board", choices=sorted(BOARDS), default="pi")
+    p.add_argument("--board", default="pi", help=f"the board to fly (default pi): {described()}")
     p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
     p.add_argument("--board-file", help="pi board wiring (TOML); default: the shipped flightctl/board_pi.toml")
-    p.add_argument("--plan", help="a plan TOML file, or a scenario name (hover, paper, ...)")
+    p.add_argument("--plan", help="a plan TOML file, or a named plan (hover, paper, ...)")
     p.add_argument("--plan-queue", metavar="DIR", help="fly each plan file put into DIR, once, in turn")
     p.add_argument("--log", default=".", metavar="DIR", help="directory for flight logs (default: .)")
     p.add_argument("--calibrate", type=float, metavar="S",
-                   help=f"seconds sitting still before arming (default {PI_CALIBRATE_S:g} on pi, {SIM_CALIBRATE_S:g} on sim)")
+                   help="seconds sitting still before arming (default: the board's, 60 s on the quadcopter)")
     p.add_argument("--min-battery-v", type=float, metavar="V", help="refuse to arm below this battery voltage")
     p.add_argument("--seed", type=int, default=0, help="simulator seed (--board sim)")
     p.add_argument("--stop-motors", action="store_true", help="only put the stop pulse on the ESCs and exit")
@@ -380,6 +263,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.stop_motors:
         return stop_motors_main(args, params)
     plan = load_plan(args.plan) if args.plan else None
+    try:
+        open_board = opener(args.board)         # an unknown board is an InputError (exit 2)
+    except BoardUnavailable as e:
+        log.error("not flying: %s", e)
+        return EXIT_REFUSED
 
     stop = threading.Event()
 
@@ -392,17 +280,10 @@ def main(argv: list[str] | None = None) -> int:
     board = None
     try:
         try:
-            board = BOARDS[args.board](args, params)
-        except Exception as e:
-            from flightctl.drivers.esc import EscError
-            from flightctl.drivers.ina219 import PowerMonitorError
-            from flightctl.drivers.mpu9250 import ImuError
-            from flightctl.pi import BoardUnavailable
-
-            if isinstance(e, (ImuError, PowerMonitorError, EscError, BoardUnavailable, ArmingRefused)):
-                log.error("not flying: %s", e)
-                return EXIT_REFUSED
-            raise
+            board = open_board(params, _options(args))
+        except BoardUnavailable as e:
+            log.error("not flying: %s", e)
+            return EXIT_REFUSED
         service = Service(args, params, board, notifier, stop)
         try:
             service.run(plan)
@@ -410,6 +291,8 @@ def main(argv: list[str] | None = None) -> int:
             log.error("not flying: %s", e)
             return EXIT_REFUSED
         return EXIT_OK
+    except InputError:
+        raise                                   # a bad board file: one line, exit 2 (flightctl.cli)
     except Exception:
         log.exception("stopping on an error")
         return EXIT_ERROR

@@ -33,18 +33,19 @@ from pathlib import Path
 from typing import Callable
 
 from flightctl import __version__
+from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, open_board
 from flightctl.errors import InputError
 from flightctl.hal import PWM_RANGE, Hal
 from flightctl.logfile import BENCH_COLUMNS
 from flightctl.params import Params, load
-
-G = 9.80665
+from flightctl.physics import G, rotor_speed
 MAX_P = 200.0
 RAMP_P_PER_S = 50.0
 SETTLE_S = 2.0
 HOLD_S = 2.0
 POWER_EVERY_S = 0.1
 HOLDER_PERIOD_S = 0.02
+EXIT_UNAVAILABLE = 3          # the board cannot be opened (as `flightctl run`)
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 MANUAL_NOTE = ("thrust and omega are manual instruments on the Pi (scale and tachometer, as in the paper): "
                "fill them in, thrust in N, omega in rad/s")
@@ -94,7 +95,7 @@ class SimStand:
         plant = self.world.plant
         f, _, _, _ = plant.model.forces(plant.t, plant.x, plant.u)
         thrust = f[motor - 1]
-        return thrust, math.sqrt(thrust / self.world.a.c1) if thrust > 0 else 0.0
+        return thrust, rotor_speed(thrust, self.world.a.c1)   # eq. 27
 
 
 class Holder(threading.Thread):
@@ -211,26 +212,22 @@ def _cell(v) -> str:
     return str(v)
 
 
-def open_board(args, params: Params):
-    """(hal, truth function or None, close function, meta)."""
-    if args.board == "sim":
-        from flightctl.boards import sim_board
-        from flightctl.clock import PacedClock
-
-        hal, world = sim_board(params, seed=args.seed)
-        clock = PacedClock(hal.clock) if args.realtime else hal.clock
-        stand = SimStand(world, clock)
-        hal.clock = stand
-        return hal, stand.truth, lambda: None, {"board": "sim (vehicle on a test stand)"}
-    from flightctl.pi import open_pi_board
-
-    board = open_pi_board(params, args.board_file)
-    return board.hal, None, board.close, {"board": "pi", "board_file": board.config.path}
+def open_bench(args, params: Params) -> tuple[Board, Callable[[int], tuple[float, float]] | None]:
+    """The board from the registry, and the instruments: a simulated vehicle is bolted to a test stand
+    and its rotors' truth is read; on hardware the scale and the tachometer are the operator's (None)."""
+    board = open_board(args.board, params, BoardOptions(board_file=args.board_file, seed=args.seed,
+                                                        realtime=args.realtime))
+    if board.world is None:
+        return board, None
+    stand = SimStand(board.world, board.hal.clock)
+    board.hal.clock = stand
+    board.meta = {**board.meta, "board": f"{board.name} (vehicle on a test stand)"}
+    return board, stand.truth
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="flightctl bench", description=__doc__.split("\n\n")[0])
-    p.add_argument("--board", choices=("pi", "sim"), default="pi")
+    p.add_argument("--board", default="pi", help=f"the board (default pi): {described()}")
     p.add_argument("--motor", type=int, required=True, help="1..4 (conventions.md numbering)")
     p.add_argument("--steps", required=True, help="command values P (0..255), e.g. 130,150,170")
     p.add_argument("--max", type=float, default=MAX_P, help=f"largest P allowed (default {MAX_P:g})")
@@ -241,7 +238,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--params", help="parameter file (TOML)")
     p.add_argument("--board-file", help="pi board wiring (TOML)")
     p.add_argument("--ask", action="store_true", help="on the Pi: ask for the scale and tachometer readings")
-    p.add_argument("--realtime", action="store_true", help="on sim: pace the simulator in real time")
+    p.add_argument("--realtime", action="store_true", help="on a simulated board: pace it in real time")
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
     if not 0 < args.ramp <= 500:
@@ -261,8 +258,13 @@ def main(argv: list[str] | None = None) -> int:
     def on_term(signum, frame):
         raise KeyboardInterrupt
 
+    try:
+        board, truth = open_bench(args, params)
+    except BoardUnavailable as e:
+        print(f"flightctl bench: cannot open the {args.board} board: {e}", file=sys.stderr)
+        return EXIT_UNAVAILABLE
     previous = signal.signal(signal.SIGTERM, on_term)
-    hal, truth, close, meta = open_board(args, params)
+    hal, meta = board.hal, {"board": board.name, **board.meta}
     ask = ask_operator if (truth is None and args.ask) else None
     bench = Bench(hal, args.motor, truth, ask, args.ramp, args.settle, args.hold)
     out = Path(args.out)
@@ -294,7 +296,7 @@ def main(argv: list[str] | None = None) -> int:
             finally:
                 hal.motors.stop()
     finally:
-        close()
+        board.close()
         signal.signal(signal.SIGTERM, previous)
     print(f"bench: {out}", file=sys.stderr)
     return status

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from flightctl.params import TABLE4, load
-from flightctl.sim import effects
+from flightctl.sim import causes
 from flightctl.sim.run import fly
 from flightctl.sim.scenarios import SCENARIOS
 
@@ -34,7 +34,7 @@ CASES = [("Table 4", "truth"), ("Table 6", "truth"), ("Table 4", "flight"), ("Ta
 
 def one(gains: str, path: str, cause: str, ms: float, log: Path, seed: int = 0) -> float:
     params = load(None, TABLE4 if gains == "Table 4" else None)
-    eff = (effects.make(cause, **{PARAM[cause]: ms / 1e3}),) if ms > 0 else ()
+    eff = (causes.make(cause, **{PARAM[cause]: ms / 1e3}),) if ms > 0 else ()
     kw = {"truth": True} if path == "truth" else {"estimator": path}
     try:
         f = fly(SCENARIOS["step_roll"](), params, log, effects=eff, noise=True, seed=seed, **kw)
@@ -72,10 +72,9 @@ def main(argv=None) -> int:
 
 
 def plot(results: dict, out: str) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), sharey=True)
+    from flightctl.sim.plots import figure, figure_legend, save
+    fig, axes = figure(1, 2, size=(9, 4.2), sharey="row")
+    axes = axes[0]
     style = {"truth": "-", "flight": "--", "paper": ":"}
     label = {"truth": "perfect state feedback", "flight": "full path, flight estimator",
              "paper": "full path, paper estimator"}
@@ -95,11 +94,10 @@ def plot(results: dict, out: str) -> None:
         ax.set_xlim(0, max(SIZES_MS[cause]) * 1.05)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("largest roll/pitch in a 5 deg roll step [deg]\n(60 = crash)", fontsize=8)
-    axes[0].legend(fontsize=6, loc="lower right")
+    figure_legend(fig, axes[0], ncol=3)
     fig.suptitle("Which hidden effect makes Table 4 unflyable and Table 6 flyable? (step_roll, figure 14)",
                  fontsize=9)
-    fig.tight_layout()
-    fig.savefig(out, dpi=80)
+    save(fig, out, dpi=80)
     print(f"wrote {out}", file=sys.stderr)
 
 

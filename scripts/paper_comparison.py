@@ -1,7 +1,8 @@
 """The paper's own comparison, honestly: Table 4 (tuned in simulation with perfect state feedback)
 and Table 6 (retuned on the vehicle), each flown (a) with perfect state feedback and (b) through the
 full onboard path (SPI decode, EMA, complementary filter, 45 Hz ultrasonic), with both estimator
-structures. Prints a Markdown table of the step metrics (true responses) of figures 13-16.
+structures, on the paper's base model and on the as-flown model (`--params paper-as-flown`,
+docs/as-flown.md). Prints a Markdown table of the step metrics (true responses) of figures 13-16.
 
     python scripts/paper_comparison.py [--out DIR]
 """
@@ -21,6 +22,7 @@ PATHS = [("perfect state feedback", dict(truth=True)),
          ("full path, flight estimator", dict(estimator="flight")),
          ("full path, paper estimator", dict(estimator="paper"))]
 STEPS = ["step_alt", "step_roll", "step_pitch", "step_yaw"]
+MODELS = [("base", None), ("as-flown", "paper-as-flown")]
 
 
 def fmt(v: float, k: float = 1.0, digits: int = 2) -> str:
@@ -33,14 +35,14 @@ def main() -> None:
     args = ap.parse_args()
     out = Path(args.out or tempfile.mkdtemp())
     out.mkdir(parents=True, exist_ok=True)
-    print("| gains | path | step | rise (s) | overshoot (%) | settling (s) | steady error | worst coupling | outcome |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for gains in ("table4", "table6"):
-        params = load(None, GAIN_SETS[gains])
+    print("| model | gains | path | step | rise (s) | overshoot (%) | settling (s) | steady error | worst coupling | outcome |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for model, gains in ((m, g) for m in MODELS for g in ("table4", "table6")):
+        params = load(model[1], GAIN_SETS[gains])
         for label, kw in PATHS:
             for name in STEPS:
                 sc = SCENARIOS[name]()
-                flight = fly(sc, params, out / f"{gains}-{name}-{label.split(',')[-1].strip().replace(' ', '_')}.csv",
+                flight = fly(sc, params, out / f"{model[0]}-{gains}-{name}-{label.split(',')[-1].strip().replace(' ', '_')}.csv",
                              **kw)
                 m = step_metrics(flight.log, sc.steps[0], flight.t_arm)
                 ang = sc.steps[0].channel != "alt"
@@ -51,7 +53,7 @@ def main() -> None:
                 hard = [abs(vz) for _, vz in flight.touchdowns if abs(vz) > 1.0]
                 if hard:
                     outcome = f"crashed: hit the floor at {max(hard):.1f} m/s"
-                print(f"| {gains} | {label} | {sc.steps[0].channel} {sc.steps[0].end * k:+g} {unit} | {fmt(m.rise_s)} | "
+                print(f"| {model[0]} | {gains} | {label} | {sc.steps[0].channel} {sc.steps[0].end * k:+g} {unit} | {fmt(m.rise_s)} | "
                       f"{fmt(m.overshoot, 100, 1)} | {fmt(m.settling_s)} | {fmt(m.steady_error, k, 3)} {unit} | "
                       f"{worst[0]} {fmt(worst[1], wk, 2)} {wu} | {outcome} |", flush=True)
 

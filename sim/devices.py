@@ -1,11 +1,13 @@
 """The simulated devices, each at the lowest boundary it can emulate:
 
 - `SimMpu9250`: answers SPI transfers like the chip (registers, 14-byte burst from 0x3B in big-endian
-  int16 at the configured full scale, the AK8963 behind the I2C master);
+  int16 at the configured full scale, the AK8963 behind the I2C master), with the chip's noise, wandering
+  and temperature-driven offsets, warming die and the rotors' vibration through its DLPF;
 - `SimGpio`: the pigpio calls the HC-SR04 driver makes, producing echo edges with 32-bit microsecond
   ticks (which wrap) and watchdog timeouts;
 - `SimMotors`: takes PWM counts on the 0..40000 range;
-- `SimBattery`: a discharging 4S LiPo behind the power monitor;
+- `SimBattery`, `SimIna219` on a `SimSMBus` (in `flightctl.sim.power`): a discharging 4S LiPo and the
+  power monitor's registers behind the smbus2 calls of the INA219 driver;
 - `SimClock`: lock-step: waiting for the next tick advances the world by one loop period.
 
 Noise and bias can be switched off (`SensorNoise.off()`); true values stay on `World`.
@@ -16,30 +18,60 @@ import heapq
 import math
 import random
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
-import pigpio
 
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.drivers.hcsr04 import US_PER_M
-from flightctl.hal import PWM_RANGE
+from flightctl.hal import LEVEL_TIMEOUT, PWM_RANGE
 from flightctl.params import Airframe
+from flightctl.physics import G, rotor_speed
 from flightctl.sim.model import Effect, Model, rotation
 from flightctl.sim.plant import Plant
+from flightctl.sim.power import SimBattery
 
-G = 9.80665
 EARTH_FIELD_T = (20e-6, 0.0, -40e-6)  # North, West, Up: a mid-latitude field, dipping down
 
 
 @dataclass(frozen=True)
 class SensorNoise:
-    """Defaults from the MPU-9250 datasheet at a 184 Hz bandwidth (noise densities 0.01 deg/s/rtHz and
-    300 ug/rtHz), its +-5 deg/s zero-rate offset, and an HC-SR04 echo jitter of a few millimetres."""
-    gyro_sigma: float = 0.003          # rad/s
-    gyro_bias: float = 0.05            # rad/s, the spread of the zero-rate offset per axis
-    accel_sigma: float = 0.05          # m/s^2
-    accel_bias: float = 0.05           # m/s^2
+    """What the simulated sensors add to the truth. MPU-9250 values from its Product Specification
+    (PS-MPU-9250A-01 rev 1.1, section 3.1 gyroscope, 3.2 accelerometer) and Register Map (RM-MPU-9250A-00
+    rev 1.6, registers 26 and 29: the DLPF bandwidths); where the datasheet is silent, a plausible value
+    with its reason. `off()` gives the truth; `steady()` keeps white noise and a fixed offset only."""
+    # MPU-9250 gyroscope
+    gyro_density: float = math.radians(0.01)     # rad/s/rtHz: rate noise spectral density (PS 3.1)
+    gyro_bias: float = 0.05            # rad/s, spread of the zero-rate offset per axis: initial ZRO tolerance
+    #                                    +-5 deg/s (PS 3.1) taken as about 1.7 sigma
+    gyro_bias_walk: float = 1.6e-5     # rad/s/rts, the bias random walk K. The datasheet is silent; MEMS gyros
+    #   of this class show an in-run bias instability B (the Allan-deviation minimum) of a few to tens of
+    #   deg/h (AirSim's MPU-6000 model, after Greenheck 2009: 4.6 deg/h). We take B = 10 deg/h and size K so
+    #   that the Allan deviation of the white noise, N = density / sqrt 2 for a one-sided density, plus this
+    #   walk, sqrt(N^2/tau + K^2 tau/3), has its minimum sqrt(2 N K / sqrt 3) at B: K = sqrt(3) B^2 / (2 N)
+    #   = 1.6e-5 rad/s/rts, the minimum at tau = 13 s; the offset then wanders 0.016 deg/s in 5 minutes.
+    gyro_temp_coeff: float = math.radians(0.02)  # rad/s/degC, spread per axis of the ZRO temperature slope.
+    #   The datasheet bounds the ZRO variation by +-30 deg/s over -40..85 degC (PS 3.1), a worst case of
+    #   0.24 deg/s/degC, and gives no typical slope: 0.02 deg/s/degC is a plausible typical value, an order
+    #   of magnitude under that bound (the 5 degC warm-up below then moves each axis by ~0.1 deg/s).
+    # MPU-9250 accelerometer
+    accel_density: float = 300e-6 * G  # m/s^2/rtHz: noise power spectral density 300 ug/rtHz (PS 3.2)
+    accel_bias: float = 0.05           # m/s^2 per axis (zero-g offset +-60 mg x, y and +-80 mg z, PS 3.2, are
+    #                                    bounds; the paper's calibration removes the offset on the floor)
+    accel_temp_coeff: float = 1.5e-3 * G   # m/s^2/degC per axis: zero-g change +-1.5 mg/degC (PS 3.2)
+    # The die temperature after power-on: T = T_ambient + rise (1 - exp(-t / tau)). The datasheet gives no
+    # figure; the chip dissipates ~12 mW (3.7 mA at 3.3 V, PS 3.1), a breakout board's regulator and a
+    # Raspberry Pi next to it add more, and the temperature register of such boards rises by a few degC over
+    # the first minutes: 5 degC with a 2 min time constant.
+    warmup_rise: float = 5.0           # degC
+    warmup_tau: float = 120.0          # s
+    # Vibration: each rotor's residual imbalance U (kg m) is a force U w^2 rotating at its speed w (1/rev):
+    # proportional to its thrust, since f = c1 w^2 (eq. 27). This is the specific force per rotor and axis
+    # at hover thrust, before the DLPF. A balanced 12-inch propeller with its motor bell keeps U near 3 g mm;
+    # at hover (w = 524 rad/s) that is U w^2 / M = 0.5 m/s^2 on the 1.645 kg frame, about 0.7 m/s^2 rms per
+    # axis from four rotors of random phase. The arms bend under the rotating load and couple it into z;
+    # multirotor logs show z vibration of the same order as x and y, so z gets the same amplitude.
+    vibration: float = 0.5             # m/s^2
     mag_sigma: float = 0.3e-6          # T
     sonar_sigma_us: float = 15.0       # echo width jitter
     sonar_dropout: float = 0.0         # probability that an echo does not come back
@@ -47,7 +79,11 @@ class SensorNoise:
 
     @staticmethod
     def off() -> "SensorNoise":
-        return SensorNoise(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return SensorNoise(**{f.name: 0.0 for f in fields(SensorNoise)})
+
+    def steady(self) -> "SensorNoise":
+        """Without what wanders: no bias random walk, no warm-up drift, no vibration."""
+        return replace(self, gyro_bias_walk=0.0, warmup_rise=0.0, vibration=0.0)
 
 
 class NoisePool:
@@ -106,11 +142,29 @@ class World:
                 Rm[2] * bn + Rm[5] * bw + Rm[8] * bu)
 
 
+# The DLPF by DLPF_CFG (register 26, gyro) and A_DLPF_CFG (register 29, accelerometer), FCHOICE_B = 0:
+# (3-dB bandwidth Hz, delay s), from those registers' tables in the Register Map (RM-MPU-9250A-00 rev 1.6).
+GYRO_DLPF = ((250.0, 0.97e-3), (184.0, 2.9e-3), (92.0, 3.9e-3), (41.0, 5.9e-3), (20.0, 9.9e-3),
+             (10.0, 17.85e-3), (5.0, 33.48e-3), (3600.0, 0.17e-3))
+ACCEL_DLPF = ((218.1, 1.88e-3), (218.1, 1.88e-3), (99.0, 2.88e-3), (44.8, 4.88e-3), (21.2, 8.87e-3),
+              (10.2, 16.83e-3), (5.05, 32.48e-3), (420.0, 1.38e-3))
+_CONFIG_REGS = frozenset((reg.SMPLRT_DIV, reg.CONFIG, reg.GYRO_CONFIG, reg.ACCEL_CONFIG, reg.ACCEL_CONFIG2))
+_TAU = 2.0 * math.pi
+
+
 class SimMpu9250:
-    """The chip behind `spidev.SpiDev.xfer2`. `fault` = 'zeros' or 'ones' makes every read a bus-error frame."""
+    """The chip behind `spidev.SpiDev.xfer2`. `fault` = 'zeros' or 'ones' makes every read a bus-error frame.
+
+    What a real MPU-9250 adds to the truth (sized by `SensorNoise`): white noise of the datasheet's density
+    through the configured DLPF; a zero-rate offset that wanders (random walk) and follows the die
+    temperature, which warms after power-on and is in the burst's temperature word; the accelerometer's
+    offset that follows the temperature too; and the rotors' 1/rev vibration in the specific force, seen
+    through the DLPF and the output sample rate (SMPLRT_DIV), so that it aliases as on the chip."""
     _HEAD = struct.Struct(">7h")
     _MAG = struct.Struct("<3hB")
     MAG_EVERY = 4   # burst reads per magnetometer sample: 450 Hz / 4, near the AK8963's 100 Hz
+    AMBIENT_C = 25.0   # the room at power-on; the datasheet's typical values are at 25 degC (PS 3.1)
+    SPIN = (-1.0, 1.0, -1.0, 1.0)   # rotors 1 and 3 turn clockwise seen from above (eq. 9)
 
     def __init__(self, world: World, who_am_i: int = reg.WHO_AM_I_MPU9250, has_mag: bool = True):
         self.world = world
@@ -122,7 +176,24 @@ class SimMpu9250:
         g = world.rng.gauss
         self.gyro_bias = (g(0, n.gyro_bias), g(0, n.gyro_bias), g(0, n.gyro_bias))
         self.accel_bias = (g(0, n.accel_bias), g(0, n.accel_bias), g(0, n.accel_bias))
+        # the physical state of the die, which a register reset leaves alone
+        self.gyro_temp_coeff = (g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff))
+        self.accel_temp_coeff = (g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff))
+        self.gyro_walk = [0.0, 0.0, 0.0]   # rad/s, the random-walk part of the zero-rate offset
+        self._t_on = self._t_last = world.t
+        self._phase = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # each rotor's angle
+        z = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # phase of each arm's z bending
+        self._z_cos, self._z_sin = [math.cos(a) for a in z], [math.sin(a) for a in z]
+        a = world.a
+        self._vib_per_n = n.vibration / (a.M * a.g / 4.0)   # m/s^2 per newton of the rotor's thrust
         self._reset()
+
+    def die_temperature(self, t: float) -> float:
+        """degC: the die warms from the room toward a steady rise after power-on (first order)."""
+        n = self.world.noise
+        if n.warmup_rise == 0.0:
+            return self.AMBIENT_C
+        return self.AMBIENT_C + n.warmup_rise * (1.0 - math.exp((self._t_on - t) / n.warmup_tau))
 
     def _reset(self) -> None:
         self.regs = bytearray(128)
@@ -132,6 +203,24 @@ class SimMpu9250:
         self.ak[reg.AK_WIA] = reg.AK_WIA_VALUE if self.has_mag else 0x00
         self._slv0_read = 0   # bytes the I2C master copies from the AK8963 on every sample
         self._mag_count = self.MAG_EVERY
+        self._configure()
+
+    def _configure(self) -> None:
+        """What the configuration registers set: scales, noise per sample, DLPF, output sample period."""
+        rg, n = self.regs, self.world.noise
+        self._a_lsb = reg.ACCEL_LSB_PER_G[(rg[reg.ACCEL_CONFIG] >> 3) & 3] / G
+        self._g_lsb = reg.GYRO_LSB_PER_DPS[(rg[reg.GYRO_CONFIG] >> 3) & 3] * (180.0 / math.pi)
+        cfg = rg[reg.CONFIG] & 7
+        g_bw = GYRO_DLPF[cfg][0]
+        a_bw, self._a_delay = ACCEL_DLPF[rg[reg.ACCEL_CONFIG2] & 7]
+        # white noise of one-sided density d through a first-order low-pass of 3-dB bandwidth B: its
+        # noise-equivalent bandwidth is pi/2 B, so sigma = d sqrt(pi/2 B) (at B = 92 Hz: 0.12 deg/s,
+        # against the datasheet's 0.1 deg/s rms total noise there, PS 3.1)
+        self._g_sigma = n.gyro_density * math.sqrt(0.5 * math.pi * g_bw)
+        self._a_sigma = n.accel_density * math.sqrt(0.5 * math.pi * a_bw)
+        self._a_tc = 1.0 / (_TAU * a_bw)   # time constant of the accelerometer's DLPF as a first-order lag
+        # SAMPLE_RATE = 1 kHz / (1 + SMPLRT_DIV) when 0 < DLPF_CFG < 7, else the gyro's 8 kHz (RM, register 25)
+        self._period = (1 + rg[reg.SMPLRT_DIV]) / 1000.0 if 0 < cfg < 7 else 1.0 / 8000.0
 
     def xfer2(self, data: list[int]) -> list[int]:
         r = data[0] & 0x7F
@@ -150,6 +239,8 @@ class SimMpu9250:
             self._reset()
             return
         self.regs[r] = value
+        if r in _CONFIG_REGS:
+            self._configure()
         if r == reg.I2C_SLV0_CTRL and value & reg.SLV_EN:
             addr, ak_reg, n = self.regs[reg.I2C_SLV0_ADDR], self.regs[reg.I2C_SLV0_REG], value & 0x0F
             if addr & 0x7F != reg.AK8963_ADDR:
@@ -167,18 +258,32 @@ class SimMpu9250:
     def _sample(self) -> None:
         w = self.world
         n = w.noise
+        t = w.t
         fx, fy, fz = w.plant.specific_force()
         p, q, r = w.plant.rates
-        ab, gb = self.accel_bias, self.gyro_bias
-        a_lsb = reg.ACCEL_LSB_PER_G[(self.regs[reg.ACCEL_CONFIG] >> 3) & 3] / G
-        g_lsb = reg.GYRO_LSB_PER_DPS[(self.regs[reg.GYRO_CONFIG] >> 3) & 3] * (180.0 / math.pi)
-        sa, sg = n.accel_sigma, n.gyro_sigma
-        e = w.normal.take(6)
+        dt, self._t_last = t - self._t_last, t
+        e = w.normal.take(9)
+        walk = self.gyro_walk
+        if n.gyro_bias_walk and dt > 0.0:   # a random walk: variance K^2 dt over the time since the last sample
+            k = n.gyro_bias_walk * math.sqrt(dt)
+            walk[0] += k * e[6]
+            walk[1] += k * e[7]
+            walk[2] += k * e[8]
+        temp = self.die_temperature(t)
+        d = temp - self.AMBIENT_C
+        g0, gc, a0, ac = self.gyro_bias, self.gyro_temp_coeff, self.accel_bias, self.accel_temp_coeff
+        if n.vibration:
+            vx, vy, vz = self._vibration(t, dt)
+            fx, fy, fz = fx + vx, fy + vy, fz + vz
+        a_lsb, g_lsb, sa, sg = self._a_lsb, self._g_lsb, self._a_sigma, self._g_sigma
         self._HEAD.pack_into(self.regs, reg.ACCEL_XOUT_H,
-                             _i16((fx + ab[0] + sa * e[0]) * a_lsb), _i16((fy + ab[1] + sa * e[1]) * a_lsb),
-                             _i16((fz + ab[2] + sa * e[2]) * a_lsb), _i16(10.0 * reg.TEMP_LSB_PER_C),
-                             _i16((p + gb[0] + sg * e[3]) * g_lsb), _i16((q + gb[1] + sg * e[4]) * g_lsb),
-                             _i16((r + gb[2] + sg * e[5]) * g_lsb))
+                             _i16((fx + a0[0] + ac[0] * d + sa * e[0]) * a_lsb),
+                             _i16((fy + a0[1] + ac[1] * d + sa * e[1]) * a_lsb),
+                             _i16((fz + a0[2] + ac[2] * d + sa * e[2]) * a_lsb),
+                             _i16((temp - reg.TEMP_OFFSET_C) * reg.TEMP_LSB_PER_C),
+                             _i16((p + g0[0] + walk[0] + gc[0] * d + sg * e[3]) * g_lsb),
+                             _i16((q + g0[1] + walk[1] + gc[1] * d + sg * e[4]) * g_lsb),
+                             _i16((r + g0[2] + walk[2] + gc[2] * d + sg * e[5]) * g_lsb))
         self._mag_count += 1
         if self._slv0_read and self.ak[reg.AK_CNTL1] and self._mag_count >= self.MAG_EVERY:
             self._mag_count = 0   # the AK8963 measures at 100 Hz (continuous mode 2)
@@ -189,6 +294,30 @@ class SimMpu9250:
             self._MAG.pack_into(self.ak, reg.AK_HXL, _i16((by + sm * e[0]) * lsb),
                                 _i16((bx + sm * e[1]) * lsb), _i16(-(bz + sm * e[2]) * lsb), 0x10)
             self._copy_ext()
+
+    def _vibration(self, t: float, dt: float) -> tuple[float, float, float]:
+        """The rotors' 1/rev specific force in the accelerometer's output register: each rotor's speed from
+        its thrust (eq. 27, so a rotor lag is followed), the amplitude in proportion to the thrust, taken
+        at the chip's last output sample (SMPLRT_DIV) and through the DLPF as a first-order low-pass with
+        the register map's bandwidth and delay."""
+        plant = self.world.plant
+        f = plant.model.forces(t, plant.x, plant.u)[0]
+        c1, kv, tc2 = self.world.a.c1, self._vib_per_n, self._a_tc * self._a_tc
+        back = t % self._period + self._a_delay   # how long ago the vibration entered the register
+        phase = self._phase
+        cos, sin, sqrt = math.cos, math.sin, math.sqrt
+        vx = vy = vz = 0.0
+        for i, fi, spin, zc, zs in zip(range(4), f, self.SPIN, self._z_cos, self._z_sin):
+            if fi > 0.0:
+                om = rotor_speed(fi, c1)
+                th = phase[i] = (phase[i] + om * dt) % _TAU
+                a = kv * fi / sqrt(1.0 + om * om * tc2)   # first-order DLPF gain at w
+                th -= om * back
+                c, s = a * cos(th), a * sin(th)
+                vx += c
+                vy += spin * s
+                vz += c * zc - s * zs
+        return vx, vy, vz
 
 
 def _i16(v: float) -> int:
@@ -275,7 +404,7 @@ class SimGpio:
             last = self.last_edge.get(pin, 0.0)
             while t - last >= timeout:   # pigpio repeats the timeout report while no edge comes
                 last += timeout
-                self._fire(pin, pigpio.TIMEOUT, last)
+                self._fire(pin, LEVEL_TIMEOUT, last)
 
     def _fire(self, pin: int, level: int, t: float) -> None:
         self.last_edge[pin] = t
@@ -306,39 +435,9 @@ class SimMotors:
         self.armed = False
 
 
-class SimBattery:
-    """A 4S 4000 mAh LiPo: open-circuit voltage linear in charge between 14.0 and 16.6 V, 25 mOhm of
-    internal resistance; the current is the rotors' mechanical power (torque x speed, eq. 27-28)
-    over the voltage at 75 % efficiency. Plausible values, not measured."""
-    CAPACITY_C = 4.0 * 3600
-    R_INT = 0.025
-    EFFICIENCY = 0.75
-
-    def __init__(self, world: World, soc: float):
-        self.world, self.soc = world, soc
-        self.current = 0.0
-        self.voltage = self._ocv()
-
-    def _ocv(self) -> float:
-        return 14.0 + 2.6 * self.soc
-
-    def advance(self, dt: float) -> None:
-        plant = self.world.plant
-        a = self.world.a
-        f, tau, _, _ = plant.model.forces(plant.t, plant.x, plant.u)
-        power = sum(tau[i] * math.sqrt(f[i] / a.c1) for i in range(4)) / self.EFFICIENCY
-        self.current = power / self.voltage
-        self.soc -= self.current * dt / self.CAPACITY_C
-        self.voltage = self._ocv() - self.R_INT * self.current
-
-    def read(self) -> tuple[float, float]:
-        s = self.world.noise.battery_sigma
-        g = self.world.rng.gauss
-        return self.voltage + g(0.0, s), self.current + g(0.0, 10 * s)
-
-
 class SimClock:
-    """Lock-step with the plant: no sleeping."""
+    """Lock-step with the plant: no sleeping. Its time is the plant's whole loop periods times the
+    period (`Plant.periods`, an integer), never a sum: the same at any substep count."""
 
     def __init__(self, world: World):
         self.world = world

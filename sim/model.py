@@ -9,16 +9,19 @@ One signature for the base model and every extension: `Model.f(t, x, u) -> xdot`
 (position and velocity inertial, x North, y West, z Up; Z-Y-X Euler angles; body rates), and the
 input is `u = (P1, P2, P3, P4, battery_v)`: the command values of eq. 26 and the battery voltage.
 `Model.f` is scalar code (the simulator's inner loop); the functions before it take numpy arrays
-too, so that fits evaluate the same equations on many samples at once.
+too, so that fits evaluate the same equations on many samples at once. The propeller and yaw-drag
+equations (eq. 6, 26-28) live in `flightctl.physics`, shared with the onboard mixer and the fits.
 """
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
-from math import cos, sin, sqrt
+from math import cos, sin
 
 from flightctl.params import Airframe
+from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, yaw_drag
 
 N_RIGID = 12
 _ZERO = (0.0, 0.0, 0.0)
@@ -27,34 +30,6 @@ X, Y, Z, VX, VY, VZ, PHI, THETA, PSI, P, Q, R = range(N_RIGID)
 
 def _trig(v):
     return np if isinstance(v, np.ndarray) else math
-
-
-def thrust_from_command(P, h1: float, h2: float):
-    """Eq. 26: f = h1 (P - h2)^2 above the dead zone, 0 below it. Floats or arrays."""
-    d = P - h2
-    d = (d + abs(d)) * 0.5  # max(d, 0) for both floats and arrays
-    return h1 * d * d
-
-
-def command_from_thrust(f: float, h1: float, h2: float) -> float:
-    """Eq. 26 inverted (the controller's side): the command that gives thrust f >= 0."""
-    return h2 + math.sqrt(f / h1) if f > 0.0 else 0.0
-
-
-def rotor_torque(f, g1: float, g2: float):
-    """Eq. 28: tau = (g1 f + g2) sgn(f); thrust is never negative, so sgn(f) is 1 for f > 0, else 0."""
-    return (g1 * f + g2) * (f > 0)
-
-
-def rotor_speed(f, c1: float):
-    """Eq. 27 inverted: omega = sqrt(f / c1)."""
-    return (f / c1) ** 0.5
-
-
-def yaw_drag(r, gamma1: float, gamma2: float):
-    """Eq. 6: tau_d = (gamma1 r^2 + gamma2) sgn(r)."""
-    sgn = 1.0 * (r > 0) - 1.0 * (r < 0)
-    return (gamma1 * r * r + gamma2) * sgn
 
 
 def body_torques(f1, f2, f3, f4, t1, t2, t3, t4, l: float):
@@ -83,26 +58,48 @@ def rotation(phi, theta, psi):
             -st, ct * sf, ct * cf)
 
 
+class Parameter(NamedTuple):
+    """One parameter of an effect: its SI unit and the range `flightctl.sim.causes.make` accepts."""
+    unit: str
+    lo: float
+    hi: float
+
+
 class Effect:
-    """A candidate extension (measured-data.md). It plugs into the model at one or more hooks:
+    """A candidate extension (measured-data.md): the plant side of one cause of
+    `flightctl.sim.causes`, whose module also holds its diagnose fit. A subclass declares
+
+    - `cause`: its name in measured-data.md; `required`: {parameter name: Parameter(unit, lo, hi)};
+    - the hooks it uses (`uses_rotor`, `uses_scale`, `uses_wrench`, or `delay`) and overrides them;
+      the base does nothing at every hook.
+
+    The hooks, in the order the model calls them within one evaluation of the forces (so an effect
+    may carry a value from its `rotor` to its `wrench`):
 
     - `delay`: the commands reach the motors this much later (applied by the plant to `u`);
     - `rotor(t, x, f_cmd, xdot)`: its own states (`n_states`, placed at `offset`) turn the
-      commanded thrusts into rotor thrusts, writing their derivatives into `xdot`;
+      commanded thrusts into rotor thrusts, writing their derivatives into `xdot` (None when only
+      the forces are wanted); the rotor speed of eq. 9 follows the returned thrusts (eq. 27);
     - `scale(t, x, u, s)`: multiplies each rotor's thrust and torque (list `s` of four);
     - `wrench(t, x, f, vb, force, torque)`: adds a body-frame force and torque (lists of three),
       given the thrusts `f` and the body-frame velocity `vb`.
-    Subclasses in `sim.effects` override what they need; the base does nothing at every hook.
+
+    The model calls `attach(airframe, offset)` once before use: `self.a` is then the airframe.
     """
     cause = "none"
+    required: dict[str, Parameter] = {}
     n_states = 0
     offset = 0
     delay = 0.0
     uses_rotor = uses_scale = uses_wrench = False
     state_dependent = False   # its `scale` reads the state (the model then cannot cache the forces)
+    a: Airframe | None = None
 
     def __init__(self, **parameters: float):
         self.parameters = dict(parameters)
+
+    def attach(self, airframe: Airframe, offset: int) -> None:
+        self.a, self.offset = airframe, offset
 
     def initial_states(self, f_cmd: list[float]) -> list[float]:
         return []
@@ -120,7 +117,7 @@ class Model:
         self.effects = tuple(effects)
         n = N_RIGID
         for e in self.effects:
-            e.offset = n
+            e.attach(airframe, n)
             n += e.n_states
         self.n = n
         self.delay = sum(e.delay for e in self.effects)
@@ -155,7 +152,7 @@ class Model:
         for e in self._rotor:
             f = e.rotor(t, x, f, xdot)
         g1, g2 = a.g1, a.g2
-        tau = [(g1 * fi + g2) if fi > 0.0 else 0.0 for fi in f]  # eq. 28
+        tau = [rotor_torque(fi, g1, g2) for fi in f]  # eq. 28
         if self._scale:
             s = [1.0, 1.0, 1.0, 1.0]
             for e in self._scale:
@@ -179,7 +176,7 @@ class Model:
         (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque = self.forces(t, x, u, xdot)
         c1, l = a.c1, a.l
         # eq. 9: Omega = -w1 + w2 - w3 + w4 (motors 1 and 3 turn clockwise), w from eq. 27
-        Omega = -sqrt(f1 / c1) + sqrt(f2 / c1) - sqrt(f3 / c1) + sqrt(f4 / c1)
+        Omega = -rotor_speed(f1, c1) + rotor_speed(f2, c1) - rotor_speed(f3, c1) + rotor_speed(f4, c1)
         return (force[0], force[1], force[2] + f1 + f2 + f3 + f4, l * (f2 - f4) + torque[0],
                 l * (f3 - f1) + torque[1], t1 - t2 + t3 - t4 + torque[2], Omega)
 
@@ -210,7 +207,7 @@ class Model:
         xdot[6] = p + w * st / ct       # Z-Y-X Euler-angle kinematics
         xdot[7] = q * cf - r * sf
         xdot[8] = w / ct
-        tau_d = (a.gamma1 * r * r + self.gamma2) * (1.0 if r > 0.0 else -1.0 if r < 0.0 else 0.0)  # eq. 6
+        tau_d = yaw_drag(r, a.gamma1, self.gamma2)  # eq. 6
         xdot[9], xdot[10], xdot[11] = angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, a)
         return xdot
 

@@ -2,7 +2,9 @@
 
 The controller holds its commands for one loop period (zero-order hold), so the plant integrates
 each period in `substeps` RK4 steps with the input constant across a step; an actuation delay is
-realised on the substep grid. The floor: the vehicle rests on z = 0 until its thrust lifts it, and
+realised on the substep grid. Time is counted in integers, loop periods and substeps, and computed
+from them (`t = n dt + j h`), never summed: after n periods it is `n dt` whatever the substep count,
+so that the loop sees the same clock at 2 and at 20 substeps. The floor: the vehicle rests on z = 0 until its thrust lifts it, and
 a touchdown stops it (level, at rest), recording the touchdown speed.
 """
 from __future__ import annotations
@@ -15,9 +17,11 @@ from flightctl.sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y
 class Plant:
     def __init__(self, model: Model, dt: float, substeps: int = 2, battery_v: float = 16.0):
         self.model = model
+        self.dt = dt
         self.h = dt / substeps
         self.substeps = substeps
-        self.t = 0.0
+        self.periods = 0                                  # loop periods integrated so far
+        self.t = 0.0                                      # periods * dt (+ substeps * h within one)
         self.u = (0.0, 0.0, 0.0, 0.0, battery_v)
         self._next = self.u                               # the last command, applied from now on
         self.x = model.initial_state(self.u)
@@ -31,26 +35,30 @@ class Plant:
         self._next = (P1, P2, P3, P4, battery_v)
 
     def advance(self, dt: float) -> None:
-        """Integrate over one loop period with the last command held."""
+        """Integrate over one loop period (the `dt` of the plant) with the last command held."""
         u_new = self._next
         h = self.h
-        for _ in range(self.substeps):
+        t0 = self.periods * self.dt
+        for j in range(1, self.substeps + 1):
             if self._lag:
                 self._queue.append(u_new)
                 self.u = self._queue.popleft()
             else:
                 self.u = u_new
             x, t, u = self.x, self.t, self.u
+            t_end = t0 + j * h
             if self.on_ground and not self._lifts(x, u):
                 if len(x) > N_RIGID:   # the extensions' own states (motor lag) run on the ground too
                     self.x = x[:N_RIGID] + self._rk4(x, t, u, h)[N_RIGID:]
-                self.t = t + h
+                self.t = t_end
                 continue
             self.on_ground = False
             self.x = self._rk4(x, t, u, h)
-            self.t = t + h
+            self.t = t_end
             if self.x[Z] < 0.0:
                 self._touch_down()
+        self.periods += 1
+        self.t = self.periods * self.dt
 
     def _rk4(self, x, t, u, h):
         f, hh = self.model.f, 0.5 * h

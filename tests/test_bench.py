@@ -8,7 +8,6 @@ import time
 import pytest
 
 from fakes.pigpiod import running
-from fakes.smbus import FakeIna219, FakeSMBus
 from flightctl.cli import main as cli
 from flightctl.errors import InputError
 from flightctl.logfile import BENCH_COLUMNS, read_table
@@ -16,6 +15,8 @@ from flightctl.params import load
 from flightctl.pi import open_pi_board
 from flightctl.hil import bench
 from flightctl.sim.devices import SensorNoise, SimMpu9250, World
+from without import PI_LIBRARIES, run_without
+from flightctl.sim.power import SimIna219, SimSMBus
 
 
 def test_sim_bench_writes_the_models_truth(tmp_path):
@@ -35,15 +36,15 @@ def test_sim_bench_writes_the_models_truth(tmp_path):
 
 def test_bench_keeps_the_other_motors_stopped_and_ramps(monkeypatch, tmp_path):
     writes = []
-    real_open = bench.open_board
+    real_open = bench.open_bench
 
     def recording_open(args, params):
-        hal, truth, close, meta = real_open(args, params)
-        real_write = hal.motors.write
-        hal.motors.write = lambda c: (writes.append(list(c)), real_write(c))
-        return hal, truth, close, meta
+        board, truth = real_open(args, params)
+        real_write = board.hal.motors.write
+        board.hal.motors.write = lambda c: (writes.append(list(c)), real_write(c))
+        return board, truth
 
-    monkeypatch.setattr(bench, "open_board", recording_open)
+    monkeypatch.setattr(bench, "open_bench", recording_open)
     assert bench.main(["--board", "sim", "--motor", "2", "--steps", "180", "--ramp", "100", "--settle", "0.1",
                        "--hold", "0.1", "--out", str(tmp_path / "b.csv")]) == 0
     assert all(c[0] == c[2] == c[3] == 0 for c in writes)
@@ -65,10 +66,11 @@ def test_steps_above_the_maximum_or_a_bad_motor_are_refused(tmp_path, capsys):
 
 def test_ctrl_c_stops_the_motor_and_keeps_the_rows_so_far(monkeypatch, tmp_path):
     state = {}
-    real_open = bench.open_board
+    real_open = bench.open_bench
 
     def interrupting_open(args, params):
-        hal, truth, close, meta = real_open(args, params)
+        board, truth = real_open(args, params)
+        hal = board.hal
         state["motors"] = hal.motors
         reads = [0]
         real_read = hal.power.read
@@ -80,9 +82,9 @@ def test_ctrl_c_stops_the_motor_and_keeps_the_rows_so_far(monkeypatch, tmp_path)
             return real_read()
 
         hal.power.read = read
-        return hal, truth, close, meta
+        return board, truth
 
-    monkeypatch.setattr(bench, "open_board", interrupting_open)
+    monkeypatch.setattr(bench, "open_bench", interrupting_open)
     out = tmp_path / "b.csv"
     assert bench.main(["--board", "sim", "--motor", "1", "--steps", "150,170", "--settle", "0.1", "--hold", "0.5",
                        "--out", str(out)]) == 130
@@ -93,7 +95,8 @@ def test_ctrl_c_stops_the_motor_and_keeps_the_rows_so_far(monkeypatch, tmp_path)
 def test_pi_bench_takes_the_operators_readings_while_the_motor_keeps_spinning(tmp_path):
     params = load(None)
     world = World(params.airframe, noise=SensorNoise.off())
-    bus = FakeSMBus({0x40: FakeIna219(battery_v=16.0, current_a=3.2)})
+    world.battery.voltage, world.battery.current = 16.0, 3.2
+    bus = SimSMBus(SimIna219(world))
     with running() as (fake, pi):
         board = open_pi_board(params, None, pi=pi, spi=SimMpu9250(world), smbus=bus)
         hal = board.hal
@@ -121,3 +124,25 @@ def test_pi_bench_takes_the_operators_readings_while_the_motor_keeps_spinning(tm
     assert math.isnan(omega)                                              # skipped with Enter
     assert volts == pytest.approx(16.0, abs=0.01) and amps == pytest.approx(3.2, abs=0.01)
     assert fake.live_wave().on_times()[27] == 1000 and fake.errors == []
+
+
+def test_an_unknown_board_or_a_pi_board_that_is_not_there_is_one_line(tmp_path, capsys):
+    assert cli(["bench", "--board", "bench9", "--motor", "1", "--steps", "150"]) == 2
+    assert capsys.readouterr().err.strip() == "flightctl bench: error: unknown board 'bench9' (known: pi, sim)"
+    board = tmp_path / "board.toml"
+    board.write_text("[pigpio]\nport = 1\n")              # nothing listens on port 1
+    out = tmp_path / "b.csv"
+    assert cli(["bench", "--board", "pi", "--board-file", str(board), "--motor", "1", "--steps", "150",
+                "--out", str(out)]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("flightctl bench: cannot open the pi board: cannot reach pigpiod")
+    assert not out.exists()
+
+
+def test_the_pi_bench_on_a_machine_without_the_pi_libraries_is_one_line(tmp_path):
+    r = run_without(PI_LIBRARIES, ["bench", "--board", "pi", "--motor", "1", "--steps", "150"], tmp_path)
+    assert r.returncode == 3
+    assert r.stderr.strip().splitlines() == [
+        "flightctl bench: cannot open the pi board: the pi board needs the Python module 'pigpio', which is not "
+        "installed (install the Pi libraries with pip install 'flightctl[pi]')"]
+    assert not (tmp_path / "bench.csv").exists()

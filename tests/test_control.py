@@ -183,9 +183,8 @@ def test_table5_values():
     assert f.alpha_yaw == pytest.approx(0.984615385, abs=5e-10)
 
 
-@pytest.mark.parametrize("structure", ["flight", "paper"])
-def test_ema_step_response_eq36_39(structure):
-    est = AttitudeEstimator(Filters(), structure)
+def test_ema_step_response_eq36_39():
+    est = AttitudeEstimator(Filters(), "paper")
     s = sample(gyro=(1.0, -2.0, 0.5))
     est.update(s, DT)
     assert est.p == pytest.approx(ALPHA_EMA * 1.0, rel=1e-12)
@@ -236,19 +235,57 @@ def test_yaw_estimate_crosses_pi_the_short_way():
     assert est.yaw < -math.pi + 0.05     # it moved through -pi, not the long way toward 0
 
 
-def test_flight_structure_ignores_accel_tilt_in_flight():
+def test_flight_structure_corrects_tilt_in_flight_slowly_with_a_pi_filter():
+    """In flight the accelerometer pulls the estimate with the PI law of docs/estimator.md:
+    both poles at -1/tau_tilt_air, so for a held accelerometer tilt the first step moves the estimate
+    by 2 dt / tau of the error, and the bias estimate by dt^2 / tau^2 of it (here the gyro is zero)."""
     s = still_sample(0.1, -0.05, 0.0)
-    flight = AttitudeEstimator(Filters(), "flight")
+    s.mag_fresh = False
+    tau = 8192 / 450.0
+    flight = AttitudeEstimator(Filters(tau_tilt_air=tau), "flight")
     paper = AttitudeEstimator(Filters(), "paper")
     flight.in_flight = paper.in_flight = True
-    for _ in range(50):
+    flight.update(s, DT)
+    assert flight.roll == pytest.approx(0.1 * 2 * DT / tau, rel=1e-9)
+    assert flight.bx == pytest.approx(-0.1 * DT / tau ** 2, rel=1e-9)
+    for _ in range(49):
         flight.update(s, DT)
         paper.update(s, DT)
-    assert flight.roll == 0.0 and flight.pitch == 0.0
-    assert paper.roll == pytest.approx(0.1 * (1 - ALPHA_RP ** 50), rel=1e-9)
-    flight.in_flight = False          # back on the ground: the correction resumes
+    paper.update(s, DT)
+    assert paper.roll == pytest.approx(0.1 * (1 - ALPHA_RP ** 50), rel=1e-9)   # Table 5's 0.284 s
+    assert 0.0 < flight.roll < 0.1 * 100 * DT / tau                            # 50 loops: a few %
+    # after 3 tau the estimate holds the accelerometer's tilt (critically damped: 1 - 4 e^-3 = 80 %)
+    for _ in range(int(3 * tau / DT)):
+        flight.update(s, DT)
+    assert flight.roll == pytest.approx(0.1, rel=0.25)
+    flight.in_flight = False          # back on the ground: Table 5's filter again
+    before = flight.roll
     flight.update(s, DT)
-    assert flight.roll == pytest.approx(0.1 * (1 - ALPHA_RP), rel=1e-9)
+    assert flight.roll == pytest.approx(ALPHA_RP * (before + DT * (-flight.bx)) + (1 - ALPHA_RP) * 0.1, rel=1e-6)
+
+
+def test_flight_structure_learns_a_gyro_bias_in_flight():
+    """A constant gyro bias after calibration: the in-flight integral term takes it out, so the
+    estimate stays at the accelerometer's level instead of drifting at the bias rate."""
+    bias = math.radians(0.5)            # deg/s: a warm-up drift far beyond the datasheet's in-run wander
+    s = still_sample(0.0, 0.0, 0.0, gyro=(bias, 0.0, 0.0))
+    s.mag_fresh = False
+    tau = 8192 / 450.0
+    est = AttitudeEstimator(Filters(tau_tilt_air=tau), "flight")
+    est.in_flight = True
+    for _ in range(int(8 * tau / DT)):
+        est.update(s, DT)
+    assert est.bx == pytest.approx(bias, rel=0.02)
+    assert abs(est.roll) < 0.05 * bias * tau      # a P-only filter would hold bias * tau / 2 off
+
+
+def test_flight_structure_without_rotor_drag_ignores_the_accelerometer_in_flight():
+    s = still_sample(0.1, -0.05, 0.0)
+    est = AttitudeEstimator(Filters(), "flight")     # the base model's default: tau_tilt_air = 0
+    est.in_flight = True
+    for _ in range(50):
+        est.update(s, DT)
+    assert est.roll == 0.0 and est.pitch == 0.0 and est.bx == 0.0
 
 
 def test_gyro_propagation_flight_vs_paper():
@@ -257,9 +294,9 @@ def test_gyro_propagation_flight_vs_paper():
     paper = AttitudeEstimator(Filters(), "paper")
     flight.update(s, DT)
     paper.update(s, DT)
-    # flight: the raw rate is integrated; the D-term rate is the EMA-filtered one
+    # flight: the raw rate is integrated and is the D term's measured rate (no EMA in the loop)
     assert flight.roll == pytest.approx(ALPHA_RP * 0.5 * DT, rel=1e-12)
-    assert flight.droll == pytest.approx(ALPHA_EMA * 0.5, rel=1e-12)
+    assert flight.droll == pytest.approx(0.5, rel=1e-12)
     # paper: the EMA-filtered rate is integrated; the D term is the difference quotient of the angle
     assert paper.roll == pytest.approx(ALPHA_RP * ALPHA_EMA * 0.5 * DT, rel=1e-12)
     assert paper.droll == pytest.approx(paper.roll / DT, rel=1e-12)

@@ -8,16 +8,15 @@ import numpy as np
 import pytest
 
 from flightctl.cli import main
-from flightctl.params import load
-from flightctl.sim import effects
-from flightctl.sim.excitation import excite
-from flightctl.sim.run import fly
+from test_diagnose_cases import quick_plan
 
 
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory):
-    path = tmp_path_factory.mktemp("diag") / "flight.csv"
-    fly(excite(), load(None), path, effects=(effects.make("com_offset", dx=0.01, dy=0.0),), noise=True, seed=5)
+    tmp = tmp_path_factory.mktemp("diag")
+    path = tmp / "flight.csv"
+    assert main(["sim", "--plan", str(quick_plan(tmp)), "--log", str(path), "--seed", "5", "--no-plot", "--quiet",
+                 "--effect", "com_offset:dx=0.01,dy=0"]) == 0
     return path
 
 
@@ -106,15 +105,16 @@ def test_no_range_and_constant_battery_are_not_judged(tmp_path, capsys, flight):
     assert main(["diagnose", str(log), "--json", str(out), "--quiet"]) == 0
     rep = json.loads(out.read_text())
     skipped = {c["cause"]: c["why"] for c in rep["not_judged"]}
-    assert set(skipped) == {"ground_effect", "battery_sag"}
+    assert set(skipped) == {"ground_effect", "battery_sag", "rotor_inflow"}
     assert "range" in skipped["ground_effect"] and "battery_v" in skipped["battery_sag"]
+    assert "range" in skipped["rotor_inflow"]
     assert rep["cause"] == "com_offset"
 
 
 def test_two_logs_and_plots(tmp_path, capsys, flight):
-    def second_half(header, rows):   # a second file: the same flight's log from t = 0 again
-        return header, rows
-    other = _rewrite(flight, tmp_path / "g.csv", second_half)
+    def first_half(header, rows):   # a second file: the first half of the same flight's log again
+        return header, rows[:len(rows) // 2]
+    other = _rewrite(flight, tmp_path / "g.csv", first_half)
     out, prefix = tmp_path / "out.json", tmp_path / "diag"
     assert main(["diagnose", str(flight), str(other), "--json", str(out), "--plot", str(prefix), "--quiet"]) == 0
     rep = json.loads(out.read_text())
@@ -122,6 +122,13 @@ def test_two_logs_and_plots(tmp_path, capsys, flight):
     assert set(rep) >= {"cause", "parameters", "rmse_base", "rmse_extended", "gain", "metric", "candidates"}
     assert [c["gain"] for c in rep["candidates"]] == sorted((c["gain"] for c in rep["candidates"]), reverse=True)
     assert np.isclose(rep["gain"], 1 - rep["rmse_extended"] / rep["rmse_base"], atol=1e-4)
+    named = rep["candidates"][0]
+    assert named["cause"] == "com_offset" and named["significant"] and named["significant_in"]
+    channels = rep["channels"]
+    for c in rep["candidates"]:   # each channel judged on its own too: gain = 1 - rmse_ext / rmse_base
+        assert list(c["channels"]) == list(channels)
+    for ch, v in named["channels"].items():
+        assert np.isclose(v["gain"], 1 - channels[ch]["rmse_extended"] / channels[ch]["rmse_base"], atol=1e-3)
     for k in ("residuals", "explained"):
         png = tmp_path / f"diag-{k}.png"
         assert png.read_bytes()[:4] == b"\x89PNG"

@@ -1,5 +1,5 @@
-"""The real drivers (MPU-9250 over SPI, HC-SR04 on pigpio) against the simulated devices of
-sim.devices and against tiny hand-made fakes. Expected values come from the datasheet scales and
+"""The real drivers (MPU-9250 over SPI, HC-SR04 on pigpio, INA219 over I2C) against the simulated
+devices of sim.devices and sim.power and against tiny hand-made fakes. Expected values come from the datasheet scales and
 the formulas, worked out here."""
 import math
 import struct
@@ -8,12 +8,14 @@ import numpy as np
 import pigpio
 import pytest
 
+from flightctl.boards import BoardOptions, open_board
 from flightctl.drivers.hcsr04 import HcSr04
+from flightctl.drivers.ina219 import Ina219
 from flightctl.drivers.mpu9250 import ImuError, Mpu9250
 from flightctl.hal import ImuSample
-from flightctl.params import Airframe
+from flightctl.params import Airframe, load
 from flightctl.sim.devices import SensorNoise, SimGpio, SimMpu9250, World
-from flightctl.sim.effects import make
+from flightctl.sim.causes import make
 from hand import R_hand
 
 G = 9.80665
@@ -387,3 +389,30 @@ def test_sonar_by_hand_edges():
     edge(ECHO, pigpio.TIMEOUT, 5000)                      # nothing came back
     r = hc.poll()
     assert math.isnan(r) and hc.failures == 1
+
+
+# --- INA219 on the simulated board -----------------------------------------------------------------
+
+def test_the_sim_board_reads_its_battery_through_the_ina219_driver():
+    board = open_board("sim", load(None), BoardOptions(noise=SensorNoise.off()))
+    power, battery = board.hal.power, board.world.battery
+    assert isinstance(power, Ina219)
+    battery.voltage, battery.current = 15.3, 21.0
+    v, i = power.read()
+    assert v == pytest.approx(15.3, abs=0.002 + 0.5e-5)   # bus to half its 4 mV LSB, shunt to half 10 uV
+    assert i == pytest.approx(21.0, abs=0.0025 + 1e-9)    # half of 10 uV / 2 mOhm
+    board.close()
+
+
+def test_the_simulated_power_monitor_is_as_noisy_as_configured():
+    """battery_sigma = 0.01 V on the bus voltage (2.5 LSB) and as many LSBs on the shunt: 25 uV, 12.5 mA
+    on 2 mOhm; each with the rounding to its LSB, 4 mV / sqrt(12) and 5 mA / sqrt(12), beside it."""
+    board = open_board("sim", load(None), BoardOptions(seed=1))
+    assert board.world.noise.battery_sigma == 0.01
+    battery = board.world.battery
+    battery.voltage, battery.current = 15.3, 10.0
+    v, i = np.array([board.hal.power.read() for _ in range(400)]).T
+    assert v.std() == pytest.approx(math.hypot(0.01, 0.004 / math.sqrt(12)), rel=0.15)
+    assert i.std() == pytest.approx(math.hypot(0.0125, 0.005 / math.sqrt(12)), rel=0.15)
+    assert v.mean() == pytest.approx(15.3, abs=4 * 0.01 / math.sqrt(400) + 0.002)
+    assert i.mean() == pytest.approx(10.0, abs=4 * 0.0125 / math.sqrt(400) + 0.0025)

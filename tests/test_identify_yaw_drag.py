@@ -16,7 +16,7 @@ RATES = np.concatenate([-np.linspace(0.5, 3.0, 12), np.linspace(0.5, 3.0, 12)]) 
 
 
 def spins(rng) -> Table:
-    tau = yaw_drag.drag_torque(RATES, GAMMA1, GAMMA2) + rng.normal(0, SIGMA, RATES.size)
+    tau = (GAMMA1 * RATES ** 2 + GAMMA2) * np.sign(RATES) + rng.normal(0, SIGMA, RATES.size)
     return Table("mem.csv", {"torque": tau, "yaw_rate": RATES}, {}, np.arange(RATES.size) + 2)
 
 

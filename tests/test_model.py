@@ -1,4 +1,4 @@
-"""sim.model, sim.effects and sim.plant against values worked out by hand from the paper's equations
+"""sim.model, sim.causes (the effects) and sim.plant against values worked out by hand from the paper's equations
 (eq. 6-9, 26-28) and conventions.md. Every expected value is written out here from the formulas and
 the reference-airframe numbers of conventions.md, never taken from the code under test.
 """
@@ -10,9 +10,8 @@ from scipy.integrate import solve_ivp
 
 from flightctl.errors import InputError
 from flightctl.params import Airframe
-from flightctl.sim import effects as fx
-from flightctl.sim.model import (Model, angular_acceleration, body_torques, command_from_thrust, rotation,
-                       rotor_speed, rotor_torque, thrust_from_command, yaw_drag)
+from flightctl.sim import causes as fx
+from flightctl.sim.model import Model, angular_acceleration, body_torques, rotation
 from flightctl.sim.plant import Plant
 
 # conventions.md, reference airframe (Table 2 and the plausible propeller defaults)
@@ -63,58 +62,6 @@ def R_hand(phi, theta, psi):
 def test_hover_command_is_about_172():
     # conventions.md: h1, h2 give hover at P ~ 172
     assert PH == pytest.approx(172.03, abs=0.01)
-
-
-# --- propeller: eq. 26-28 ------------------------------------------------------------------------
-
-def test_thrust_from_command_eq26_floats():
-    assert thrust_from_command(130.0, H1, H2) == pytest.approx(1.49e-3 * 10.0 ** 2)
-    assert thrust_from_command(255.0, H1, H2) == pytest.approx(1.49e-3 * 135.0 ** 2)   # 27.15 N
-    assert thrust_from_command(PH, H1, H2) == pytest.approx(FH, rel=1e-12)
-    # dead zone: no thrust at or below h2, never negative (the parabola would rise again)
-    assert thrust_from_command(120.0, H1, H2) == 0.0
-    assert thrust_from_command(100.0, H1, H2) == 0.0
-    assert thrust_from_command(0.0, H1, H2) == 0.0
-
-
-def test_thrust_from_command_eq26_arrays():
-    P = np.array([0.0, 100.0, 120.0, 121.0, 130.0, 255.0])
-    want = np.array([0.0, 0.0, 0.0, 1.49e-3 * 1.0, 1.49e-3 * 100.0, 1.49e-3 * 135.0 ** 2])
-    got = thrust_from_command(P, H1, H2)
-    assert isinstance(got, np.ndarray)
-    np.testing.assert_allclose(got, want, rtol=1e-12, atol=0)
-
-
-def test_command_from_thrust_inverts_eq26():
-    assert command_from_thrust(4.0, H1, H2) == pytest.approx(120.0 + math.sqrt(4.0 / 1.49e-3))
-    assert command_from_thrust(FH, H1, H2) == pytest.approx(PH)
-    for f in (0.01, 1.0, 4.0, 8.0, 20.0):
-        assert thrust_from_command(command_from_thrust(f, H1, H2), H1, H2) == pytest.approx(f, rel=1e-12)
-    assert thrust_from_command(command_from_thrust(0.0, H1, H2), H1, H2) == 0.0
-
-
-def test_rotor_torque_eq28():
-    assert rotor_torque(2.0, G1, G2) == pytest.approx(0.020 * 2.0 + 0.002)
-    assert rotor_torque(FH, G1, G2) == pytest.approx(0.020 * FH + 0.002)
-    assert rotor_torque(0.0, G1, G2) == 0.0      # sgn(0) = 0: a stopped rotor has no torque
-    got = rotor_torque(np.array([0.0, 1.0, 5.0]), G1, G2)
-    np.testing.assert_allclose(got, [0.0, 0.022, 0.102], rtol=1e-12)
-
-
-def test_rotor_speed_eq27():
-    assert rotor_speed(4.0, C1) == pytest.approx(math.sqrt(4.0 / 1.47e-5))
-    # conventions.md: hover near 5000 RPM
-    assert rotor_speed(FH, C1) * 60 / (2 * math.pi) == pytest.approx(5000, rel=0.01)
-    np.testing.assert_allclose(rotor_speed(np.array([0.0, 1.47e-5 * 100 ** 2]), C1), [0.0, 100.0])
-
-
-def test_yaw_drag_eq6():
-    assert yaw_drag(2.0, GAMMA1, GAMMA2) == pytest.approx(4.86291e-4 * 4.0 + 1.22958e-3)
-    assert yaw_drag(-2.0, GAMMA1, GAMMA2) == pytest.approx(-(4.86291e-4 * 4.0 + 1.22958e-3))
-    assert yaw_drag(0.0, GAMMA1, GAMMA2) == 0.0
-    assert yaw_drag(3.0, GAMMA1, 0.0) == pytest.approx(4.86291e-4 * 9.0)
-    np.testing.assert_allclose(yaw_drag(np.array([-1.0, 0.0, 1.0]), GAMMA1, GAMMA2),
-                               [-(GAMMA1 + GAMMA2), 0.0, GAMMA1 + GAMMA2])
 
 
 def test_body_torques_plus_configuration():
@@ -441,6 +388,78 @@ def test_effect_motor_lag():
     assert xd[5] == pytest.approx((1.0 + 2.0 + 3.0 + 4.0) / M - G, rel=1e-12)
     assert xd[9] == pytest.approx(L * (2.0 - 4.0) / JXX, rel=1e-12)
     assert xd[10] == pytest.approx(L * (3.0 - 1.0) / JYY, rel=1e-12)
+
+
+def test_effect_rotor_inflow_climb_loses_heave_thrust():
+    k = 0.32
+    m = Model(Airframe(), (fx.make("rotor_inflow", k=k),))
+    # level, climbing at 0.5 m/s with hover thrust on every rotor: each loses k sqrt(FH / B) 0.5 = k 0.5
+    xd = m.f(0.0, state(z=3.0, vz=0.5), hover_u())
+    assert xd[5] == pytest.approx((4 * FH - 4 * k * 0.5) / M - G, rel=1e-12)
+    assert xd[5] == pytest.approx(-4 * k * 0.5 / M, rel=1e-9)        # -0.39 m/s^2: heave damping 4 k
+    assert xd[9:12] == pytest.approx([0.0, 0.0, 0.0], abs=1e-12)
+    assert m.specific_force(0.0, state(z=3.0, vz=0.5), hover_u())[2] == pytest.approx(G - 2 * k / M, rel=1e-12)
+    # descending gains thrust; hovering changes nothing
+    assert m.f(0.0, state(z=3.0, vz=-0.5), hover_u())[5] == pytest.approx(+4 * k * 0.5 / M, rel=1e-9)
+    assert m.f(0.0, state(z=3.0), hover_u())[5] == pytest.approx(0.0, abs=1e-12)
+    # the loss goes as sqrt(f / B): at a quarter of the hover thrust per rotor, half of it
+    d = math.sqrt(FH / 4 / H1)
+    u = (H2 + d,) * 4 + (BATT,)
+    assert m.f(0.0, state(z=3.0, vz=1.0), u)[5] == pytest.approx((FH - 4 * k * 0.5 * 1.0) / M - G, rel=1e-9)
+
+
+def test_effect_rotor_inflow_damps_roll_and_pitch():
+    k = 0.32
+    m = Model(Airframe(), (fx.make("rotor_inflow", k=k),))
+    # rolling at p = 1 rad/s: rotor 2 at (0, +l) rises at l p and loses k l p, rotor 4 gains it
+    xd = m.f(0.0, state(z=3.0, p=1.0), hover_u())
+    assert xd[9] == pytest.approx(-2 * k * L * L * 1.0 / JXX, rel=1e-12)    # -2.8 rad/s^2: damping
+    assert xd[5] == pytest.approx(0.0, abs=1e-12)                             # no net heave change
+    # pitching at q = 1 rad/s: rotor 1 at (+l, 0) falls (w - q l), gains thrust; rotor 3 loses it
+    xd = m.f(0.0, state(z=3.0, q=1.0), hover_u())
+    assert xd[10] == pytest.approx(-2 * k * L * L * 1.0 / JYY, rel=1e-12)
+    # the axial speed is along z_b: a vehicle rolled by 90 deg moving up has none
+    xd = m.f(0.0, state(z=3.0, vz=1.0, phi=math.pi / 2), hover_u())
+    assert xd[9:11] == pytest.approx([0.0, 0.0], abs=1e-12)
+    assert xd[4] == pytest.approx(-4 * FH / M, rel=1e-9)    # the whole thrust along -y, none lost
+
+
+def test_effect_motor_dynamics_ccw_speed_up_yaws_clockwise():
+    tau = 0.04
+    e = fx.make("motor_dynamics", tau=tau)
+    m = Model(Airframe(), (e,))
+    W = math.sqrt(FH / C1)                       # hover speed, eq. 27: about 524 rad/s
+    assert m.n == 16 and m.initial_state(hover_u())[12:] == pytest.approx([W] * 4, rel=1e-12)
+    # in hover, the counter-clockwise rotors 2 and 4 are commanded 4 P units more
+    u = hover_u((0.0, 4.0, 0.0, 4.0))
+    Wc = math.sqrt(H1 * (D + 4.0) ** 2 / C1)      # eq. 26 and 27: the commanded speed
+    xd = m.f(0.0, state(z=3.0) + [W] * 4, u)
+    assert xd[12:16] == pytest.approx([0.0, (Wc - W) / tau, 0.0, (Wc - W) / tau], rel=1e-12, abs=1e-9)
+    # the speeds, so the thrusts and drag torques, have not changed yet; the body takes the reaction
+    # -Jp (dW2 + dW4) about z_b: clockwise seen from above (r decreasing), the same way as the
+    # drag torque -tau_2 - tau_4 of those rotors will turn it once they are faster (conventions.md)
+    assert xd[11] == pytest.approx(-JP * 2 * (Wc - W) / tau / JZZ, rel=1e-9)
+    assert xd[11] < 0
+    assert xd[5] == pytest.approx(0.0, abs=1e-12) and xd[9:11] == pytest.approx([0.0, 0.0], abs=1e-12)
+    # motor_lag in the same state: no yaw at all until the thrusts move
+    lag = Model(Airframe(), (fx.make("motor_lag", tau=tau),))
+    assert lag.f(0.0, state(z=3.0) + [FH] * 4, u)[11] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_effect_motor_dynamics_thrust_torque_and_momentum_follow_the_lagged_speeds():
+    m = Model(Airframe(), (fx.make("motor_dynamics", tau=0.05),))
+    W = [500.0, 510.0, 520.0, 530.0]
+    u = hover_u()
+    Wc = math.sqrt(FH / C1)
+    xd = m.f(0.0, state(z=3.0, q=1.0) + W, u)
+    f = [C1 * w * w for w in W]                                    # eq. 27
+    tq = [G1 * fi + G2 for fi in f]                                # eq. 28
+    Omega = -W[0] + W[1] - W[2] + W[3]                             # eq. 9 with the lagged speeds
+    spin_up = sum(s * (Wc - w) / 0.05 for s, w in zip((-1, 1, -1, 1), W))
+    assert xd[5] == pytest.approx(sum(f) / M - G, rel=1e-12)
+    assert xd[9] == pytest.approx((L * (f[1] - f[3]) - 1.0 * JP * Omega) / JXX, rel=1e-12)   # q hz, r = 0
+    assert xd[10] == pytest.approx(L * (f[2] - f[0]) / JYY, rel=1e-12)
+    assert xd[11] == pytest.approx((tq[0] - tq[1] + tq[2] - tq[3] - JP * spin_up) / JZZ, rel=1e-12)
 
 
 def test_parse_effect():

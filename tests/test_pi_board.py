@@ -1,13 +1,15 @@
 """The pi board wired from its TOML file, against the fakes: a fake pigpiod (ESC output, sonar) through
-the real pigpio client, the register-level MPU-9250 as the SPI device, a fake SMBus with an INA219."""
+the real pigpio client, the register-level MPU-9250 as the SPI device, the simulated INA219 on its I2C bus."""
 from __future__ import annotations
 
 import pytest
 
+import dataclasses
+
 from fakes.pigpiod import running
-from fakes.smbus import FakeIna219, FakeSMBus
-from flightctl.boards import make_hal
+from flightctl.boards import MIN_BATTERY_V, BoardOptions, BoardUnavailable, open_board
 from flightctl.clock import WallClock
+from flightctl.drivers import esc
 from flightctl.drivers.esc import PigpioEsc
 from flightctl.drivers.hcsr04 import HcSr04
 from flightctl.drivers.ina219 import Ina219
@@ -15,20 +17,44 @@ from flightctl.drivers.mpu9250 import ImuError, Mpu9250
 from flightctl.errors import InputError
 from flightctl.hal import ImuSample
 from flightctl.params import load
-from flightctl.pi import BoardConfig, load_board, open_pi_board
+from flightctl.pi import SECTIONS, load_board, open_pi_board
 from flightctl.sim.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.power import SimIna219, SimSMBus
 
 
-def test_the_shipped_board_file_is_the_defaults():
+def test_the_shipped_board_file_is_the_quadcopters_wiring():
     config = load_board()
     assert config.esc.pins == (17, 27, 22, 25)
     assert (config.sonar.trigger_pin, config.sonar.echo_pin) == (23, 24)
     assert (config.imu.spi_bus, config.imu.spi_device) == (0, 0)
     assert (config.power.i2c_bus, config.power.address) == (1, 0x40)
     assert config.pigpio.host == "127.0.0.1"
-    defaults = BoardConfig()
-    assert (config.esc, config.imu, config.sonar, config.power, config.checks) == \
-        (defaults.esc, defaults.imu, defaults.sonar, defaults.power, defaults.checks)
+    # what the shipped file leaves out: the ESC driver's own defaults and every board's battery threshold
+    assert (config.esc.stop_us, config.esc.max_us, config.esc.deadman_ms, config.esc.tolerance_hz) == \
+        (esc.STOP_US, esc.MAX_US, esc.DEADMAN_MS, esc.FREQUENCY_TOLERANCE_HZ)
+    assert config.checks.min_battery_v == MIN_BATTERY_V
+
+
+def test_every_board_file_key_has_a_unit_a_range_and_a_description():
+    for section, cls in SECTIONS.items():
+        for f in dataclasses.fields(cls):
+            m = f.metadata
+            assert m["doc"], f"{section}.{f.name}"
+            if f.type != "str":
+                assert m["lo"] < m["hi"], f"{section}.{f.name}"
+                if f.default is not dataclasses.MISSING:
+                    assert m["lo"] <= f.default <= m["hi"], f"{section}.{f.name}"
+
+
+def test_a_board_file_replaces_only_the_keys_it_gives(tmp_path):
+    path = tmp_path / "board.toml"
+    path.write_text("[esc]\npins = [5, 6, 13, 19]\nstop_us = 1050\n[power]\nshunt_ohm = 0.0005\n")
+    config, shipped = load_board(path), load_board()
+    assert config.esc.pins == (5, 6, 13, 19) and config.esc.stop_us == 1050
+    assert config.esc.max_us == shipped.esc.max_us
+    assert config.power.shunt_ohm == 0.0005 and config.power.address == shipped.power.address
+    assert (config.imu, config.sonar, config.pigpio) == (shipped.imu, shipped.sonar, shipped.pigpio)
+    assert config.path == str(path)
 
 
 @pytest.mark.parametrize("text, message", [
@@ -38,7 +64,13 @@ def test_the_shipped_board_file_is_the_defaults():
     ("[esc]\npins = [17, 27, 22, 9]\n", "GPIO 9 is the SPI MISO pin"),
     ("[sonar]\ntrigger_pin = 17\n", "used twice"),
     ("[power]\naddress = \"0x40\"\n", "power.address: expected an integer"),
-    ("[esc]\nstop_us = 2200\n", "stop_us < max_us"),
+    ("[esc]\nstop_us = 1400\nmax_us = 1300\n", "stop_us < max_us"),
+    ("[esc]\ndeadman_ms = 0\n", "esc.deadman_ms: 0 ms is out of range [20, 1000]"),
+    ("[power]\naddress = 0x80\n", "power.address: 128 is out of range [3, 119]"),
+    ("[esc]\npins = [17, 27, 22, 40]\n", "esc.pins: 40 BCM GPIO is out of range [0, 31]"),
+    ("[power]\nshunt_ohm = true\n", "power.shunt_ohm: expected a number"),
+    ("[checks]\nmin_battery_v = 99\n", "checks.min_battery_v: 99 V is out of range"),
+    ("esc = 3\n", "esc: expected a table"),
 ])
 def test_bad_board_files_are_refused_naming_the_key(tmp_path, text, message):
     path = tmp_path / "board.toml"
@@ -50,7 +82,8 @@ def test_bad_board_files_are_refused_naming_the_key(tmp_path, text, message):
 def chips():
     params = load(None)
     world = World(params.airframe, noise=SensorNoise.off())
-    return params, SimMpu9250(world), FakeSMBus({0x40: FakeIna219(battery_v=16.1, current_a=0.4)})
+    world.battery.voltage, world.battery.current = 16.1, 0.4
+    return params, SimMpu9250(world), SimSMBus(SimIna219(world))
 
 
 def test_pi_board_wires_every_driver_from_the_board_file(tmp_path):
@@ -73,13 +106,25 @@ def test_pi_board_wires_every_driver_from_the_board_file(tmp_path):
         assert fake.live_wave().on_times()[5] == 1000
 
 
-def test_make_hal_pi_reaches_the_pi_board():
+def test_the_registry_opens_the_pi_board_by_name():
     params, spi, bus = chips()
     with running() as (fake, pi):
-        hal = make_hal("pi", params, pi=pi, spi=spi, smbus=bus)
-        assert isinstance(hal.motors, PigpioEsc)
-        hal.motors.stop()
-        hal.rangefinder.stop()
+        board = open_board("pi", params, BoardOptions(devices=dict(pi=pi, spi=spi, smbus=bus)))
+        assert board.name == "pi" and isinstance(board.hal.motors, PigpioEsc) and board.world is None
+        assert board.min_battery_v == MIN_BATTERY_V and board.calibrate_s == 60.0
+        assert board.meta["esc_pins"] == "[17, 27, 22, 25]"
+        board.close()
+        board.close()                            # safe twice
+        assert fake.live_wave().on_times() == {17: 1000, 27: 1000, 22: 1000, 25: 1000}
+
+
+def test_a_wrong_chip_through_the_registry_is_board_unavailable():
+    params, _, bus = chips()
+    wrong = SimMpu9250(World(params.airframe, noise=SensorNoise.off()), who_am_i=0x70)
+    with running() as (fake, pi):
+        with pytest.raises(BoardUnavailable, match="WHO_AM_I returned 0x70"):
+            open_board("pi", params, BoardOptions(devices=dict(pi=pi, spi=wrong, smbus=bus)))
+        assert fake.live_wave().on_times() == {17: 1000, 27: 1000, 22: 1000, 25: 1000}
 
 
 def test_a_wrong_imu_leaves_the_escs_at_the_stop_pulse(tmp_path):

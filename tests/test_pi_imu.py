@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from flightctl.boards import sim_board
+from flightctl.sim.board import sim_board
 from flightctl.drivers.mpu9250 import ImuError, Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.loop import MAX_BAD_IMU_FRAMES, FlightLoop

@@ -4,6 +4,7 @@ re-fly; pre-arm refusal; plan files; the ExecStopPost `--stop-motors` against th
 from __future__ import annotations
 
 import json
+import logging
 import os
 import signal
 import socket
@@ -15,11 +16,14 @@ from pathlib import Path
 import pytest
 
 from fakes.pigpiod import running
+from flightctl.cli import main as cli
 from flightctl.drivers.esc import PigpioEsc
 from flightctl.errors import InputError
 from flightctl.logfile import MAG_COLUMNS, read_flight_log
-from flightctl.service import TeardownLog, load_plan, main
-from flightctl.sim.run import TRUTH_COLUMNS
+from flightctl.plans import load_plan
+from flightctl.service import TeardownLog, main
+from flightctl.sim.board import TRUTH_COLUMNS
+from without import PI_LIBRARIES, run_without
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -147,7 +151,7 @@ def test_plan_files_are_checked(tmp_path):
         bad.write_text(text)
         with pytest.raises(InputError, match=message):
             load_plan(str(bad))
-    with pytest.raises(InputError, match="neither a plan file nor a scenario"):
+    with pytest.raises(InputError, match="neither a plan file nor a named plan"):
         load_plan("no-such-plan")
 
 
@@ -176,11 +180,49 @@ def test_stop_motors_puts_the_stop_pulse_on_whatever_a_dead_controller_left(tmp_
         assert fake.scripts == {}
 
 
-def test_stop_motors_without_pigpiod_fails_loudly(tmp_path):
+def board_without_pigpiod(tmp_path) -> Path:
     s = socket.socket()
     s.bind(("127.0.0.1", 0))
     port = s.getsockname()[1]
     s.close()                                   # nothing listens there
     board = tmp_path / "board.toml"
     board.write_text(f"[pigpio]\nport = {port}\n")
+    return board
+
+
+def test_stop_motors_without_pigpiod_fails_loudly(tmp_path):
+    board = board_without_pigpiod(tmp_path)
     assert main(["--board", "pi", "--board-file", str(board), "--stop-motors"]) == 1
+
+
+def test_stop_motors_on_the_simulator_has_nothing_to_do(caplog):
+    caplog.set_level(logging.INFO, logger="flightctl.run")
+    assert main(["--board", "sim", "--stop-motors"]) == 0
+    assert "nothing to do on the sim board" in caplog.text
+
+
+def test_the_pi_board_without_pigpiod_exits_3_with_one_line(tmp_path, caplog):
+    board = board_without_pigpiod(tmp_path)
+    assert main(["--board", "pi", "--board-file", str(board), "--plan", "hover", "--log", str(tmp_path)]) == 3
+    errors = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+    assert len(errors) == 1 and errors[0].startswith("not flying: cannot reach pigpiod")
+    assert not list(tmp_path.glob("flight-*"))
+
+
+def test_an_unknown_board_or_a_bad_board_file_is_one_line(tmp_path, capsys):
+    assert cli(["run", "--board", "hil9", "--plan", "hover"]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "flightctl run: error: unknown board 'hil9' (known: pi, sim)"]
+    board = tmp_path / "board.toml"
+    board.write_text("[esc]\ndeadman_ms = 5000\n")
+    assert cli(["run", "--board", "pi", "--board-file", str(board), "--plan", "hover", "--log", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"flightctl run: error: {board}: esc.deadman_ms: 5000 ms is out of range [20, 1000]"]
+
+
+def test_the_pi_board_on_a_machine_without_the_pi_libraries_is_one_line(tmp_path):
+    r = run_without(PI_LIBRARIES, ["run", "--board", "pi", "--plan", "hover", "--log", "logs"], tmp_path)
+    assert r.returncode == 3, r.stderr
+    assert r.stderr.strip().splitlines() == [
+        "flightctl run: not flying: the pi board needs the Python module 'pigpio', which is not installed "
+        "(install the Pi libraries with pip install 'flightctl[pi]')"]

@@ -31,22 +31,32 @@ class AttitudeEstimator:
     """The onboard estimator. `update` runs once per loop; the controller reads `roll, pitch, yaw`
     and their rates `droll, dpitch, dyaw` (the measured derivative of eq. 24's D term).
 
-    Two structures, both with the constants of Table 5 (see docs/estimator.md for why):
-    - "paper", section 4.4 read literally: the EMA-filtered gyro is integrated in the complementary
-      filter, the D term differentiates the fused angle, the accelerometer corrects tilt always.
-    - "flight" (the default): the calibrated gyro is integrated unfiltered, the D term takes the
-      EMA-filtered gyro (eq. 36-38) as the measured rate, and the accelerometer corrects tilt only
-      while the vehicle is not flying. In flight the accelerometer of a multirotor reads thrust
-      (and drag), not tilt: with the correction on, a held 5 degree command makes the true tilt
-      ramp at 5 deg / 0.28 s, and the 0.28 s EMA inside the angle loop leaves Table 6 unstable.
+    Two structures, both with the constants of Table 5 (docs/estimator.md says why):
+    - "paper", section 4.4 read literally: the EMA-filtered gyro (eq. 36-39) is integrated in the
+      complementary filters (eq. 33-35), the D term differentiates the fused angle (eq. 24), and the
+      accelerometer corrects tilt at Table 5's 0.284 s in flight as on the ground.
+    - "flight" (the default): the D term takes the gyro as the chip delivers it (its own low-pass
+      only): the 0.284 s EMA in the D path costs the roll loop most of its phase margin
+      (`flightctl analyze`). Roll and pitch integrate the gyro less an in-flight bias estimate. On
+      the ground the accelerometer corrects tilt with Table 5's alpha (where the paper tuned it,
+      and where it reads tilt); in flight it corrects through a proportional-integral complementary
+      filter (Mahony's form, both poles at -1/tau_tilt_air) whose time constant is long beside the
+      rotor-drag time M/k over which a flying multirotor's accelerometer comes to read tilt again.
+      The integral term follows a wandering gyro bias, so the tilt stays bounded in long flights.
+      Without rotor drag (the base model) the accelerometer reads no tilt in flight: tau_tilt_air = 0
+      turns the correction off there.
+    Yaw is fused with the magnetometer (eq. 32 restated for z up, eq. 35) in both.
     """
-    __slots__ = ("a_ema", "a_rp", "a_yaw", "paper", "in_flight", "p", "q", "r", "roll", "pitch", "yaw",
-                 "droll", "dpitch", "dyaw", "tilt_bias", "yaw_bias", "use_mag")
+    __slots__ = ("a_ema", "a_rp", "a_yaw", "k_air", "ki_air", "paper", "in_flight", "p", "q", "r",
+                 "roll", "pitch", "yaw", "droll", "dpitch", "dyaw", "bx", "by", "tilt_bias", "yaw_bias",
+                 "use_mag")
 
     def __init__(self, filters: Filters, structure: str = "flight"):
         if structure not in ESTIMATORS:
             raise ValueError(f"unknown estimator {structure!r} (known: {', '.join(ESTIMATORS)})")
         self.a_ema, self.a_rp, self.a_yaw = filters.alpha_ema, filters.alpha_roll_pitch, filters.alpha_yaw
+        w = 1.0 / filters.tau_tilt_air if filters.tau_tilt_air > 0.0 else 0.0   # 0: no correction in flight
+        self.k_air, self.ki_air = 2.0 * w, w * w    # (s + w)^2 = s^2 + k s + ki: critically damped
         self.paper = structure == "paper"
         self.in_flight = False
         self.set_reference((0.0, 0.0), 0.0, False)
@@ -57,31 +67,37 @@ class AttitudeEstimator:
         self.roll = self.pitch = self.yaw = 0.0
         self.p = self.q = self.r = 0.0
         self.droll = self.dpitch = self.dyaw = 0.0
+        self.bx = self.by = 0.0     # in-flight gyro bias estimate (rad/s), body x and y
 
     def update(self, s: ImuSample, dt: float) -> None:
-        """One loop: `s` holds calibrated gyro rates (bias removed)."""
-        a = self.a_ema
-        b = 1.0 - a
-        p = self.p = a * s.gx + b * self.p      # eq. 36-38
-        q = self.q = a * s.gy + b * self.q
-        r = self.r = a * s.gz + b * self.r
+        """One loop: `s` holds calibrated gyro rates (the still bias removed)."""
         roll, pitch, yaw = self.roll, self.pitch, self.yaw
         sr, cr, sp, cp = sin(roll), cos(roll), sin(pitch), cos(pitch)
-        # Euler-angle rates (Z-Y-X) of the filtered rates: the D term's measurement ("flight")
-        w = q * sr + r * cr
-        self.droll, self.dpitch, self.dyaw = p + w * sp / cp, q * cr - r * sr, w / cp
-        if not self.paper:   # the propagation integrates the unfiltered rates
-            w = s.gy * sr + s.gz * cr
-            p, q, r = s.gx, s.gy, s.gz
-        roll_g = roll + (p + w * sp / cp) * dt
-        pitch_g = pitch + (q * cr - r * sr) * dt
-        yaw_g = yaw + w / cp * dt
-        a = self.a_rp
-        if self.paper or not self.in_flight:
-            ax, ay, az = s.ax, s.ay, s.az
-            roll_g = a * roll_g + (1.0 - a) * (atan2(ay, az) - self.tilt_bias[0])        # eq. 30, 33
-            pitch_g = a * pitch_g + (1.0 - a) * (atan2(-ax, sqrt(ay * ay + az * az))     # eq. 31, 34
-                                                 - self.tilt_bias[1])
+        if self.paper:
+            a = self.a_ema
+            b = 1.0 - a
+            p = self.p = a * s.gx + b * self.p      # eq. 36-38
+            q = self.q = a * s.gy + b * self.q
+            r = self.r = a * s.gz + b * self.r
+        else:
+            p, q, r = s.gx - self.bx, s.gy - self.by, s.gz
+        w = q * sr + r * cr                         # Z-Y-X Euler-angle rates of the body rates
+        droll, dpitch, dyaw = p + w * sp / cp, q * cr - r * sr, w / cp
+        roll_g, pitch_g, yaw_g = roll + droll * dt, pitch + dpitch * dt, yaw + dyaw * dt
+        ax, ay, az = s.ax, s.ay, s.az
+        if self.paper or not self.in_flight:        # eq. 30-31, 33-34 with Table 5's alpha
+            a = self.a_rp
+            roll_g = a * roll_g + (1.0 - a) * (atan2(ay, az) - self.tilt_bias[0])
+            pitch_g = a * pitch_g + (1.0 - a) * (atan2(-ax, sqrt(ay * ay + az * az)) - self.tilt_bias[1])
+        else:                                       # the in-flight PI correction
+            er = atan2(ay, az) - self.tilt_bias[0] - roll_g
+            ep = atan2(-ax, sqrt(ay * ay + az * az)) - self.tilt_bias[1] - pitch_g
+            k = self.k_air * dt
+            roll_g += k * er
+            pitch_g += k * ep
+            ki = self.ki_air * dt                   # the error in Euler rates, back to body x and y
+            self.bx -= ki * er
+            self.by -= ki * (ep * cr)
         if self.use_mag and s.mag_fresh:         # eq. 35, the difference taken across +-pi
             # level the field with the chip's own tilt (estimate plus mounting bias), as the
             # calibration did when it took the heading reference
@@ -90,8 +106,9 @@ class AttitudeEstimator:
             yaw_g += (1.0 - self.a_yaw) * ((yaw_mag - yaw_g + pi) % (2 * pi) - pi)
         yaw_g = (yaw_g + pi) % (2 * pi) - pi
         if self.paper:   # eq. 24 literally: the difference quotient of the fused angles
-            self.droll, self.dpitch = (roll_g - roll) / dt, (pitch_g - pitch) / dt
-            self.dyaw = ((yaw_g - yaw + pi) % (2 * pi) - pi) / dt
+            droll, dpitch = (roll_g - roll) / dt, (pitch_g - pitch) / dt
+            dyaw = ((yaw_g - yaw + pi) % (2 * pi) - pi) / dt
+        self.droll, self.dpitch, self.dyaw = droll, dpitch, dyaw
         self.roll, self.pitch, self.yaw = roll_g, pitch_g, yaw_g
 
 

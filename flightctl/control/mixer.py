@@ -1,11 +1,12 @@
 """The mixer of eq. 25 with the tilt correction of u_z and the limits of Table 3, then eq. 26
-inverted (thrust -> command value P) and P -> PWM counts on pigpio's 0..40000 range."""
+inverted (thrust -> command value P, `flightctl.physics`) and P -> PWM counts on pigpio's 0..40000 range."""
 from __future__ import annotations
 
-from math import cos, sqrt
+from math import cos
 
 from flightctl.hal import PWM_RANGE
 from flightctl.params import Airframe
+from flightctl.physics import command_from_thrust
 
 MIN_TILT_COSINE = 0.5  # beyond 60 degrees of tilt the u_z correction is held (and the vehicle is lost)
 
@@ -31,9 +32,9 @@ class Mixer:
         f[1] = base + uphi - upsi
         f[2] = base + utheta + upsi
         f[3] = base - uphi - upsi
-        fmax, h1, h2, scale = self.fmax, self.h1, self.h2, self.scale
+        fmax, h1, h2, scale, command = self.fmax, self.h1, self.h2, self.scale, command_from_thrust
         for i in range(4):
             fi = f[i]
             fi = fmax if fi > fmax else fi if fi > 0.0 else 0.0   # NaN -> 0: never a NaN command
             f[i] = fi
-            counts[i] = int(scale * (h2 + sqrt(fi / h1)) + 0.5)   # eq. 26 inverted, then rounded counts
+            counts[i] = int(scale * command(fi, h1, h2) + 0.5)    # eq. 26 inverted, then rounded counts

@@ -1,5 +1,5 @@
 """HC-SR04 ultrasonic rangefinder on pigpio: a 10 us trigger pulse, the echo width measured from
-either-edge callbacks with microsecond ticks (`pigpio.tickDiff`, wrap-safe), a watchdog for the
+either-edge callbacks with microsecond ticks (`tick_diff`, wrap-safe), a watchdog for the
 no-echo and stuck-high cases, and out-of-range readings rejected.
 
 `gpio` is a `pigpio.pi` on the quadcopter and `sim.devices.SimGpio` in simulation: the same edge
@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import math
 
-import pigpio
 
-from flightctl.hal import Gpio
+from flightctl.hal import EITHER_EDGE, GPIO_INPUT, GPIO_OUTPUT, LEVEL_TIMEOUT, Gpio, tick_diff
 
 US_PER_M = 5831.0           # echo width per metre: there and back at 343 m/s
 MIN_RANGE_M, MAX_RANGE_M = 0.02, 4.0
@@ -29,9 +28,9 @@ class HcSr04:
         self._cb = None
 
     def start(self) -> None:
-        self.gpio.set_mode(self.trigger_pin, pigpio.OUTPUT)
-        self.gpio.set_mode(self.echo_pin, pigpio.INPUT)
-        self._cb = self.gpio.callback(self.echo_pin, pigpio.EITHER_EDGE, self._edge)
+        self.gpio.set_mode(self.trigger_pin, GPIO_OUTPUT)
+        self.gpio.set_mode(self.echo_pin, GPIO_INPUT)
+        self._cb = self.gpio.callback(self.echo_pin, EITHER_EDGE, self._edge)
         self.gpio.set_watchdog(self.echo_pin, WATCHDOG_MS)
 
     def stop(self) -> None:
@@ -52,13 +51,13 @@ class HcSr04:
         if level == 1:
             self._rise = tick
         elif level == 0 and self._rise is not None:
-            width_us = pigpio.tickDiff(self._rise, tick)
+            width_us = tick_diff(self._rise, tick)
             self._rise = None
             self._waiting = False
             distance = width_us / US_PER_M
             self._finish(distance if MIN_RANGE_M <= distance <= MAX_RANGE_M else math.nan)
-        elif level == pigpio.TIMEOUT and self._waiting and (
-                self._rise is not None or pigpio.tickDiff(self._t_trigger, tick) >= 1000 * WATCHDOG_MS):
+        elif level == LEVEL_TIMEOUT and self._waiting and (
+                self._rise is not None or tick_diff(self._t_trigger, tick) >= 1000 * WATCHDOG_MS):
             # no edge for WATCHDOG_MS since the trigger: no echo came back, or the echo line is stuck
             # high (pigpio repeats the report on a quiet line, so one may land just after a trigger)
             self._rise = None

@@ -12,8 +12,7 @@ import time
 
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.hal import ImuSample, SpiDevice
-
-G = 9.80665
+from flightctl.physics import G
 _HEAD = struct.Struct(">7h")    # accel x y z, temperature, gyro x y z: big-endian int16
 _MAG = struct.Struct("<3hB")     # then the AK8963 data, little-endian int16, and ST2
 

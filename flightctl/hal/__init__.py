@@ -1,7 +1,8 @@
 """The hardware abstraction layer: one narrow Protocol per device kind.
 
 Backends are siblings: the Pi drivers in `flightctl.drivers` and the simulated devices in
-`sim.devices`, wired into a `Hal` by `flightctl.boards` only. The simulated backends sit at the
+`flightctl.sim.devices`, wired into a `Hal` only by the boards of the registry `flightctl.boards`
+(`flightctl/pi.py`, `sim/board.py`). The simulated backends sit at the
 lowest boundary that can be emulated (SPI register reads, GPIO edges with microsecond ticks, PWM
 counts), so the real drivers' decode and timing code runs in every simulation.
 """
@@ -30,6 +31,16 @@ class SpiDevice(Protocol):
     max_speed_hz: int
 
     def xfer2(self, data: list[int]) -> list[int]: ...
+
+
+# pigpio's protocol values for the calls below (pigpio.py: INPUT, OUTPUT, EITHER_EDGE, and the level
+# TIMEOUT of a watchdog report), kept here so that the simulator runs without the Pi libraries
+GPIO_INPUT, GPIO_OUTPUT, EITHER_EDGE, LEVEL_TIMEOUT = 0, 1, 2, 2
+
+
+def tick_diff(t1: int, t2: int) -> int:
+    """Microseconds from tick t1 to t2 across the 32-bit wrap (as `pigpio.tickDiff`)."""
+    return (t2 - t1) & 0xFFFFFFFF
 
 
 @runtime_checkable

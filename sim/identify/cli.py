@@ -93,8 +93,9 @@ def identify(args) -> Identified:
         _check_params_update(args.write_params, result.values)
     image = None
     if args.plot:
-        from flightctl.sim.identify.plots import png
-        image = png(result.figure())
+        from flightctl.sim.identify.plots import FIGURES
+        from flightctl.sim.plots import png
+        image = png(FIGURES[args.kind](*result.figure_data))
     Path(args.json).write_text(json.dumps(result.report, indent=2) + "\n")
     if args.write_params:
         paramfile.update_file(args.write_params, result.values, f"flightctl identify {args.kind} {args.file}")
@@ -109,8 +110,10 @@ def main(argv: list[str]) -> int:
         from flightctl.sim.identify import realdata
         lines = realdata.convert(args.runs, args.out)
     elif args.kind == "real-data":
-        from flightctl.sim.identify import realdata
-        lines = realdata.report(args.data, args.out)
+        from flightctl.sim.identify import realdata, realplots
+        data_dir, out_dir = realdata.report_dirs(args.data, args.out)
+        res = realdata.analyse(data_dir)
+        lines = realdata.write_report(res, realplots.images(res), args.data, out_dir)
     else:
         lines = identify(args).summary
     print("\n".join(lines))

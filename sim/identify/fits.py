@@ -7,7 +7,6 @@ Standard errors come from the covariance of the fit, `s^2 (J^T J)^-1` with `s^2 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -22,11 +21,13 @@ class FitError(ValueError):
 @dataclass(frozen=True)
 class Identified:
     """What one identification gives the command line: the JSON report, a few lines for a human,
-    the fitted values under the names of conventions.md (for a parameter file) and the figure."""
+    the fitted values under the names of conventions.md (for a parameter file), and what its figure
+    draws: the arguments of `plots.FIGURES[kind]`, drawn only when a plot is asked for (the fits
+    never import the figures)."""
     report: dict
     summary: list[str]
     values: dict[str, float]
-    figure: Callable[[], object]  # -> matplotlib Figure; called only when a plot is asked for
+    figure_data: tuple
 
 
 @dataclass(frozen=True)

@@ -54,11 +54,7 @@ def identify_pendulum(table, airframe) -> Identified:
               "trials": {k: len(v) for k, v in groups.items()}, "M": M, "g": g}
     lines = [f"pendulum {table.path}: M = {M:g} kg, eq. 17-18 per trial, averaged per axis"]
     lines += [f"  {k} = {p['value']:.5g} ± {p['stderr']:.2g} kg m^2 ({len(groups[k])} trials)" for k, p in params.items()]
-
-    def figure():
-        from flightctl.sim.identify import plots
-        return plots.per_group("Pendulum inertia per trial (eq. 17-18)", "J_C (kg m^2)", groups, params)
-    return Identified(report, lines, {k: p["value"] for k, p in params.items()}, figure)
+    return Identified(report, lines, {k: p["value"] for k, p in params.items()}, (groups, params))
 
 
 def identify_rotor(table, airframe) -> Identified:
@@ -83,9 +79,5 @@ def identify_rotor(table, airframe) -> Identified:
               "per_rotor": {str(i): {"Jp": sum(v.values()), **v} for i, v in rotors.items()}}
     lines = [f"rotor {table.path}: {len(rotors)} rotors, eq. 19-21, averaged",
              f"  Jp = {params['Jp']['value']:.4g} ± {params['Jp']['stderr']:.2g} kg m^2"]
-
-    def figure():
-        from flightctl.sim.identify import plots
-        return plots.per_group("Rotor inertia per rotor (eq. 19-21)", "Jp (kg m^2)", {"Jp": Jp}, params,
-                               labels=[f"rotor {i}" for i in rotors])
-    return Identified(report, lines, {"Jp": params["Jp"]["value"]}, figure)
+    labels = [f"rotor {i}" for i in rotors]
+    return Identified(report, lines, {"Jp": params["Jp"]["value"]}, ({"Jp": Jp}, params, labels))

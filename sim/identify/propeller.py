@@ -15,18 +15,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flightctl.physics import thrust_from_command, thrust_from_speed
 from flightctl.sim.identify.fits import (Fit, FitError, Identified, check_count, linear_fit, nonlinear_fit, r_squared,
-                               require, rms, whole_numbers)
+                                         require, rms, whole_numbers)
 
 FITS = {"thrust_P": ("h1", "h2"), "thrust_omega": ("c1",), "torque": ("g1", "g2")}
 NAMES = tuple(n for names in FITS.values() for n in names)
 STDERR_METHOD = ("top-level stderr propagated from the per-motor fits, sqrt(sum of stderr^2) / n; "
                  "motor_spread is the standard deviation of the per-motor values / sqrt(n)")
-
-
-def thrust_from_command(P, h1, h2):
-    """Eq. 26, zero in the dead zone P <= h2."""
-    return h1 * np.clip(P - h2, 0.0, None) ** 2
 
 
 def torque_from_power(voltage, current, omega):
@@ -37,10 +33,10 @@ def torque_from_power(voltage, current, omega):
 def predict(fit: str, x, v: dict[str, float]):
     """The model of one fit with parameter values v: thrust_P(P), thrust_omega(w), torque(f)."""
     if fit == "thrust_P":
-        return thrust_from_command(x, v["h1"], v["h2"])
+        return thrust_from_command(x, v["h1"], v["h2"])   # eq. 26
     if fit == "thrust_omega":
-        return v["c1"] * x ** 2   # eq. 27
-    return v["g1"] * x + v["g2"]  # eq. 28 (f > 0 on the bench)
+        return thrust_from_speed(x, v["c1"])              # eq. 27
+    return v["g1"] * x + v["g2"]   # eq. 28 as fitted: the straight line through the bench points (f > 0)
 
 
 def motor_points(P, thrust, omega, voltage, current) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -140,8 +136,4 @@ def identify(table, airframe) -> Identified:
     for fit, names in FITS.items():
         params = ", ".join(f"{n} = {result.value[n]:.4g} ± {result.stderr[n]:.2g} {units[n]}" for n in names)
         lines.append(f"  {fit:<12} {params}; rms {report['residual_rms'][fit]:.3g}, R^2 {report['r2'][fit]:.4f}")
-
-    def figure():
-        from flightctl.sim.identify import plots
-        return plots.bench(result)
-    return Identified(report, lines, dict(result.value), figure)
+    return Identified(report, lines, dict(result.value), (result,))

@@ -4,7 +4,8 @@ The paper (sec. 3.2.1) has no torque sensor: it takes the reaction torque from e
 `tau = V I / w` (eq. 13-16), and assumes `f = c1 w^2` (eq. 27). The RCbenchmark 1580 stand measures
 the reaction torque, and the UIUC static tests give the thrust coefficient over speed, so both
 assumptions can be held against measurements. `flightctl identify real-data --out docs` regenerates
-the figures and the block of numbers in docs/identification.md.
+the figures (realplots.py, which imports this module, never the reverse) and the block of numbers in
+docs/identification.md.
 """
 from __future__ import annotations
 
@@ -16,12 +17,13 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.logfile import BENCH_COLUMNS, read_table
 from flightctl.params import Airframe
+from flightctl.physics import G
 from flightctl.sim.identify.fits import rms
 from flightctl.sim.identify.propeller import torque_from_power
 
 RCB = {"esc": "ESC signal (µs)", "torque": "Torque (N·m)", "thrust": "Thrust (gf)",
        "voltage": "Voltage (V)", "current": "Current (A)", "rpm": "Motor Electrical Speed (RPM)"}
-GF = 9.80665e-3                 # N per gram-force
+GF = G * 1e-3                   # N per gram-force
 RPM = 2 * np.pi / 60            # rad/s per rev/min
 ESC_HZ = Airframe().esc_pwm_hz  # 449 Hz: P = pulse_s * 449 * 255 (conventions.md)
 ESC_OFF_US = 1000.0             # at or below this pulse width the ESC holds the motor off
@@ -29,6 +31,7 @@ UIUC_COLUMNS = ("volume", "PropName", "D_in", "N_rpm", "CT")
 LARGE_IN = 11.0                 # propellers this large (inches) or more are like the reference 12-inch one
 MIN_STEPS = 9                   # steps a run needs to hold out a third and still fit every model
 BEGIN, END = "<!-- real-data:begin -->", "<!-- real-data:end -->"
+FIGURE_FILES = {"torque": "real_torque.png", "ct": "real_ct.png", "held_out": "real_heldout.png"}  # realplots.py
 
 
 @dataclass(frozen=True)
@@ -217,18 +220,20 @@ def default_data_dir() -> Path:
     return Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
 
 
-def report(data: str | None, out: str) -> list[str]:
-    """Analyse, draw and write OUT/real_*.png and the generated block of OUT/identification.md."""
+def report_dirs(data: str | None, out: str) -> tuple[Path, Path]:
+    """The real data (`--data`, default `default_data_dir()`) and the output directory, checked."""
     data_dir = Path(data) if data else default_data_dir()
     if not (data_dir / "rcbenchmark").is_dir() or not (data_dir / "uiuc-static").is_dir():
         raise InputError(f"{data_dir}: no rcbenchmark/ and uiuc-static/ here; give the real data with --data DIR")
     out_dir = Path(out)
     if not out_dir.is_dir():
         raise InputError(f"{out}: not a directory")
-    res = analyse(data_dir)
-    from flightctl.sim.identify import realplots
-    images = {"real_torque.png": realplots.torque(res), "real_ct.png": realplots.ct(res),
-              "real_heldout.png": realplots.held_out(res)}
+    return data_dir, out_dir
+
+
+def write_report(res: dict, images: dict[str, bytes], data: str | None, out_dir: Path) -> list[str]:
+    """Write the figures (file name -> PNG, drawn by realplots.py) and the generated block of
+    OUT/identification.md."""
     block = markdown(res, data)
     for name, image in images.items():
         (out_dir / name).write_bytes(image)
@@ -292,7 +297,7 @@ def markdown(res: dict, data: str | None) -> str:
                        f"{r['eta_min']:.2f}", f"{r['eta_median']:.2f}", f"{r['eta_max']:.2f}", f"{r['g1_ratio']:.2f}",
                        f"{r['loss'][0]:.2f}", f"{r['loss'][1]:.1f}"]
                       for n, r in runs.items()]), "",
-             "![torque](real_torque.png)", "",
+             f"![torque]({FIGURE_FILES['torque']})", "",
              "#### (b) Thrust coefficient over speed (eq. 27 assumes it constant)", "",
              f"UIUC: CT changes over each propeller's tested speeds by a median **{100 * np.median(u['change']):+.1f} %** "
              f"(5th to 95th percentile {100 * np.percentile(u['change'], 5):+.1f} % to "
@@ -306,7 +311,7 @@ def markdown(res: dict, data: str | None) -> str:
              f"`c2 < 0` in {sum(r['c2'] < 0 for r in runs.values())} of {len(runs)} files.", "",
              "UIUC held out every third speed, relative thrust RMSE, median over propellers: "
              + ", ".join(f"{m} **{100 * np.median(v):.1f} %**" for m, v in u["rel"].items()) + ".", "",
-             "![CT](real_ct.png)", "",
+             f"![CT]({FIGURE_FILES['ct']})", "",
              "#### (c) Extended models scored on held-out steps", "",
              "Each file is fitted without its held-out steps and scored on them: `interleaved` holds out every "
              "third ESC step, `extrapolation` holds out the fastest third. Thrust RMSE in mN, torque RMSE in mN m. "
@@ -320,5 +325,5 @@ def markdown(res: dict, data: str | None) -> str:
         lines += _table(["file", *models],
                         [[short[n], *(f"{1e3 * r['rmse'][split][m]:.3g}" for m in models)] for n, r in runs.items()])
         lines.append("")
-    lines += ["In words: " + "; ".join(verdicts(res)) + ".", "", "![held-out](real_heldout.png)", END]
+    lines += ["In words: " + "; ".join(verdicts(res)) + ".", "", f"![held-out]({FIGURE_FILES['held_out']})", END]
     return "\n".join(lines)

@@ -7,14 +7,10 @@ import numpy as np
 from flightctl.sim.identify.fits import Identified, linear_fit, require
 
 
-def drag_torque(r, gamma1, gamma2):
-    """Eq. 6."""
-    return (gamma1 * r ** 2 + gamma2) * np.sign(r)
-
-
 def identify(table, airframe) -> Identified:
     r, tau = table["yaw_rate"], table["torque"]
     require(table, "yaw_rate", r != 0, "the yaw rate must not be 0 (one row per steady spin)")
+    # eq. 6 (flightctl.physics.yaw_drag) is linear in gamma1, gamma2: columns r |r| and sgn(r)
     fit = linear_fit(np.column_stack([r * np.abs(r), np.sign(r)]), tau, ("gamma1", "gamma2"))
     report = {"kind": "yaw-drag", "file": table.path, **fit.params(),
               "residual_rms": {"torque": fit.rms}, "r2": {"torque": fit.r2},
@@ -23,8 +19,4 @@ def identify(table, airframe) -> Identified:
              f"  gamma1 = {fit['gamma1']:.4g} ± {fit.error('gamma1'):.2g} N m/(rad/s)^2, "
              f"gamma2 = {fit['gamma2']:.4g} ± {fit.error('gamma2'):.2g} N m; "
              f"rms {fit.rms:.3g} N m, R^2 {fit.r2:.4f}"]
-
-    def figure():
-        from flightctl.sim.identify import plots
-        return plots.yaw_drag(r, tau, fit)
-    return Identified(report, lines, {"gamma1": fit["gamma1"], "gamma2": fit["gamma2"]}, figure)
+    return Identified(report, lines, {"gamma1": fit["gamma1"], "gamma2": fit["gamma2"]}, (r, tau, fit))

@@ -17,7 +17,8 @@ from pathlib import Path
 from flightctl import params as paramfile
 from flightctl.errors import InputError
 from flightctl.logfile import read_flight_log
-from flightctl.sim.identify import diagnose as dg
+from flightctl.sim.identify.diagnose import report as diagnose_report
+from flightctl.sim.identify.diagnose.verdict import diagnose, say
 
 MIN_LOG_S = 2.0   # a log shorter than this cannot hold a take-off and a flight: too short to judge
 
@@ -52,7 +53,7 @@ def _check_writable(path: Path) -> None:
 
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
-    progress = (lambda *a: None) if args.quiet else dg.say
+    progress = (lambda *a: None) if args.quiet else say
     t0 = time.perf_counter()
     params = paramfile.load(args.params)
     out_json = Path(args.json)
@@ -65,8 +66,7 @@ def main(argv: list[str]) -> int:
     for log in args.logs:
         progress(f"reading {log}")
         tables.append(read_flight_log(log, min_seconds=MIN_LOG_S, min_rows=10))
-    d = dg.diagnose(tables, params.airframe, progress)
-    from flightctl.sim.identify import diagnose_report
+    d = diagnose(tables, params.airframe, progress)
     report_text = diagnose_report.text(d)
     images = diagnose_report.figures(d) if plots else {}
     report = d.report()

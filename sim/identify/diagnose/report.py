@@ -3,11 +3,11 @@ whiteness, its cross-correlation with each input) and figures (residual against 
 against the variable that explains it). matplotlib is imported only when figures are asked for."""
 from __future__ import annotations
 
-import io
-
 import numpy as np
 
-from flightctl.sim.identify.diagnose import CHANNELS, UNITS, C, Diagnosis, Result
+from flightctl.sim.identify.diagnose.candidate import Result
+from flightctl.sim.identify.diagnose.dataset import CHANNELS, UNITS, C
+from flightctl.sim.identify.diagnose.verdict import Diagnosis
 
 LB_LAGS = 10          # Ljung-Box lags, on the residual decimated to the low-pass bandwidth
 XCORR_MAX_S = 0.25    # cross-correlations are searched over lags within +-this
@@ -71,21 +71,27 @@ def text(d: Diagnosis) -> str:
     L.append(f"  {ds.seconds:.1f} s airborne, {ds.n} samples at {ds.fs:.0f} Hz, {len(ds.stretches)} stretch(es)")
     L.append(f"  metric: {rep['metric']}")
     L.append("")
-    L.append(f"  {'candidate':<16} {'parameters':<34} {'gain':>8} {'t':>7}  named?")
+    L.append(f"  {'candidate':<16} {'parameters':<34} {'gain':>8} {'t':>7}  {'best channel (gain, t)':<24} named?")
     for c in rep["candidates"]:
         params = ", ".join(f"{k}={v:.4g}" if isinstance(v, (int, float)) else f"{k}={v}"
                            for k, v in c["parameters"].items())
+        ch, cg = max(c["channels"].items(), key=lambda kv: -math.inf if kv[1]["gain"] is None else kv[1]["gain"])
+        named = "yes" if c["cause"] == d.cause else "significant" if c["significant"] else "no"
+        if c["significant"] and c["significant_in"] != "all channels":
+            named += f" (in {c['significant_in']})"
         L.append(f"  {c['cause']:<16} {params:<34} {c['gain']:>+8.4f} {c['t_stat']:>7.1f}  "
-                 f"{'yes' if c['cause'] == d.cause else 'significant' if c['significant'] else 'no'}")
+                 f"{ch + ' ' + format(cg['gain'], '+.3f') + ', ' + format(cg['t'], '.1f'):<24} {named}")
     for nj in rep["not_judged"]:
         L.append(f"  {nj['cause']:<16} not judged: {nj['why']}")
     L.append("")
     if d.cause == "none":
-        L.append(f"  verdict: none (no candidate has a held-out gain >= {rep['significance']['min_gain']} "
-                 f"with t >= {rep['significance']['t_crit']})")
+        sig = rep["significance"]
+        L.append(f"  verdict: none (no candidate has a held-out gain >= {sig['min_gain']} with t >= "
+                 f"{sig['t_crit']}, nor one channel's gain >= {sig['min_channel_gain']} "
+                 f"with t >= {sig['t_channel']})")
     else:
         L.append(f"  verdict: {d.cause} {d.parameters}: held-out RMSE {d.rmse_base:.4g} -> {d.rmse_extended:.4g}, "
-                 f"gain {d.gain:.3f}")
+                 f"gain {d.gain:.3f} (significant in {d.significant[d.cause]})")
     best = next((r for r in d.results if r.cause == d.cause), None)
     L.append("")
     L.append(_residual_table(d, best))
@@ -128,9 +134,7 @@ def _residual_table(d: Diagnosis, best: Result | None) -> str:
 def figures(d: Diagnosis) -> dict[str, bytes]:
     """{"residuals": png, "explained": png}: residual (base, extended) against time for every channel,
     and the base residual of the most changed channel against the variable that explains it."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from flightctl.sim.plots import figure, legend, png
 
     ds = d.ds
     best = next((r for r in d.results if r.cause == d.cause), None)
@@ -139,7 +143,8 @@ def figures(d: Diagnosis) -> dict[str, bytes]:
     ext = shown.score.residual if shown is not None else base
     t = ds.time
     out = {}
-    fig, axes = plt.subplots(C, 1, figsize=(9, 11), sharex=True)
+    fig, axes = figure(C, 1, size=(9, 11), sharex="col")
+    axes = axes[:, 0]
     step = max(1, ds.n // 6000)
     for c, ax in enumerate(axes):
         ax.plot(t[::step], base[c, ::step], ",", color="tab:red", label="base model")
@@ -150,9 +155,10 @@ def figures(d: Diagnosis) -> dict[str, bytes]:
     axes[0].set_title(f"held-out residual, base (red) and {shown.cause if shown else '-'} (blue); "
                       f"verdict: {d.cause}", fontsize=9)
     axes[-1].set_xlabel("time in the log [s] (airborne stretches only)")
-    out["residuals"] = _png(fig, plt)
+    out["residuals"] = png(fig)
 
-    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    fig, axes = figure(size=(9.5, 4.5))   # room for the legend beside the data
+    ax = axes[0, 0]
     if shown is not None and shown.explanatory is not None:
         change = np.sqrt(np.mean((base - ext) ** 2, axis=1)) / np.sqrt(np.mean(base ** 2, axis=1))
         c = int(np.argmax(change))
@@ -164,18 +170,10 @@ def figures(d: Diagnosis) -> dict[str, bytes]:
                 label=f"what {shown.cause} {shown.parameters} predicts")
         ax.set_xlabel(shown.explains)
         ax.set_ylabel(f"{CHANNELS[c]} [{UNITS[c]}]")
-        ax.legend(fontsize=7, markerscale=4)
+        legend(ax, fontsize=7, markerscale=4)
         ax.set_title(f"residual against the variable that explains it ({CHANNELS[c]})", fontsize=9)
     else:
         ax.text(0.5, 0.5, "no candidate judged", ha="center")
-    out["explained"] = _png(fig, plt)
+    out["explained"] = png(fig)
     return out
-
-
-def _png(fig, plt) -> bytes:
-    buf = io.BytesIO()
-    fig.tight_layout()
-    fig.savefig(buf, format="png", dpi=90)
-    plt.close(fig)
-    return buf.getvalue()
 

@@ -1,0 +1,81 @@
+"""Derive the as-flown terms of the paper's vehicle from first principles and write the shipped
+parameter file `flightctl/vehicles/paper-as-flown.toml` (`--params paper-as-flown`).
+
+    python scripts/as_flown.py            # print the derivation and rewrite the file
+
+Every number below carries its provenance; docs/as-flown.md explains the physics.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+from flightctl.params import VEHICLES, EffectSpec, Filters, Params, dumps
+
+RHO = 1.225                 # kg/m^3, ISA sea level (the UIUC data's density)
+BLADES = 2
+CHORD_75 = 0.024            # m, chord at 0.75 R of a 12-inch two-blade multirotor propeller (DJI 1238 class)
+LIFT_SLOPE = 5.7            # 1/rad, 2-D thin-aerofoil 2 pi less the usual 3-D/low-Reynolds loss
+KV = 920.0                  # RPM/V: a ~900 KV 12-inch-class motor on 4S (hover near 40 % throttle)
+R_PHASE = 0.10              # ohm, winding plus ESC of that motor class
+J_BLADE_MODEL = 1.0e-4      # kg m^2, 13 g blade as a tapered rod (m r^2 / 3) plus the bell
+TAU_MOTOR = 0.035           # s, the as-flown choice (docs/as-flown.md: tens of ms, sine-wave ESC)
+TAU_TILT_AIR = 8192 / 450.0 # s, the in-flight accelerometer correction: 8192 dt, long beside M/k (docs/estimator.md)
+
+
+def derive(params: Params = Params()) -> dict:
+    a = params.airframe
+    B = a.M * a.g / 4                               # hover thrust per rotor (eq. 25's base)
+    A = math.pi * a.rotor_radius ** 2
+    v_h = math.sqrt(B / (2 * RHO * A))              # momentum theory, hover induced velocity
+    omega_h = math.sqrt(B / a.c1)                   # eq. 27 at hover
+    tip = omega_h * a.rotor_radius
+    lam_h = v_h / tip
+    sigma = BLADES * CHORD_75 / (math.pi * a.rotor_radius)
+    a_sigma = LIFT_SLOPE * sigma
+    # blade-element momentum theory, axial climb at fixed pitch and speed (Johnson, Helicopter
+    # Theory, sec. 2-4; Padfield, Helicopter Flight Dynamics, heave damping):
+    # dC_T/d(lambda_c) = 2 a sigma lambda_h / (16 lambda_h + a sigma), dT/dV = rho A (Omega R) dC_T/d(lambda_c)
+    k_inflow = RHO * A * tip * 2 * a_sigma * lam_h / (16 * lam_h + a_sigma)
+    k_inflow_max = 2 * RHO * A * v_h                # the same with a rigid thrust-pitch law (a sigma -> inf)
+    # momentum drag: the rotor turns the free stream's horizontal momentum, mass flow rho A v_h
+    k_drag = 4 * RHO * A * v_h
+    # open-loop motor: J dW/dt = Kt (V - Ke W)/R - Q(W), linearised at hover
+    ke = 60.0 / (2 * math.pi * KV)
+    q_h = a.g1 * B + a.g2                           # eq. 28 at hover
+    damping = ke * ke / R_PHASE + 2 * q_h / omega_h
+    return {"B": B, "v_h": v_h, "omega_h": omega_h, "lambda_h": lam_h, "sigma": sigma,
+            "k_inflow": k_inflow, "k_inflow_max": k_inflow_max, "k_drag": k_drag, "M_over_k": a.M / k_drag,
+            "tau_open_table2_Jp": a.Jp / damping, "tau_open_blade_J": J_BLADE_MODEL / damping}
+
+
+def as_flown(d: dict) -> Params:
+    src_in = (f"theory: blade-element momentum, dT/dV at hover = {d['k_inflow']:.3f} N s/m per rotor "
+              f"(v_h {d['v_h']:.2f} m/s, solidity {d['sigma']:.3f}, lift slope {LIFT_SLOPE}/rad; "
+              f"rigid-pitch bound {d['k_inflow_max']:.2f}); scripts/as_flown.py")
+    src_md = (f"plausible default, tens of ms for a sine-wave ESC; the open-loop estimate Jp/(Kt Ke/R + 2Q/W) "
+              f"is {d['tau_open_blade_J']:.3f}-{d['tau_open_table2_Jp']:.3f} s (docs/as-flown.md); "
+              f"measure it with the bench step profile")
+    src_dr = (f"theory: momentum drag 4 rho A v_h = {d['k_drag']:.2f} N s/m (M/k = {d['M_over_k']:.2f} s), "
+              f"a lower bound: blade flapping adds to it")
+    filters = dataclasses.replace(Filters(), tau_tilt_air=TAU_TILT_AIR)
+    return Params(filters=filters, effects=(EffectSpec("rotor_inflow", (("k", round(d["k_inflow"], 4)),), src_in),
+                           EffectSpec("motor_dynamics", (("tau", TAU_MOTOR),), src_md),
+                           EffectSpec("rotor_drag", (("k", round(d["k_drag"], 3)),), src_dr)))
+
+
+def main() -> None:
+    d = derive()
+    for k, v in d.items():
+        print(f"{k:>20} = {v:.4g}")
+    path = VEHICLES / "paper-as-flown.toml"
+    text = ("# The paper's vehicle as flown: the reference airframe (conventions.md) plus the terms its\n"
+            "# model lacks, each with its provenance. Written by scripts/as_flown.py; do not edit by hand.\n"
+            + dumps(as_flown(d), tables=("filters",)))
+    path.write_text(text)
+    print(f"-> {Path(path).relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,78 @@
+"""The causes: every candidate extension of measured-data.md, one module each, holding side by side
+its plant effect (an `Effect` on the seam of `flightctl.sim.model`) and its diagnose fit (a
+`Candidate` of `flightctl.sim.identify.diagnose.candidate`).
+
+`CAUSES` maps each name to its `Cause`: the effect class, the candidate class, the parameters with
+their units, and a one-line description. `flightctl sim --effect` builds effects with `parse`, the
+tests with `make`, and `flightctl diagnose` runs every candidate in this order.
+
+Adding a cause: a module here with its `Effect` and its `Candidate` (whose `effect` names it), one
+line in `_FITS` below, a row in measured-data.md's table of causes (tests/test_causes.py checks that
+the two agree), a unit test of the effect and a hidden-effect case (tests/test_diagnose_cases.py).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from flightctl.errors import InputError
+from flightctl.sim.causes import (actuation_delay, battery_sag, com_offset, ground_effect, linear_yaw_drag,
+                                  motor_dynamics, motor_lag, motor_weak, rotor_drag, rotor_inflow)
+from flightctl.sim.identify.diagnose.candidate import Candidate
+from flightctl.sim.model import Effect, Parameter
+
+
+@dataclass(frozen=True)
+class Cause:
+    name: str
+    doc: str                           # one line: what the real vehicle does that the base model does not
+    parameters: dict[str, Parameter]   # name -> (unit, lo, hi), in the order of measured-data.md
+    effect: type[Effect]
+    candidate: type[Candidate]
+
+    @classmethod
+    def of(cls, candidate: type[Candidate]) -> "Cause":
+        effect = candidate.effect
+        doc = (effect.__doc__ or "").strip().splitlines()[0]
+        return cls(effect.cause, doc, dict(effect.required), effect, candidate)
+
+
+_FITS = (motor_lag.MotorLagFit, actuation_delay.ActuationDelayFit, ground_effect.GroundEffectFit,
+         battery_sag.BatterySagFit, linear_yaw_drag.LinearYawDragFit, rotor_drag.RotorDragFit,
+         com_offset.ComOffsetFit, motor_weak.MotorWeakFit, rotor_inflow.RotorInflowFit,
+         motor_dynamics.MotorDynamicsFit)
+
+CAUSES: dict[str, Cause] = {c.name: c for c in map(Cause.of, _FITS)}
+
+
+def make(cause: str, **parameters: float) -> Effect:
+    """The plant effect of `cause` with its parameters, each checked against its range."""
+    if cause not in CAUSES:
+        raise InputError(f"unknown effect {cause!r} (known: {', '.join(CAUSES)})")
+    spec = CAUSES[cause].parameters
+    missing = set(spec) - set(parameters)
+    unknown = set(parameters) - set(spec)
+    if missing or unknown:
+        raise InputError(f"{cause}: takes {', '.join(spec)}"
+                         + (f"; missing {', '.join(sorted(missing))}" if missing else "")
+                         + (f"; unknown {', '.join(sorted(unknown))}" if unknown else ""))
+    for name, p in spec.items():
+        v = parameters[name]
+        if not (math.isfinite(v) and p.lo <= v <= p.hi):
+            raise InputError(f"{cause}: {name}={v:g} is out of range [{p.lo:g}, {p.hi:g}]")
+    return CAUSES[cause].effect(**parameters)
+
+
+def parse(text: str) -> Effect:
+    """`CAUSE:name=value,name=value`, as `flightctl sim --effect` takes it."""
+    cause, _, args = text.partition(":")
+    parameters = {}
+    for item in filter(None, args.split(",")):
+        name, sep, value = item.partition("=")
+        try:
+            parameters[name.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep:
+            raise InputError(f"--effect {text!r}: expected CAUSE:name=value,... (bad item {item!r})")
+    return make(cause.strip(), **parameters)

@@ -1,0 +1,53 @@
+"""`actuation_delay(delay)`: each rotor's thrust follows its command after a pure delay."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from flightctl.sim.causes.motor_lag import MotorLagFit
+from flightctl.sim.identify.diagnose.candidate import GridCandidate, too_short_to_time
+from flightctl.sim.model import Effect, Parameter
+
+
+class ActuationDelay(Effect):
+    """Each thrust follows its command after a pure delay (the plant delays the input)."""
+    cause = "actuation_delay"
+    required = {"delay": Parameter("s", 0.0, 1.0)}
+
+    def __init__(self, **parameters):
+        super().__init__(**parameters)
+        self.delay = self.parameters["delay"]
+
+
+def _shift(F, m):
+    """F delayed by m samples, the first value held before the start."""
+    if m <= 0:
+        return F
+    out = np.empty_like(F)
+    out[:, m:] = F[:, :-m]
+    out[:, :m] = F[:, :1]
+    return out
+
+
+class ActuationDelayFit(GridCandidate):
+    """The thrust series shifted by the delay, linearly interpolated between periods (the average
+    over the period); a 49-point grid from 0 to 120 ms."""
+    effect = ActuationDelay
+    explains = MotorLagFit.explains
+    grid = np.linspace(0.0, 0.12, 49)
+
+    def delta(self, d):
+        ds = self.ds
+        preds = []
+        for i in range(len(ds.files)):
+            F = ds.F[i]
+            if d > 0:
+                s = d * ds.fs                      # delay in loop periods; average over the period
+                m, frac = int(math.floor(s)), s - math.floor(s)
+                F = (1.0 - frac) * _shift(F, m) + frac * _shift(F, m + 1)
+            preds.append(ds.predict_file(i, F))
+        return ds.delta_filtered(preds)
+
+    def not_named(self, result):
+        return too_short_to_time(result, self.ds)

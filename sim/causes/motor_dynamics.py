@@ -1,0 +1,103 @@
+"""`motor_dynamics(tau)`: each rotor's speed lags its command, and the body takes the reaction.
+
+**Physics.** A motor does not change its propeller's speed at once: with the ESC's speed loop and
+the propeller's inertia the speed Omega_i follows the commanded speed through a first-order lag,
+d Omega_i / dt = (Omega_cmd,i - Omega_i) / tau, where the command is the speed at which eq. 27 gives
+the thrust of eq. 26: Omega_cmd = sqrt(h1 (P - h2)^2 / c1). Thrust (eq. 27, c1 Omega_i^2) and rotor
+torque (eq. 28) follow Omega_i, and so does the rotors' angular momentum Jp Omega of eq. 7 and 9,
+Omega = sum s_i Omega_i with s_i = +1 for the counter-clockwise rotors 2 and 4 and -1 for the
+clockwise 1 and 3 (conventions.md). What `motor_lag` leaves out is that changing that momentum
+takes a torque from the motors, whose reaction acts on the body: the angular momentum balance of
+body and rotors, d/dt (J w + Jp Omega z_b) + w x (J w + Jp Omega z_b) = tau, adds
+
+    -Jp sum s_i d Omega_i / dt   about z_b
+
+to eq. 7. Speeding up the counter-clockwise rotors (a yaw command to the negative side, whose drag
+reaction -tau_2 - tau_4 turns the body clockwise) turns the body clockwise at once, before their drag
+has grown: the reaction leads the drag torque. For the reference airframe a thrust change df of one
+rotor in hover changes its speed by df / (2 sqrt(c1 B)) = 65 rad/s per N, so the reaction torque is
+Jp 65 = 0.017 N m per N/s of thrust rate against the drag torque's g1 = 0.020 N m per N: above
+about 1 rad/s the reaction dominates the yaw torque. Roll, pitch and heave are those of `motor_lag`
+(to first order in the speed change), so the yaw channel tells the two apart.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from flightctl.physics import rotor_speed, thrust_from_speed
+from flightctl.sim.causes.motor_lag import MotorLagFit, lag_held
+from flightctl.sim.identify.diagnose.candidate import GridCandidate, too_short_to_time
+from flightctl.sim.model import Effect, Parameter
+
+SPIN = (-1.0, 1.0, -1.0, 1.0)   # s_i: +1 counter-clockwise seen from above (motors 2, 4), -1 clockwise
+
+
+class MotorDynamics(Effect):
+    """Each rotor's speed follows its command through a first-order lag; the body takes its reaction.
+
+    d Omega_i / dt = (Omega_cmd,i - Omega_i) / tau; thrust c1 Omega_i^2 (eq. 27), torque (eq. 28) and
+    the momentum of eq. 9 follow Omega_i; the extra yaw torque is -Jp sum s_i d Omega_i / dt."""
+    cause, n_states, uses_rotor, uses_wrench = "motor_dynamics", 4, True, True
+    required = {"tau": Parameter("s", 1e-4, 5.0)}
+    _spin_up = 0.0   # sum s_i dOmega_i/dt of the last `rotor` call, for `wrench` (rad/s^2)
+
+    def initial_states(self, f_cmd):
+        return [rotor_speed(f, self.a.c1) for f in f_cmd]
+
+    def rotor(self, t, x, f_cmd, xdot):
+        o, tau, c1 = self.offset, self.parameters["tau"], self.a.c1
+        f = [0.0, 0.0, 0.0, 0.0]
+        spin_up = 0.0
+        for i in range(4):
+            w = x[o + i]
+            dw = (rotor_speed(f_cmd[i], c1) - w) / tau
+            if xdot is not None:
+                xdot[o + i] = dw
+            spin_up += SPIN[i] * dw
+            f[i] = thrust_from_speed(w, c1)          # eq. 27
+        self._spin_up = spin_up
+        return f
+
+    def wrench(self, t, x, f, vb, force, torque):
+        torque[2] -= self.a.Jp * self._spin_up
+
+
+class MotorDynamicsFit(GridCandidate):
+    """The commanded speeds (eq. 26, 27) through the exact lag of the held command: thrust c1
+    Omega^2 from the speed averaged over the period, and -Jp sum s_i dOmega_i/dt / Jzz on r_dot
+    from the speed change over the period; the grid of `motor_lag`."""
+    effect = MotorDynamics
+    explains = "rotor spin-up sum s_i dOmega_i/dt (rad/s^2)"
+    grid = MotorLagFit.grid
+
+    def _speeds(self, i, tau):
+        """(thrust (4, n) from the lagged speeds, sum s_i dOmega_i/dt (n,)) of file i."""
+        ds, a = self.ds, self.ds.a
+        W = rotor_speed(ds.F[i], a.c1)
+        if tau <= 0:
+            return ds.F[i], np.zeros(W.shape[1])
+        at_rows, mean = lag_held(W, tau, ds.fs)
+        dW = np.zeros_like(W)
+        dW[:, :-1] = np.diff(at_rows, axis=1) * ds.fs
+        return thrust_from_speed(mean, a.c1), np.asarray(SPIN) @ dW
+
+    def delta(self, tau):
+        ds = self.ds
+        preds = []
+        for i in range(len(ds.files)):
+            F, spin_up = self._speeds(i, tau)
+            extra = np.zeros((3, F.shape[1]))
+            extra[2] = -ds.a.Jp * spin_up
+            preds.append(ds.predict_file(i, F, torque_extra=extra))
+        return ds.delta_filtered(preds)
+
+    def run(self):
+        result = super().run()
+        self._tau = result.parameters["tau"]
+        return result
+
+    def not_named(self, result):
+        return too_short_to_time(result, self.ds)
+
+    def explanatory(self):
+        return self.ds.flat([self._speeds(i, self._tau)[1] for i in range(len(self.ds.files))])

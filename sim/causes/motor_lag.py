@@ -1,0 +1,58 @@
+"""`motor_lag(tau)`: each rotor's thrust follows its command through a first-order lag."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import signal
+
+from flightctl.sim.identify.diagnose.candidate import GridCandidate, too_short_to_time
+from flightctl.sim.model import Effect, Parameter
+
+
+class MotorLag(Effect):
+    """Each thrust follows its command through a first-order lag: d f / dt = (f_cmd - f) / tau."""
+    cause, n_states, uses_rotor = "motor_lag", 4, True
+    required = {"tau": Parameter("s", 1e-4, 5.0)}
+
+    def initial_states(self, f_cmd):
+        return list(f_cmd)
+
+    def rotor(self, t, x, f_cmd, xdot):
+        o, tau = self.offset, self.parameters["tau"]
+        f = x[o:o + 4]
+        if xdot is not None:
+            for i in range(4):
+                xdot[o + i] = (f_cmd[i] - f[i]) / tau
+        return f
+
+
+def lag_held(U: np.ndarray, tau: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """A first-order lag y' = (u - y) / tau of a zero-order-held input U (k, n), exact, started in
+    equilibrium: (y at the sample instants, y averaged over each period from row k to k+1)."""
+    dt = 1.0 / fs
+    a = math.exp(-dt / tau)
+    b_, a_ = [0.0, 1.0 - a], [1.0, -a]
+    y, _ = signal.lfilter(b_, a_, U, axis=1, zi=signal.lfilter_zi(b_, a_)[None, :] * U[:, :1])
+    return y, U + (y - U) * (tau / dt) * (1.0 - a)
+
+
+class MotorLagFit(GridCandidate):
+    """Each rotor's eq. 26 thrust through the exact lag of the held command, averaged over the
+    period; a 41-point grid over tau (0 and 2 ms to 0.3 s, geometric)."""
+    effect = MotorLag
+    explains = "rate of change of the commanded total |thrust differences| (N/s)"
+    grid = np.concatenate([[0.0], np.geomspace(0.002, 0.3, 40)])
+
+    def delta(self, tau):
+        ds = self.ds
+        preds = []
+        for i in range(len(ds.files)):
+            F = ds.F[i]
+            if tau > 0:
+                F = lag_held(F, tau, ds.fs)[1]
+            preds.append(ds.predict_file(i, F))
+        return ds.delta_filtered(preds)
+
+    def not_named(self, result):
+        return too_short_to_time(result, self.ds)

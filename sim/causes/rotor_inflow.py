@@ -1,0 +1,124 @@
+"""`rotor_inflow(k)`: each rotor's thrust falls with its axial speed (momentum theory).
+
+**Physics.** A rotor of disc area A = pi R^2 that gives thrust T in hover accelerates the air through
+it to the induced velocity v_h = sqrt(T / (2 rho A)) (momentum theory). When the rotor climbs at V
+along its axis the air meets it faster, the blades see a smaller angle of attack, and at the same
+speed the thrust falls. Blade element theory, C_T = (sigma a / 2)(theta_0 / 3 - lambda / 2), with
+momentum theory, C_T = 2 lambda_i (lambda_c + lambda_i), lambda = lambda_c + lambda_i the inflow
+over the tip speed Omega R, differentiated at hover (lambda_c = 0, lambda_i = lambda_h):
+
+    dT/dV = -(T / v_h) x / (1 + x),   x = sigma a / (16 lambda_h),   lambda_h = v_h / (Omega R).
+
+For the reference airframe (conventions.md): T = B = M g / 4 = 4.03 N, R = 0.1524 m, rho = 1.225
+kg/m^3 give v_h = 4.75 m/s; Omega = sqrt(B / c1) = 524 rad/s (5000 RPM) gives lambda_h = 0.060. A
+12-inch two-blade propeller has a solidity sigma of about 0.10 (chord about 24 mm at 0.75 R) and a
+lift slope a of about 5.7 per rad, so x = 0.60 and dT/dV = -0.32 N s/m per rotor; sigma from 0.08 to
+0.14 gives -0.28 to -0.39 (checked against a numerical solution of the same equations). Ideal
+momentum theory at constant power instead of constant speed gives -T / (3 v_h) = -0.28, and
+-T / (2 v_h) = -0.42 is the value at x = 1: the outside check's -0.26 to -0.43 spans these. So
+theory gives **k = 0.32 N s/m** (0.28 to 0.42); `k` is `-dT/dV` at hover.
+
+At a fixed pitch the thrust goes as Omega^2, v_h as Omega and lambda_h stays the same, so dT/dV
+scales as v_h, i.e. as sqrt(T): hence `f_i - k sqrt(f_i / B) V_i` with V_i the axial speed of rotor
+i, the body-z velocity plus the rotation: V_i = w_b + p y_i - q x_i for the rotor at (x_i, y_i)
+(conventions.md: motor 1 at (+l, 0), 2 at (0, +l), 3 at (-l, 0), 4 at (0, -l)). A climb at w_b loses
+4 k w_b of thrust (1.3 N s/m of heave damping at k = 0.32); a roll rate p loses thrust on the
+rising rotor 2 and gains it on the falling rotor 4, a damping moment -2 k l^2 p (0.04 N m s/rad).
+Only the thrust changes (the contract's term); the rotor torque of eq. 28 and the speed of eq. 9
+follow the commanded thrust.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from flightctl.sim.identify.diagnose.candidate import AffineCandidate
+from flightctl.sim.identify.diagnose.dataset import C
+from flightctl.sim.model import P, Q, Effect, Parameter, body_torques
+
+
+def thrust_change(f1, f2, f3, f4, k: float, B: float, l: float, w, p, q):
+    """The four rotors' thrust changes -k sqrt(f_i / B) (w + p y_i - q x_i) ("+" layout), for
+    floats (the simulator) or arrays (the fit)."""
+    return (-k * (f1 / B) ** 0.5 * (w - q * l), -k * (f2 / B) ** 0.5 * (w + p * l),
+            -k * (f3 / B) ** 0.5 * (w + q * l), -k * (f4 / B) ** 0.5 * (w - p * l))
+
+
+class RotorInflow(Effect):
+    """Each rotor's thrust falls with its axial speed: f_i - k sqrt(f_i / B) (w_b + p y_i - q x_i)."""
+    cause, uses_wrench = "rotor_inflow", True
+    required = {"k": Parameter("N s/m", 0.0, 5.0)}
+
+    def attach(self, airframe, offset):
+        super().attach(airframe, offset)
+        self._B = airframe.M * airframe.g / 4.0
+
+    def wrench(self, t, x, f, vb, force, torque):
+        l = self.a.l
+        d1, d2, d3, d4 = thrust_change(f[0], f[1], f[2], f[3], self.parameters["k"], self._B, l, vb[2], x[P], x[Q])
+        t_phi, t_theta, _ = body_torques(d1, d2, d3, d4, 0.0, 0.0, 0.0, 0.0, l)
+        force[2] += d1 + d2 + d3 + d4
+        torque[0] += t_phi
+        torque[1] += t_theta
+
+
+def climb_speed(ds) -> list[np.ndarray]:
+    """Per file, the body-z velocity w_b on the airborne rows (0 elsewhere), reconstructed from the
+    log: the vertical acceleration R (a_x, a_y, a_z) - g (integrated gyro attitude, accelerometer)
+    integrated twice over each airborne stretch, plus z0 + c0 t + c1 t^2 / 2 fitted by least squares
+    to the levelled range (the initial height and speed, and the accelerometer bias); then w_b =
+    v_z cos(phi) cos(theta) (the horizontal velocity is not known; its part along z_b is left out)."""
+    g = ds.a.g
+    out = [np.zeros(f.t.size) for f in ds.files]
+    for i, s0, s1 in ds.stretches:
+        f = ds.files[i]
+        sl = slice(s0, s1 + 1)                 # the input rows and the row after the last
+        t = f.t[sl] - f.t[s0]
+        Rm, acc = f.Rm[:, sl], f.acc[:, sl]
+        av = Rm[6] * acc[0] + Rm[7] * acc[1] + Rm[8] * acc[2] - g
+        dt = np.diff(t)
+        v = np.concatenate([[0.0], np.cumsum(0.5 * (av[1:] + av[:-1]) * dt)])
+        z = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+        ok = np.isfinite(f.z[sl])
+        A = np.vstack([np.ones_like(t), t, 0.5 * t * t]).T
+        c = np.linalg.lstsq(A[ok], f.z[sl][ok] - z[ok], rcond=None)[0]
+        vz = v + c[1] + c[2] * t
+        w = vz * Rm[8]
+        out[i][s0:s1] = 0.5 * (w[:-1] + w[1:])  # over the period from row k to k + 1
+    return out
+
+
+class RotorInflowFit(AffineCandidate):
+    """The thrust changes per unit k on p_dot, q_dot and acc_z, linear in k: weighted least squares.
+    The body rates are the gyro's, w_b is `climb_speed` and f_i the commanded thrust (eq. 26)."""
+    effect = RotorInflow
+    explains = "body-z velocity w_b (m/s), reconstructed"
+
+    def why_not(self):
+        if not np.isfinite(self.ds.z).any():
+            return "no range readings in flight: the climb speed is unknown"
+        return None
+
+    def columns(self):
+        ds, a = self.ds, self.ds.a
+        self._w = climb_speed(ds)
+        G = []
+        for i in range(len(ds.files)):
+            F = ds.F[i]
+            p, q, _ = ds.wmid[i]
+            d = thrust_change(*F, 1.0, a.M * a.g / 4.0, a.l, self._w[i], p, q)
+            t_phi, t_theta, _ = body_torques(*d, 0.0, 0.0, 0.0, 0.0, a.l)
+            x = np.zeros((C, F.shape[1]))
+            x[0], x[1], x[5] = t_phi / a.Jxx, t_theta / a.Jyy, sum(d) / a.M
+            G.append(x)
+        return None, [ds.flat_filtered(G)]
+
+    def to_parameters(self, theta):
+        return {"k": round(float(theta[0]), 4)}
+
+    def not_named(self, result):
+        if result.parameters["k"] <= 0:
+            return "rotor_inflow: the fit wants the thrust to rise with the axial speed (k <= 0): not named"
+        return None
+
+    def explanatory(self):
+        return self.ds.flat(self._w)
