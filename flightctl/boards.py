@@ -38,6 +38,7 @@ BOARDS = {
                 "flightctl.pi:stop_motors", "install the Pi libraries with pip install 'flightctl[pi]'"),
     "sim": Entry("flightctl.sim.board:open_board",
                  "the simulated quadcopter behind the real IMU and sonar drivers"),
+    "hil": Entry("flightctl.hil_board:open_board", "the flight code flying a plant on a PC over --link (flightctl hil serve)"),
 }
 
 
@@ -56,6 +57,7 @@ class BoardOptions:
     noise: object = None            # sim: a SensorNoise; None: the default noise
     substeps: int = 2               # sim: plant integration steps per loop period
     devices: dict = field(default_factory=dict)   # pi: devices to use instead of opening them (pi, spi, smbus)
+    link: str | None = None         # hil: serial:PATH[,BAUD] or tcp:[HOST:]PORT (flightctl.link)
 
 
 @dataclass

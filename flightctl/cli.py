@@ -12,7 +12,10 @@ COMMANDS = {
     "diagnose": ("flightctl.sim.identify.diagnose.cli", "name what the model gets wrong in flight logs"),
     "run": ("flightctl.service", "the onboard service: fly on the quadcopter (or --board sim)"),
     "bench": ("flightctl.hil.bench", "spin one motor at a time for identification"),
+    "hil": ("flightctl.hil.cli", "hardware-in-the-loop: the PC side (serve), or both ends on one machine (demo)"),
     "analyze": ("flightctl.sim.analyze", "linear analysis of each loop about hover: margins, damping, steps"),
+    "params": ("flightctl.sim.paramscli", "parameter files: params show [NAME|FILE], params diff A B"),
+    "log": ("flightctl.sim.logexport", "flight log tools: log export F.csv F.ulg (PX4's ULog)"),
 }
 
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import csv
 import math
+import queue
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
@@ -169,10 +171,16 @@ class FlightLogWriter:
 
     A row is `FLIGHT_COLUMNS` order plus `extra` columns; `range` is passed as a string ('' when no
     echo arrived on that row) so that formatting costs nothing on the 9 rows out of 10 without one.
+
+    Logging never stops the loop. A write that fails (a full disk: OSError) sets `failed` and
+    `error`; that chunk and every later one are dropped and counted (`dropped`); the loop lands on it.
+    `background=True` (the service) formats and writes on a thread: a chunk that finds
+    `queue_chunks` chunks still waiting (a stalled card) is dropped and counted, and the loop goes on.
+    At close, dropped rows are named in a last `# dropped_rows: N (why)` line when the file takes it.
     """
 
     def __init__(self, out: str | Path | IO[str], meta: dict[str, str], extra: tuple[str, ...] = (),
-                 chunk: int = 450, keep: bool = False):
+                 chunk: int = 450, keep: bool = False, background: bool = False, queue_chunks: int = 8):
         self._own = not hasattr(out, "write")
         self._f = open(out, "w") if self._own else out
         for key, value in meta.items():
@@ -189,6 +197,15 @@ class FlightLogWriter:
         self.meta = {k: str(v) for k, v in meta.items()}
         self._meta_lines = sum(len(str(v).splitlines()) or 1 for v in meta.values())
         self._kept: list[tuple] | None = [] if keep else None
+        self.dropped = 0
+        self.failed = False
+        self.error: str | None = None
+        self._queue: queue.Queue | None = None
+        self._thread = None
+        if background:
+            self._queue = queue.Queue(queue_chunks)
+            self._thread = threading.Thread(target=self._drain, name="flight-log", daemon=True)
+            self._thread.start()
 
     def append(self, row: tuple) -> None:
         self._rows.append(row)
@@ -196,13 +213,45 @@ class FlightLogWriter:
             self.flush()
 
     def flush(self) -> None:
-        fmt = self._fmt
-        self._f.write("".join([fmt % r for r in self._rows]))
+        rows, self._rows = self._rows, []
         if self._kept is not None:
-            self._kept.extend(self._rows)
-        self.count += len(self._rows)
-        self._rows.clear()
-        self._f.flush()
+            self._kept.extend(rows)
+        if not rows:
+            return
+        if self._queue is None:
+            self._write(rows)
+            return
+        try:
+            self._queue.put_nowait(rows)
+        except queue.Full:
+            self._drop(len(rows), "the writer could not keep up")
+
+    def _drop(self, n: int, why: str) -> None:
+        self.dropped += n
+        if self.error is None:
+            self.error = f"{self.path}: {why}"
+
+    def _write(self, rows: list[tuple]) -> None:
+        if self.failed:
+            self.dropped += len(rows)
+            return
+        try:
+            fmt = self._fmt
+            self._f.write("".join([fmt % r for r in rows]))
+            self._f.flush()
+        except (OSError, ValueError) as e:          # ValueError: the file was closed under us
+            self.dropped += len(rows)
+            self.error = f"{self.path}: {getattr(e, 'strerror', None) or e}"
+            self.failed = True
+            return
+        self.count += len(rows)
+
+    def _drain(self) -> None:
+        while True:
+            rows = self._queue.get()
+            if rows is None:
+                return
+            self._write(rows)
 
     def table(self) -> Table:
         """What was written, as read back (needs `keep=True`), without parsing the file again."""
@@ -214,12 +263,38 @@ class FlightLogWriter:
         columns["range"] = ranges
         return Table(self.path, columns, dict(self.meta), np.arange(len(rows)) + 2 + self._meta_lines)
 
-    def close(self) -> None:
+    def close(self, timeout: float = 2.0) -> None:
+        """Write what is left (waiting at most `timeout` for a background writer), name the dropped
+        rows, close. Never raises for the file's sake."""
         if self._f is None:
             return
-        self.flush()
-        if self._own:
-            self._f.close()
+        if self._queue is not None:
+            rows, self._rows = self._rows, []
+            if self._kept is not None:
+                self._kept.extend(rows)
+            try:
+                if rows:
+                    self._queue.put(rows, timeout=timeout)
+                self._queue.put(None, timeout=timeout)
+            except queue.Full:
+                self._drop(len(rows), "the writer could not keep up")
+            self._thread.join(timeout)
+            if self._thread.is_alive():           # still stuck in a write: leave the file to it
+                self._drop(sum(len(r) for r in list(self._queue.queue) if r), "the writer could not keep up")
+                self._f = None
+                return
+        else:
+            self.flush()
+        try:
+            if self.dropped and not self.failed:
+                self._f.write(f"# dropped_rows: {self.dropped} ({self.error})\n")
+            if self._own:
+                self._f.close()
+            else:
+                self._f.flush()
+        except (OSError, ValueError) as e:
+            self.failed = True
+            self.error = self.error or f"{self.path}: {getattr(e, 'strerror', None) or e}"
         self._f = None
 
     def __enter__(self):

@@ -5,8 +5,14 @@
 
 Lifecycle: calibrate sitting still (motors stopped), arm (the motors refuse for a named reason),
 fly the plan, disarm on touchdown. The log starts at arming (its gyro columns are calibrated). Checks, each with a named reason: IMU frames going bad, a crash
-(tilt past 60 degrees), a low battery (land), the altitude lost (descend slowly). Whatever ends the
-loop - the plan, a stop request (SIGTERM), an exception - the motors are stopped last.
+(flightctl/safety.py: tilt past 60 degrees), a low battery (land), the altitude lost (descend slowly).
+The motors are cut in the air only for a crash, bad IMU frames or a stop request (SIGTERM, the kill
+command); every ordinary event lands under control (`_land`: level, descend at LAND_SPEED, touch
+down, stop): the plan ending in the air (a landing move after `duration` included), the log writer
+failing (a full disk; the writer drops rows, never stops the loop), a failed watchdog ping (the notify
+socket lost: systemd would kill the process), a plan that fails or gives a non-finite setpoint.
+Event times are seconds since arming, the log's `t`. Whatever ends the loop - the plan, a stop
+request, an exception - the motors are stopped last.
 """
 from __future__ import annotations
 
@@ -21,13 +27,15 @@ from flightctl.hal import PWM_RANGE, Hal, ImuSample
 from flightctl.logfile import FlightLogWriter
 from flightctl.params import Params
 from flightctl.plan import Move, Plan
+from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
 
 MAX_BAD_IMU_FRAMES = 10         # consecutive (22 ms)
-CRASH_TILT = math.radians(60)
 LOW_CELL_V, CELLS = 3.5, 4      # land below 14.0 V on a 4S pack
 LAND_SPEED = 0.3                # m/s, a landing commanded by the checks
 LOST_ALT_S = 1.0                # no valid echo for this long in the air: descend blind
 TOUCHDOWN_ALT, TOUCHDOWN_S = 0.05, 0.5
+LAND_LEVEL_S = 1.0              # s: roll and pitch ramp back to level when a landing begins
+LAND_SLACK_S = 10.0             # s beyond the descent for the touchdown to be detected
 
 
 @dataclass
@@ -36,23 +44,28 @@ class FlightResult:
     events: list[tuple[float, str]] = field(default_factory=list)
     iterations: int = 0
     overruns: int = 0               # deadlines missed by the wall clock (always 0 in simulation)
+    t_arm: float | None = None      # clock time of arming (log time 0)
+    max_alt: float = 0.0            # highest altitude estimate in flight (m)
 
 
 class FlightLoop:
     def __init__(self, hal: Hal, params: Params, plan: Plan, log: FlightLogWriter | None = None,
                  controller: FlightController | None = None, calibrate_s: float = 60.0,
-                 stop: threading.Event | None = None, on_tick: Callable[[int], None] | None = None,
-                 extra_row: Callable[[], tuple] | None = None):
+                 stop: threading.Event | None = None, on_tick: Callable[[int], bool | None] | None = None,
+                 extra_row: Callable[[], tuple] | None = None, telemetry=None):
         self.hal, self.params, self.plan, self.log = hal, params, plan, log
         self.ctl = controller if controller is not None else FlightController(params)
         self.calibrate_s = calibrate_s
         self.stop = stop if stop is not None else threading.Event()
-        self.on_tick = on_tick          # e.g. the systemd watchdog ping
+        self.on_tick = on_tick          # e.g. the systemd watchdog ping; False: the ping failed
         self.extra_row = extra_row      # extra log columns (the simulator's truth)
+        self.telemetry = telemetry      # a ground station link (flightctl/mavlink.py): start, poll, may_arm, tick
         self.result = FlightResult()
+        self.t_arm = 0.0                # clock time of arming (event times are since then)
+        self._why = ""                  # why the loop began a landing the plan did not ask for
 
     def _event(self, t: float, what: str) -> None:
-        self.result.events.append((t, what))
+        self.result.events.append((t - self.t_arm, what))
 
     def run(self) -> FlightResult:
         hal = self.hal
@@ -63,6 +76,8 @@ class FlightLoop:
             hal.motors.stop()
             if self.log is not None:
                 self.log.close()
+                if self.log.dropped:
+                    self._event(hal.clock.now(), f"log: {self.log.dropped} rows dropped ({self.log.error})")
         return self.result
 
     def _fly(self) -> None:
@@ -79,18 +94,28 @@ class FlightLoop:
         power_every = max(1, round(a.loop_hz / 10.0))
         dt = clock.period
         t0 = clock.now()
-        t_arm = t0 + self.calibrate_s
+        self.t_arm = t_arm = t0 + self.calibrate_s
         armed = flying = False
         bad_frames = 0
         battery_v, _ = power.read()
         last_echo = t_touch = None
-        landing = False
+        landing = log_failed = False
+        max_alt = 0.0
         i = 0
+        tel = self.telemetry
+        if tel is not None:
+            tel.start(res)
         while not self.stop.is_set():
             t = clock.wait_next()
             i += 1
-            if self.on_tick is not None:
-                self.on_tick(i)
+            cmd = tel.poll() if tel is not None else None      # "kill" or "land" from the ground station
+            if cmd == "kill":
+                res.reason = "stopped: killed by the ground station (forced disarm)"
+                self._event(t, res.reason)
+                break
+            if self.on_tick is not None and self.on_tick(i) is False and flying and not landing:
+                landing = self._land(t, ctl.alt, "watchdog ping failed (notify socket lost): landing")
+                plan = self.plan
             if imu.read(sample):
                 calibration.correct(sample)
                 bad_frames = 0
@@ -98,7 +123,7 @@ class FlightLoop:
                 bad_frames += 1
                 if bad_frames > MAX_BAD_IMU_FRAMES:
                     res.reason = "stopped: IMU frames bad"
-                    self._event(t - t0, res.reason)
+                    self._event(t, res.reason)
                     break
             if i % power_every == 0:
                 battery_v, _ = power.read()
@@ -110,14 +135,40 @@ class FlightLoop:
                 calibration.add(sample)
                 counts = stop_counts
                 sp = plan.sp
-                if t >= t_arm:
+                if t >= t_arm and (tel is None or tel.may_arm()):
+                    if tel is not None and tel.arm_required:   # armed by the ground station: the log starts now
+                        self.t_arm = t_arm = t
                     calibration.apply(ctl.est)
                     motors.arm()
                     armed = flying = ctl.est.in_flight = True
                     last_echo = t
-                    self._event(t - t0, "armed")
+                    res.t_arm = t_arm
+                    self._event(t, "armed")
             else:
-                sp = plan.at(t - t_arm)
+                try:
+                    sp = plan.at(t - t_arm)
+                    s = sp[0] + sp[1] + sp[2] + sp[3]
+                    if s - s != 0.0:                                  # NaN or infinite
+                        raise ValueError("a non-finite setpoint")
+                except Exception as e:
+                    if landing:
+                        raise                                        # the landing plan itself: a bug
+                    if not flying:                                   # on the ground, motors stopped
+                        res.reason = f"stopped: plan failed ({e})"
+                        self._event(t, res.reason)
+                        break
+                    landing = self._land(t, ctl.alt, f"plan failed ({e}): landing")
+                    plan = self.plan
+                    sp = plan.sp
+                if log_failed is False and self.log is not None and self.log.failed:
+                    log_failed = True
+                    if flying and not landing:
+                        landing = self._land(t, ctl.alt, f"log write failed ({self.log.error}): landing")
+                        plan = self.plan
+                        sp = plan.sp
+                if cmd == "land" and flying and not landing:
+                    landing = self._land(t, ctl.alt, "land commanded by the ground station: landing")
+                    plan = self.plan
                 if echo is not None:
                     if echo == echo:
                         range_cell = "%.4f" % echo
@@ -129,30 +180,43 @@ class FlightLoop:
                     est = ctl.est
                     if not (abs(est.roll) <= CRASH_TILT and abs(est.pitch) <= CRASH_TILT):   # NaN too
                         res.reason = "stopped: crash (tilt past 60 degrees)"
-                        self._event(t - t0, res.reason)
+                        self._event(t, res.reason)
                         break
+                    if ctl.alt > max_alt:
+                        max_alt = ctl.alt
                     if not landing and battery_v < LOW_CELL_V * CELLS:
-                        landing = self._land(t - t_arm, ctl.alt, "battery low: landing")
+                        landing = self._land(t, ctl.alt, "battery low: landing")
                         plan = self.plan
                     if t - last_echo > LOST_ALT_S and ctl.alt > TOUCHDOWN_ALT:
                         ctl.uz = -0.1 * a.B    # no altitude: descend slowly, open loop
                         ctl.alt = max(ctl.alt - LAND_SPEED * dt, 0.0)
                         if not landing:
-                            landing = self._land(t - t_arm, ctl.alt, "altitude lost: descending")
+                            landing = self._land(t, ctl.alt, "altitude lost: descending")
                             plan = self.plan
                     if sp[3] <= 0.0 and ctl.alt < TOUCHDOWN_ALT and (plan.lands() or landing):
                         t_touch = t_touch if t_touch is not None else t
                         if t - t_touch > TOUCHDOWN_S:
                             flying = ctl.est.in_flight = False
                             motors.stop()
-                            self._event(t - t0, "landed: motors stopped")
+                            self._event(t, "landed: motors stopped")
+                            if max_alt < LEFT_GROUND_ALT:
+                                self._event(t, f"never left the ground (highest altitude {max_alt:.2f} m)")
+                            if self._why:
+                                res.reason = "landed: " + self._why.rsplit(": ", 1)[0]
                     else:
                         t_touch = None
                 else:
                     counts = stop_counts
                     ctl.step(sample, dt, 0.0, 0.0, ctl.est.yaw, 0.0)   # keep estimating on the ground
                 if t - t_arm >= plan.duration:
-                    break
+                    if not flying:
+                        break
+                    if landing:          # the landing's own end: the touchdown was never detected
+                        res.reason = "stopped: no touchdown detected by the end of the landing"
+                        self._event(t, res.reason)
+                        break
+                    landing = self._land(t, ctl.alt, f"plan ended in the air at {ctl.alt:.2f} m: landing")
+                    plan = self.plan
             if flying:
                 motors.write(counts)
             if log_append is not None and armed:   # the log starts at arming, with the gyro calibrated
@@ -162,16 +226,25 @@ class FlightLoop:
                        est.roll, est.pitch, est.yaw, ctl.alt, sp[0], sp[1], sp[2], sp[3],
                        sample.mx, sample.my, sample.mz)
                 log_append(row + extra() if extra is not None else row)
+            if tel is not None:
+                tel.tick(t, armed, flying, landing, sample, ctl.est, ctl.alt, echo, battery_v, counts, sp)
         res.iterations = i
+        res.max_alt = max_alt
         if self.stop.is_set():
             res.reason = "stopped: stop requested"
-            self._event(clock.now() - t0, res.reason)
+            self._event(clock.now(), res.reason)
 
-    def _land(self, t_plan: float, alt: float, why: str) -> bool:
-        """Replace the rest of the plan by a descent from here at LAND_SPEED and a touchdown."""
-        self._event(t_plan + self.calibrate_s, why)
+    def _land(self, t: float, alt: float, why: str) -> bool:
+        """From clock time `t`: replace the rest of the plan by roll and pitch back to level and a
+        descent at LAND_SPEED to a touchdown, within LAND_SLACK_S of the descent's end."""
+        self._event(t, why)
+        alt_sp = self.plan.sp[3]
+        self._why = why if not alt_sp <= TOUCHDOWN_ALT else ""     # the plan was not landing already
+        t_plan = t - self.t_arm
         ramp = max(alt, 0.0) / LAND_SPEED
-        self.plan = plan = Plan([m for m in self.plan.moves if m.t <= t_plan]
-                                + [Move(t_plan, "alt", 0.0, ramp)], self.plan.duration + ramp + 5.0)
+        kept = [m for m in self.plan.moves if m.t <= t_plan and math.isfinite(m.value)]
+        self.plan = plan = Plan(kept + [Move(t_plan, "roll", 0.0, LAND_LEVEL_S), Move(t_plan, "pitch", 0.0, LAND_LEVEL_S),
+                                        Move(t_plan, "alt", 0.0, ramp)],
+                                t_plan + ramp + LAND_SLACK_S, self.plan.name, self.plan.doc)
         plan.at(t_plan)
         return True

@@ -75,10 +75,12 @@ class Notifier:
         self._next_ping = self._clock() + self.ping_s
         return self.notify("WATCHDOG=1")
 
-    def tick(self, i: int = 0) -> None:
-        """The loop's `on_tick` hook: a WATCHDOG=1 at most every `ping_s`."""
-        if self._sock is not None and self._clock() >= self._next_ping:
-            self.watchdog()
+    def tick(self, i: int = 0) -> bool | None:
+        """The loop's `on_tick` hook: a WATCHDOG=1 at most every `ping_s`. False when a ping could
+        not be sent (the socket is gone: systemd will kill the process; the loop lands on it), else None."""
+        if self._sock is not None and self._clock() >= self._next_ping and not self.watchdog():
+            return False
+        return None
 
     def close(self) -> None:
         if self._sock is not None:

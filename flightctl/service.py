@@ -68,7 +68,7 @@ class TeardownLog(FlightLogWriter):
     `finally` sent after its last iteration, one period later, the other columns as last seen."""
 
     def __init__(self, out, meta, extra=(), period: float = 1 / 450.0):
-        super().__init__(out, meta, extra)
+        super().__init__(out, meta, extra, background=True)   # a slow card drops rows, never stalls the loop
         self.period = period
         self.last: tuple | None = None
 
@@ -117,6 +117,7 @@ class Service:
         self.calibrate_s = args.calibrate if args.calibrate is not None else board.calibrate_s
         self.min_battery_v = args.min_battery_v if args.min_battery_v is not None else board.min_battery_v
         self.flights: list[FlightResult] = []
+        self.link = None            # the ground station (flightctl/mavlink.py), with --mavlink
 
     def check(self) -> None:
         reasons = prearm(self.board.hal, self.params, self.min_battery_v)
@@ -154,6 +155,8 @@ class Service:
             except ArmingRefused as e:      # this plan is not flown; the service stays up, disarmed
                 log.error("plan %s not flown: %s", plan.name, e)
                 self.notifier.status(f"disarmed: plan {plan.name} refused: {e}")
+                if self.link is not None:
+                    self.link.text(f"plan {plan.name} refused: {e}")
                 continue
             self.fly(plan, plan_file=claimed)
 
@@ -190,7 +193,7 @@ class Service:
     def fly(self, plan: Plan, plan_file: Path | None = None) -> FlightResult:
         params, board, hal = self.params, self.board, self.board.hal
         if not plan.lands():
-            log.warning("plan %s does not end at altitude 0: the loop stops the motors when it ends", plan.name)
+            log.warning("plan %s does not end at altitude 0: the loop lands when it ends", plan.name)
         plan.restart()
         path = self._new_path("flight", f"{plan.name}.csv")
         meta = {"software": f"flightctl {__version__}", "board": board.name, "plan": plan.name,
@@ -200,7 +203,10 @@ class Service:
                 "params": dumps(params)}
         flight_log = TeardownLog(path, meta, MAG_COLUMNS + board.extra_columns, params.airframe.dt)
         loop = FlightLoop(hal, params, plan, flight_log, FlightController(params), calibrate_s=self.calibrate_s,
-                          stop=self.stop, on_tick=self.notifier.tick, extra_row=board.extra_row)
+                          stop=self.stop, on_tick=self.notifier.tick, extra_row=board.extra_row,
+                          telemetry=self.link)
+        if self.link is not None:       # the pre-arm checks passed (run, serve_queue): the pilot may arm
+            self.link.ready(plan.name)
         self.notifier.status(f"flying {plan.name}: calibrating {self.calibrate_s:g} s, then arming")
         log.info("flight %s: calibrating %g s, log %s", plan.name, self.calibrate_s, path)
         freeze_gc()
@@ -213,9 +219,17 @@ class Service:
         summary = {"plan": plan.name, "log": path.name, "reason": result.reason, "events": result.events,
                    "iterations": result.iterations, "overruns": result.overruns,
                    "max_late_s": getattr(getattr(hal.clock, "wall", hal.clock), "max_late_s", None)}
-        path.with_name(path.stem + "-summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+        summary["log_dropped_rows"], summary["log_error"] = flight_log.dropped, flight_log.error
+        if flight_log.dropped:
+            log.error("flight log %s: %d rows dropped (%s)", path, flight_log.dropped, flight_log.error)
+        try:
+            path.with_name(path.stem + "-summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+        except OSError as e:             # a full disk: the journal has the summary above
+            log.error("flight summary not written: %s", e)
         self.notifier.status(f"disarmed after {plan.name}: {result.reason}")
         self.flights.append(result)
+        if self.link is not None:
+            self.link.end()
         return result
 
 
@@ -231,7 +245,7 @@ def stop_motors_main(args, params: Params) -> int:
 
 
 def _options(args) -> BoardOptions:
-    return BoardOptions(board_file=args.board_file, seed=args.seed, realtime=True)
+    return BoardOptions(board_file=args.board_file, seed=args.seed, realtime=True, link=args.link)
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -246,7 +260,11 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                    help="seconds sitting still before arming (default: the board's, 60 s on the quadcopter)")
     p.add_argument("--min-battery-v", type=float, metavar="V", help="refuse to arm below this battery voltage")
     p.add_argument("--seed", type=int, default=0, help="simulator seed (--board sim)")
+    p.add_argument("--link", help="--board hil: serial:/dev/serial0,921600 or tcp:HOST:PORT (docs/hil.md)")
     p.add_argument("--stop-motors", action="store_true", help="only put the stop pulse on the ESCs and exit")
+    p.add_argument("--mavlink", metavar="URL",
+                   help="a ground station (udpout:HOST:PORT, udpin:HOST:PORT, /dev/ttyAMA0,57600): telemetry, "
+                        "and the pilot arms (ARM_DISARM), lands or kills from it; pip install 'flightctl[mavlink]'")
     args = p.parse_args(argv)
     if args.plan and args.plan_queue:
         p.error("--plan and --plan-queue exclude each other")
@@ -277,18 +295,24 @@ def main(argv: list[str] | None = None) -> int:
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
     notifier = Notifier.from_env()
-    board = None
+    board = link = None
     try:
+        if args.mavlink:                        # imported only when asked for (pymavlink is an extra)
+            from flightctl.mavlink import open_link
+            link = open_link(args.mavlink, params, arm_required=True)
         try:
             board = open_board(params, _options(args))
         except BoardUnavailable as e:
             log.error("not flying: %s", e)
             return EXIT_REFUSED
         service = Service(args, params, board, notifier, stop)
+        service.link = link
         try:
             service.run(plan)
         except ArmingRefused as e:
             log.error("not flying: %s", e)
+            if link is not None:
+                link.text(f"arming refused: {e}")
             return EXIT_REFUSED
         return EXIT_OK
     except InputError:
@@ -303,6 +327,8 @@ def main(argv: list[str] | None = None) -> int:
             except Exception:
                 log.exception("zero thrust could not be sent")
             board.close()
+        if link is not None:
+            link.close()
         notifier.stopping()
         notifier.close()
         for s, handler in previous.items():

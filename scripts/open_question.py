@@ -8,18 +8,24 @@ increasing size hidden in the plant, and records the largest true roll or pitch 
 noise seeds (60 degrees = crash). Writes the figure and the numbers beside it (.json).
 
     python scripts/open_question.py [--out docs/open-question.png] [--quick]
+    python scripts/open_question.py --params paper-as-flown --out docs/open-question-as-flown.png --seeds 1
+
+On a model that already carries `motor_dynamics` (the as-flown file), the motor-lag sweep replaces its
+time constant instead of adding a second lag.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from flightctl.params import TABLE4, load
+from flightctl.params import TABLE4, EffectSpec, load
 from flightctl.sim import causes
+from flightctl.sim.progress import Progress
 from flightctl.sim.run import fly
 from flightctl.sim.scenarios import SCENARIOS
 
@@ -32,9 +38,15 @@ CASES = [("Table 4", "truth"), ("Table 6", "truth"), ("Table 4", "flight"), ("Ta
          ("Table 4", "paper"), ("Table 6", "paper")]
 
 
-def one(gains: str, path: str, cause: str, ms: float, log: Path, seed: int = 0) -> float:
-    params = load(None, TABLE4 if gains == "Table 4" else None)
+def one(gains: str, path: str, cause: str, ms: float, log: Path, seed: int = 0, model: str | None = None) -> float:
+    params = load(model, TABLE4 if gains == "Table 4" else None)
     eff = (causes.make(cause, **{PARAM[cause]: ms / 1e3}),) if ms > 0 else ()
+    if cause == "motor_lag" and any(e.cause == "motor_dynamics" for e in params.effects):
+        tau = max(ms, 1.0) / 1e3     # the model's own rotor lag, at the size swept
+        params = dataclasses.replace(params, effects=tuple(
+            EffectSpec(e.cause, (("tau", tau),), e.source) if e.cause == "motor_dynamics" else e
+            for e in params.effects))
+        eff = ()
     kw = {"truth": True} if path == "truth" else {"estimator": path}
     try:
         f = fly(SCENARIOS["step_roll"](), params, log, effects=eff, noise=True, seed=seed, **kw)
@@ -42,7 +54,7 @@ def one(gains: str, path: str, cause: str, ms: float, log: Path, seed: int = 0) 
         return CRASH_DEG
     roll = np.degrees(np.abs(np.concatenate([f.log["true_roll"], f.log["true_pitch"]])))
     worst = float(np.nanmax(roll)) if roll.size else CRASH_DEG
-    return CRASH_DEG if f.result.reason.startswith("stopped: crash") else min(worst, CRASH_DEG)
+    return CRASH_DEG if f.crashed else min(worst, CRASH_DEG)
 
 
 def main(argv=None) -> int:
@@ -50,20 +62,23 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="docs/open-question.png")
     ap.add_argument("--quick", action="store_true", help="three sizes per effect (a smoke run)")
     ap.add_argument("--replot", action="store_true", help="redraw the figure from the .json beside it")
+    ap.add_argument("--params", help="parameter file or shipped name (default: the paper's base model)")
+    ap.add_argument("--seeds", type=int, default=len(SEEDS), help="noise seeds per case (default 3)")
     args = ap.parse_args(argv)
     if args.replot:
         plot(json.loads(Path(args.out).with_suffix(".json").read_text()), args.out)
         return 0
     log = Path(args.out).with_suffix(".tmp.csv")
     results = {}
-    for cause, sizes in SIZES_MS.items():
-        sizes = sizes[::5] if args.quick else sizes
+    sweeps = {cause: sizes[::5] if args.quick else sizes for cause, sizes in SIZES_MS.items()}
+    progress = Progress(sum(map(len, sweeps.values())) * len(CASES))
+    for cause, sizes in sweeps.items():
         for gains, path in CASES:
             row = []
             for ms in sizes:
-                row.append(max(one(gains, path, cause, ms, log, seed) for seed in SEEDS))
-                print(f"{cause:16s} {gains} {path:6s} {ms:5.1f} ms: max tilt {row[-1]:5.1f} deg", file=sys.stderr,
-                      flush=True)
+                row.append(max(one(gains, path, cause, ms, log, seed, args.params)
+                               for seed in SEEDS[:args.seeds]))
+                progress.step(f"{cause} {gains} {path} {ms:.1f} ms: max tilt {row[-1]:.1f} deg")
             results[f"{cause}|{gains}|{path}"] = dict(zip(map(str, sizes), row))
     log.unlink(missing_ok=True)
     Path(args.out).with_suffix(".json").write_text(json.dumps(results, indent=1) + "\n")

@@ -29,7 +29,7 @@ from flightctl.sim.analysis.linear import LinearPlant, linearise
 from flightctl.sim.analysis.loops import CHANNELS, Loop, build, hover_responses
 from flightctl.sim.model import Model
 
-DEFAULT_ESTIMATOR = inspect.signature(FlightController).parameters["structure"].default
+DEFAULT_ESTIMATOR = inspect.signature(FlightController).parameters["structure"].default   # what flies
 TRUTH = "truth"
 
 
@@ -42,7 +42,7 @@ class Analysis:
 
 
 def analyse(params: Params, effects=(), estimators=(TRUTH, DEFAULT_ESTIMATOR), alt: float = HOVER_ALT,
-            horizon: float = 20.0) -> Analysis:
+            horizon: float | None = None, channels=CHANNELS) -> Analysis:
     """Every loop for each estimator: 'truth' (perfect state feedback), a name of ESTIMATORS, or a
     function making an estimator from the parameters. The model carries the parameter file's
     effects and then `effects`, as the simulated board builds it (`flightctl.sim.board`), so that
@@ -54,7 +54,7 @@ def analyse(params: Params, effects=(), estimators=(TRUTH, DEFAULT_ESTIMATOR), a
     for est in estimators:
         Y = None if est == TRUTH else hover_responses(params, plant, est)
         name = est if isinstance(est, str) else getattr(est, "__name__", "custom")
-        loops[name] = {ch: build(params, plant, est, ch, Y, horizon) for ch in CHANNELS}
+        loops[name] = {ch: build(params, plant, est, ch, Y, horizon) for ch in channels}
     return Analysis(params, effects, plant, loops)
 
 
@@ -100,7 +100,7 @@ def report(an: Analysis, gains: str) -> dict:
 UNITS = {"roll": "roll", "pitch": "pitch", "yaw": "yaw", "alt": "altitude"}
 
 
-def plot(an: Analysis, prefix: str) -> list[Path]:
+def plot(an: Analysis, prefix: str, title: str) -> list[Path]:
     """PREFIX-bode.png (|L| and its phase per loop, each estimator a line) and PREFIX-step.png."""
     import control
 
@@ -110,7 +110,7 @@ def plot(an: Analysis, prefix: str) -> list[Path]:
     for j, ch in enumerate(CHANNELS):
         for est, loops in an.loops.items():
             L = loops[ch].L
-            w = np.logspace(-1.0, math.log10(0.999 * math.pi / L.dt), 500)
+            w = np.logspace(-1.0, math.log10(0.999 * math.pi / L.dt), 300)
             resp = control.frequency_response(L, w)
             mag = 20.0 * np.log10(np.abs(resp.magnitude).ravel())
             phase = np.degrees(np.unwrap(np.asarray(resp.phase).ravel()))
@@ -119,12 +119,13 @@ def plot(an: Analysis, prefix: str) -> list[Path]:
             axes[1, j].semilogx(w, phase, color=line.get_color(), label=est)
         axes[0, j].axhline(0.0, color="0.4", lw=0.8)
         axes[1, j].axhline(-180.0, color="0.4", lw=0.8)
-        axes[0, j].set_title(f"{UNITS[ch]} loop (broken at the plant input)")
+        axes[0, j].set_title(f"{UNITS[ch]} loop")
         axes[0, j].set_ylabel("|L| (dB)")
         axes[1, j].set_ylabel("phase of L (deg)")
         axes[1, j].set_xlabel("frequency (rad/s)")
         for ax in axes[:, j]:
-            ax.grid(alpha=0.3, which="both")
+            ax.grid(alpha=0.3)
+    fig.suptitle(f"{title}: each loop broken at the plant input")
     figure_legend(fig, axes[0, 0], len(an.loops))
     bode = Path(f"{prefix}-bode.png")
     save(fig, bode)
@@ -133,12 +134,19 @@ def plot(an: Analysis, prefix: str) -> list[Path]:
     for ax, ch in zip(axes.ravel(), CHANNELS):
         for est, loops in an.loops.items():
             loop = loops[ch]
-            ax.plot(loop.t, np.clip(loop.y, -1.0, 3.0), label=est)
+            y = loop.y.copy()
+            out = np.flatnonzero(np.abs(y) > 3.0)
+            if out.size:                                 # an unstable response ends where it leaves the axes
+                y[out[0]:] = np.nan
+            every = max(1, loop.t.size // 2000)          # a screen's worth of points
+            ax.plot(loop.t[::every], y[::every], label=est)
         ax.axhline(1.0, color="0.4", lw=0.8)
-        ax.set_title(f"{UNITS[ch]}: true response to a setpoint step")
+        ax.set_ylim(-1.0, 3.0)
+        ax.set_title(f"{UNITS[ch]}: the true response to a setpoint step")
         ax.set_xlabel("time (s)")
         ax.set_ylabel("response / step (ratio)")
         ax.grid(alpha=0.3)
+    fig.suptitle(title)
     figure_legend(fig, axes[0, 0], len(an.loops))
     step = Path(f"{prefix}-step.png")
     save(fig, step)
@@ -174,14 +182,15 @@ def main(argv: list[str]) -> int:
     estimators = tuple(dict.fromkeys(args.estimator or (TRUTH, DEFAULT_ESTIMATOR)))
     an = analyse(params, effects, estimators, args.alt)
     P = an.plant.u0[:4]
-    print(f"flightctl analyze: {args.gains} gains, {args.params or 'reference airframe'}, hover at "
-          f"{args.alt:g} m (P = {np.mean(P):.2f}); plant: " + (", ".join(map(repr, an.effects)) or "base model"))
+    title = f"{args.gains} gains, {args.params or 'reference airframe'}, hover at {args.alt:g} m"
+    print(f"flightctl analyze: {title} (P = {np.mean(P):.2f}); plant: "
+          + (", ".join(map(repr, an.effects)) or "base model"))
     print(table(an))
     if args.json:
         Path(args.json).write_text(json.dumps(report(an, args.gains), indent=2) + "\n")
         print(f"\nfigures -> {args.json}")
     if args.plot:
-        for path in plot(an, args.plot):
+        for path in plot(an, args.plot, f"flightctl analyze: {title}"):
             print(f"plot -> {path}")
     return 0
 

@@ -6,6 +6,8 @@ takes) in simulated time, the same way."""
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -40,7 +42,36 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", help="PNG of the responses (default: beside the log, .png)")
     p.add_argument("--no-plot", action="store_true")
     p.add_argument("--quiet", action="store_true")
+    p.add_argument("--mavlink", metavar="URL",
+                   help="stream to a ground station and take its commands (pymavlink's connection string, "
+                        "e.g. udpout:127.0.0.1:14550; needs pip install 'flightctl[mavlink]'; README)")
+    p.add_argument("--json", metavar="METRICS.json",
+                   help="write the outcome and the metrics as JSON (SI units: s, m, rad)")
     return p
+
+
+def _finite(v: float) -> float | None:
+    """JSON has no infinity or NaN: a step never settled, or a value not measured, is null."""
+    return v if math.isfinite(v) else None
+
+
+def metrics_json(flown, flight, wall_s: float) -> dict:
+    """The outcome of a flight and its metrics (true responses), as `--json` writes them."""
+    log = flight.log
+    out = {"scenario": flown.name, "reason": flight.result.reason, "flown_s": float(log["t"][-1]),
+           "wall_s": wall_s, "rows": len(log), "events": [{"t": t, "what": w} for t, w in flight.result.events],
+           "touchdowns": [{"t": t, "speed": abs(vz)} for t, vz in flight.touchdowns],
+           "outcome": flight.outcome, "crashed": flight.crashed, "flew": flight.flew,
+           "log_dropped_rows": flight.log_dropped, "steps": []}
+    if flown.name == "hover" and flight.flew:
+        out["hold_last_10s"] = hold_metrics(log, until=flown.plan.duration)
+    for step in flown.steps:
+        m = step_metrics(log, step, flight.t_arm)
+        out["steps"].append({"channel": step.channel, "t": step.t, "start": step.start, "end": step.end,
+                             "rise_s": _finite(m.rise_s), "overshoot": _finite(m.overshoot),
+                             "settling_s": _finite(m.settling_s), "steady_error": _finite(m.steady_error),
+                             "coupling": {k: _finite(v) for k, v in m.coupling.items()}})
+    return out
 
 
 def main(argv: list[str]) -> int:
@@ -58,31 +89,47 @@ def main(argv: list[str]) -> int:
     log_path = Path(args.log)
     if not log_path.parent.is_dir():
         raise InputError(f"--log {log_path}: the directory does not exist")
+    if args.json and not Path(args.json).parent.is_dir():
+        raise InputError(f"--json {args.json}: the directory does not exist")
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     path = "perfect state feedback" if args.truth else f"full onboard path, {args.estimator} estimator"
     say(f"flying {flown.name} ({flown.doc}); {args.gains}, {path}"
         + (f"; plant with {', '.join(map(repr, effects))}" if effects else ""))
     start = time.perf_counter()
-    flight = fly(flown, params, log_path, effects, noise=not args.no_noise, seed=args.seed,
-                 truth=args.truth, substeps=args.substeps, estimator=args.estimator)
+    link = None
+    if args.mavlink:
+        from flightctl.mavlink import open_link
+        link = open_link(args.mavlink, params)
+    if link is not None:
+        link.ready(flown.name)
+    try:
+        flight = fly(flown, params, log_path, effects, noise=not args.no_noise, seed=args.seed,
+                     truth=args.truth, substeps=args.substeps, estimator=args.estimator, telemetry=link)
+    finally:
+        if link is not None:
+            link.close()
     wall = time.perf_counter() - start
     log = flight.log
     duration = log["t"][-1]
-    print(f"{flown.name}: {flight.result.reason}; {duration:.1f} s flown in {wall:.1f} s "
+    loop_reason = "" if flight.result.reason == "plan complete" else f" ({flight.result.reason})"
+    print(f"{flown.name}: {flight.outcome}{loop_reason}; {duration:.1f} s flown in {wall:.1f} s "
           f"({duration / wall:.0f}x real time), {len(log)} rows -> {log_path}")
     for t, what in flight.result.events:
         print(f"  t = {t:6.2f} s  {what}")
     for t, vz in flight.touchdowns:
         print(f"  touchdown at t = {t:6.2f} s, {abs(vz):.2f} m/s")
-    if args.scenario == "hover":
-        h = hold_metrics(log)
+    if args.scenario == "hover" and flight.flew and not flight.crashed:
+        h = hold_metrics(log, until=flown.plan.duration)
         print(f"  last 10 s: altitude within {100 * h['alt_error']:.1f} cm of 1.5 m, "
               f"tilt within {h['tilt'] * 57.2958:.2f} deg")
     for step in flown.steps:
         print("  " + step_metrics(log, step, flight.t_arm).row())
+    if args.json:
+        Path(args.json).write_text(json.dumps(metrics_json(flown, flight, wall), indent=1) + "\n")
+        print(f"  metrics -> {args.json}")
     if not args.no_plot:
         png = Path(args.plot) if args.plot else log_path.with_suffix(".png")
         from flightctl.sim.plots import plot_flight
         plot_flight(log, png, f"flightctl sim {flown.name}: {args.gains}, {path}")
         print(f"  plot -> {png}")
-    return 0
+    return 1 if flight.crashed or not flight.flew else 0

@@ -26,7 +26,7 @@ from flightctl.drivers import mpu9250_regs as reg
 from flightctl.drivers.hcsr04 import US_PER_M
 from flightctl.hal import LEVEL_TIMEOUT, PWM_RANGE
 from flightctl.params import Airframe
-from flightctl.physics import G, rotor_speed
+from flightctl.physics import G
 from flightctl.sim.model import Effect, Model, rotation
 from flightctl.sim.plant import Plant
 from flightctl.sim.power import SimBattery
@@ -60,9 +60,9 @@ class SensorNoise:
     #                                    bounds; the paper's calibration removes the offset on the floor)
     accel_temp_coeff: float = 1.5e-3 * G   # m/s^2/degC per axis: zero-g change +-1.5 mg/degC (PS 3.2)
     # The die temperature after power-on: T = T_ambient + rise (1 - exp(-t / tau)). The datasheet gives no
-    # figure; the chip dissipates ~12 mW (3.7 mA at 3.3 V, PS 3.1), a breakout board's regulator and a
-    # Raspberry Pi next to it add more, and the temperature register of such boards rises by a few degC over
-    # the first minutes: 5 degC with a 2 min time constant.
+    # figure. Plausible: the chip itself dissipates ~10 mW (a few mA at 3.3 V), a breakout board's regulator
+    # and the Raspberry Pi beside it add more, and a board's thermal time constant is minutes: a rise of
+    # 5 degC with a 2 min time constant.
     warmup_rise: float = 5.0           # degC
     warmup_tau: float = 120.0          # s
     # Vibration: each rotor's residual imbalance U (kg m) is a force U w^2 rotating at its speed w (1/rev):
@@ -300,16 +300,14 @@ class SimMpu9250:
         its thrust (eq. 27, so a rotor lag is followed), the amplitude in proportion to the thrust, taken
         at the chip's last output sample (SMPLRT_DIV) and through the DLPF as a first-order low-pass with
         the register map's bandwidth and delay."""
-        plant = self.world.plant
-        f = plant.model.forces(t, plant.x, plant.u)[0]
-        c1, kv, tc2 = self.world.a.c1, self._vib_per_n, self._a_tc * self._a_tc
+        rotors = self.world.plant.forces()
+        kv, tc2 = self._vib_per_n, self._a_tc * self._a_tc
         back = t % self._period + self._a_delay   # how long ago the vibration entered the register
         phase = self._phase
         cos, sin, sqrt = math.cos, math.sin, math.sqrt
         vx = vy = vz = 0.0
-        for i, fi, spin, zc, zs in zip(range(4), f, self.SPIN, self._z_cos, self._z_sin):
+        for i, fi, om, spin, zc, zs in zip(range(4), rotors.f, rotors.w, self.SPIN, self._z_cos, self._z_sin):
             if fi > 0.0:
-                om = rotor_speed(fi, c1)
                 th = phase[i] = (phase[i] + om * dt) % _TAU
                 a = kv * fi / sqrt(1.0 + om * om * tc2)   # first-order DLPF gain at w
                 th -= om * back

@@ -72,8 +72,11 @@ def step_metrics(log: Table, step: Step, t_arm: float, source: str = "true") -> 
     return StepMetrics(step, rise, overshoot, settling, steady, coupling)
 
 
-def hold_metrics(log: Table, last_s: float = 10.0) -> dict[str, float]:
-    """Over the last `last_s` seconds: the largest altitude error (m) and tilt (rad), true values."""
-    sel = log["t"] >= log["t"][-1] - last_s
+def hold_metrics(log: Table, last_s: float = 10.0, until: float | None = None) -> dict[str, float]:
+    """Over the last `last_s` seconds before `until` (the plan's end; default: the log's end, which
+    after a plan that ends in the air is the landing): the largest altitude error (m) and tilt (rad),
+    true values."""
+    end = log["t"][-1] if until is None else until
+    sel = (log["t"] >= end - last_s) & (log["t"] <= end)
     return {"alt_error": float(np.max(np.abs(log["true_z"][sel] - log["alt_sp"][sel]))),
             "tilt": float(np.max(np.maximum(np.abs(log["true_roll"][sel]), np.abs(log["true_pitch"][sel]))))}

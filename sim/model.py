@@ -52,7 +52,11 @@ def angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, a: 
 def rotation(phi, theta, psi):
     """R = Rz(psi) Ry(theta) Rx(phi), body to inertial, as nine entries row by row."""
     m = _trig(phi)
-    sf, cf, st, ct, sp, cp = m.sin(phi), m.cos(phi), m.sin(theta), m.cos(theta), m.sin(psi), m.cos(psi)
+    return rotation_from_trig(m.sin(phi), m.cos(phi), m.sin(theta), m.cos(theta), m.sin(psi), m.cos(psi))
+
+
+def rotation_from_trig(sf, cf, st, ct, sp, cp):
+    """`rotation` from the sines and cosines of phi, theta and psi (for a caller that has them)."""
     return (cp * ct, cp * st * sf - sp * cf, cp * st * cf + sp * sf,
             sp * ct, sp * st * sf + cp * cf, sp * st * cf - cp * sf,
             -st, ct * sf, ct * cf)
@@ -77,6 +81,8 @@ class Effect:
     may carry a value from its `rotor` to its `wrench`):
 
     - `delay`: the commands reach the motors this much later (applied by the plant to `u`);
+    - `command(f_cmd)`: a rotor effect sees each new input's commanded thrusts (eq. 26) once, before
+      the `rotor` calls that take them, and keeps what depends on the input only;
     - `rotor(t, x, f_cmd, xdot)`: its own states (`n_states`, placed at `offset`) turn the
       commanded thrusts into rotor thrusts, writing their derivatives into `xdot` (None when only
       the forces are wanted); the rotor speed of eq. 9 follows the returned thrusts (eq. 27);
@@ -104,9 +110,23 @@ class Effect:
     def initial_states(self, f_cmd: list[float]) -> list[float]:
         return []
 
+    def command(self, f_cmd: list[float]) -> None:
+        """A rotor effect's view of each new input, before the `rotor` calls that take these
+        commanded thrusts: what depends on the input only is computed here, once per input."""
+
     def __repr__(self):
         args = ",".join(f"{k}={v:g}" for k, v in self.parameters.items())
         return f"{self.cause}:{args}" if args else self.cause
+
+
+class Forces(NamedTuple):
+    """The rotors at one state and input: thrusts `f` (N), reaction torques `tau` (N m, eq. 28), the
+    effects' extra body-frame `force` (N) and `torque` (N m), and the speeds `w` (rad/s, eq. 27)."""
+    f: list
+    tau: list
+    force: tuple
+    torque: tuple
+    w: list
 
 
 class Model:
@@ -129,8 +149,11 @@ class Model:
         self._cacheable = not (self._rotor or self._wrench or any(e.state_dependent for e in self._scale))
         self._cached_u = None
         self._cached = None
+        self._command_u = None   # the input of `_f_cmd`, the commanded thrusts (eq. 26)
+        self._f_cmd = None
         # gamma2 is the friction of the yaw-drag test bearing: zero in free flight (eq. 6).
         self.gamma2 = airframe.gamma2 if bearing else 0.0
+        self._iM = 1.0 / airframe.M
 
     def initial_state(self, u) -> list[float]:
         x = [0.0] * N_RIGID
@@ -139,62 +162,74 @@ class Model:
             x += e.initial_states(f_cmd)
         return x
 
-    def _commanded(self, u):
-        a = self.a
-        return [thrust_from_command(u[i], a.h1, a.h2) for i in range(4)]
+    def _commanded(self, u) -> list[float]:
+        """The commanded thrusts of eq. 26, computed once per input (by value: a list changed in
+        place is a new input); the rotor effects see each new input first in their `command` hook."""
+        key = tuple(u)
+        if key != self._command_u:
+            a = self.a
+            h1, h2 = a.h1, a.h2
+            self._command_u = key
+            self._f_cmd = [thrust_from_command(u[0], h1, h2), thrust_from_command(u[1], h1, h2),
+                           thrust_from_command(u[2], h1, h2), thrust_from_command(u[3], h1, h2)]
+            for e in self._rotor:
+                e.command(self._f_cmd)
+        return self._f_cmd
 
-    def forces(self, t, x, u, xdot=None):
-        """Per-rotor thrusts and torques (eq. 26, 28 and the extensions) and the extra body wrench."""
+    def forces(self, t, x, u, xdot=None, Rm=None) -> Forces:
+        """The rotors (eq. 26-28 and the extensions) and the extra body wrench. `Rm`: the rotation
+        of x's attitude when the caller has it (`rotation_from_trig`), for the body velocity."""
         a = self.a
-        h1, h2 = a.h1, a.h2
-        f = [thrust_from_command(u[0], h1, h2), thrust_from_command(u[1], h1, h2),
-             thrust_from_command(u[2], h1, h2), thrust_from_command(u[3], h1, h2)]
+        f = self._commanded(u)
         for e in self._rotor:
             f = e.rotor(t, x, f, xdot)
         g1, g2 = a.g1, a.g2
-        tau = [rotor_torque(fi, g1, g2) for fi in f]  # eq. 28
+        tau = [rotor_torque(f[0], g1, g2), rotor_torque(f[1], g1, g2),   # eq. 28
+               rotor_torque(f[2], g1, g2), rotor_torque(f[3], g1, g2)]
         if self._scale:
             s = [1.0, 1.0, 1.0, 1.0]
             for e in self._scale:
                 e.scale(t, x, u, s)
             f = [f[i] * s[i] for i in range(4)]
             tau = [tau[i] * s[i] for i in range(4)]
+        c1 = a.c1
+        w = [rotor_speed(f[0], c1), rotor_speed(f[1], c1), rotor_speed(f[2], c1), rotor_speed(f[3], c1)]
         if not self._wrench:
-            return f, tau, _ZERO, _ZERO
+            return Forces(f, tau, _ZERO, _ZERO, w)
         force, torque = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
-        Rm = rotation(x[PHI], x[THETA], x[PSI])
+        if Rm is None:
+            Rm = rotation(x[PHI], x[THETA], x[PSI])
         vx, vy, vz = x[VX], x[VY], x[VZ]
         vb = (Rm[0] * vx + Rm[3] * vy + Rm[6] * vz, Rm[1] * vx + Rm[4] * vy + Rm[7] * vz,
-              Rm[2] * vx + Rm[5] * vy + Rm[8] * vz)
+              Rm[2] * vx + Rm[5] * vy + Rm[8] * vz)   # R^T v
         for e in self._wrench:
             e.wrench(t, x, f, vb, force, torque)
-        return f, tau, force, torque
+        return Forces(f, tau, force, torque, w)
 
-    def _aggregate(self, t, x, u, xdot=None):
+    def _aggregate(self, t, x, u, xdot=None, Rm=None):
         """Body force and torques, eq. 9's Omega: what the rigid body needs from the rotors."""
-        a = self.a
-        (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque = self.forces(t, x, u, xdot)
-        c1, l = a.c1, a.l
-        # eq. 9: Omega = -w1 + w2 - w3 + w4 (motors 1 and 3 turn clockwise), w from eq. 27
-        Omega = -rotor_speed(f1, c1) + rotor_speed(f2, c1) - rotor_speed(f3, c1) + rotor_speed(f4, c1)
+        (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque, (w1, w2, w3, w4) = self.forces(t, x, u, xdot, Rm)
+        l = self.a.l
+        # eq. 9: Omega = -w1 + w2 - w3 + w4 (motors 1 and 3 turn clockwise)
         return (force[0], force[1], force[2] + f1 + f2 + f3 + f4, l * (f2 - f4) + torque[0],
-                l * (f3 - f1) + torque[1], t1 - t2 + t3 - t4 + torque[2], Omega)
+                l * (f3 - f1) + torque[1], t1 - t2 + t3 - t4 + torque[2], -w1 + w2 - w3 + w4)
 
     def f(self, t, x, u):
         """xdot = f(t, x, u): M dv/dt = R (F_ext + sum f z_b) - M g z, and eq. 7. Scalar code (fast);
         the functions above it take arrays too, for fitting."""
         a = self.a
         xdot = [0.0] * self.n
+        phi, theta, psi, p, q, r = x[6:12]
+        sf, cf, st, ct, sp, cp = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
         if self._cacheable:
             key = tuple(u)   # by value: a list changed in place must not return stale forces
             if key != self._cached_u:
                 self._cached_u, self._cached = key, self._aggregate(t, x, u)
             fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._cached
         else:
-            fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._aggregate(t, x, u, xdot)
-        phi, theta, psi, p, q, r = x[6:12]
-        sf, cf, st, ct, sp, cp = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
-        iM = 1.0 / a.M
+            Rm = rotation_from_trig(sf, cf, st, ct, sp, cp) if self._wrench else None
+            fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._aggregate(t, x, u, xdot, Rm)
+        iM = self._iM
         # R = Rz(psi) Ry(theta) Rx(phi) applied to the body force (fx, fy, fz)
         up = sf * fy + cf * fz
         bx = ct * fx + st * up
@@ -211,8 +246,9 @@ class Model:
         xdot[9], xdot[10], xdot[11] = angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, a)
         return xdot
 
-    def specific_force(self, t, x, u):
-        """What an accelerometer at the centre of mass reads, body frame: (sum f z_b + F_ext) / M."""
-        f, _, force, _ = self.forces(t, x, u)
+    def specific_force(self, t, x, u, forces: Forces | None = None):
+        """What an accelerometer at the centre of mass reads, body frame: (sum f z_b + F_ext) / M.
+        `forces`: `forces(t, x, u)` when the caller has them already."""
+        f, _, force, _, _ = self.forces(t, x, u) if forces is None else forces
         M = self.a.M
         return force[0] / M, force[1] / M, (force[2] + f[0] + f[1] + f[2] + f[3]) / M

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections import deque
 
-from flightctl.sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Model, P
+from flightctl.sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Forces, Model, P
 
 
 class Plant:
@@ -29,6 +29,8 @@ class Plant:
         self.touchdowns: list[tuple[float, float]] = []  # (time, vertical speed at contact)
         self._lag = round(model.delay / self.h)           # delay in substeps
         self._queue: deque = deque([self.u] * self._lag)
+        self._forces_at = None                            # (t, x, u) of `_forces`
+        self._forces: Forces | None = None
 
     def command(self, P1: float, P2: float, P3: float, P4: float, battery_v: float) -> None:
         """The input from now on (after the actuation delay, if any)."""
@@ -71,8 +73,17 @@ class Plant:
 
     def _lifts(self, x, u) -> bool:
         """On the floor the vehicle stays put until the vertical thrust exceeds its weight."""
-        _, _, fz = self.model.specific_force(self.t, x, u)
+        _, _, fz = self.model.specific_force(self.t, x, u, self.forces())
         return fz > self.model.a.g
+
+    def forces(self) -> Forces:
+        """The rotors now (`Model.forces` at the plant's time, state and input), computed once for
+        each: the floor, the battery and the IMU (specific force, vibration) all ask at one state.
+        Compared by value, so that a state or input changed in place is seen."""
+        key = (self.t, tuple(self.x), tuple(self.u))
+        if key != self._forces_at:
+            self._forces_at, self._forces = key, self.model.forces(self.t, self.x, self.u)
+        return self._forces
 
     def _touch_down(self) -> None:
         x = self.x
@@ -86,7 +97,7 @@ class Plant:
         """Accelerometer truth: on the floor the reaction of the floor, (0, 0, g)."""
         if self.on_ground:
             return 0.0, 0.0, self.model.a.g
-        return self.model.specific_force(self.t, self.x, self.u)
+        return self.model.specific_force(self.t, self.x, self.u, self.forces())
 
     @property
     def position(self):

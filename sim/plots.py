@@ -3,7 +3,8 @@
 Every figure is a `matplotlib.figure.Figure` made by `figure()` and rendered by `png()` or `save()`
 through the Agg canvas: no pyplot, so no global state (safe in threads and tests) and no backend to
 select. The style: constrained layout, a unit on every axis (a ratio or count says so), legends
-outside the data (`legend()` puts one beside its axes, `figure_legend()` one under all of them).
+outside the data (`legend()` puts one beside its axes, `figure_legend()` one under all of them), an
+empty axes says why (`empty_panel()`), a crash is marked and named in the title (`plot_flight`).
 Imported only when a plot is asked for (matplotlib is slow to import).
 
 The flight figure is like the paper's figures 13-20: for each channel the setpoint (red), the
@@ -19,6 +20,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from flightctl.logfile import Table
+from flightctl.safety import CRASH_TILT, CRASH_TOUCHDOWN_SPEED
 
 DPI = 90
 
@@ -40,6 +42,13 @@ def figure_legend(fig: Figure, ax, ncol: int) -> None:
     fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncol=ncol, fontsize="small")
 
 
+def empty_panel(ax, why: str) -> None:
+    """An axes with nothing to plot says why, in its middle, instead of a blank frame."""
+    ax.text(0.5, 0.5, why, ha="center", va="center", wrap=True, fontsize=9, transform=ax.transAxes)
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
 def png(fig: Figure, dpi: int = DPI) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi)
@@ -50,7 +59,33 @@ def save(fig: Figure, path: str | Path, dpi: int = DPI) -> None:
     Path(path).write_bytes(png(fig, dpi))
 
 
+def crash_times(log: Table, crash_tilt: float = CRASH_TILT, hard_touchdown: float = CRASH_TOUCHDOWN_SPEED) -> list[tuple[float, str]]:
+    """(time, what) of each crash in a log (flightctl/safety.py): the first tilt past `crash_tilt` (rad; the true attitude
+    where the log has it, else the estimate), and touchdowns faster than `hard_touchdown` (m/s) where
+    the log has the true altitude."""
+    t = log["t"]
+    roll, pitch = ((log["true_roll"], log["true_pitch"]) if "true_roll" in log else (log["roll"], log["pitch"]))
+    out = []
+    over = np.flatnonzero(np.maximum(np.abs(roll), np.abs(pitch)) > crash_tilt)
+    if over.size:
+        out.append((float(t[over[0]]), f"tilt past {math.degrees(crash_tilt):.0f} deg"))
+    if "true_z" in log and len(t) > 2:
+        z = log["true_z"]
+        vz = np.gradient(z, t)
+        down = np.flatnonzero((z[1:] <= 0.01) & (z[:-1] > 0.01)) + 1     # each arrival on the floor
+        for k in down:
+            speed = float(np.max(np.abs(vz[max(k - 5, 0):k + 1])))
+            if speed > hard_touchdown:
+                out.append((float(t[k]), f"hit the floor at {speed:.1f} m/s"))
+    return sorted(out)
+
+
 def plot_flight(log: Table, path: str | Path, title: str) -> None:
+    save(flight_figure(log, title), path, dpi=80)
+
+
+def flight_figure(log: Table, title: str) -> Figure:
+    """The flight figure; a crash is marked on every panel and the title says so."""
     t = log["t"]
     deg = 180 / math.pi
     panels = [("alt", "altitude (m)", 1.0, "true_z"), ("roll", "roll (deg)", deg, "true_roll"),
@@ -67,12 +102,18 @@ def plot_flight(log: Table, path: str | Path, title: str) -> None:
     rng = log["range"]
     ok = ~np.isnan(rng)
     axes[0].plot(t[ok], rng[ok], ".", ms=1.5, color="0.5", label="sonar range")
-    figure_legend(fig, axes[0], ncol=4)
     for i in range(1, 5):
         axes[4].plot(t, log[f"P{i}"], lw=0.6, label=f"P{i}")
     axes[4].set_ylabel("command P (0-255, no unit)")
     axes[4].set_xlabel("time (s)")
     legend(axes[4])
     axes[4].grid(alpha=0.3)
-    fig.suptitle(title)
-    save(fig, path, dpi=80)
+    crashes = crash_times(log)
+    for tc, _ in crashes:
+        for ax in axes:
+            ax.axvline(tc, color="k", lw=1.5, ls=":", label="crash" if ax is axes[0] and tc == crashes[0][0] else None)
+    figure_legend(fig, axes[0], ncol=5 if crashes else 4)
+    if crashes:
+        title = f"CRASHED at t = {crashes[0][0]:.2f} s ({crashes[0][1]}): {title}"
+    fig.suptitle(title, color="tab:red" if crashes else "black")
+    return fig

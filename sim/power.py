@@ -7,7 +7,6 @@ import errno
 from typing import TYPE_CHECKING
 
 from flightctl.drivers import ina219_regs as ina
-from flightctl.physics import rotor_speed
 
 if TYPE_CHECKING:
     from flightctl.sim.devices import World
@@ -31,10 +30,9 @@ class SimBattery:
         return 14.0 + 2.6 * self.soc
 
     def advance(self, dt: float) -> None:
-        plant = self.world.plant
-        c1 = self.world.a.c1
-        f, tau, _, _ = plant.model.forces(plant.t, plant.x, plant.u)
-        power = sum(tau[i] * rotor_speed(f[i], c1) for i in range(4)) / self.EFFICIENCY
+        rotors = self.world.plant.forces()
+        tau, w = rotors.tau, rotors.w
+        power = sum(tau[i] * w[i] for i in range(4)) / self.EFFICIENCY
         self.current = power / self.voltage
         self.soc -= self.current * dt / self.CAPACITY_C
         self.voltage = self._ocv() - self.R_INT * self.current

@@ -1,10 +1,14 @@
 """Fly a scenario: the onboard loop against the simulated board (sim/board.py), lock-step,
 writing the contract flight log plus the simulator's true state in `true_*` columns (which diagnose
-never reads)."""
+never reads), and judge the outcome on the true state with the one definition of a crash
+(flightctl/safety.py)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from flightctl import __version__
 from flightctl.boards import BoardOptions
@@ -12,6 +16,7 @@ from flightctl.control.controller import FlightController
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter, Table
 from flightctl.loop import FlightLoop, FlightResult
 from flightctl.params import Params, dumps
+from flightctl.safety import LEFT_GROUND_ALT, crash_reason
 from flightctl.sim.board import SIM_CALIBRATE_S, open_board
 from flightctl.sim.devices import SensorNoise, TruthEstimator, TruthRangefinder
 from flightctl.sim.scenarios import Scenario
@@ -22,15 +27,45 @@ class Flight:
     scenario: Scenario
     log: Table
     result: FlightResult
-    touchdowns: list[tuple[float, float]]
+    touchdowns: list[tuple[float, float]]   # (log time, vertical speed at contact)
     t_arm: float   # log time of arming (the log starts there)
+    log_dropped: int = 0                    # rows the log writer could not write
+    outcome: str = ""                       # "landed upright", "crashed: ...", "never left the ground", ...
+    crashed: bool = False
+    flew: bool = True
+
+
+ON_GROUND = 0.05   # m, true altitude
+
+
+def judge(result: FlightResult, log: Table, touchdowns, g: float) -> tuple[str, bool, bool]:
+    """(outcome, crashed, flew) on the true state: a crash by flightctl.safety (largest true tilt,
+    fastest touchdown), a vehicle cut in the air (it falls: a crash), one that never rose
+    LEFT_GROUND_ALT, or one that landed upright."""
+    if not len(log):
+        return "never armed: " + result.reason, False, False
+    z = log["true_z"]
+    tilt = float(np.max(np.maximum(np.abs(log["true_roll"]), np.abs(log["true_pitch"]))))
+    speed = max((abs(vz) for _, vz in touchdowns), default=0.0)
+    if not math.isfinite(float(z[-1])) or z[-1] > ON_GROUND:         # the motors stopped above the floor
+        fall = math.sqrt(2 * g * max(float(z[-1]), 0.0)) if math.isfinite(float(z[-1])) else math.inf
+        speed = max(speed, fall)
+    why = crash_reason(tilt, speed) if math.isfinite(tilt) else crash_reason(math.nan, speed)
+    if result.reason.startswith("stopped: crash") and why is None:
+        why = result.reason.removeprefix("stopped: crash").strip(" ()")
+    if why is not None:
+        return f"crashed: {why}", True, bool(np.nanmax(z) >= LEFT_GROUND_ALT)
+    if not np.nanmax(z) >= LEFT_GROUND_ALT:
+        return f"never left the ground (highest {float(np.nanmax(z)):.2f} m)", False, False
+    return "landed upright", False, True
 
 
 def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), noise: bool = True,
         seed: int = 0, truth: bool = False, substeps: int = 2, calibrate_s: float = SIM_CALIBRATE_S,
-        estimator: str = "flight") -> Flight:
+        estimator: str = "flight", telemetry=None) -> Flight:
     """`truth=True` is perfect state feedback: the controller sees the true attitude and altitude at
-    every loop (the paper's own simulation); otherwise the full onboard path."""
+    every loop (the paper's own simulation); otherwise the full onboard path. `telemetry`: a ground
+    station link (flightctl/mavlink.py) the loop streams to and takes commands from."""
     board = open_board(params, BoardOptions(seed=seed, effects=tuple(effects), substeps=substeps,
                                             noise=SensorNoise() if noise else SensorNoise.off()))
     hal, world = board.hal, board.world
@@ -44,7 +79,11 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
     log = FlightLogWriter(log_path, meta, extra=MAG_COLUMNS + board.extra_columns, keep=True)
     scenario.plan.restart()
     loop = FlightLoop(hal, params, scenario.plan, log, FlightController(params, truth_est, estimator),
-                      calibrate_s=calibrate_s, extra_row=board.extra_row)
+                      calibrate_s=calibrate_s, extra_row=board.extra_row, telemetry=telemetry)
     result = loop.run()
     board.close()
-    return Flight(scenario, log.table(), result, world.plant.touchdowns, 0.0)
+    t_arm = result.t_arm if result.t_arm is not None else calibrate_s
+    touchdowns = [(t - t_arm, vz) for t, vz in world.plant.touchdowns]
+    table = log.table()
+    outcome, crashed, flew = judge(result, table, touchdowns, params.airframe.g)
+    return Flight(scenario, table, result, touchdowns, 0.0, log.dropped, outcome, crashed, flew)

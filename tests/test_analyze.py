@@ -1,19 +1,20 @@
 """`flightctl analyze`: the linearisation against values worked out by hand, the loop figures against
 the closed form of the sampled loop, and the step predictions against the nonlinear simulation.
 
-Tolerances of the step comparisons (the linear loops are sampled-data exact, on the log's 450 Hz
-grid). What the linearisation leaves out at these step sizes: sin(5 deg) ~ 5 deg (0.1 %); the yaw
-drag gamma1 r^2, whose slope is zero at hover, at the 30 deg step's peak rate (~1.6 rad/s with
-Table 6) acts like 7e-4 N m s/rad of damping against k_d's 4 g1 kd_psi = 0.02, 3 % more damping on a
-zeta of 0.07, -0.8 percentage points of overshoot; through the full path, the IMU's LSBs, the PWM
-counts and the sonar's microsecond ticks (each < 0.1 % of the signal), the magnetometer fresh on one
-sample in four (the analysis takes every sample; the yaw correction is consistent with the gyro, so
-this moves the yaw estimate by little), and the sonar's echo delay, which follows the altitude
-(1 to 6 loop periods over a climb from the floor to 1.5 m and beyond, against the 5 taken at 1.5 m:
-one period is 0.3 degrees of phase at Table 6's 2.4 rad/s crossover, about 0.7 points of overshoot
-on its zeta of 0.04). Hence 1.5 percentage points on overshoot. Rise times: each crossing is found
-on the same 450 Hz grid in both (one period either end) and the effects above move them by under
-1 %: two loop periods plus 2 %.
+Tolerances of the step comparisons. The linear loops are sampled-data exact and both responses are
+on the log's 450 Hz grid; what the linearisation leaves out at these step sizes:
+- sin(5 deg) ~ 5 deg (0.1 %);
+- the yaw drag gamma1 r^2, whose slope is zero at hover: at the 30 deg turn's peak rate (2.1 rad/s
+  with Table 6) it acts like 9e-4 N m s/rad of damping (describing function 8 gamma1 r / 3 pi)
+  against k_d's 4 g1 kd_psi = 0.02: 4 % more damping on a zeta of 0.07, -0.7 points of overshoot;
+- through the full path: the IMU's LSBs, the PWM counts and the sonar's microsecond ticks (each
+  under 0.1 % of the signal); the magnetometer, fresh on one sample in four where the analysis
+  takes every sample (its correction agrees with the gyro's, so it moves the yaw estimate little);
+  the sonar's echo delay, which follows the altitude (1 to 6 loop periods over the climb against
+  the 5 taken at 1.5 m; one period is 0.3 deg of phase at Table 6's 2.4 rad/s crossover, about
+  0.7 points of overshoot on its zeta of 0.04).
+Hence 1.5 percentage points on overshoot. Rise times: each crossing is found on the same grid in
+both (one period either end) and the effects above move them by under 1 %: two periods plus 2 %.
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ from flightctl.cli import main as cli
 from flightctl.params import TABLE4, TABLE6, load
 from flightctl.physics import command_from_thrust
 from flightctl.plan import Move, Plan
+from flightctl.plans import TAKEOFF
 from flightctl.sim import causes
 from flightctl.sim.analysis.linear import SIGNALS, impulse_responses, linearise, realise, sampled
 from flightctl.sim.analyze import DEFAULT_ESTIMATOR, TRUTH, analyse
@@ -85,9 +87,10 @@ def test_effects_carry_their_terms_and_states_into_the_linearisation():
     # rotor_inflow (measured-data.md): f_i - k sqrt(f_i / B) (w_b + p y_i - q x_i), at hover f_i = B
     assert plant.A[VZ, VZ] == pytest.approx(-4 * k / A.M, rel=1e-6)
     assert plant.A[P, P] == pytest.approx(-2 * k * A.l ** 2 / A.Jxx, rel=1e-6)
-    # motor_dynamics: the yaw reaction -Jp sum s_i dOmega_i/dt acts at once on a command step: the
-    # commanded speed sqrt(h1 / c1) (P - h2) (eq. 26, 27), s = (-1, +1, -1, +1) against YAW's signs
-    reaction = 4 * A.Jp * math.sqrt(A.h1 / A.c1) / (tau * A.Jzz)
+    # motor_dynamics: the yaw reaction -Jp sum s_i dOmega_i/dt acts at once on a command step, each
+    # commanded speed moving by dOmega/df = 1 / (2 sqrt(c1 B)) (eq. 27 at hover) per newton of u_psi,
+    # with s = (-1, +1, -1, +1) against YAW's signs
+    reaction = 4 * A.Jp / (2 * math.sqrt(A.c1 * A.B)) / (tau * A.Jzz)
     assert plant.B[R] @ (np.array(YAW) * dPdf) == pytest.approx(reaction, rel=1e-6)
 
 
@@ -167,7 +170,7 @@ def test_roll_phase_margin_with_and_without_the_ema_in_the_d_path(name, gains):
     values without the EMA are those of the continuous loop; the 450 Hz hold costs w_c dt / 2 (3.0
     and 0.9 deg); with the EMA the estimate's integration of the current gyro sample leads by half a
     period and gives it back. The analysis must equal the closed form of the sampled loop."""
-    an = analyse(load(None, gains), (), (TRUTH, EmaRate))
+    an = analyse(load(None, gains), (), (TRUTH, EmaRate), channels=("roll",))
     truth, ema = an.loops[TRUTH]["roll"].figures, an.loops["EmaRate"]["roll"].figures
     assert truth["phase_margin_deg"] == pytest.approx(sampled_roll_margin(gains, False), abs=0.05)
     assert ema["phase_margin_deg"] == pytest.approx(sampled_roll_margin(gains, True), abs=0.05)
@@ -178,7 +181,8 @@ def test_roll_phase_margin_with_and_without_the_ema_in_the_d_path(name, gains):
 @pytest.fixture(scope="module")
 def predictions():
     """Both gain sets analysed once, with perfect state feedback and the default onboard estimator."""
-    return {name: analyse(load(None, gains), (), (TRUTH, DEFAULT_ESTIMATOR)) for name, gains in GAINS}
+    return {name: analyse(load(None, gains), (), (TRUTH, DEFAULT_ESTIMATOR), channels=("roll", "yaw", "alt"))
+            for name, gains in GAINS}
 
 
 def alt_from_floor():
@@ -189,13 +193,20 @@ def alt_from_floor():
     return scenario(Plan([Move(0.0, "alt", 1.5)], 12.0, "alt_from_floor", "climb from the floor to 1.5 m"))
 
 
-CASES = [("step_roll", True), ("step_roll", False), ("step_yaw", False), ("alt", True), ("alt", False)]
+def yaw_step():
+    """Figure 16's first turn, 0 -> 30 deg (step_yaw's second turn follows 8 s later)."""
+    return scenario(Plan([TAKEOFF, Move(10.0, "yaw", math.radians(30))], 18.0, "yaw_step", "a 30 deg turn"))
+
+
+PLANS = {"step_roll": SCENARIOS["step_roll"], "yaw": yaw_step, "alt": alt_from_floor}
+# perfect state feedback where its loop differs from the full path's in more than the estimator
+CASES = [("step_roll", False), ("yaw", False), ("alt", True), ("alt", False)]
 
 
 @pytest.mark.parametrize("name,gains", GAINS)
 @pytest.mark.parametrize("plan,truth", CASES)
 def test_step_prediction_matches_the_nonlinear_simulation(tmp_path, predictions, plan, truth, name, gains):
-    sc = alt_from_floor() if plan == "alt" else SCENARIOS[plan]()
+    sc = PLANS[plan]()
     step = sc.steps[0]
     flight = fly(sc, load(None, gains), tmp_path / "f.csv", truth=truth, noise=False,
                  estimator=DEFAULT_ESTIMATOR)
@@ -206,7 +217,7 @@ def test_step_prediction_matches_the_nonlinear_simulation(tmp_path, predictions,
     assert m.rise_s == pytest.approx(f["rise_s"], abs=RISE_TOLERANCE(f["rise_s"]))
 
 
-def test_cli_prints_writes_and_draws_the_figures(tmp_path, capsys):
+def test_cli_prints_writes_and_draws_the_figures(tmp_path, capsys, predictions):
     out = tmp_path / "a.json"
     assert cli(["analyze", "--gains", "table4", "--estimator", "truth", "--json", str(out),
                 "--plot", str(tmp_path / "a")]) == 0
@@ -214,7 +225,7 @@ def test_cli_prints_writes_and_draws_the_figures(tmp_path, capsys):
     report = json.loads(out.read_text())
     loops = report["loops"]["truth"]
     assert set(loops) == {"roll", "pitch", "yaw", "alt"}
-    expected = analyse(load(None, TABLE4), (), (TRUTH,)).loops[TRUTH]
+    expected = predictions["table4"].loops[TRUTH]   # roll, yaw and alt
     for ch, loop in expected.items():
         assert loops[ch]["phase_margin_deg"] == pytest.approx(loop.figures["phase_margin_deg"])
         assert f"{loop.figures['phase_margin_deg']:7.1f}" in printed.split(f"\n{ch} ")[1].split("\n")[0]

@@ -1,37 +1,63 @@
-"""`flightctl bench`: one motor at a time, the others at the stop pulse, a ramp, a maximum, a stop on
-Ctrl-C, and bench.csv rows: the simulator's truth on --board sim, the operator's entries on the Pi."""
+"""`flightctl bench`: the four motors in turn on the simulated stand with the simulated instruments on a
+pty (read through pyserial), one bench.csv that identify fits, the step profile's time constant, and
+the safety stops: each leaves the motor at the stop pulse and keeps the rows so far."""
 from __future__ import annotations
 
-import math
-import time
+import json
+import os
+import signal
+import tomllib
 
 import pytest
 
-from fakes.pigpiod import running
 from flightctl.cli import main as cli
 from flightctl.errors import InputError
 from flightctl.logfile import BENCH_COLUMNS, read_table
 from flightctl.params import load
-from flightctl.pi import open_pi_board
 from flightctl.hil import bench
-from flightctl.sim.devices import SensorNoise, SimMpu9250, World
+from flightctl.hil.bench import RAW_COLUMNS, counts_for
 from without import PI_LIBRARIES, run_without
-from flightctl.sim.power import SimIna219, SimSMBus
+
+FAST = ["--ramp", "400", "--settle", "0.3", "--hold", "0.3", "--no-plot"]
 
 
-def test_sim_bench_writes_the_models_truth(tmp_path):
+def test_sim_bench_through_the_pty_instruments_feeds_identify(tmp_path):
+    """The issue's end-to-end chain: simulated motors, instruments on a pty through pyserial, bench.csv,
+    `flightctl identify bench` recovers the simulated propeller within 3 %."""
     out = tmp_path / "bench.csv"
-    assert bench.main(["--board", "sim", "--motor", "3", "--steps", "130,160,190", "--settle", "0.3",
-                       "--hold", "0.3", "--out", str(out)]) == 0
+    assert cli(["bench", "--board", "sim", "--instruments", "pty", "--steps", "130,145,160,175,190",
+                "--out", str(out), *FAST[:-1]]) == 0
     table = read_table(out, BENCH_COLUMNS)
-    a = load(None).airframe
-    assert list(table["motor"]) == [3, 3, 3] and list(table["P"]) == [130, 160, 190]
-    for P, f, w in zip(table["P"], table["thrust"], table["omega"]):
-        assert f == pytest.approx(a.h1 * (P - a.h2) ** 2, rel=1e-3)          # eq. 26 (P quantised to counts)
-        assert w == pytest.approx(math.sqrt(f / a.c1), rel=1e-5)             # eq. 27 (6 digits in the file)
-    assert all(15.0 < v < 16.8 for v in table["voltage"])
-    assert table["current"][2] > table["current"][0] > 0
-    assert table.meta["board"].startswith("sim")
+    assert sorted(set(table["motor"])) == [1, 2, 3, 4] and len(table) == 20
+    assert all(15.0 < v < 16.8 for v in table["voltage"])          # the onboard INA219 (simulated chip)
+    raw = read_table(tmp_path / "bench-raw.csv", RAW_COLUMNS, text_columns=("phase",))
+    assert len(raw) > 20 * 0.3 * 150 and (raw["t"][1:] >= raw["t"][:-1]).all()   # 200 lines/s, in time order
+    assert {"ramp", "settle", "hold", "tare"} <= set(raw["phase"])
+    assert (tmp_path / "bench.png").stat().st_size > 10_000
+    report = tmp_path / "id.json"
+    assert cli(["identify", "bench", str(out), "--json", str(report)]) == 0
+    found, a = json.loads(report.read_text()), load(None).airframe
+    for name in ("h1", "h2", "c1"):
+        assert found[name]["value"] == pytest.approx(getattr(a, name), rel=0.03), name
+    # the rows are the instruments' averages, not copies of the truth: eq. 26 within the noise
+    for P, f in zip(table["P"], table["thrust"]):
+        assert f == pytest.approx(a.h1 * (P - a.h2) ** 2, rel=0.02, abs=0.02)
+
+
+def test_step_profile_fits_the_motor_time_constant_and_writes_it(tmp_path):
+    out, params = tmp_path / "step.csv", tmp_path / "fitted.toml"
+    assert bench.main(["--board", "sim", "--params", "paper-as-flown", "--profile", "step", "--motors", "1,4",
+                       "--step", "140,180", "--record", "0.4", "--out", str(out), "--write-params", str(params),
+                       *FAST]) == 0
+    true_tau = dict(load("paper-as-flown").effects[1].parameters)["tau"]
+    written = load(params)
+    dyn = [e for e in written.effects if e.cause == "motor_dynamics"]
+    assert len(dyn) == 1 and dict(dyn[0].parameters)["tau"] == pytest.approx(true_tau, rel=0.1)
+    assert "step profile" in dyn[0].source
+    assert {e.cause for e in written.effects} == {e.cause for e in load("paper-as-flown").effects}
+    assert "gains" not in tomllib.loads(params.read_text())       # a vehicle file leaves [gains] to --gains
+    table = read_table(out, BENCH_COLUMNS)
+    assert list(table["motor"]) == [1, 1, 4, 4] and list(table["P"]) == [140, 180, 140, 180]
 
 
 def test_bench_keeps_the_other_motors_stopped_and_ramps(monkeypatch, tmp_path):
@@ -39,14 +65,14 @@ def test_bench_keeps_the_other_motors_stopped_and_ramps(monkeypatch, tmp_path):
     real_open = bench.open_bench
 
     def recording_open(args, params):
-        board, truth = real_open(args, params)
-        real_write = board.hal.motors.write
-        board.hal.motors.write = lambda c: (writes.append(list(c)), real_write(c))
-        return board, truth
+        rig = real_open(args, params)
+        real_write = rig.board.hal.motors.write
+        rig.board.hal.motors.write = lambda c: (writes.append(list(c)), real_write(c))
+        return rig
 
     monkeypatch.setattr(bench, "open_bench", recording_open)
     assert bench.main(["--board", "sim", "--motor", "2", "--steps", "180", "--ramp", "100", "--settle", "0.1",
-                       "--hold", "0.1", "--out", str(tmp_path / "b.csv")]) == 0
+                       "--hold", "0.1", "--no-plot", "--out", str(tmp_path / "b.csv")]) == 0
     assert all(c[0] == c[2] == c[3] == 0 for c in writes)
     motor2 = [c[1] for c in writes]
     steps = [b - a for a, b in zip(motor2, motor2[1:])]
@@ -59,76 +85,87 @@ def test_steps_above_the_maximum_or_a_bad_motor_are_refused(tmp_path, capsys):
     assert cli(["bench", "--board", "sim", "--motor", "1", "--steps", "150,230", "--out", str(tmp_path / "b.csv")]) == 2
     assert "exceeds --max 200" in capsys.readouterr().err
     assert cli(["bench", "--board", "sim", "--motor", "5", "--steps", "150"]) == 2
+    assert cli(["bench", "--board", "sim", "--instruments", "morse:/dev/x", "--out", str(tmp_path / "b.csv")]) == 2
+    assert cli(["bench", "--board", "sim", "--instruments", "serial:/dev/null", "--out", str(tmp_path / "b.csv")]) == 2
     assert not (tmp_path / "b.csv").exists()
     with pytest.raises(InputError):
         bench.parse_steps("150,abc", 200)
 
 
-def test_ctrl_c_stops_the_motor_and_keeps_the_rows_so_far(monkeypatch, tmp_path):
+def _run_with(monkeypatch, tmp_path, argv, on_write):
+    """bench.main on the simulated stand; `on_write(counts, rig)` sees every motor write."""
     state = {}
     real_open = bench.open_bench
 
-    def interrupting_open(args, params):
-        board, truth = real_open(args, params)
-        hal = board.hal
-        state["motors"] = hal.motors
-        reads = [0]
-        real_read = hal.power.read
+    def hooked_open(args, params):
+        rig = real_open(args, params)
+        motors = state["motors"] = rig.board.hal.motors
+        real_write = motors.write
 
-        def read():
-            reads[0] += 1
-            if reads[0] > 6:                    # during the second step's measurement
-                raise KeyboardInterrupt
-            return real_read()
+        def write(c):
+            on_write(c, rig)
+            real_write(c)
+        motors.write = write
+        return rig
 
-        hal.power.read = read
-        return board, truth
-
-    monkeypatch.setattr(bench, "open_bench", interrupting_open)
+    monkeypatch.setattr(bench, "open_bench", hooked_open)
     out = tmp_path / "b.csv"
-    assert bench.main(["--board", "sim", "--motor", "1", "--steps", "150,170", "--settle", "0.1", "--hold", "0.5",
-                       "--out", str(out)]) == 130
-    assert state["motors"].counts == [0, 0, 0, 0] and not state["motors"].armed
-    assert len(read_table(out, BENCH_COLUMNS)) == 1
+    status = bench.main(["--board", "sim", "--motors", "1", "--steps", "130,145,160,175,190", *FAST, "--out", str(out),
+                         *argv])
+    motors = state["motors"]
+    assert motors.counts == [0, 0, 0, 0] and not motors.armed                # the stop pulse, whatever happened
+    return status, read_table(out, BENCH_COLUMNS, min_rows=0)
 
 
-def test_pi_bench_takes_the_operators_readings_while_the_motor_keeps_spinning(tmp_path):
-    params = load(None)
-    world = World(params.airframe, noise=SensorNoise.off())
-    world.battery.voltage, world.battery.current = 16.0, 3.2
-    bus = SimSMBus(SimIna219(world))
-    with running() as (fake, pi):
-        board = open_pi_board(params, None, pi=pi, spi=SimMpu9250(world), smbus=bus)
-        hal = board.hal
-        seen = {}
+@pytest.mark.parametrize("fault, argv, expected, rows", [
+    ("silent", [], "went silent", [130, 145]),
+    (None, ["--max-rpm", "5000"], "beyond the propeller's limit", [130, 145, 160]),   # 553 rad/s at P = 175
+    ("slipping", [], "thrust fell", [130, 145, 160]),
+])
+def test_a_fault_or_an_implausible_reading_stops_the_spinning_motor(monkeypatch, tmp_path, capsys, fault, argv,
+                                                                    expected, rows):
+    seen = []
 
-        def operator(motor, P):
-            time.sleep(0.3)                     # three dead-man periods: the holder keeps writing
-            seen["on_times"] = fake.live_wave().on_times()
-            seen["script"] = fake.script_running()
-            answers = iter(["510", ""])         # scale 510 g; tachometer skipped with Enter
-            return bench.ask_operator(motor, P, read=lambda prompt: next(answers))
+    def on_write(c, rig):
+        seen.append(c[0])
+        if c[0] >= counts_for(158):                     # during the third step
+            if fault == "slipping":
+                rig.sim.thrust_gain = 0.3                 # the load cell slips in its mount
+            elif fault:
+                rig.sim.fault = fault
 
-        b = bench.Bench(hal, 2, truth=None, ask=operator, ramp=500, settle_s=0.05, hold_s=0.1)
-        hal.motors.stop()
-        hal.motors.arm()
-        row = b.step(150)
-        b.finish()
-        board.close()
-    assert seen["script"]                                                 # armed throughout
-    assert seen["on_times"][27] == round(150 / 255 * 40000 / 40000 * 2227)  # motor 2 still at P = 150
-    assert seen["on_times"][17] == seen["on_times"][22] == seen["on_times"][25] == 1000
-    motor, P, thrust, omega, volts, amps = row
-    assert (motor, P) == (2, 150)
-    assert thrust == pytest.approx(0.510 * 9.80665)
-    assert math.isnan(omega)                                              # skipped with Enter
-    assert volts == pytest.approx(16.0, abs=0.01) and amps == pytest.approx(3.2, abs=0.01)
-    assert fake.live_wave().on_times()[27] == 1000 and fake.errors == []
+    status, table = _run_with(monkeypatch, tmp_path, argv, on_write)
+    assert status == 1
+    assert max(seen) >= counts_for(158)                 # it was spinning when it stopped
+    err = capsys.readouterr().err
+    assert expected in err and "motor 1 at the stop pulse" in err
+    assert list(table["P"]) == rows
+
+
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
+def test_ctrl_c_or_sigterm_stops_the_motor_and_keeps_the_rows_so_far(monkeypatch, tmp_path, how):
+    def on_write(c, rig):
+        if c[0] >= counts_for(140):
+            if how == "ctrl-c":
+                raise KeyboardInterrupt
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    previous = signal.getsignal(signal.SIGTERM)
+    status, table = _run_with(monkeypatch, tmp_path, [], on_write)
+    assert status == 130 and list(table["P"]) == [130]
+    assert signal.getsignal(signal.SIGTERM) == previous
+
+
+def test_a_step_that_does_not_settle_in_time_stops(monkeypatch, tmp_path, capsys):
+    status, table = _run_with(monkeypatch, tmp_path, ["--params", "paper-as-flown", "--ramp", "500", "--settle", "0",
+                                                      "--hold", "0.04", "--step-timeout", "0.01"], lambda c, rig: None)
+    assert status == 1 and len(table) == 0
+    assert "did not settle within --step-timeout" in capsys.readouterr().err
 
 
 def test_an_unknown_board_or_a_pi_board_that_is_not_there_is_one_line(tmp_path, capsys):
     assert cli(["bench", "--board", "bench9", "--motor", "1", "--steps", "150"]) == 2
-    assert capsys.readouterr().err.strip() == "flightctl bench: error: unknown board 'bench9' (known: pi, sim)"
+    assert capsys.readouterr().err.strip() == "flightctl bench: error: unknown board 'bench9' (known: pi, sim, hil)"
     board = tmp_path / "board.toml"
     board.write_text("[pigpio]\nport = 1\n")              # nothing listens on port 1
     out = tmp_path / "b.csv"

@@ -114,7 +114,11 @@ def run_case(tmp: Path, cause: str, parameters: dict, seed: int, quick: bool = F
     plan = ["--plan", str(quick_plan(tmp))] if quick else ["excite"]
     effect = f"{cause}:" + ",".join(f"{k}={v!r}" for k, v in parameters.items())
     hidden = ["--effect", effect] if parameters else []
-    assert main(["sim", *plan, "--log", str(log), "--seed", str(seed), "--no-plot", "--quiet", *hidden]) == 0
+    # 1: the flight ended in a crash, which many hidden effects cause (Table 6 is not stable with a lag
+    # through the full path) and which the descents of these plans can cause by touching the floor
+    # too fast; the log is written either way, and diagnose judges its airborne part
+    assert main(["sim", *plan, "--log", str(log), "--seed", str(seed), "--no-plot", "--quiet", *hidden]) in (0, 1)
+    assert log.is_file()
     out = tmp / f"report_{cause}_{seed}.json"
     assert main(["diagnose", str(log), "--json", str(out), "--quiet"]) == 0
     return json.loads(out.read_text())

@@ -15,8 +15,9 @@ from test_diagnose_cases import quick_plan
 def flight(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("diag")
     path = tmp / "flight.csv"
-    assert main(["sim", "--plan", str(quick_plan(tmp)), "--log", str(path), "--seed", "5", "--no-plot", "--quiet",
-                 "--effect", "com_offset:dx=0.01,dy=0"]) == 0
+    main(["sim", "--plan", str(quick_plan(tmp)), "--log", str(path), "--seed", "5", "--no-plot", "--quiet",
+          "--effect", "com_offset:dx=0.01,dy=0"])   # 0, or 1 if it lands too fast (test_diagnose_cases.run_case)
+    assert path.is_file()
     return path
 
 

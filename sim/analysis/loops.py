@@ -36,6 +36,7 @@ MIX = {"alt": (1, 1, 1, 1), "roll": (0, 1, 0, -1), "pitch": (-1, 0, 1, 0), "yaw"
 GAIN = {"roll": "phi", "pitch": "theta", "yaw": "psi", "alt": "z"}   # eq. 24 gain names: kp_phi, ...
 SETTLING_BAND = 0.05        # as the simulator's step metrics (flightctl.sim.metrics)
 TRIGGER_S = 10e-6           # the HC-SR04 trigger pulse (flightctl.drivers.hcsr04)
+MIN_HORIZON, MAX_HORIZON = 20.0, 120.0   # s, of the step responses
 DRIFT_RATE = 1e-4           # 1/s: a closed-loop mode slower than this (a time constant beyond 2.8 h)
                             # is drift, not dynamics (rounding moves a pole at 0 by ~1e-6 at most)
 
@@ -68,7 +69,8 @@ def altitude_task(dt: float):
     """`on_range`: the altitude is the range (levelled by cos(roll) cos(pitch), 1 at hover) and its
     derivative the difference quotient over the time between echoes; delta form, input the range,
     outputs (alt, dalt), its state the last range."""
-    return np.array([[-1.0 / dt]]), np.array([[1.0 / dt]]), np.array([[0.0], [-1.0 / dt]]), np.array([[1.0], [1.0 / dt]])
+    return (np.array([[-1.0 / dt]]), np.array([[1.0 / dt]]),
+            np.array([[0.0], [-1.0 / dt]]), np.array([[1.0], [1.0 / dt]]))
 
 
 def series(first, second):
@@ -92,10 +94,11 @@ def echo_ticks(alt: float, dt: float) -> int:
 
 
 def build(params: Params, plant: LinearPlant, structure, channel: str, responses=None,
-          horizon: float = 20.0) -> Loop:
+          horizon: float | None = None) -> Loop:
     """The loop of `channel` with the estimator `structure` ('truth', a name of ESTIMATORS or a
     function making an estimator from the parameters); `responses` are the estimator's impulse
-    responses when already computed."""
+    responses when already computed; the step response runs for `horizon` s (default: until the
+    dominant mode has decayed to 1 %, within 20 to 120 s)."""
     a = params.airframe
     dt = a.dt
     P0 = plant.u0[:4]
@@ -127,11 +130,14 @@ def build(params: Params, plant: LinearPlant, structure, channel: str, responses
     Tcl = (np.block([[A + Bg @ Dk[:, 1:] @ Cm, Bg @ Ck], [Bk[:, 1:] @ Cm, Ak]]),
            np.vstack([Bg @ Dk[:, :1], Bk[:, :1]]), np.hstack([C[:1], np.zeros((1, nk))]), np.zeros((1, 1)))
     T = to_control(Tcl, period)
+    s, share = modes(*Tcl[:3])
+    if horizon is None:   # long enough for the dominant mode to settle within the band
+        zeta, wn = dominant(s, share, period)
+        horizon = float(np.clip(5.0 / (zeta * wn), MIN_HORIZON, MAX_HORIZON)) if zeta * wn > 0 else MIN_HORIZON
     if sonar:
         t, y = sonar_step(plant, B, D, (Ak, Bk, Ck, Dk), period, lag, dt, horizon)
     else:
         t, y = step(T, horizon)
-    s, share = modes(*Tcl[:3])
     final = float(np.real(share.sum()))   # where the step settles: the modes' settled parts (D = 0)
     return Loop(channel, period, L, T, 1.0 + period * s, t, y, figures(L, s, share, period, t, y, final))
 

@@ -44,13 +44,17 @@ class MotorDynamics(Effect):
     def initial_states(self, f_cmd):
         return [rotor_speed(f, self.a.c1) for f in f_cmd]
 
+    def command(self, f_cmd):
+        c1 = self.a.c1
+        self._w_cmd = [rotor_speed(f, c1) for f in f_cmd]   # Omega_cmd, once per input (eq. 27)
+
     def rotor(self, t, x, f_cmd, xdot):
-        o, tau, c1 = self.offset, self.parameters["tau"], self.a.c1
+        o, tau, c1, w_cmd = self.offset, self.parameters["tau"], self.a.c1, self._w_cmd
         f = [0.0, 0.0, 0.0, 0.0]
         spin_up = 0.0
         for i in range(4):
             w = x[o + i]
-            dw = (rotor_speed(f_cmd[i], c1) - w) / tau
+            dw = (w_cmd[i] - w) / tau
             if xdot is not None:
                 xdot[o + i] = dw
             spin_up += SPIN[i] * dw

@@ -4,7 +4,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import signal
 
 from flightctl.sim.identify.diagnose.candidate import GridCandidate, too_short_to_time
 from flightctl.sim.model import Effect, Parameter
@@ -30,6 +29,7 @@ class MotorLag(Effect):
 def lag_held(U: np.ndarray, tau: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
     """A first-order lag y' = (u - y) / tau of a zero-order-held input U (k, n), exact, started in
     equilibrium: (y at the sample instants, y averaged over each period from row k to k+1)."""
+    from scipy import signal   # here, not at the top: `flightctl sim` imports the causes for their effects
     dt = 1.0 / fs
     a = math.exp(-dt / tau)
     b_, a_ = [0.0, 1.0 - a], [1.0, -a]

@@ -4,7 +4,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import optimize, signal
 
 from flightctl.sim.identify.diagnose.candidate import Candidate, Result
 from flightctl.sim.identify.diagnose.data import motors_on, stretches
@@ -40,6 +39,7 @@ class RotorDragFit(Candidate):
 
     def _filtered(self, k, inputs):
         """Per file: the body-frame (2, n) response -k/M R^T LPF_k(x) of inertial horizontal x (2, n)."""
+        from scipy import signal   # here, not at the top: `flightctl sim` imports the causes for their effects
         ds, M = self.ds, self.ds.a.M
         out = []
         for f, x in zip(ds.files, inputs):
@@ -104,6 +104,7 @@ class RotorDragFit(Candidate):
         return res
 
     def run(self) -> Result:
+        from scipy import optimize
         ds = self.ds
         counts = ds.block_counts
         zero = np.zeros((3, 2, ds.n))

@@ -8,7 +8,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import optimize
 
 from flightctl.sim.identify.diagnose.dataset import OFFSET, DataSet
 from flightctl.sim.identify.diagnose.scoring import (Score, Significance, block_stats, heldout, objective,
@@ -118,6 +117,7 @@ class GridCandidate(Candidate):
         raise NotImplementedError
 
     def _best(self, objs):
+        from scipy import optimize   # here, not at the top: `flightctl sim` imports the causes for their effects
         j = int(np.argmin(objs))
         g = self.grid
         if 0 < j < len(g) - 1:

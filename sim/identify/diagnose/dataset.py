@@ -9,7 +9,6 @@ k+1 with the gyro difference k -> k+1 (angular acceleration) and the acceleromet
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
 
 from flightctl.params import Airframe
 from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, yaw_drag
@@ -30,6 +29,7 @@ class DataSet:
     sample's block, `block_edges` the (start, stop) of each."""
 
     def __init__(self, files: list[FileData], a: Airframe, lowpass_hz: float = LOWPASS_HZ):
+        from scipy import signal   # here, not at the top: `flightctl sim` imports the causes for their effects
         self.files, self.a = files, a
         self.fs = 1.0 / float(np.median(np.concatenate([np.diff(f.t) for f in files])))
         self.sos = signal.butter(2, lowpass_hz, fs=self.fs, output="sos")
@@ -70,6 +70,7 @@ class DataSet:
 
     def flat_filtered(self, per_file):
         """The stretches of per-file (C, n) arrays, each stretch low-passed forward and backward."""
+        from scipy import signal
         parts = []
         for i, s0, s1 in self.stretches:
             x = per_file[i][..., s0:s1]

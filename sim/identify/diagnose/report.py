@@ -134,7 +134,7 @@ def _residual_table(d: Diagnosis, best: Result | None) -> str:
 def figures(d: Diagnosis) -> dict[str, bytes]:
     """{"residuals": png, "explained": png}: residual (base, extended) against time for every channel,
     and the base residual of the most changed channel against the variable that explains it."""
-    from flightctl.sim.plots import figure, legend, png
+    from flightctl.sim.plots import empty_panel, figure, legend, png
 
     ds = d.ds
     best = next((r for r in d.results if r.cause == d.cause), None)
@@ -172,8 +172,11 @@ def figures(d: Diagnosis) -> dict[str, bytes]:
         ax.set_ylabel(f"{CHANNELS[c]} [{UNITS[c]}]")
         legend(ax, fontsize=7, markerscale=4)
         ax.set_title(f"residual against the variable that explains it ({CHANNELS[c]})", fontsize=9)
+    elif shown is None:
+        empty_panel(ax, "Nothing to show: no candidate could be judged on these logs "
+                        f"({', '.join(n['cause'] for n in d.not_judged) or 'none'}; the report says why).")
     else:
-        ax.text(0.5, 0.5, "no candidate judged", ha="center")
+        empty_panel(ax, f"Nothing to show: {shown.cause} has no single variable that explains the residual.")
     out["explained"] = png(fig)
     return out
 

@@ -1,0 +1,211 @@
+"""`flightctl hil`: hardware-in-the-loop (docs/hil.md).
+
+    flightctl hil serve --link serial:/dev/ttyUSB0,921600|tcp:PORT [--mode lockstep|free] [--json F]
+    flightctl hil demo --seconds S [--link pty|tcp] [--mode lockstep|free] [--json F]
+
+`serve` is the PC side: the simulated plant and sensors answering the flight side, which runs
+`flightctl run --board hil --link ...` on the Pi. `demo` runs both ends on one machine: `serve` in a
+child process, the flight side here on the "hil" board (the real loop on the wall clock), over a
+pseudo-terminal pair (the flight side through pyserial) or loopback TCP, flying the hover plan.
+Latency, jitter and loss are printed at the end; `--json` holds frames_sent, frames_lost,
+latency_p50_ms, latency_p99_ms and outcome.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+from pathlib import Path
+
+from flightctl import link as lk
+from flightctl.boards import BoardOptions, BoardUnavailable, open_board
+from flightctl.errors import InputError
+from flightctl.hal import ArmingRefused
+from flightctl.loop import FlightLoop
+from flightctl.params import load
+from flightctl.plan import Move, Plan
+from flightctl.plans import TAKEOFF
+from flightctl.service import prearm
+from flightctl.hil.serve import Cut, HilPlant, serve
+
+MODES = ("lockstep", "free")
+LAND_S = 4.0            # the demo's descent ramp
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise InputError(message)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="flightctl hil", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="what", required=True, metavar="serve|demo")
+    s = sub.add_parser("serve", help="the PC side: the simulated plant answering the flight side")
+    s.add_argument("--link", required=True, help="serial:/dev/ttyUSB0,921600 or tcp:PORT (tcp:0: any free port)")
+    s.add_argument("--mode", choices=MODES, default="lockstep")
+    s.add_argument("--params", help="parameter file (TOML) of the simulated vehicle")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seconds", type=float, help="end after this much simulated time")
+    s.add_argument("--json", help="write the PC side's figures here")
+    s.add_argument("--cut", nargs=2, type=float, metavar=("AT", "FOR"),
+                   help="pull the cable AT s after the first command, for FOR s (tests the failsafe)")
+    d = sub.add_parser("demo", help="both ends on this machine, flying the hover plan")
+    d.add_argument("--seconds", type=float, default=20.0, help="flight time after arming (default 20)")
+    d.add_argument("--link", choices=("pty", "tcp"), default="pty")
+    d.add_argument("--mode", choices=MODES, default="lockstep")
+    d.add_argument("--calibrate", type=float, default=1.0, help="seconds sitting still before arming")
+    d.add_argument("--params", help="parameter file (TOML)")
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--json", help="write the figures here")
+    d.add_argument("--cut", nargs=2, type=float, metavar=("AT", "FOR"), help="as serve --cut")
+    return p
+
+
+def _listen(host: str, port: int) -> socket.socket:
+    srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        srv.bind((host, port))
+    except OSError as e:
+        raise InputError(f"--link tcp:{port}: cannot listen ({e.strerror})") from None
+    srv.listen(1)
+    return srv
+
+
+def serve_main(args) -> int:
+    try:
+        kind, where, n = lk.parse_link(args.link)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    params = load(args.params)
+    plant = HilPlant(params, args.seed)
+    if kind == "tcp":
+        srv = _listen(where if args.link.count(":") == 2 else "0.0.0.0", n)   # tcp:PORT: every interface
+        print(f"hil serve: listening on port {srv.getsockname()[1]}", flush=True)
+        conn, peer = srv.accept()
+        srv.close()
+        port = lk.SocketPort(conn)
+    elif kind == "fd":
+        port = lk.FdPort(n)
+    else:
+        try:
+            port = lk.SerialPort(where, n)
+        except lk.LinkError as e:
+            raise InputError(str(e)) from None
+    cut = Cut(*args.cut) if args.cut else None
+    try:
+        res = serve(port, plant, args.mode, args.seconds, cut)
+    finally:
+        port.close()
+    figures = res.as_dict()
+    print(f"hil serve: {res.reason}; {res.commands} commands, {res.frames_sent} frames sent, "
+          f"{res.rx['frames']} received, {res.rx['lost']} lost, {res.rx['bad_crc'] + res.rx['bad_length']} corrupt, "
+          f"{res.rx['out_of_order']} out of order; {res.sim_s:.2f} s simulated, max altitude {res.max_alt:.2f} m",
+          file=sys.stderr)
+    if args.json:
+        Path(args.json).write_text(json.dumps(figures, indent=2) + "\n")
+    return 0
+
+
+def demo_plan(seconds: float) -> Plan:
+    """The hover plan for `seconds`: take off, hold, and (given the time) come down and land."""
+    moves = [TAKEOFF]
+    if seconds >= TAKEOFF.ramp + 2 * LAND_S:
+        moves.append(Move(seconds - LAND_S - 2.0, "alt", 0.0, LAND_S))
+    return Plan(moves, seconds, "hover", f"take off to {TAKEOFF.value:g} m for {seconds:g} s")
+
+
+def _spawn_serve(args, tmp: Path):
+    """The PC side in a child process; returns (process, the flight side's --link, fds to close)."""
+    cmd = [sys.executable, "-m", "flightctl.cli", "hil", "serve", "--mode", args.mode, "--seed", str(args.seed),
+           "--json", str(tmp / "serve.json")]
+    if args.params:
+        cmd += ["--params", args.params]
+    if args.cut:
+        cmd += ["--cut", *map(str, args.cut)]
+    if args.link == "pty":
+        master, slave = os.openpty()
+        proc = subprocess.Popen(cmd + ["--link", f"fd:{master}"], pass_fds=(master,), stdin=subprocess.DEVNULL)
+        os.close(master)
+        return proc, f"serial:{os.ttyname(slave)},{lk.DEFAULT_BAUD}", [slave]
+    proc = subprocess.Popen(cmd + ["--link", "tcp:127.0.0.1:0"], stdout=subprocess.PIPE, stdin=subprocess.DEVNULL,
+                            text=True)
+    line = proc.stdout.readline()
+    if not line.startswith("hil serve: listening on port "):
+        proc.kill()
+        raise InputError(f"hil demo: the PC side did not start ({line.strip() or 'no output'})")
+    return proc, f"tcp:127.0.0.1:{int(line.rsplit(' ', 1)[1])}", []
+
+
+def demo_main(args) -> int:
+    if not 0 < args.seconds <= 3600:
+        raise InputError("--seconds: 0 < S <= 3600")
+    params = load(args.params)
+    with tempfile.TemporaryDirectory(prefix="flightctl-hil-") as tmpdir:
+        tmp = Path(tmpdir)
+        proc, spec, fds = _spawn_serve(args, tmp)
+        try:
+            try:
+                board = open_board("hil", params, BoardOptions(link=spec))
+            except BoardUnavailable as e:
+                print(f"flightctl hil demo: cannot open the hil board: {e}", file=sys.stderr)
+                return 3
+            link = board.hal.clock.link
+            try:
+                reasons = prearm(board.hal, params, board.min_battery_v)
+                if reasons:
+                    raise InputError("hil demo: not flying: " + "; ".join(reasons))
+                stop = threading.Event()
+                loop = FlightLoop(board.hal, params, demo_plan(args.seconds), calibrate_s=args.calibrate, stop=stop)
+
+                def end_on_touchdown(i: int) -> None:   # the loop idles out a landing's margin: not here
+                    events = loop.result.events
+                    if events and events[-1][1].startswith("landed"):
+                        stop.set()
+                loop.on_tick = end_on_touchdown
+                try:
+                    result = loop.run()
+                    outcome = next((w for _, w in reversed(result.events) if w.startswith("landed")), result.reason)
+                except ArmingRefused as e:           # the link went down on the ground: stay stopped
+                    result = loop.result
+                    outcome = f"not armed: {e}"
+            finally:
+                board.close()
+            proc.wait(timeout=10)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            for fd in fds:
+                os.close(fd)
+        pc_path = tmp / "serve.json"
+        pc = json.loads(pc_path.read_text()) if pc_path.exists() else None
+    pi = link.summary()
+    if pc is None:
+        raise InputError("hil demo: the PC side ended without its figures")
+    sent = pi["commands_sent"] + pc["frames_sent"]
+    lost = (pi["commands_sent"] - pc["rx"]["frames"]) + (pc["frames_sent"] - pi["rx_frames"])
+    figures = {"frames_sent": sent, "frames_lost": lost, "latency_p50_ms": pi["latency_p50_ms"],
+               "latency_p99_ms": pi["latency_p99_ms"], "latency_max_ms": pi["latency_max_ms"],
+               "jitter_ms": pi["jitter_ms"], "stale_ticks": pi["stale_ticks"], "overruns": board.hal.clock.overruns,
+               "outcome": outcome, "events": [f"{t:.3f} s: {what}" for t, what in result.events],
+               "link_events": pi["events"], "link": args.link, "mode": args.mode,
+               "max_alt_m": pc["max_alt_m"], "final_alt_m": pc["final_alt_m"], "crashed": pc["crashed"],
+               "flight_side": pi, "pc_side": pc}
+    print(f"hil demo ({args.link}, {args.mode}): {sent} frames sent, {lost} lost; latency p50 "
+          f"{figures['latency_p50_ms']:.2f} ms, p99 {figures['latency_p99_ms']:.2f} ms, jitter "
+          f"{figures['jitter_ms']:.2f} ms; {figures['stale_ticks']} ticks without a new frame; outcome: "
+          f"{outcome}; max altitude {pc['max_alt_m']:.2f} m, final {pc['final_alt_m']:.2f} m")
+    if args.json:
+        Path(args.json).write_text(json.dumps(figures, indent=2) + "\n")
+    return 0
+
+
+def main(argv: list[str]) -> int:
+    args = _parser().parse_args(argv)
+    return serve_main(args) if args.what == "serve" else demo_main(args)

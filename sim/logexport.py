@@ -1,0 +1,235 @@
+"""`flightctl log export FLIGHT.csv FLIGHT.ulg`: a flight log as PX4's ULog, for PlotJuggler and
+Flight Review (the format: https://docs.px4.io/main/en/dev_log/ulog_file_format.html).
+
+The file: the 16-byte header, the flag bits, then the definitions (formats, information messages
+with the software version, every parameter, subscriptions) and the data messages in time order.
+Topics take PX4's names and fields, so the tools that know PX4 plot them, and PX4's frames:
+body FRD, inertial NED, converted once here (flightctl/frames.py). Timestamps are microseconds since
+the loop started (the log's time plus its calibration time).
+
+| topic | fields | from the CSV |
+|---|---|---|
+| sensor_combined | gyro_rad[3] (rad/s), accelerometer_m_s2[3] (m/s^2) | gyro_*, acc_* |
+| vehicle_attitude | q[4] (FRD to NED) | roll, pitch, yaw (the estimate) |
+| vehicle_attitude_setpoint | roll_body, pitch_body, yaw_body (rad), q_d[4] | *_sp |
+| vehicle_local_position | z (m, down), dist_bottom (m) | alt (the estimate) |
+| vehicle_local_position_setpoint | z (m, down) | alt_sp |
+| actuator_outputs | noutputs, output[4] (ESC pulse, us), command[4] (P, 0-255) | P1..P4 |
+| battery_status | voltage_v, voltage_filtered_v (V) | battery_v (rows with a reading) |
+| distance_sensor | current_distance, min_distance, max_distance (m), orientation, type | range (rows with an echo) |
+| vehicle_attitude_groundtruth, vehicle_local_position_groundtruth | q[4]; x, y, z (m) | true_* (simulator only) |
+
+Parameters are the log's `# params:` file, flattened (`kp_z` is `gains.kp_z`), as float parameters.
+"""
+from __future__ import annotations
+
+import argparse
+import struct
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from flightctl import __version__
+from flightctl.errors import InputError
+from flightctl.frames import euler_ned, pulse_us, quaternion, vector_ned
+from flightctl.logfile import read_flight_log
+from flightctl.params import Airframe, from_dict
+
+MAGIC = b"ULog\x01\x12\x35"
+FILE_VERSION = 1
+ULTRASOUND, DOWNWARD = 1, 25          # PX4's distance_sensor type and orientation (ROTATION_DOWNWARD_FACING)
+SONAR_RANGE_M = (0.02, 4.0)           # HC-SR04
+TRUTH = ("true_x", "true_y", "true_z", "true_roll", "true_pitch", "true_yaw")
+
+# numpy field type of each ULog type
+_TYPES = {"uint64_t": "<u8", "uint32_t": "<u4", "uint8_t": "u1", "float": "<f4"}
+
+
+def _message(kind: str, payload: bytes) -> bytes:
+    """One ULog message: uint16 payload size, uint8 type, the payload."""
+    if len(payload) > 0xFFFF:
+        raise ValueError(f"ULog message {kind!r} too long ({len(payload)} bytes)")
+    return struct.pack("<HB", len(payload), ord(kind)) + payload
+
+
+def _info(key: str, value) -> bytes:
+    """An 'I' message; `value` str -> char[n], int -> uint32_t."""
+    if isinstance(value, str):
+        raw = value.encode()
+        tkey = f"char[{len(raw)}] {key}".encode()
+    else:
+        raw, tkey = struct.pack("<I", value), f"uint32_t {key}".encode()
+    return _message("I", bytes([len(tkey)]) + tkey + raw)
+
+
+def _parameter(name: str, value: float) -> bytes:
+    tkey = f"float {name}".encode()
+    return _message("P", bytes([len(tkey)]) + tkey + struct.pack("<f", value))
+
+
+class Topic:
+    """A topic's format and its data messages as one structured array (header included), so that a
+    long log is packed by numpy, not row by row."""
+
+    def __init__(self, name: str, fields: list[tuple[str, str, int]]):
+        self.name, self.fields = name, [("uint64_t", "timestamp", 0)] + fields
+        dtype = [("size", "<u2"), ("kind", "u1"), ("msg_id", "<u2")]
+        for ftype, fname, n in self.fields:
+            dtype.append((fname, _TYPES[ftype], (n,)) if n else (fname, _TYPES[ftype]))
+        self.dtype = np.dtype(dtype)   # packed (numpy aligns nothing unless asked), as ULog is
+
+    def format(self) -> bytes:
+        text = ";".join(f"{t}[{n}] {f}" if n else f"{t} {f}" for t, f, n in self.fields)
+        return _message("F", f"{self.name}:{text};".encode())
+
+    def records(self, msg_id: int, timestamp: np.ndarray, **values) -> np.ndarray:
+        rec = np.zeros(len(timestamp), self.dtype)
+        rec["size"], rec["kind"], rec["msg_id"] = self.dtype.itemsize - 3, ord("D"), msg_id
+        rec["timestamp"] = timestamp
+        for name, v in values.items():
+            rec[name] = v
+        return rec
+
+
+TOPICS = {t.name: t for t in (
+    Topic("sensor_combined", [("float", "gyro_rad", 3), ("float", "accelerometer_m_s2", 3)]),
+    Topic("vehicle_attitude", [("float", "q", 4)]),
+    Topic("vehicle_attitude_setpoint", [("float", "roll_body", 0), ("float", "pitch_body", 0),
+                                        ("float", "yaw_body", 0), ("float", "q_d", 4)]),
+    Topic("vehicle_local_position", [("float", "z", 0), ("float", "dist_bottom", 0)]),
+    Topic("vehicle_local_position_setpoint", [("float", "z", 0)]),
+    Topic("actuator_outputs", [("uint32_t", "noutputs", 0), ("float", "output", 4), ("float", "command", 4)]),
+    Topic("battery_status", [("float", "voltage_v", 0), ("float", "voltage_filtered_v", 0)]),
+    Topic("distance_sensor", [("float", "min_distance", 0), ("float", "max_distance", 0),
+                              ("float", "current_distance", 0), ("uint8_t", "type", 0),
+                              ("uint8_t", "orientation", 0)]),
+    Topic("vehicle_attitude_groundtruth", [("float", "q", 4)]),
+    Topic("vehicle_local_position_groundtruth", [("float", "x", 0), ("float", "y", 0), ("float", "z", 0)]),
+)}
+
+
+def _q(roll, pitch, yaw) -> np.ndarray:
+    """Quaternions (n x 4, FRD to NED) of our Euler angle columns."""
+    r, p, y = euler_ned(roll, pitch, yaw)      # works on arrays
+    return np.column_stack(np.vectorize(quaternion)(r, p, y))
+
+
+def flat_parameters(meta: dict[str, str], path: str) -> dict[str, float]:
+    """The log's parameter file as name -> value; {} when the log carries none."""
+    text = meta.get("params")
+    if text is None:
+        return {}
+    try:
+        params = from_dict(tomllib.loads(text))
+    except (tomllib.TOMLDecodeError, InputError) as e:
+        raise InputError(f"{path}: its '# params:' lines are not a valid parameter file ({e})") from None
+    out = {}
+    for prefix, obj in (("", params.airframe), ("gains.", params.gains), ("filters.", params.filters)):
+        out.update({prefix + k: float(v) for k, v in vars(obj).items()})
+    for k, e in enumerate(params.effects, start=1):
+        out.update({f"effect{k}.{e.cause}.{name}": v for name, v in e.parameters})
+    return out
+
+
+def _release(version: str) -> int:
+    """PX4's ver_sw_release: major, minor, patch bytes and 255 (a release)."""
+    nums = [int(x) for x in version.split(".")[:3] if x.isdigit()] + [0, 0, 0]
+    return (nums[0] << 24) | (nums[1] << 16) | (nums[2] << 8) | 255
+
+
+def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
+    """Write the ULog file; returns the number of samples per topic."""
+    log = read_flight_log(csv_path, extra=TRUTH)
+    meta = log.meta
+    params = flat_parameters(meta, log.path)
+    esc_hz = params.get("esc_pwm_hz", Airframe.esc_pwm_hz)
+    try:
+        t0 = float(meta.get("calibrate_s", 0.0))
+    except ValueError:
+        t0 = 0.0
+    ts = np.round((log["t"] + t0) * 1e6).astype(np.uint64)
+    col = log.columns
+    n = len(ts)
+    P = np.column_stack([col[f"P{i}"] for i in range(1, 5)])
+    gx, gy, gz = vector_ned(col["gyro_x"], col["gyro_y"], col["gyro_z"])
+    ax, ay, az = vector_ned(col["acc_x"], col["acc_y"], col["acc_z"])
+    rsp, psp, ysp = euler_ned(col["roll_sp"], col["pitch_sp"], col["yaw_sp"])
+    data = {
+        "sensor_combined": dict(gyro_rad=np.column_stack([gx, gy, gz]),
+                                accelerometer_m_s2=np.column_stack([ax, ay, az])),
+        "vehicle_attitude": dict(q=_q(col["roll"], col["pitch"], col["yaw"])),
+        "vehicle_attitude_setpoint": dict(roll_body=rsp, pitch_body=psp, yaw_body=ysp,
+                                          q_d=_q(col["roll_sp"], col["pitch_sp"], col["yaw_sp"])),
+        "vehicle_local_position": dict(z=-col["alt"], dist_bottom=col["alt"]),
+        "vehicle_local_position_setpoint": dict(z=-col["alt_sp"]),
+        "actuator_outputs": dict(noutputs=4, output=pulse_us(P, esc_hz), command=P),
+    }
+    stamps = {name: ts for name in data}
+    volts = col["battery_v"]
+    has_v = np.isfinite(volts)
+    data["battery_status"] = dict(voltage_v=volts[has_v], voltage_filtered_v=volts[has_v])
+    stamps["battery_status"] = ts[has_v]
+    rng = col["range"]
+    echo = np.isfinite(rng)
+    data["distance_sensor"] = dict(min_distance=SONAR_RANGE_M[0], max_distance=SONAR_RANGE_M[1],
+                                   current_distance=rng[echo], type=ULTRASOUND, orientation=DOWNWARD)
+    stamps["distance_sensor"] = ts[echo]
+    if all(c in log for c in TRUTH):
+        data["vehicle_attitude_groundtruth"] = dict(q=_q(col["true_roll"], col["true_pitch"], col["true_yaw"]))
+        data["vehicle_local_position_groundtruth"] = dict(zip("xyz", vector_ned(col["true_x"], col["true_y"], col["true_z"])))
+        stamps.update({k: ts for k in data if k.endswith("groundtruth")})
+
+    head = bytearray(MAGIC + bytes([FILE_VERSION]) + struct.pack("<Q", 0))
+    head += _message("B", bytes(16) + bytes(24))     # flag bits: no compatible, incompatible or appended data
+    topics = [TOPICS[name] for name in data]
+    for topic in topics:
+        head += topic.format()
+    software = meta.get("software", f"flightctl {__version__}")
+    head += _info("sys_name", "flightctl")
+    head += _info("ver_sw", software)
+    head += _info("ver_sw_release", _release(software.split()[-1]))
+    head += _info("ver_hw", meta.get("board", "unknown"))
+    head += _info("sys_toolchain", "python")
+    head += _info("source_log", Path(log.path).name)
+    for name, value in params.items():
+        head += _parameter(name, value)
+    for msg_id, topic in enumerate(topics):
+        head += _message("A", struct.pack("<BH", 0, msg_id) + topic.name.encode())
+
+    # data: every topic's records as raw bytes, merged into time order (stable: topics keep their order)
+    chunks, times = [], []
+    for msg_id, topic in enumerate(topics):
+        rec = topic.records(msg_id, stamps[topic.name], **data[topic.name])
+        chunks.append(rec.view(np.uint8).reshape(len(rec), rec.dtype.itemsize))
+        times.append(rec["timestamp"])
+    order = np.argsort(np.concatenate(times), kind="stable")
+    blobs = [bytes(row) for c in chunks for row in c]
+    body = b"".join([blobs[i] for i in order])
+    Path(ulg_path).write_bytes(bytes(head) + body)
+    return {topic.name: len(stamps[topic.name]) for topic in topics} | {"rows": n}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise InputError(message)
+
+
+def main(argv: list[str]) -> int:
+    p = _Parser(prog="flightctl log", description="Flight log tools.")
+    sub = p.add_subparsers(dest="action", required=True)
+    e = sub.add_parser("export", help="write a flight log (CSV, measured-data.md) as PX4's ULog",
+                       description=__doc__.split("\n\n")[0])
+    e.add_argument("csv", metavar="FLIGHT.csv")
+    e.add_argument("ulg", metavar="FLIGHT.ulg")
+    args = p.parse_args(argv)
+    out = Path(args.ulg)
+    if out.suffix != ".ulg":
+        raise InputError(f"{out}: the output should end in .ulg")
+    if not out.parent.is_dir():
+        raise InputError(f"{out}: the directory does not exist")
+    counts = export(args.csv, out)
+    rows = counts.pop("rows")
+    print(f"{args.csv}: {rows} rows -> {out} ({out.stat().st_size} bytes; "
+          + ", ".join(f"{k} {v}" for k, v in counts.items()) + ")")
+    return 0

@@ -1,0 +1,201 @@
+"""Issue 10, defects 3 and 7: the motors are cut in the air only for a crash or a kill command, and
+the simulator's verdicts agree with each other.
+
+Every flight here is the onboard loop (flightctl/loop.py) against the simulated quadcopter; the faults
+come in at the lowest boundary there is: a real file that refuses to be written (/dev/full: ENOSPC), a
+stream that blocks like a stalled SD card, the real AF_UNIX notify socket going away, a plan object
+whose setpoint goes bad in flight.
+"""
+from __future__ import annotations
+
+import math
+import os
+import socket
+import threading
+
+import numpy as np
+import pytest
+
+from flightctl.logfile import MAG_COLUMNS, FlightLogWriter, read_flight_log
+from flightctl.loop import FlightLoop
+from flightctl.params import load
+from flightctl.plan import Move, Plan
+from flightctl.safety import CRASH_TILT, CRASH_TOUCHDOWN_SPEED, crash_reason
+from flightctl.sdnotify import Notifier
+from flightctl.sim.board import SIM_CALIBRATE_S, TRUTH_COLUMNS, sim_board, truth_row
+from flightctl.sim.cli import main as sim_main
+from flightctl.sim.run import fly
+from flightctl.sim.scenarios import scenario
+
+PARAMS = load(None)
+
+
+def soft_landing(touchdowns, log):
+    """Landed upright and slowly, motors stopped, at the end of the flight."""
+    assert touchdowns, "the vehicle never came down: the flight ended in the air"
+    assert abs(touchdowns[-1][1]) < CRASH_TOUCHDOWN_SPEED, touchdowns
+    assert log["true_z"][-1] < 0.05
+    assert max(abs(log["true_roll"][-1]), abs(log["true_pitch"][-1])) < math.radians(10)
+    assert all(log[p][-1] == 0.0 for p in ("P1", "P2", "P3", "P4"))
+
+
+def fly_plan(tmp_path, plan, log_path=None, **kw):
+    return fly(scenario(plan), PARAMS, log_path or tmp_path / "f.csv", **kw)
+
+
+# --- defect 3: no cut in the air for an ordinary event --------------------------------------------
+def test_a_plan_that_ends_in_the_air_lands_instead_of_cutting(tmp_path):
+    flight = fly_plan(tmp_path, Plan([Move(0.0, "alt", 1.0, 2.0)], 5.0, "ends_high"))
+    soft_landing(flight.touchdowns, flight.log)
+    assert any("plan ended in the air" in what for _, what in flight.result.events)
+    assert flight.result.reason.startswith("landed")
+
+
+def test_a_landing_move_after_duration_is_flown_as_a_controlled_landing(tmp_path):
+    flight = fly_plan(tmp_path, Plan([Move(0.0, "alt", 1.0, 2.0), Move(6.0, "alt", 0.0, 2.0)], 5.0, "late"))
+    soft_landing(flight.touchdowns, flight.log)
+    assert any("plan ended in the air" in what for _, what in flight.result.events)
+
+
+def test_a_full_disk_drops_log_rows_and_lands(tmp_path):
+    # /dev/full: every write reaches the kernel and fails with ENOSPC, as on a full SD card
+    plan = Plan([Move(0.0, "alt", 1.0, 2.0), Move(6.0, "alt", 0.0, 3.0)], 12.0, "full")
+    flight = fly_plan(tmp_path, plan, log_path="/dev/full")
+    soft_landing(flight.touchdowns, flight.log)      # the kept rows: the simulator's record
+    events = " | ".join(what for _, what in flight.result.events)
+    assert "log write failed" in events and "No space left" in events and "landing" in events
+    assert flight.log_dropped > 0
+
+
+class StalledCard:
+    """A file whose flush (the write system call under Python's buffer) blocks until released: an SD
+    card stalling for seconds."""
+
+    def __init__(self, path):
+        self.f = open(path, "w")
+        self.name = str(path)
+        self.release = threading.Event()
+
+    def write(self, s):
+        return self.f.write(s)
+
+    def flush(self):
+        self.release.wait()
+        self.f.flush()
+
+    def close(self):
+        self.f.close()
+
+
+def test_a_writer_that_cannot_keep_up_drops_rows_says_so_and_never_blocks_the_loop(tmp_path):
+    card = StalledCard(tmp_path / "f.csv")
+    log = FlightLogWriter(card, {"k": "v"}, chunk=45, background=True, queue_chunks=4)
+    row = (0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 9.8, "", 16.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    loop = threading.Thread(target=lambda: [log.append((i / 450.0,) + row[1:]) for i in range(45 * 20)])
+    loop.start()
+    loop.join(10.0)
+    assert not loop.is_alive(), "the loop waited for the stalled card"
+    assert not card.release.is_set()
+    assert log.dropped > 0 and "could not keep up" in log.error
+    card.release.set()
+    log.close()
+    card.close()
+    table = read_flight_log(tmp_path / "f.csv")
+    assert len(table) == 45 * 20 - log.dropped      # what was not dropped is there, in order
+    assert "dropped_rows" in table.meta and int(table.meta["dropped_rows"].split()[0]) == log.dropped
+
+
+def test_a_lost_notify_socket_lands(tmp_path):
+    path = str(tmp_path / "notify.sock")
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    listener.bind(path)
+    hal, world = sim_board(PARAMS)
+    notifier = Notifier(path, ping_s=0.25, clock=lambda: world.t)
+    lost_at = int((SIM_CALIBRATE_S + 4.0) * 450)        # in the air, 2 s after take-off
+
+    def tick(i):
+        if i == lost_at:
+            listener.close()
+            os.unlink(path)                            # systemd's socket is gone
+        return notifier.tick(i)
+
+    log = FlightLogWriter(tmp_path / "f.csv", {}, extra=MAG_COLUMNS + TRUTH_COLUMNS, keep=True)
+    plan = Plan([Move(0.0, "alt", 1.0, 2.0), Move(20.0, "alt", 0.0, 3.0)], 25.0, "notify")
+    loop = FlightLoop(hal, PARAMS, plan, log, calibrate_s=SIM_CALIBRATE_S, on_tick=tick,
+                      extra_row=truth_row(world))
+    result = loop.run()
+    assert notifier.errors > 0
+    events = " | ".join(what for _, what in result.events)
+    assert "watchdog ping failed" in events and "landing" in events
+    soft_landing(world.plant.touchdowns, log.table())
+    assert world.plant.touchdowns[-1][0] < SIM_CALIBRATE_S + 20.0    # it did not wait for the plan's landing
+
+
+class FailingPlan(Plan):
+    """A plan whose setpoints go bad (NaN, then an exception) in flight."""
+
+    def at(self, t):
+        sp = super().at(t)
+        if t > 3.0:
+            sp[1] = math.nan
+        if t > 3.5:
+            raise ValueError("plan broke")
+        return sp
+
+
+def test_a_plan_that_goes_bad_in_flight_lands(tmp_path):
+    plan = FailingPlan([Move(0.0, "alt", 1.0, 2.0), Move(9.0, "alt", 0.0, 2.0)], 12.0, "bad")
+    flight = fly_plan(tmp_path, plan)
+    soft_landing(flight.touchdowns, flight.log)
+    events = " | ".join(what for _, what in flight.result.events)
+    assert "plan failed" in events and "landing" in events
+    assert np.isfinite(flight.log["pitch_sp"]).all()
+
+
+def test_crash_and_kill_still_cut_at_once(tmp_path):
+    stop = threading.Event()
+    hal, world = sim_board(PARAMS)
+    ticks = int((SIM_CALIBRATE_S + 3.0) * 450)
+    loop = FlightLoop(hal, PARAMS, Plan([Move(0.0, "alt", 1.0, 2.0)], 10.0, "kill"), None,
+                      calibrate_s=SIM_CALIBRATE_S, stop=stop, on_tick=lambda i: stop.set() if i == ticks else None)
+    result = loop.run()
+    assert result.reason == "stopped: stop requested"
+    assert world.plant.x[2] > 0.5 and not world.plant.touchdowns      # cut in the air, on command
+
+
+# --- defect 7: one verdict ------------------------------------------------------------------------
+def test_one_definition_of_a_crash():
+    assert CRASH_TILT == pytest.approx(math.radians(60))
+    assert crash_reason(0.0, CRASH_TOUCHDOWN_SPEED * 0.9) is None
+    assert "m/s" in crash_reason(0.0, CRASH_TOUCHDOWN_SPEED * 1.1)
+    assert "tilted" in crash_reason(CRASH_TILT * 1.01, 0.0)
+    assert crash_reason(math.nan, 0.0) is not None
+
+
+def test_a_hard_touchdown_is_a_crash_and_exits_non_zero(tmp_path, capsys):
+    rc = sim_main(["step_alt", "--log", str(tmp_path / "s.csv"), "--no-plot"])
+    out = capsys.readouterr().out
+    assert rc == 1
+    assert "crashed: hit the floor at 5." in out and "plan complete" not in out
+
+
+def test_a_vehicle_that_never_flew_says_so(tmp_path, capsys):
+    heavy = tmp_path / "heavy.toml"
+    heavy.write_text("M = 50.0\n")
+    rc = sim_main(["hover", "--params", str(heavy), "--log", str(tmp_path / "h.csv"), "--no-plot"])
+    out = capsys.readouterr().out
+    assert rc == 1
+    assert "never left the ground" in out and "within" not in out and "plan complete" not in out
+
+
+def test_console_times_are_log_times(tmp_path, capsys):
+    assert sim_main(["hover_low", "--log", str(tmp_path / "l.csv"), "--no-plot"]) == 0
+    out = capsys.readouterr().out
+    log = read_flight_log(tmp_path / "l.csv", extra=TRUTH_COLUMNS)
+    armed = next(line for line in out.splitlines() if "armed" in line)
+    assert float(armed.split("=")[1].split("s")[0]) == pytest.approx(log["t"][0], abs=1 / 450)
+    touchdown = next(line for line in out.splitlines() if "touchdown at" in line)
+    t_touch = float(touchdown.split("=")[1].split("s")[0])
+    first_down = log["t"][np.flatnonzero((log["true_z"] <= 0.0) & (log["t"] > 5.0))[0]]
+    assert t_touch == pytest.approx(first_down, abs=0.02)
+    assert "landed upright" in out
