@@ -327,7 +327,10 @@ def open_board(params: Params, options: BoardOptions) -> Board:
     link = HilLink(port)
     try:
         link.contact()
-        imu = Mpu9250(LinkSpi(link))
+        # The link hands the driver the last frame again on a tick where no new one has arrived (a
+        # loaded PC, a lost link), so a repeat is the link's staleness, not a frozen chip: the frozen
+        # check is off here and link loss is judged by the link (no echoes -> altitude lost -> land).
+        imu = Mpu9250(LinkSpi(link), frozen_frames=0)
         sonar = HcSr04(LinkGpio(link), SONAR_TRIGGER_PIN, SONAR_ECHO_PIN)
         power = Ina219(LinkSMBus(link), bus_name="the HIL link")
         imu.start()

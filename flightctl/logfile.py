@@ -6,6 +6,7 @@ metadata. Errors name the file, the row (line number in the file) or column, and
 from __future__ import annotations
 
 import csv
+import io
 import math
 import queue
 import threading
@@ -15,7 +16,7 @@ from typing import IO
 
 import numpy as np
 
-from flightctl.errors import InputError
+from flightctl.errors import InputError, read_text
 
 FLIGHT_COLUMNS = ("t", "P1", "P2", "P3", "P4", "gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z",
                   "range", "battery_v", "roll", "pitch", "yaw", "alt",
@@ -62,10 +63,7 @@ def read_table(path: str | Path, required: tuple[str, ...], text_columns: tuple[
     """Read a CSV with a header row. `required` columns must be present; cells in them must be
     numbers (or, in `allow_missing`, empty/nan). `text_columns` are kept as strings."""
     path = str(path)
-    try:
-        f = open(path, newline="")
-    except OSError as e:
-        raise InputError(f"{path}: cannot read ({e.strerror})") from None
+    f = io.StringIO(read_text(path), newline="")   # regular file, UTF-8 (BOM dropped), bounded lines
     meta: dict[str, str] = {}
     with f:
         header, header_line = None, 0
@@ -80,7 +78,10 @@ def read_table(path: str | Path, required: tuple[str, ...], text_columns: tuple[
                     key, value = key.strip(), value.strip()   # FlightLogWriter writes a multi-line value as repeated keys
                     meta[key] = f"{meta[key]}\n{value}" if key in meta else value
                 continue
-            cells = next(csv.reader([raw]))
+            try:
+                cells = next(csv.reader([raw]))
+            except csv.Error as e:
+                raise InputError(f"{path}: row {lineno}: not CSV ({e})") from None
             if header is None:
                 header, header_line = [c.strip() for c in cells], lineno
                 continue
@@ -89,6 +90,9 @@ def read_table(path: str | Path, required: tuple[str, ...], text_columns: tuple[
     if header is None:
         raise InputError(f"{path}: no header row (the file is empty)")
     index = {name: i for i, name in enumerate(header)}
+    if len(index) < len(header):
+        twice = next(name for name in header if header.count(name) > 1)
+        raise InputError(f"{path}: line {header_line}: column {twice!r} appears twice in the header")
     for name in required:
         if name not in index:
             raise InputError(f"{path}: missing column {name!r} (line {header_line} has: {', '.join(header)})")
@@ -162,7 +166,22 @@ def read_flight_log(path: str | Path, min_seconds: float = 0.0, min_rows: int = 
         table.fail(f"time is not increasing (t = {t[k]:g} s after {t[k - 1]:g} s)", row=k, column="t")
     if t[-1] - t[0] < min_seconds:
         table.fail(f"too short to judge: {t[-1] - t[0]:.2f} s of data, at least {min_seconds:g} s needed")
+    for name, (lo, hi), what in _FLIGHT_RANGES:
+        x = table[name]
+        bad = np.flatnonzero(~((x >= lo) & (x <= hi)) & ~np.isnan(x))   # NaN: an allowed empty cell
+        if bad.size:
+            k = int(bad[0])
+            table.fail(f"{x[k]:g} is outside {what}", row=k, column=name)
     return table
+
+
+# measured-data.md's ranges of the flight log columns, beyond which a row is not a measurement
+_FLIGHT_RANGES = ([(f"P{i}", (0.0, 255.0), "the command range 0-255") for i in range(1, 5)]
+                  + [(f"gyro_{a}", (-100.0, 100.0), "a gyro reading (+-100 rad/s)") for a in "xyz"]
+                  + [(f"acc_{a}", (-1000.0, 1000.0), "an accelerometer reading (+-1000 m/s^2)") for a in "xyz"]
+                  + [("t", (-1e7, 1e7), "a time since arming (+-1e7 s)"),
+                     ("battery_v", (1e-3, 100.0), "a battery voltage (above 0, at most 100 V)"),
+                     ("range", (0.0, 10.0), "the rangefinder's range (0 to 10 m)")])
 
 
 class FlightLogWriter:

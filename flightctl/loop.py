@@ -29,13 +29,18 @@ from flightctl.params import Params
 from flightctl.plan import Move, Plan
 from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
 
-MAX_BAD_IMU_FRAMES = 10         # consecutive (22 ms)
+MAX_BAD_IMU_FRAMES = 10         # consecutive refused IMU frames flown on the last good sample (22 ms),
+#                                 then the motors stop (drivers/mpu9250.py's checks; docs/safety.md)
 LOW_CELL_V, CELLS = 3.5, 4      # land below 14.0 V on a 4S pack
 LAND_SPEED = 0.3                # m/s, a landing commanded by the checks
 LOST_ALT_S = 1.0                # no valid echo for this long in the air: descend blind
 TOUCHDOWN_ALT, TOUCHDOWN_S = 0.05, 0.5
 LAND_LEVEL_S = 1.0              # s: roll and pitch ramp back to level when a landing begins
 LAND_SLACK_S = 10.0             # s beyond the descent for the touchdown to be detected
+STALL_PERIODS = 1.5             # a tick later than this many periods after the last: the loop stalled
+MAX_STALL_EVENTS = 10           # stalls named in events (a loaded CPU is not a flood); all are counted
+ATTITUDE_LOST = math.radians(20)   # roll or pitch this far from its setpoint ...
+ATTITUDE_LOST_LOOPS = 9            # ... for this many loops (20 ms): a motor or propeller lost (named)
 
 
 @dataclass
@@ -97,17 +102,27 @@ class FlightLoop:
         self.t_arm = t_arm = t0 + self.calibrate_s
         armed = flying = False
         bad_frames = 0
+        imu_seen: set[str] = set()   # reasons of refused IMU frames already named in an event
+        imu_saturated = False
         battery_v, _ = power.read()
         last_echo = t_touch = None
         landing = log_failed = False
         max_alt = 0.0
         i = 0
+        t_prev = None
+        stalls = off_loops = 0
         tel = self.telemetry
         if tel is not None:
             tel.start(res)
         while not self.stop.is_set():
             t = clock.wait_next()
             i += 1
+            if t_prev is not None and t - t_prev > STALL_PERIODS * dt:   # missed ticks: fly on (hold)
+                stalls += 1
+                if stalls <= MAX_STALL_EVENTS:
+                    self._event(t, f"loop stalled {1000 * (t - t_prev):.0f} ms "
+                                   f"({round((t - t_prev) / dt) - 1} ticks missed): holding")
+            t_prev = t
             cmd = tel.poll() if tel is not None else None      # "kill" or "land" from the ground station
             if cmd == "kill":
                 res.reason = "stopped: killed by the ground station (forced disarm)"
@@ -119,9 +134,17 @@ class FlightLoop:
             if imu.read(sample):
                 calibration.correct(sample)
                 bad_frames = 0
+                if imu_saturated is False and getattr(imu, "saturated", False):
+                    imu_saturated = True      # flown on the full-scale value; the crash check decides
+                    self._event(t, "IMU saturated (a word at full scale): flying on the clipped value")
             else:
                 bad_frames += 1
+                why = getattr(imu, "why", "") or "bad frame"
+                if why not in imu_seen:       # once per reason: an intermittent fault is not a flood
+                    imu_seen.add(why)
+                    self._event(t, f"IMU frame refused ({why}): holding the last good sample")
                 if bad_frames > MAX_BAD_IMU_FRAMES:
+                    self._event(t, f"IMU frames bad ({why}) for {bad_frames} loops: motors stopped")
                     res.reason = "stopped: IMU frames bad"
                     self._event(t, res.reason)
                     break
@@ -182,6 +205,13 @@ class FlightLoop:
                         res.reason = "stopped: crash (tilt past 60 degrees)"
                         self._event(t, res.reason)
                         break
+                    if abs(est.roll - sp[0]) > ATTITUDE_LOST or abs(est.pitch - sp[1]) > ATTITUDE_LOST:
+                        off_loops += 1
+                        if off_loops == ATTITUDE_LOST_LOOPS:     # the crash check stops at CRASH_TILT
+                            self._event(t, "attitude not held for %d loops: motor %d commanded hardest "
+                                           "(a motor or propeller lost?)" % (off_loops, counts.index(max(counts)) + 1))
+                    else:
+                        off_loops = 0
                     if ctl.alt > max_alt:
                         max_alt = ctl.alt
                     if not landing and battery_v < LOW_CELL_V * CELLS:

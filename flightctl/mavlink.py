@@ -254,8 +254,9 @@ class MavlinkLink:
                 return
 
     def _ack(self, command: int, ok: bool, why: str = "") -> None:
-        if why:
+        if why:                         # the reason before the answer
             self.text(why, self.defs.MAV_SEVERITY_INFO if ok else self.defs.MAV_SEVERITY_WARNING)
+            self._send_texts()
         self._send(self.mav.command_ack_send, command,
                    self.defs.MAV_RESULT_ACCEPTED if ok else self.defs.MAV_RESULT_DENIED)
 

@@ -11,11 +11,10 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from flightctl.errors import InputError, read_toml
+from flightctl.errors import InputError, number, read_toml
 
 
 INERTIA_TOLERANCE = 0.10  # accepted excess of one principal inertia over the sum of the others
@@ -142,15 +141,23 @@ def _build(cls, table: dict, where: str, base=None):
         name = f"{where}{key}"
         if key not in known:
             raise InputError(f"{name}: unknown parameter (known: {', '.join(sorted(known))})")
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise InputError(f"{name}: expected a number, got {type(value).__name__} {value!r}")
-        value = float(value)
         meta = known[key].metadata
-        if not math.isfinite(value) or not meta["lo"] <= value <= meta["hi"]:
-            raise InputError(f"{name}: {value:g} {meta['unit']} is out of range "
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(f"{name}: expected a number, got {type(value).__name__} {_short(value)}")
+        v = number(value)
+        if v is None or not meta["lo"] <= v <= meta["hi"]:
+            shown = f"{v:g}" if v is not None else _short(value)
+            raise InputError(f"{name}: {shown} {meta['unit']} is out of range "
                              f"[{meta['lo']:g}, {meta['hi']:g}]")
+        value = v
         values[key] = value
     return dataclasses.replace(base, **values)
+
+
+def _short(value) -> str:
+    """A value for an error line: never thousands of digits."""
+    text = repr(value)
+    return text if len(text) <= 40 else f"{text[:37]}..."
 
 
 def from_dict(data: dict, gains: Gains | None = None) -> Params:
@@ -190,8 +197,8 @@ def _effects(items) -> tuple[EffectSpec, ...]:
         if not isinstance(source, str):
             raise InputError(f"{where}: source: expected text")
         for key, value in item.items():
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise InputError(f"{where} ({cause}): {key}: expected a finite number, got {value!r}")
+            if number(value) is None:
+                raise InputError(f"{where} ({cause}): {key}: expected a finite number, got {_short(value)}")
         specs.append(EffectSpec(cause, tuple((key, float(v)) for key, v in item.items()), source))
     return tuple(specs)
 
@@ -243,7 +250,7 @@ def dumps(params: Params, sources: dict[str, str] | None = None, tables=("gains"
 def update_file(path: str | Path, values: dict[str, float], source: str) -> Params:
     """Write fitted airframe values into a parameter file (created if missing), validated first."""
     path = Path(path)
-    data = tomllib.loads(path.read_text()) if path.exists() else {}
+    data = read_toml(path) if path.exists() else {}
     data.update(values)
     params = from_dict(data)
     path.write_text(dumps(params, {k: source for k in values}))

@@ -18,7 +18,6 @@ be passed in (`pi=`, `spi=`, `smbus=`), which is how the tests wire this board t
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -30,7 +29,7 @@ from flightctl.drivers.esc import EscError, PigpioEsc
 from flightctl.drivers.hcsr04 import HcSr04
 from flightctl.drivers.ina219 import Ina219, PowerMonitorError
 from flightctl.drivers.mpu9250 import ImuError, Mpu9250
-from flightctl.errors import InputError, read_toml
+from flightctl.errors import InputError, number, read_toml
 from flightctl.hal import Hal
 from flightctl.params import Params
 
@@ -110,24 +109,25 @@ def _value(where: str, f: dataclasses.Field, value):
     m, kind = f.metadata, f.type
     if kind == "str":
         if not isinstance(value, str) or not value:
-            raise InputError(f"{where}: expected a string, got {value!r}")
+            raise InputError(f"{where}: expected a string, got {repr(value)[:40]}")
         return value
     if kind == "tuple[int, ...]":
         if not isinstance(value, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
-            raise InputError(f"{where}: expected a list of integers, got {value!r}")
+            raise InputError(f"{where}: expected a list of integers, got {repr(value)[:40]}")
         items = value
     elif kind == "int":
         if isinstance(value, bool) or not isinstance(value, int):
-            raise InputError(f"{where}: expected an integer, got {value!r}")
+            raise InputError(f"{where}: expected an integer, got {repr(value)[:40]}")
         items = [value]
     else:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise InputError(f"{where}: expected a number, got {value!r}")
+        if number(value) is None:
+            raise InputError(f"{where}: expected a number, got {str(value)[:40]}")
         items = [value]
     unit = f" {m['unit']}" if m["unit"] else ""
     for v in items:
         if not m["lo"] <= v <= m["hi"]:
-            raise InputError(f"{where}: {v:g}{unit} is out of range [{m['lo']:g}, {m['hi']:g}]")
+            shown = f"{v:g}" if number(v) is not None else f"{str(v)[:37]}..."
+            raise InputError(f"{where}: {shown}{unit} is out of range [{m['lo']:g}, {m['hi']:g}]")
     return tuple(value) if kind.startswith("tuple") else float(value) if kind == "float" else value
 
 

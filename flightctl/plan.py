@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from math import cos, pi
 from pathlib import Path
 
-from flightctl.errors import InputError, read_toml
+from flightctl.errors import InputError, number, read_toml
 
 CHANNELS = ("roll", "pitch", "yaw", "alt")
 MAX_PLAN_S = 3600.0
@@ -108,9 +108,11 @@ def check_move(m: Move, where: str) -> Move:
 
 
 def _number(where: str, key: str, v) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise InputError(f"{where}: {key}: expected a number, got {v!r}")
-    return float(v)
+    x = number(v)
+    if x is None:
+        shown = repr(v) if len(repr(v)) <= 40 else f"{repr(v)[:37]}..."
+        raise InputError(f"{where}: {key}: expected a number, got {shown}")
+    return x
 
 
 def read_plan_file(path: str | Path) -> Plan:
@@ -120,9 +122,10 @@ def read_plan_file(path: str | Path) -> Plan:
     unknown = set(data) - {"name", "duration", "move"}
     if unknown:
         raise InputError(f"{path}: unknown key {sorted(unknown)[0]!r} (known: name, duration, move)")
-    duration = data.get("duration")
-    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not 0 < duration <= MAX_PLAN_S:
-        raise InputError(f"{path}: duration: a number of seconds in (0, {MAX_PLAN_S:g}] is needed, got {duration!r}")
+    duration = number(data.get("duration"))
+    if duration is None or not 0 < duration <= MAX_PLAN_S:
+        raise InputError(f"{path}: duration: a number of seconds in (0, {MAX_PLAN_S:g}] is needed, "
+                         f"got {str(data.get('duration'))[:40]!r}")
     table = data.get("move", [])
     if not isinstance(table, list):
         raise InputError(f"{path}: move: expected [[move]] tables")

@@ -12,10 +12,11 @@ each with a named reason: IMU frames good and the vehicle at rest (|a| near g), 
 threshold, ESC output really at the ESC frequency (`Motors.arm()` measures it; then `stop()` again).
 Then READY=1 to systemd, and the service waits, disarmed, for a plan:
 - `--plan` flies that plan once and exits;
-- `--plan-queue DIR` takes the oldest `*.toml` in DIR (untouched for PLAN_SETTLE_S, so a copy in
-  progress is not read half-written) by renaming it into the log directory (atomic: a plan is flown
-  at most once), flies it, and waits for the next one. A restarted service
-  finds no plan and stays disarmed: a restart can never re-arm.
+- `--plan-queue DIR` validates each queued plan, refuses (moved aside with a one-line reason) a bad
+  one and a stale one (written before the service started, or older than --plan-max-age), claims the
+  oldest good one by renaming it into the log directory (atomic: a plan is flown at most once), flies
+  it, and waits for the next one (flightctl/planqueue.py). A restarted service flies nothing queued
+  before it started: a restart can never re-arm.
 - neither: stays disarmed (stop pulse) until stopped.
 A flight is `FlightLoop`: calibrate sitting still, arm, fly, land, at 450 Hz on the deadline-keeping
 wall clock (`--board sim` paces the simulator with the same clock, in real time), writing the
@@ -50,13 +51,14 @@ from flightctl.hal import ArmingRefused, Hal, ImuSample
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter
 from flightctl.loop import FlightLoop, FlightResult
 from flightctl.params import Params, dumps, load
-from flightctl.plan import Plan, read_plan_file
+from flightctl.plan import Plan
+from flightctl.planqueue import PLAN_MAX_AGE_S, PlanQueue, check_name, new_path
 from flightctl.plans import load_plan
 from flightctl.sdnotify import Notifier
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_REFUSED = 0, 1, 2, 3
 PLAN_POLL_S = 0.5
-PLAN_SETTLE_S = 0.5            # a plan file must be this old before it is claimed (a copy in progress)
+OUTPUT_CHECK_S = 2.0           # while disarmed, the ESC output is read back this often (drivers/esc.py)
 REST_ACCEL = (0.8, 1.2)        # |a| / g at rest, for the pre-arm IMU check
 
 log = logging.getLogger("flightctl.run")
@@ -118,8 +120,30 @@ class Service:
         self.min_battery_v = args.min_battery_v if args.min_battery_v is not None else board.min_battery_v
         self.flights: list[FlightResult] = []
         self.link = None            # the ground station (flightctl/mavlink.py), with --mavlink
+        self.started = time.time()  # plans queued before this are never flown (planqueue.py)
+        self.tampered: str | None = None   # what another process did to the ESC output: never arm again
+        self._next_output_check = 0.0
+
+    def watch_output(self) -> None:
+        """While disarmed: read the ESC output back (boards whose motors can, i.e. the Pi's pigpio
+        driver); if another process changed it, put the stop pulse back, say so, and refuse to arm
+        until the service is restarted by hand."""
+        check = getattr(self.board.hal.motors, "check_output", None)
+        now = time.monotonic()
+        if check is None or now < self._next_output_check:
+            return
+        self._next_output_check = now + OUTPUT_CHECK_S
+        try:
+            check()
+        except Exception as e:
+            if self.tampered is None:
+                self.tampered = f"{e}: refusing to arm until restarted"
+                log.error("%s", self.tampered)
+                self.notifier.status(f"disarmed: {self.tampered}")
 
     def check(self) -> None:
+        if self.tampered is not None:
+            raise ArmingRefused(self.tampered)
         reasons = prearm(self.board.hal, self.params, self.min_battery_v)
         if reasons:
             raise ArmingRefused("; ".join(reasons))
@@ -136,20 +160,23 @@ class Service:
             log.info("no plan: holding the stop pulse until stopped")
             while not self.stop.wait(PLAN_POLL_S):
                 self.notifier.tick()
+                self.watch_output()
 
     def serve_queue(self, queue: Path) -> None:
-        queue.mkdir(parents=True, exist_ok=True)
+        plans = PlanQueue(queue, self.log_dir, started=self.started, max_age_s=self.args.plan_max_age)
+        plans.open()
         while not self.stop.is_set():
             self.notifier.tick()
-            claimed = self.claim(queue)
-            if claimed is None:
+            self.watch_output()
+            taken = plans.take()
+            if plans.refused:
+                name, reason = plans.refused.pop()
+                plans.refused.clear()
+                self.notifier.status(f"disarmed: plan {name} refused: {reason}")
+            if taken is None:
                 self.stop.wait(PLAN_POLL_S)
                 continue
-            try:
-                plan = read_plan_file(claimed)
-            except InputError as e:
-                log.error("plan refused: %s", e)
-                continue
+            plan, claimed = taken
             try:
                 self.check()
             except ArmingRefused as e:      # this plan is not flown; the service stays up, disarmed
@@ -160,42 +187,12 @@ class Service:
                 continue
             self.fly(plan, plan_file=claimed)
 
-    def claim(self, queue: Path) -> Path | None:
-        """Move the oldest queued plan into the log directory; None if there is none."""
-        now = time.time()
-        plans = []
-        for p in queue.glob("*.toml"):
-            try:
-                mtime = p.stat().st_mtime
-            except OSError:
-                continue
-            if now - mtime >= PLAN_SETTLE_S:       # not while it is still being written
-                plans.append((mtime, p.name, p))
-        for _, _, p in sorted(plans):
-            target = self._new_path("plan", p.name)
-            try:
-                os.rename(p, target)
-            except OSError:
-                continue      # taken away meanwhile
-            log.info("plan %s claimed as %s", p.name, target)
-            return target
-        return None
-
-    def _new_path(self, kind: str, suffix: str) -> Path:
-        self.log_dir.mkdir(parents=True, exist_ok=True)
-        stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-        for k in range(1000):
-            p = self.log_dir / f"{kind}-{stamp}{'-%d' % k if k else ''}-{suffix}"
-            if not p.exists():
-                return p
-        raise RuntimeError(f"{self.log_dir}: cannot name a new {kind} file")
-
     def fly(self, plan: Plan, plan_file: Path | None = None) -> FlightResult:
         params, board, hal = self.params, self.board, self.board.hal
         if not plan.lands():
             log.warning("plan %s does not end at altitude 0: the loop lands when it ends", plan.name)
         plan.restart()
-        path = self._new_path("flight", f"{plan.name}.csv")
+        path = new_path(self.log_dir, "flight", f"{plan.name}.csv")
         meta = {"software": f"flightctl {__version__}", "board": board.name, "plan": plan.name,
                 "plan_file": str(plan_file or self.args.plan), "calibrate_s": self.calibrate_s,
                 "loop_hz": params.airframe.loop_hz, "esc_pwm_hz": params.airframe.esc_pwm_hz,
@@ -256,6 +253,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--plan", help="a plan TOML file, or a named plan (hover, paper, ...)")
     p.add_argument("--plan-queue", metavar="DIR", help="fly each plan file put into DIR, once, in turn")
     p.add_argument("--log", default=".", metavar="DIR", help="directory for flight logs (default: .)")
+    p.add_argument("--plan-max-age", type=float, default=PLAN_MAX_AGE_S, metavar="S",
+                   help=f"refuse a queued plan written more than S seconds ago (default {PLAN_MAX_AGE_S:g})")
     p.add_argument("--calibrate", type=float, metavar="S",
                    help="seconds sitting still before arming (default: the board's, 60 s on the quadcopter)")
     p.add_argument("--min-battery-v", type=float, metavar="V", help="refuse to arm below this battery voltage")
@@ -268,6 +267,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     args = p.parse_args(argv)
     if args.plan and args.plan_queue:
         p.error("--plan and --plan-queue exclude each other")
+    if not 1 <= args.plan_max_age <= 86400:
+        p.error("--plan-max-age: 1..86400 s")
     if args.calibrate is not None and not 0 <= args.calibrate <= 600:
         p.error("--calibrate: 0..600 s")
     return args
@@ -280,7 +281,7 @@ def main(argv: list[str] | None = None) -> int:
     params = load(args.params)
     if args.stop_motors:
         return stop_motors_main(args, params)
-    plan = load_plan(args.plan) if args.plan else None
+    plan = check_name(load_plan(args.plan), args.plan) if args.plan else None
     try:
         open_board = opener(args.board)         # an unknown board is an InputError (exit 2)
     except BoardUnavailable as e:

@@ -1,5 +1,7 @@
 """Benchmark (figures, not a test): how many times faster than real time `flightctl sim paper` flies,
-and what one control-loop iteration costs, decode to PWM counts, against the 2222 us loop period.
+on the base model and on the as-flown one (`--params paper-as-flown`: its effects make the forces
+state-dependent), and what one control-loop iteration costs, decode to PWM counts, against the
+2222 us loop period.
 
     python scripts/benchmark.py [--repeat N]
 
@@ -66,11 +68,12 @@ def main() -> None:
     args = ap.parse_args()
     params = load(None)
     out = Path(tempfile.mkdtemp())
-    for label, kw in (("full onboard path", {}), ("perfect state feedback", {"truth": True})):
+    for label, name, kw in (("full onboard path", None, {}), ("perfect state feedback", None, {"truth": True}),
+                            ("full onboard path, --params paper-as-flown", "paper-as-flown", {})):
         ratios = []
         for _ in range(args.repeat):
             start = time.perf_counter()
-            flight = fly(SCENARIOS["paper"](), params, out / "paper.csv", **kw)
+            flight = fly(SCENARIOS["paper"](), load(name), out / "paper.csv", **kw)
             wall = time.perf_counter() - start
             ratios.append(flight.log["t"][-1] / wall)
         print(f"flightctl sim paper, {label}: {statistics.median(ratios):.1f}x real time "

@@ -92,8 +92,8 @@ if command -v raspi-config >/dev/null 2>&1; then
         skip "I2C enabled"
     fi
 else
-    step "enable SPI" -- raspi-config nonint do_spi 0
-    step "enable I2C" -- raspi-config nonint do_i2c 0
+    echo "install-pi.sh: raspi-config not found: enable SPI and I2C yourself (dtparam=spi=on and dtparam=i2c_arm=on in config.txt)" >&2
+    skip "SPI and I2C left as they are (no raspi-config)"
 fi
 
 # 3. the service user and its groups
@@ -118,6 +118,13 @@ else
 fi
 if [ -d "$STATE_DIR/plans" ] && [ -d "$STATE_DIR/logs" ]; then
     skip "$STATE_DIR/plans and $STATE_DIR/logs exist"
+    # whoever can write the plan queue can make the vehicle fly: owner and group only
+    for dir in "$STATE_DIR" "$STATE_DIR/plans" "$STATE_DIR/logs"; do
+        if [ -n "$(find "$dir" -maxdepth 0 -perm -o+w 2>/dev/null)" ] || [ "$(stat -c %U "$dir")" != "$USER_NAME" ]; then
+            step "restrict $dir to $USER_NAME (it was writable by others or owned by someone else)" -- \
+                install -d -o "$USER_NAME" -g "$USER_NAME" -m 0750 "$dir"
+        fi
+    done
 else
     step "create $STATE_DIR/plans and $STATE_DIR/logs" -- \
         install -d -o "$USER_NAME" -g "$USER_NAME" -m 0750 "$STATE_DIR" "$STATE_DIR/plans" "$STATE_DIR/logs"
@@ -143,7 +150,12 @@ install_unit() {
     fi
 }
 UNITS_CHANGED=0
-install_unit "$SOURCE/systemd/flightctl.service" "$UNIT_DIR/flightctl.service"
+# the unit names the prefix: carry --prefix into it
+UNIT_SRC=$(mktemp)
+trap 'rm -f "$UNIT_SRC"' EXIT
+sed "s#/opt/flightctl#$PREFIX#g" "$SOURCE/systemd/flightctl.service" >"$UNIT_SRC"
+chmod 0644 "$UNIT_SRC"
+install_unit "$UNIT_SRC" "$UNIT_DIR/flightctl.service"
 install_unit "$SOURCE/systemd/pigpiod.service.d/flightctl.conf" "$UNIT_DIR/pigpiod.service.d/flightctl.conf"
 if [ "$UNITS_CHANGED" = 1 ] || [ "$DRY_RUN" = 1 ]; then
     step "reload systemd" -- systemctl daemon-reload

@@ -15,7 +15,7 @@ from flightctl.boards import MIN_BATTERY_V, Board, BoardOptions
 from flightctl.clock import PacedClock
 from flightctl.drivers.hcsr04 import HcSr04
 from flightctl.drivers.ina219 import Ina219
-from flightctl.drivers.mpu9250 import Mpu9250
+from flightctl.drivers.mpu9250 import FROZEN_FRAMES, Mpu9250
 from flightctl.hal import Hal
 from flightctl.params import Params
 from flightctl.sim import causes
@@ -32,7 +32,9 @@ def sim_board(params: Params, effects=(), noise=None, seed: int = 0, substeps: i
     carries the parameter file's effects (measured-data.md), then `effects`."""
     carried = tuple(causes.make(e.cause, **dict(e.parameters)) for e in params.effects)
     world = World(params.airframe, carried + tuple(effects), noise if noise is not None else SensorNoise(), seed, substeps)
-    imu = Mpu9250(SimMpu9250(world), sleep=lambda s: None)
+    n = world.noise   # an ideal chip (no white noise) repeats its frames: no frozen-frame check
+    imu = Mpu9250(SimMpu9250(world), sleep=lambda s: None,
+                  frozen_frames=0 if n.gyro_density == 0.0 and n.accel_density == 0.0 else FROZEN_FRAMES)
     sonar = HcSr04(world.gpio, SONAR_TRIGGER_PIN, SONAR_ECHO_PIN)
     power = Ina219(SimSMBus(SimIna219(world)), bus_name="the simulated I2C bus")
     hal = Hal(imu=imu, motors=SimMotors(world), rangefinder=sonar, power=power, clock=SimClock(world))

@@ -2,7 +2,11 @@
 quadcopter, write the contract flight log, a PNG of the responses, and print the step metrics.
 
 `flightctl sim --plan PLAN.toml --log FLIGHT.csv` flies a plan file (what `flightctl run --plan`
-takes) in simulated time, the same way."""
+takes) in simulated time, the same way.
+
+`flightctl sim SCENARIO --fault NAME[:k=v,...]` (repeatable) injects a fault at the simulated devices
+(flightctl/sim/faults.py); `flightctl sim faults --json M.json` flies every fault and writes the
+matrix (docs/safety.md)."""
 from __future__ import annotations
 
 import argparse
@@ -15,7 +19,7 @@ from pathlib import Path
 from flightctl.control.estimator import ESTIMATORS
 from flightctl.errors import InputError
 from flightctl.params import GAIN_SETS, load
-from flightctl.sim import causes
+from flightctl.sim import causes, faults
 from flightctl.sim.metrics import hold_metrics, step_metrics
 from flightctl.plans import load_plan
 from flightctl.sim.scenarios import SCENARIOS, scenario
@@ -29,6 +33,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--log", required=True, help="the flight log to write (CSV, measured-data.md)")
     p.add_argument("--effect", action="append", default=[], metavar="CAUSE:name=value,...",
                    help=f"add an extension to the simulated plant ({', '.join(causes.CAUSES)}); repeatable")
+    p.add_argument("--fault", action="append", default=[], metavar="NAME[:at=S,k=v]",
+                   help="inject a fault at the simulated devices (at: s of simulated time, from power-on; "
+                        "faults: " + ", ".join(faults.FAULTS) + "); repeatable")
     p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
     p.add_argument("--gains", choices=sorted(GAIN_SETS), default="table6",
                    help="gain set: table6 (flight, default) or table4 (the paper's simulation)")
@@ -77,6 +84,8 @@ def metrics_json(flown, flight, wall_s: float) -> dict:
 def main(argv: list[str]) -> int:
     from flightctl.sim.run import fly
 
+    if argv[:1] == ["faults"]:
+        return faults_main(argv[1:])
     p = parser()
     args = p.parse_args(argv)
     if (args.scenario is None) == (args.plan is None):
@@ -85,6 +94,7 @@ def main(argv: list[str]) -> int:
         raise InputError("--substeps: at least 1")
     params = load(args.params, GAIN_SETS[args.gains])
     effects = tuple(causes.parse(e) for e in args.effect)
+    injected = tuple(faults.parse(f) for f in args.fault)
     flown = SCENARIOS[args.scenario]() if args.scenario else scenario(load_plan(args.plan))
     log_path = Path(args.log)
     if not log_path.parent.is_dir():
@@ -104,7 +114,8 @@ def main(argv: list[str]) -> int:
         link.ready(flown.name)
     try:
         flight = fly(flown, params, log_path, effects, noise=not args.no_noise, seed=args.seed,
-                     truth=args.truth, substeps=args.substeps, estimator=args.estimator, telemetry=link)
+                     truth=args.truth, substeps=args.substeps, estimator=args.estimator, telemetry=link,
+                     faults=injected)
     finally:
         if link is not None:
             link.close()
@@ -133,3 +144,31 @@ def main(argv: list[str]) -> int:
         plot_flight(log, png, f"flightctl sim {flown.name}: {args.gains}, {path}")
         print(f"  plot -> {png}")
     return 1 if flight.crashed or not flight.flew else 0
+
+
+def faults_main(argv: list[str]) -> int:
+    """`flightctl sim faults --json M.json [--doc docs/safety.md]`: the fault-injection matrix."""
+    from flightctl.sim import faultmatrix
+
+    p = argparse.ArgumentParser(prog="flightctl sim faults", description=faultmatrix.__doc__)
+    p.add_argument("--json", required=True, metavar="M.json", help="the matrix, one object per fault")
+    p.add_argument("--logs", metavar="DIR", help="where the flights' logs go (default: beside --json)")
+    p.add_argument("--doc", metavar="safety.md", help="also write the table into this Markdown file, "
+                   "between its fault-matrix markers (docs/safety.md)")
+    p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
+    args = p.parse_args(argv)
+    out = Path(args.json)
+    logs = Path(args.logs) if args.logs else out.parent
+    for what, d in (("--json", out.parent), ("--logs", logs)):
+        if not d.is_dir():
+            raise InputError(f"{what}: the directory {d} does not exist")
+    if args.doc and not Path(args.doc).is_file():
+        raise InputError(f"--doc {args.doc}: no such file")
+    rows = faultmatrix.run_matrix(load(args.params, GAIN_SETS["table6"]), logs, seed=args.seed)
+    out.write_text(json.dumps(rows, indent=1) + "\n")
+    table = faultmatrix.markdown(rows)
+    print(table, end="")
+    if args.doc and not faultmatrix.write_doc(Path(args.doc), table):
+        raise InputError(f"--doc {args.doc}: no fault-matrix markers ({faultmatrix.BEGIN})")
+    return 0 if all(r["detected"] for r in rows) else 1

@@ -147,7 +147,7 @@ class Model:
         # without rotor states, state-dependent scales or wrenches, the forces depend on the input
         # only, which is constant across an integration step: compute them once per input
         self._cacheable = not (self._rotor or self._wrench or any(e.state_dependent for e in self._scale))
-        self._cached_u = None
+        self._cached_u = None     # the input of `_cached`: (its forces, their aggregate), when cacheable
         self._cached = None
         self._command_u = None   # the input of `_f_cmd`, the commanded thrusts (eq. 26)
         self._f_cmd = None
@@ -176,9 +176,23 @@ class Model:
                 e.command(self._f_cmd)
         return self._f_cmd
 
+    def _per_input(self, t, x, u):
+        """(forces, aggregate) of a cacheable model, whose forces depend on the input only: computed
+        once per input (by value: a list changed in place must not return stale forces)."""
+        key = tuple(u)
+        if key != self._cached_u:
+            rotors = self._forces(t, x, u)
+            self._cached_u, self._cached = key, (rotors, self._aggregate(rotors))
+        return self._cached
+
     def forces(self, t, x, u, xdot=None, Rm=None) -> Forces:
         """The rotors (eq. 26-28 and the extensions) and the extra body wrench. `Rm`: the rotation
         of x's attitude when the caller has it (`rotation_from_trig`), for the body velocity."""
+        if self._cacheable:
+            return self._per_input(t, x, u)[0]
+        return self._forces(t, x, u, xdot, Rm)
+
+    def _forces(self, t, x, u, xdot=None, Rm=None) -> Forces:
         a = self.a
         f = self._commanded(u)
         for e in self._rotor:
@@ -206,9 +220,9 @@ class Model:
             e.wrench(t, x, f, vb, force, torque)
         return Forces(f, tau, force, torque, w)
 
-    def _aggregate(self, t, x, u, xdot=None, Rm=None):
+    def _aggregate(self, rotors: Forces):
         """Body force and torques, eq. 9's Omega: what the rigid body needs from the rotors."""
-        (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque, (w1, w2, w3, w4) = self.forces(t, x, u, xdot, Rm)
+        (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque, (w1, w2, w3, w4) = rotors
         l = self.a.l
         # eq. 9: Omega = -w1 + w2 - w3 + w4 (motors 1 and 3 turn clockwise)
         return (force[0], force[1], force[2] + f1 + f2 + f3 + f4, l * (f2 - f4) + torque[0],
@@ -218,32 +232,26 @@ class Model:
         """xdot = f(t, x, u): M dv/dt = R (F_ext + sum f z_b) - M g z, and eq. 7. Scalar code (fast);
         the functions above it take arrays too, for fitting."""
         a = self.a
-        xdot = [0.0] * self.n
+        xdot = [0.0] * self.n   # the rotor effects write their own states' derivatives (beyond N_RIGID)
         phi, theta, psi, p, q, r = x[6:12]
         sf, cf, st, ct, sp, cp = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
         if self._cacheable:
-            key = tuple(u)   # by value: a list changed in place must not return stale forces
-            if key != self._cached_u:
-                self._cached_u, self._cached = key, self._aggregate(t, x, u)
-            fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._cached
+            fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._per_input(t, x, u)[1]
         else:
             Rm = rotation_from_trig(sf, cf, st, ct, sp, cp) if self._wrench else None
-            fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._aggregate(t, x, u, xdot, Rm)
+            fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._aggregate(self._forces(t, x, u, xdot, Rm))
         iM = self._iM
         # R = Rz(psi) Ry(theta) Rx(phi) applied to the body force (fx, fy, fz)
         up = sf * fy + cf * fz
         bx = ct * fx + st * up
         by = cf * fy - sf * fz
-        xdot[0], xdot[1], xdot[2] = x[3], x[4], x[5]
-        xdot[3] = (cp * bx - sp * by) * iM
-        xdot[4] = (sp * bx + cp * by) * iM
-        xdot[5] = (-st * fx + ct * up) * iM - a.g
         w = q * sf + r * cf
-        xdot[6] = p + w * st / ct       # Z-Y-X Euler-angle kinematics
-        xdot[7] = q * cf - r * sf
-        xdot[8] = w / ct
         tau_d = yaw_drag(r, a.gamma1, self.gamma2)  # eq. 6
-        xdot[9], xdot[10], xdot[11] = angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, a)
+        dp, dq, dr = angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, a)
+        xdot[:N_RIGID] = (x[3], x[4], x[5],
+                          (cp * bx - sp * by) * iM, (sp * bx + cp * by) * iM, (-st * fx + ct * up) * iM - a.g,
+                          p + w * st / ct, q * cf - r * sf, w / ct,   # Z-Y-X Euler-angle kinematics
+                          dp, dq, dr)
         return xdot
 
     def specific_force(self, t, x, u, forces: Forces | None = None):

@@ -17,7 +17,7 @@ import dataclasses
 import re
 from pathlib import Path
 
-from flightctl.errors import InputError, read_toml
+from flightctl.errors import InputError, read_text, read_toml
 from flightctl.params import GAIN_SETS, VEHICLES, Params, dumps, load, resolve
 
 DEFAULTS = "defaults"
@@ -39,7 +39,7 @@ def _read(spec: str | None, gains: str) -> tuple[Params, dict[str, str], str]:
     origin = f"vehicle {path.stem}" if path.parent == VEHICLES else f"file {path}"
     keys = {f.name for t in TABLES for f in dataclasses.fields(getattr(params, t))}
     sources = {}
-    for line in path.read_text().splitlines():
+    for line in read_text(path).splitlines():
         m = _LINE.match(line)
         if m and m.group(1) in keys:
             note = m.group(2).split(";", 1)[-1].strip()

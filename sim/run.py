@@ -62,10 +62,11 @@ def judge(result: FlightResult, log: Table, touchdowns, g: float) -> tuple[str, 
 
 def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), noise: bool = True,
         seed: int = 0, truth: bool = False, substeps: int = 2, calibrate_s: float = SIM_CALIBRATE_S,
-        estimator: str = "flight", telemetry=None) -> Flight:
+        estimator: str = "flight", telemetry=None, faults=()) -> Flight:
     """`truth=True` is perfect state feedback: the controller sees the true attitude and altitude at
     every loop (the paper's own simulation); otherwise the full onboard path. `telemetry`: a ground
-    station link (flightctl/mavlink.py) the loop streams to and takes commands from."""
+    station link (flightctl/mavlink.py) the loop streams to and takes commands from. `faults`:
+    `flightctl.sim.faults.Fault`s, applied to the board's devices and the log (issue 10)."""
     board = open_board(params, BoardOptions(seed=seed, effects=tuple(effects), substeps=substeps,
                                             noise=SensorNoise() if noise else SensorNoise.off()))
     hal, world = board.hal, board.world
@@ -76,7 +77,11 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
     meta = {"software": f"flightctl {__version__}", "board": board.name, "scenario": scenario.name,
             "path": "perfect state feedback" if truth else f"full onboard path ({estimator} estimator)",
             "calibrate_s": calibrate_s, **board.meta, "params": dumps(params)}
+    if faults:
+        meta["faults"] = ", ".join(f"{f.name} at {f.at:g} s" for f in faults)
     log = FlightLogWriter(log_path, meta, extra=MAG_COLUMNS + board.extra_columns, keep=True)
+    for fault in faults:
+        fault.apply(hal, world, log)
     scenario.plan.restart()
     loop = FlightLoop(hal, params, scenario.plan, log, FlightController(params, truth_est, estimator),
                       calibrate_s=calibrate_s, extra_row=board.extra_row, telemetry=telemetry)

@@ -135,3 +135,13 @@ def test_two_logs_and_plots(tmp_path, capsys, flight):
         assert png.read_bytes()[:4] == b"\x89PNG"
     text = capsys.readouterr().out
     assert "verdict: com_offset" in text and "Ljung-Box" in text
+
+
+def test_an_error_after_a_good_log_is_the_only_line_on_stderr(tmp_path, capsys, flight):
+    """Without --quiet, and with the first log good: progress must not come before the error line."""
+    bad = _rewrite(flight, tmp_path / "bad.csv", lambda h, r: (h, r[:5]))
+    out = tmp_path / "out.json"
+    assert main(["diagnose", str(flight), str(bad), "--json", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(bad) in err, err
+    assert not out.exists()

@@ -98,12 +98,13 @@ def test_missing_file_is_refused(tmp_path, capsys):
 
 
 def test_fitted_values_outside_the_schema_write_nothing(tmp_path, capsys):
-    """gamma2 < 0 fits the file but the parameter schema refuses it: not even the JSON is written."""
+    """gamma2 < 0 fits the file but the parameter schema's physical range refuses it, with or without
+    --write-params: not even the JSON is written."""
     csv = tmp_path / "yaw.csv"
     csv.write_text(HEADER["yaw-drag"] + "\n" + "\n".join(yaw_rows(gamma2=-1e-3)) + "\n")
     argv = ["identify", "yaw-drag", str(csv)] + [str(x) for kv in outputs(tmp_path).items() for x in kv]
     code, err = run(capsys, argv)
-    assert_refused(code, err, tmp_path, [str(outputs(tmp_path)["--write-params"]), "gamma2", "out of range"])
+    assert_refused(code, err, tmp_path, [str(csv), "gamma2", "outside its physical range"])
 
 
 def test_unreadable_parameter_files_are_named_and_left_alone(tmp_path, capsys):

@@ -17,6 +17,7 @@ import pytest
 
 from flightctl.cli import main as cli
 from flightctl.logfile import read_flight_log
+from without import run_without
 
 os.environ.setdefault("MAVLINK20", "1")
 mavutil = pytest.importorskip("pymavlink.mavutil")
@@ -265,3 +266,13 @@ def test_run_waits_for_the_pilot_to_arm(tmp_path, gcs):
     assert "armed" in texts and any(t.startswith("landed") for t in texts)
     (csv,) = tmp_path.glob("flight-*short.csv")
     assert read_flight_log(csv)["alt"].max() > 0.3
+
+
+@pytest.mark.parametrize("command", [["sim", "hover", "--log", "f.csv"],
+                                     ["run", "--board", "sim", "--plan", "hover", "--log", "."]])
+def test_without_pymavlink_mavlink_is_one_line_saying_how_to_get_it(tmp_path, command):
+    r = run_without(("pymavlink",), command + ["--mavlink", "udpout:127.0.0.1:9"], cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    (line,) = r.stderr.strip().splitlines()[-1:]
+    assert "pip install 'flightctl[mavlink]'" in line and "Traceback" not in r.stderr
+    assert not list(tmp_path.glob("*.csv"))                          # nothing flown

@@ -44,6 +44,16 @@ stop wave: zero thrust within ~deadman_ms + one period, without the controller a
 ExecStopPost) removes stale scripts left by a dead controller: pigpiod on the quadcopter is
 flightctl's own, so every script in its 32 slots is ours. The systemd unit's ExecStopPost and its
 watchdog are the second layer (docs/pi.md).
+
+Only the flight controller commands the motors (issue 10): the units keep every other process away
+from pigpiod (systemd/, docs/pi.md), and the driver reads the output back in case something else got
+through. `output_problems()` names what differs from what this driver sent: a wave pigpiod transmits
+that is not ours (another client's), no wave at all, an ESC pin no longer an output, and with
+`measure=True` the real pin output (edges) against the stop pulse. `arm()` refuses on any of them
+before it touches the output; the service calls `check_output()` every few seconds while disarmed;
+in flight `write()` reads back the transmitted wave every OUTPUT_CHECK_S and raises `EscError` (the
+loop stops the motors: whoever else drives the pins, this driver cannot land the vehicle through
+them). `stop()` always sends the stop wave, whatever it believes is on the pins.
 """
 from __future__ import annotations
 
@@ -67,6 +77,8 @@ WIDTH_TOLERANCE_US = 12.0   # pigpio samples edges every 5 us by default
 MEASURE_S = 0.15            # ~67 periods per pin
 MIN_PERIODS = 10
 STUCK_S = 0.05              # a wave sent this long ago and still not on the pins: output stuck
+OUTPUT_CHECK_S = 0.1        # in flight, write() reads back which wave pigpiod transmits this often
+CHECK_MEASURE_S = 0.03      # disarmed read-back: edges measured this long (~13 periods per pin)
 SCRIPT_SLOTS = 32           # pigpiod's script table
 
 
@@ -131,6 +143,7 @@ class PigpioEsc:
         self.measured: dict[int, tuple[float, float, int]] = {}
         self.armed = False
         self.waves_sent = 0
+        self._last_check = 0.0
 
     # --- lifecycle ---------------------------------------------------------------------------
     def start(self) -> None:
@@ -171,6 +184,9 @@ class PigpioEsc:
     def arm(self) -> None:
         if not self._started:
             self.start()
+        problems = self.output_problems()
+        if problems:
+            raise ArmingRefused("ESC output: " + "; ".join(problems))
         self.stop()
         self.check_frequency()
         self._start_deadman()
@@ -181,19 +197,25 @@ class PigpioEsc:
         on = [min(max(int(c * k + 0.5), lo), hi) for c in counts]
         if on != self._on:
             self._send(on)
-        if self._sid is not None:
-            now = self._clock()
-            if now - self._last_refresh >= REFRESH_S:
-                self.pi.update_script(self._sid, [self._countdown])
-                self._last_refresh = now
+        now = self._clock()
+        if self._sid is not None and now - self._last_refresh >= REFRESH_S:
+            self.pi.update_script(self._sid, [self._countdown])
+            self._last_refresh = now
+        if now - self._last_check >= OUTPUT_CHECK_S:
+            self._last_check = now
+            at = self.pi.wave_tx_at()
+            if not self._ours(at):
+                raise EscError("ESC output: " + self._foreign(at))
 
     def stop(self) -> None:
-        """The stop pulse on every output (at the end of the running cycle), then the dead-man removed."""
+        """The stop pulse on every output (at the end of the running cycle), then the dead-man removed.
+        Always sent: another client may have replaced it (a wave sent again is only queued behind itself)."""
         if not self._started:
             self.start()
-        elif self._current != self._stop_wid:
+        else:
             self.pi.wave_send_using_mode(self._stop_wid, pigpio.WAVE_MODE_REPEAT_SYNC)
-            self._retired.append(self._current)
+            if self._current != self._stop_wid:
+                self._retired.append(self._current)
             self._current, self._on = self._stop_wid, [self.stop_us] * 4
             self._t_sent = self._clock()
             self.waves_sent += 1
@@ -242,6 +264,47 @@ class PigpioEsc:
         self.waves_sent += 1
 
     # --- checks ----------------------------------------------------------------------------------
+    def _ours(self, at: int) -> bool:
+        """Is `at` (wave_tx_at) a wave this driver sent: the last one, one it replaced that is still
+        finishing its cycle, or the stop wave (ours, sent by the dead-man too)?"""
+        return at == self._current or at == self._stop_wid or at in self._retired
+
+    def _foreign(self, at: int) -> str:
+        if at in (pigpio.NO_TX_WAVE, pigpio.WAVE_NOT_FOUND):
+            return f"no wave on the ESC pins (pigpiod reports {at}): another pigpiod client stopped or deleted it"
+        return f"pigpiod transmits wave {at}, not this controller's wave {self._current}: another pigpiod client"
+
+    def output_problems(self, measure: bool = False) -> list[str]:
+        """What differs on the ESC pins from what this driver sent (empty: nothing), read back from
+        pigpiod: the wave transmitted, the pins' modes, and with `measure` the real output (edges)."""
+        if not self._started:
+            return []
+        problems = []
+        at = self.pi.wave_tx_at()
+        if not self._ours(at):
+            problems.append(self._foreign(at))
+        for motor, p in enumerate(self.pins, start=1):
+            mode = self.pi.get_mode(p)
+            if mode != pigpio.OUTPUT:
+                kind = "an input" if mode == pigpio.INPUT else f"mode {mode}"
+                problems.append(f"motor {motor} (GPIO {p}) is {kind}, not an output: another pigpiod client")
+        if measure and self._current == self._stop_wid:
+            measured = self.measure(CHECK_MEASURE_S)
+            for motor, p in enumerate(self.pins, start=1):
+                _, high, n = measured[p]
+                if n and abs(high - self.stop_us) > WIDTH_TOLERANCE_US:
+                    problems.append(f"motor {motor} (GPIO {p}) outputs {high:.0f} us pulses, not the "
+                                    f"{self.stop_us} us stop pulse: another pigpiod client")
+        return problems
+
+    def check_output(self) -> None:
+        """While disarmed: raise `EscError` naming what another process changed on the ESC pins, and
+        put the stop wave back (the stop pulse: zero thrust)."""
+        problems = self.output_problems(measure=True)
+        if problems:
+            self.stop()
+            raise EscError("ESC output changed while disarmed: " + "; ".join(problems))
+
     def measure(self, duration: float | None = None) -> dict[int, tuple[float, float, int]]:
         """Per pin: (frequency Hz, mean high time us, periods seen) from pigpio edge callbacks."""
         duration = self.measure_s if duration is None else duration

@@ -3,6 +3,24 @@
 Frames: the chip is mounted with its x toward motor 1 and z up, so accelerometer and gyro axes are
 the body axes. The AK8963 axes are (x_mpu = y_ak, y_mpu = x_ak, z_mpu = -z_ak); the driver converts
 once, here, and reports the field in the body frame (x forward, y left, z up) in tesla.
+
+Frame checks (issue 10, defect 4; docs/safety.md). `read` refuses a frame, leaving the sample as it
+was (the loop flies on the last good sample), when it is
+- a bus-error pattern: the 14 data bytes all 0x00 or all 0xFF (MISO stuck low or high);
+- frozen: the same 14 bytes as the FROZEN_FRAMES frames before it. A live chip never repeats a
+  frame: its accelerometer noise alone is ~20 LSB rms (300 ug/rtHz, PS 3.2, at 4096 LSB/g), so
+  FROZEN_FRAMES + 1 identical frames are a stale bus or a hung chip (refused from the 5th);
+- a temperature outside the chip's operating range, TEMP_RANGE_C (PS 3.4: -40 to 85 degC);
+- an impossible jump from the last accepted frame: more than JUMP_ACCEL in one axis's specific force,
+  JUMP_GYRO in one rate, or JUMP_TEMP_C in the die temperature between two frames; unless the frame
+  before it (refused or not) is within those limits of it, i.e. a real step confirmed by the next frame.
+  Random bytes fail one of these at once (the die temperature alone moves ~0.01 degC a second);
+  JUMP_GYRO is 3 rad/s in 2.2 ms, ~1400 rad/s^2, ten times what the rotors' torque can give the
+  frame, and JUMP_ACCEL 30 m/s^2, forty times the rotors' vibration (sim/devices.py).
+`rejected` counts the refused frames by reason; `why` names the last one. A saturated frame (an
+accelerometer or gyro word at the int16 limit, -32768 or 32767: the true value is beyond the full
+scale) is not refused, since a real manoeuvre can saturate it too: it is decoded as the full scale,
+`saturated` is set and counted in `rejected["saturated"]`; the loop names it (docs/safety.md).
 """
 from __future__ import annotations
 
@@ -15,6 +33,12 @@ from flightctl.hal import ImuSample, SpiDevice
 from flightctl.physics import G
 _HEAD = struct.Struct(">7h")    # accel x y z, temperature, gyro x y z: big-endian int16
 _MAG = struct.Struct("<3hB")     # then the AK8963 data, little-endian int16, and ST2
+FROZEN_FRAMES = 4                # identical frames accepted after a frame; the next one is refused
+TEMP_RANGE_C = (-40.0, 85.0)     # degC, the operating range (PS-MPU-9250A-01 section 3.4)
+JUMP_ACCEL = 30.0                # m/s^2 per frame and axis
+JUMP_GYRO = 3.0                  # rad/s per frame and axis
+JUMP_TEMP_C = 1.0                # degC per frame
+_BUS_ZEROS, _BUS_ONES = b"\x00" * 14, b"\xff" * 14
 
 
 class ImuError(Exception):
@@ -25,7 +49,9 @@ class Mpu9250:
     """`start()` configures the chip; `read(sample)` does one burst read and fills the sample in SI."""
 
     def __init__(self, spi: SpiDevice, accel_fs: int = 2, gyro_fs: int = 1, dlpf: int = 1,
-                 sleep=time.sleep):
+                 sleep=time.sleep, frozen_frames: int = FROZEN_FRAMES):
+        """`frozen_frames` = 0 switches the frozen check off: only for an ideal, noise-free simulated
+        chip, whose frames do repeat."""
         if accel_fs not in range(4) or gyro_fs not in range(4):
             raise ValueError("full-scale selections are 0..3")
         self.spi = spi
@@ -36,6 +62,18 @@ class Mpu9250:
         self._tx = [reg.READ | reg.ACCEL_XOUT_H] + [0] * reg.BURST_LEN
         self.has_mag = False
         self.temperature = 0.0
+        self.frozen_frames = frozen_frames
+        self._jump = (round(JUMP_ACCEL / self._a),) * 3 + (round(JUMP_TEMP_C * reg.TEMP_LSB_PER_C),) \
+            + (round(JUMP_GYRO / self._g),) * 3
+        lo, hi = ((c - reg.TEMP_OFFSET_C) * reg.TEMP_LSB_PER_C for c in TEMP_RANGE_C)
+        self._temp_lsb = (lo, hi)
+        self._prev_head = b""     # the last frame read (refused or not), raw
+        self._prev = None         # its seven words
+        self._good = None         # the words of the last accepted frame
+        self._repeats = 0         # how many times the last frame repeated the one before it
+        self.rejected: dict[str, int] = {}
+        self.why = ""
+        self.saturated = False    # the last accepted frame had a word at the int16 limit
 
     # --- register access -------------------------------------------------------------------
     def write(self, register: int, value: int) -> None:
@@ -89,13 +127,32 @@ class Mpu9250:
         self.spi.max_speed_hz = reg.READ_SPI_HZ
 
     def read(self, out: ImuSample) -> bool:
-        """One burst read from ACCEL_XOUT_H; False (sample untouched) on a bus-error frame."""
+        """One burst read from ACCEL_XOUT_H; False (sample untouched) on a refused frame (the checks
+        of the module docstring; `why` names the reason)."""
         rx = self.spi.xfer2(self._tx)
         data = bytes(rx)
         head = data[1:15]
-        if head == b"\x00" * 14 or head == b"\xff" * 14:
-            return False
-        ax, ay, az, temp, gx, gy, gz = _HEAD.unpack_from(data, 1)
+        if head == _BUS_ZEROS or head == _BUS_ONES:
+            return self._refuse("bus error pattern")
+        if head == self._prev_head:
+            self._repeats += 1
+            if self.frozen_frames and self._repeats >= self.frozen_frames:
+                return self._refuse("frozen")
+        else:
+            self._repeats = 0
+        self._prev_head = head
+        words = _HEAD.unpack_from(data, 1)
+        prev, self._prev = self._prev, words
+        ax, ay, az, temp, gx, gy, gz = words
+        if not self._temp_lsb[0] <= temp <= self._temp_lsb[1]:
+            return self._refuse("temperature out of range")
+        good = self._good
+        if good is not None and self._jumps(good, words) and (prev is None or self._jumps(prev, words)):
+            return self._refuse("impossible jump")
+        self._good = words
+        self.saturated = sat = -32768 in words or 32767 in (ax, ay, az, gx, gy, gz)
+        if sat:
+            self.rejected["saturated"] = self.rejected.get("saturated", 0) + 1
         mx, my, mz, st2 = _MAG.unpack_from(data, 15)
         a, g = self._a, self._g
         out.ax, out.ay, out.az = ax * a, ay * a, az * a
@@ -108,3 +165,15 @@ class Mpu9250:
         else:
             out.mag_fresh = False
         return True
+
+    def _jumps(self, a: tuple, b: tuple) -> bool:
+        """True if any word moves more than its limit between frames `a` and `b`."""
+        for x, y, lim in zip(a, b, self._jump):
+            if x - y > lim or y - x > lim:
+                return True
+        return False
+
+    def _refuse(self, why: str) -> bool:
+        self.why = why
+        self.rejected[why] = self.rejected.get(why, 0) + 1
+        return False

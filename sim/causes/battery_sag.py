@@ -46,6 +46,12 @@ class BatterySagFit(AffineCandidate):
         G1 = ds.flat_filtered([g * f.battery_v ** 2 for g, f in zip(G, ds.files)])
         return G0, [G1]
 
+    def why_not_carried(self):
+        return None if np.isfinite(self.ds.V).all() else "battery_v is missing in flight"
+
+    def from_parameters(self, parameters):
+        return [1.0 / parameters["v_nominal"] ** 2]
+
     def to_parameters(self, theta):
         c = float(theta[0])
         return {"v_nominal": round(1.0 / math.sqrt(c), 3) if c > 0 else None}

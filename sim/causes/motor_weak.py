@@ -30,9 +30,16 @@ class MotorWeakFit(AffineCandidate):
     effect = MotorWeak
     explains = "thrust of the weak motor (N)"
 
+    def _column(self, m):
+        ds = self.ds
+        return ds.flat_filtered([ds.thrust_columns(i)[m] for i in range(len(ds.files))])
+
+    def predict(self, parameters):
+        return (parameters["scale"] - 1.0) * self._column(int(parameters["motor"]) - 1)
+
     def run(self):
         ds = self.ds
-        Gm = [ds.flat_filtered([ds.thrust_columns(i)[m] for i in range(len(ds.files))]) for m in range(4)]
+        Gm = [self._column(m) for m in range(4)]
         folds = []
 
         def best(train):

@@ -70,7 +70,7 @@ class RotorDragFit(Candidate):
     def _stats(self, cols):
         """Per block: sums and cross-products of e = r - drag prediction and the bias columns, x and y."""
         ds = self.ds
-        e = ds.r_base[3:5] - cols[0]
+        e = self.r_base[3:5] - cols[0]
         A = np.stack([cols[1], cols[2]], axis=-1)          # (2, n, 2)
         st = []
         for i0, i1 in ds.block_edges:
@@ -99,9 +99,20 @@ class RotorDragFit(Candidate):
         return float(np.log(np.maximum(rss, 1e-300)).sum()), b
 
     def _residual(self, cols, b):
-        res = self.ds.r_base.copy()
+        res = self.r_base.copy()
         res[3:5] = res[3:5] - cols[0] - b[0] * cols[1] - b[1] * cols[2]
         return res
+
+    def predict(self, parameters):
+        """The drag prediction at k with its two nuisance biases fitted on all data (as the climb
+        speed of `rotor_inflow` fits its initial height and speed): a carried effect's term."""
+        k = float(parameters["k"])
+        out = np.zeros_like(self.r_base)
+        if k > 0:
+            cols = self.columns(k)
+            b = self._solve(self._stats(cols), list(range(N_BLOCKS)), self.ds.n)[1]
+            out[3:5] = cols[0] + b[0] * cols[1] + b[1] * cols[2]
+        return out
 
     def run(self) -> Result:
         from scipy import optimize

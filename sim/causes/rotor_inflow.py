@@ -98,6 +98,8 @@ class RotorInflowFit(AffineCandidate):
             return "no range readings in flight: the climb speed is unknown"
         return None
 
+    why_not_carried = why_not
+
     def columns(self):
         ds, a = self.ds, self.ds.a
         self._w = climb_speed(ds)

@@ -12,14 +12,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import tomllib
 from pathlib import Path
 
+import numpy as np
+
 from flightctl import params as paramfile
-from flightctl.errors import InputError
+from flightctl.errors import InputError, read_toml
 from flightctl.logfile import BENCH_COLUMNS, PENDULUM_COLUMNS, YAW_DRAG_COLUMNS, read_table
 from flightctl.sim.identify import inertia, propeller, yaw_drag
-from flightctl.sim.identify.fits import FitError, Identified
+from flightctl.sim.identify.fits import FitError, Identified, check_result
 
 KINDS = {  # kind: (help, columns, text columns, identify)
     "bench": ("eq. 26-28 from one steady point per row and motor", BENCH_COLUMNS, (), propeller.identify),
@@ -71,7 +72,7 @@ def _check_params_update(path: str, values: dict[str, float]) -> None:
     data = {}
     if target.exists():
         paramfile.load(target)
-        data = tomllib.loads(target.read_text())
+        data = read_toml(target)
     try:
         paramfile.from_dict({**data, **values})
     except InputError as e:
@@ -83,7 +84,9 @@ def identify(args) -> Identified:
     airframe = paramfile.load(args.params).airframe
     table = read_table(args.file, columns, text_columns=text)
     try:
-        result = fit(table, airframe)
+        with np.errstate(all="ignore"):      # an overflow is found below, not printed as a warning
+            result = fit(table, airframe)
+        check_result(result)
     except FitError as e:
         table.fail(str(e))
     for path in (args.json, args.write_params, args.plot):
@@ -96,7 +99,7 @@ def identify(args) -> Identified:
         from flightctl.sim.identify.plots import FIGURES
         from flightctl.sim.plots import png
         image = png(FIGURES[args.kind](*result.figure_data))
-    Path(args.json).write_text(json.dumps(result.report, indent=2) + "\n")
+    Path(args.json).write_text(json.dumps(result.report, indent=2, allow_nan=False) + "\n")
     if args.write_params:
         paramfile.update_file(args.write_params, result.values, f"flightctl identify {args.kind} {args.file}")
     if image is not None:

@@ -8,8 +8,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import dataclasses
+import math
+
 import numpy as np
 from scipy.optimize import least_squares
+
+from flightctl.params import Airframe
 
 MIN_DOF = 2  # points beyond the number of parameters, so that a fit can estimate its own error
 
@@ -111,6 +116,37 @@ def require(table, column: str, ok: np.ndarray, what: str) -> None:
         value = table[column][k]
         shown = f"{value:g}" if isinstance(value, (float, np.floating)) else repr(str(value))
         table.fail(f"{what}, got {shown}", row=k, column=column)
+
+
+def within(table, column: str, lo: float, hi: float, unit: str) -> np.ndarray:
+    """A measured column whose values must lie in [lo, hi]: beyond it a row is not a measurement of
+    this rig (and the fits would overflow)."""
+    x = table[column]
+    require(table, column, (x >= lo) & (x <= hi), f"must be {lo:g} to {hi:g} {unit}")
+    return x
+
+
+def check_result(result: Identified) -> None:
+    """Refuse (FitError naming it) a fitted value outside the parameter schema's physical range
+    (flightctl.params, conventions.md) and any non-finite number in the report."""
+    fields = {f.name: f.metadata for f in dataclasses.fields(Airframe)}
+    for name, value in result.values.items():
+        meta = fields[name]
+        if not (math.isfinite(value) and meta["lo"] <= value <= meta["hi"]):
+            raise FitError(f"the fit gives {name} = {value:.4g} {meta['unit']}, outside its physical range "
+                           f"[{meta['lo']:g}, {meta['hi']:g}] (check the signs and units of the data)")
+    _check_finite(result.report, "")
+
+
+def _check_finite(value, where: str) -> None:
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_finite(v, f"{where}.{k}" if where else str(k))
+    elif isinstance(value, (list, tuple)):
+        for k, v in enumerate(value):
+            _check_finite(v, f"{where}[{k}]")
+    elif isinstance(value, (float, np.floating)) and not math.isfinite(value):
+        raise FitError(f"the fit gives {where} = {value}: the data do not determine it")
 
 
 def whole_numbers(table, column: str, lo: int, hi: int) -> np.ndarray:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flightctl.sim.identify.fits import Identified, require, whole_numbers
+from flightctl.sim.identify.fits import Identified, require, whole_numbers, within
 
 AXES = {"x": "Jxx", "y": "Jyy", "z": "Jzz"}
 ROTOR_COLUMNS = ("rotor", "part", "mass", "radius")
@@ -38,6 +38,8 @@ def identify_pendulum(table, airframe) -> Identified:
     require(table, "axis", np.isin(axis, list(AXES)), "the axis must be x, y or z")
     require(table, "pivot_distance", r > 0, "the pivot distance must be positive")
     require(table, "period", T > 0, "the period must be positive")
+    within(table, "pivot_distance", 0.0, 100.0, "m")
+    within(table, "period", 0.0, 1e3, "s")
     M, g = airframe.M, airframe.g
     J = pendulum_inertia(M, g, r, T)
     require(table, "period", J > 0, "the period is shorter than a point mass at this pivot distance "
@@ -63,6 +65,8 @@ def identify_rotor(table, airframe) -> Identified:
     require(table, "part", np.isin(part, PARTS), "the part must be blade or motor")
     require(table, "mass", m > 0, "the mass must be positive")
     require(table, "radius", r > 0, "the radius must be positive")
+    within(table, "mass", 0.0, 100.0, "kg")
+    within(table, "radius", 0.0, 10.0, "m")
     J = disc_inertia(m, r)
     rotors = {}
     for i in map(int, np.unique(rotor)):

@@ -17,7 +17,7 @@ import numpy as np
 
 from flightctl.physics import thrust_from_command, thrust_from_speed
 from flightctl.sim.identify.fits import (Fit, FitError, Identified, check_count, linear_fit, nonlinear_fit, r_squared,
-                                         require, rms, whole_numbers)
+                                         require, rms, whole_numbers, within)
 
 FITS = {"thrust_P": ("h1", "h2"), "thrust_omega": ("c1",), "torque": ("g1", "g2")}
 NAMES = tuple(n for names in FITS.values() for n in names)
@@ -107,9 +107,11 @@ def fit_bench(table) -> BenchResult:
     motor = whole_numbers(table, "motor", 1, 4)
     P, f, w, V, I = (table[c] for c in ("P", "thrust", "omega", "voltage", "current"))
     require(table, "P", (P >= 0) & (P <= 255), "the command value P must be 0 to 255")
-    require(table, "omega", w >= 0, "the speed must not be negative")
+    within(table, "thrust", -1e3, 1e3, "N")
+    within(table, "omega", 0.0, 1e4, "rad/s (the speed must not be negative)")
     require(table, "voltage", V > 0, "the voltage must be positive")
-    require(table, "current", I >= 0, "the current must not be negative")
+    within(table, "voltage", 0.0, 100.0, "V")
+    within(table, "current", 0.0, 1e3, "A (the current must not be negative)")
     points, fits = {}, {}
     for m in map(int, np.unique(motor)):
         k = motor == m

@@ -23,6 +23,8 @@ from flightctl.sim.identify.propeller import torque_from_power
 
 RCB = {"esc": "ESC signal (µs)", "torque": "Torque (N·m)", "thrust": "Thrust (gf)",
        "voltage": "Voltage (V)", "current": "Current (A)", "rpm": "Motor Electrical Speed (RPM)"}
+RCB_RANGES = {"esc": (0.0, 1e4), "torque": (-100.0, 100.0), "thrust": (-1e5, 1e5), "voltage": (0.0, 100.0),
+              "current": (-10.0, 1e3), "rpm": (0.0, 1e6)}
 GF = G * 1e-3                   # N per gram-force
 RPM = 2 * np.pi / 60            # rad/s per rev/min
 ESC_HZ = Airframe().esc_pwm_hz  # 449 Hz: P = pulse_s * 449 * 255 (conventions.md)
@@ -55,6 +57,11 @@ def read_rcbenchmark(path: str | Path) -> Run:
     """Keep the rows with a speed reading and the ESC above its off pulse; average consecutive rows at
     the same pulse width (one steady step); convert µs -> P at 449 Hz, gf -> N, RPM -> rad/s."""
     table = read_table(path, tuple(RCB.values()), allow_missing=(RCB["rpm"],))
+    for key, (lo, hi) in RCB_RANGES.items():   # the stand's own ranges: beyond them a row is not a reading
+        x = table[RCB[key]]
+        bad = np.flatnonzero(~((x >= lo) & (x <= hi)) & ~np.isnan(x))
+        if bad.size:
+            table.fail(f"{x[bad[0]]:g} is outside {lo:g} to {hi:g}", row=int(bad[0]), column=RCB[key])
     esc, rpm = table[RCB["esc"]], table[RCB["rpm"]]
     keep = (rpm > 0) & (esc > ESC_OFF_US)
     step = np.concatenate([[0], np.cumsum(np.diff(esc) != 0)])

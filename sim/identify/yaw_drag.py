@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from flightctl.sim.identify.fits import Identified, linear_fit, require
+from flightctl.sim.identify.fits import Identified, linear_fit, require, within
 
 
 def identify(table, airframe) -> Identified:
     r, tau = table["yaw_rate"], table["torque"]
     require(table, "yaw_rate", r != 0, "the yaw rate must not be 0 (one row per steady spin)")
+    within(table, "yaw_rate", -1e3, 1e3, "rad/s")
+    within(table, "torque", -100.0, 100.0, "N m")
     # eq. 6 (flightctl.physics.yaw_drag) is linear in gamma1, gamma2: columns r |r| and sgn(r)
     fit = linear_fit(np.column_stack([r * np.abs(r), np.sign(r)]), tau, ("gamma1", "gamma2"))
     report = {"kind": "yaw-drag", "file": table.path, **fit.params(),

@@ -19,6 +19,8 @@ The method (docs/diagnose.md):
    which no choice of channel units can tilt).
 4. **Significance.** A cause is named only if its held-out gain is at least `MIN_GAIN` and it beats
    the base model on held-out windows by `T_CRIT` standard errors; else `none`.
+5. **Base model.** The paper's, plus the `[[effect]]` tables of `--params` at their parameters, each
+   through its own candidate's prediction; a candidate of a carried cause is refitted in its place.
 
 Accelerometer channels carry one constant offset each (the accelerometer bias is not calibrated
 away in flight), fitted on the training blocks, for the base model and every candidate alike. The

@@ -56,19 +56,34 @@ class Candidate:
       `not_named(result) -> str | None`  asked only when its score is significant: a reason not
                   to name it all the same (written as a note), such as a size the data cannot
                   tell from nothing or a sign the physics excludes;
-      `explanatory() -> (n,) array`  the explaining variable per sample, for the figure.
+      `explanatory() -> (n,) array`  the explaining variable per sample, for the figure;
+      `predict(parameters) -> (C, n)`  the filtered change of the prediction at given parameters
+                  (the carried effect of a parameter file in the base model; `GridCandidate` and
+                  `AffineCandidate` implement it from `delta` or `columns`);
+      `why_not_carried() -> str | None`  a reason the logs cannot give that prediction (data it
+                  needs are missing): the carried effect is then left out of the base, with a note.
 
     A prediction change is computed per file from the per-file arrays (`DataSet.predict_file` with
     the candidate's thrusts, scales or extra wrench, or its own columns of the channels) and then
     low-passed with `DataSet.delta_filtered` / `flat_filtered`, so that measurement and prediction
     go through the same filter. The base residual is `DataSet.r_base`; a candidate's residual is
-    `r_base` minus its filtered change.
+    `r_base` minus its filtered change. `self.r_base` is the base residual this candidate is fitted
+    on: `DataSet.r_base`, the base model with the parameter file's effects, except that the term of
+    this candidate's own cause, when carried, is taken out: the fitted parameters replace the carried
+    ones, and a fit at the carried value is the base model itself.
     """
     effect: type[Effect] = Effect
     explains = ""
 
     def __init__(self, ds: DataSet):
         self.ds = ds
+        self.r_base = ds.base_without(self.cause)
+        carried = ds.carried_parameters.get(self.cause)
+        grid = getattr(self, "grid", None)
+        if carried is not None and grid is not None and len(self.effect.required) == 1:
+            # a fit over a grid of its one parameter: the carried value is a grid point, so that a
+            # fold may keep the base model as it is
+            self.grid = np.union1d(grid, [carried[next(iter(self.effect.required))]])
 
     @property
     def cause(self) -> str:
@@ -86,6 +101,14 @@ class Candidate:
         raise NotImplementedError
 
     def explanatory(self) -> np.ndarray | None:
+        return None
+
+    def predict(self, parameters: dict) -> np.ndarray:
+        """The filtered (C, n) change of the prediction at `parameters` (the effect's own names)."""
+        raise NotImplementedError
+
+    def why_not_carried(self) -> str | None:
+        """A reason the logs cannot give this cause's prediction, or None."""
         return None
 
 
@@ -111,7 +134,10 @@ class GridCandidate(Candidate):
         return name
 
     def residual(self, theta) -> np.ndarray:
-        return self.ds.r_base - self.delta(theta)
+        return self.r_base - self.delta(theta)
+
+    def predict(self, parameters):
+        return self.delta(float(parameters[self.name]))
 
     def delta(self, theta) -> np.ndarray:
         raise NotImplementedError
@@ -134,7 +160,7 @@ class GridCandidate(Candidate):
     def run(self) -> Result:
         ds = self.ds
         deltas = [self.delta(th) for th in self.grid]
-        stats = np.stack([block_stats(ds, ds.r_base - d) for d in deltas])    # (J, 2, B, C)
+        stats = np.stack([block_stats(ds, self.r_base - d) for d in deltas])    # (J, 2, B, C)
         folds = []
 
         def fold(train):
@@ -142,11 +168,11 @@ class GridCandidate(Candidate):
             objs = [stats_objective(st, test_block, ds.block_counts) for st in stats]
             j = int(np.argmin(objs))
             folds.append(float(self.grid[j]))
-            return ds.r_base - deltas[j]
+            return self.r_base - deltas[j]
 
         score = heldout(ds, fold)
         self._mask = np.ones(ds.n, bool)
-        objs = [objective(ds.r_base - d, self._mask) for d in deltas]
+        objs = [objective(self.r_base - d, self._mask) for d in deltas]
         theta = self._best(objs)
         return Result(self.cause, {self.name: round(theta, self.round_to)}, score, self.residual(theta),
                       explains=self.explains, folds=folds)
@@ -156,7 +182,7 @@ class AffineCandidate(Candidate):
     """Prediction change D = G0 + sum_p theta_p G_p with filtered columns: weighted least squares,
     each channel weighted by the inverse of its residual variance (three reweighting passes), with
     the offset channels centred on the training data. Implement `columns()`, and `to_parameters`
-    when the parameters are not the thetas themselves."""
+    and `from_parameters` when the parameters are not the thetas themselves."""
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -169,9 +195,19 @@ class AffineCandidate(Candidate):
     def to_parameters(self, theta) -> dict:
         return {n: float(v) for n, v in zip(self.names, theta)}
 
+    def from_parameters(self, parameters: dict) -> list[float]:
+        """The thetas of `columns` at the effect's parameters (the inverse of `to_parameters`)."""
+        return [float(parameters[n]) for n in self.names]
+
+    def predict(self, parameters):
+        G0, Gs = self.columns()
+        d = np.zeros_like(self.r_base) if G0 is None else G0.copy()
+        for g, th in zip(Gs, self.from_parameters(parameters)):
+            d += th * g
+        return d
+
     def fit(self, G0, Gs, mask):
-        ds = self.ds
-        r = ds.r_base[:, mask] - (G0[:, mask] if G0 is not None else 0.0)
+        r = self.r_base[:, mask] - (G0[:, mask] if G0 is not None else 0.0)
         A = np.stack([g[:, mask] for g in Gs], axis=-1)          # (C, n, P)
         r = r - np.where(OFFSET, r.mean(axis=1), 0.0)[:, None]
         A = A - np.where(OFFSET[:, None], A.mean(axis=1), 0.0)[:, None, :]
@@ -186,7 +222,7 @@ class AffineCandidate(Candidate):
         return theta
 
     def residual_at(self, G0, Gs, theta):
-        res = self.ds.r_base - (G0 if G0 is not None else 0.0)
+        res = self.r_base - (G0 if G0 is not None else 0.0)
         for g, th in zip(Gs, theta):
             res = res - th * g
         return res

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -34,7 +35,9 @@ def _parser() -> argparse.ArgumentParser:
                             "it on the rest, and name the one that explains the discrepancy, or none "
                             "(measured-data.md; method: docs/diagnose.md).")
     p.add_argument("logs", nargs="+", metavar="FLIGHT.csv")
-    p.add_argument("--params", metavar="PARAMS.toml", help="the base model (default: the reference airframe)")
+    p.add_argument("--params", metavar="PARAMS.toml",
+                   help="the base model: its airframe and its [[effect]] tables (default: the reference "
+                        "airframe, no effects)")
     p.add_argument("--json", required=True, metavar="REPORT.json")
     p.add_argument("--plot", metavar="PREFIX",
                    help="write PREFIX-residuals.png (residual vs time) and PREFIX-explained.png "
@@ -53,7 +56,11 @@ def _check_writable(path: Path) -> None:
 
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
-    progress = (lambda *a: None) if args.quiet else say
+    # On a terminal, progress is live. Otherwise (scripts, checks) it is held until the run succeeds,
+    # so that an error is the only line on stderr, as measured-data.md requires.
+    held: list[tuple] = []
+    progress = ((lambda *a: None) if args.quiet else say if sys.stderr.isatty()
+                else (lambda *a: held.append(a)))
     t0 = time.perf_counter()
     params = paramfile.load(args.params)
     out_json = Path(args.json)
@@ -66,7 +73,7 @@ def main(argv: list[str]) -> int:
     for log in args.logs:
         progress(f"reading {log}")
         tables.append(read_flight_log(log, min_seconds=MIN_LOG_S, min_rows=10))
-    d = diagnose(tables, params.airframe, progress)
+    d = diagnose(tables, params.airframe, progress, params.effects)
     report_text = diagnose_report.text(d)
     images = diagnose_report.figures(d) if plots else {}
     report = d.report()
@@ -77,4 +84,6 @@ def main(argv: list[str]) -> int:
         path.write_bytes(images[k])
     print(report_text, end="")
     progress(f"done in {time.perf_counter() - t0:.1f} s: {d.cause} {d.parameters}")
+    for a in held:
+        say(*a)
     return 0

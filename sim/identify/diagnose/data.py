@@ -17,6 +17,7 @@ EDGE_S = 0.1             # s trimmed at both ends of each airborne stretch
 MIN_STRETCH_S = 0.5      # s: shorter airborne stretches are dropped
 RANGE_GAP_S = 0.25       # s: a range older than this does not give the altitude
 MOTOR_ON_MARGIN = 1.0    # P units above the dead zone h2 for a motor to count as running
+IMU_COLUMNS = ("gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z")
 
 
 @dataclass
@@ -94,6 +95,21 @@ def motors_on(P: np.ndarray, a: Airframe) -> np.ndarray:
     return (P > a.h2 + MOTOR_ON_MARGIN).any(axis=0)
 
 
+def _check_columns(table: Table, P: np.ndarray, a: Airframe) -> None:
+    """Refuse what would give a confident verdict from no measurement: a sensor column that never
+    changes (a dead or unlogged sensor; a real IMU always reads noise), and a motor whose command
+    never leaves the dead zone while the others fly (the quadcopter cannot fly so: not logged)."""
+    for name in IMU_COLUMNS:
+        x = table[name]
+        if np.ptp(x) == 0:
+            table.fail(f"{x[0]:g} on every row: a dead or unlogged sensor cannot be judged", column=name)
+    running = P > a.h2 + MOTOR_ON_MARGIN
+    if running.any():
+        for i in np.flatnonzero(~running.any(axis=1)):
+            table.fail(f"motor {i + 1} never runs (P at most {P[i].max():g}, its dead zone h2 = {a.h2:g}) "
+                       "while the others do: its command was not logged", column=f"P{i + 1}")
+
+
 def load_file(table: Table, a: Airframe) -> FileData:
     """The arrays of one flight log (already read and checked by `flightctl.logfile`)."""
     t = table["t"]
@@ -103,6 +119,7 @@ def load_file(table: Table, a: Airframe) -> FileData:
     acc = np.vstack([table[c] for c in ("acc_x", "acc_y", "acc_z")])
     notes = []
     on = motors_on(P, a)
+    _check_columns(table, P, a)
     # at rest before the first take-off: the initial tilt
     first_on = int(np.argmax(on)) if on.any() else n
     still = slice(0, first_on)

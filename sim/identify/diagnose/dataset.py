@@ -26,7 +26,8 @@ N_BLOCKS = 8             # blocked cross-validation
 
 class DataSet:
     """`r_base` (C, n) is the low-passed base residual over the airborne samples; `block` gives each
-    sample's block, `block_edges` the (start, stop) of each."""
+    sample's block, `block_edges` the (start, stop) of each. The base model is the paper's until
+    `carry` adds a parameter file's effects to it (docs/diagnose.md, "A base model with effects")."""
 
     def __init__(self, files: list[FileData], a: Airframe, lowpass_hz: float = LOWPASS_HZ):
         from scipy import signal   # here, not at the top: `flightctl sim` imports the causes for their effects
@@ -63,6 +64,21 @@ class DataSet:
             self.block[edges[b]:edges[b + 1]] = b
         self.block_edges = list(zip(edges[:-1], edges[1:]))
         self.block_counts = np.diff(edges).astype(float)
+        self.carried: dict[str, np.ndarray] = {}     # cause -> its filtered term in the base prediction
+        self.carried_parameters: dict[str, dict] = {}
+
+    def carry(self, cause: str, parameters: dict, delta: np.ndarray) -> None:
+        """Add a carried effect's filtered prediction change `delta` (C, n) at `parameters` to the
+        base model (a cause carried twice: both terms, the later parameters)."""
+        self.r_base = self.r_base - delta
+        self.carried[cause] = self.carried.get(cause, 0.0) + delta
+        self.carried_parameters[cause] = dict(parameters)
+
+    def base_without(self, cause: str) -> np.ndarray:
+        """The base residual with `cause`'s carried term taken out again (the base a candidate of a
+        carried cause is fitted on: its parameters replace the carried ones)."""
+        d = self.carried.get(cause)
+        return self.r_base if d is None else self.r_base + d
 
     # -- helpers over stretches
     def flat(self, per_file):

@@ -70,6 +70,8 @@ def text(d: Diagnosis) -> str:
     L.append(f"flightctl diagnose: {', '.join(rep['data']['files'])}")
     L.append(f"  {ds.seconds:.1f} s airborne, {ds.n} samples at {ds.fs:.0f} Hz, {len(ds.stretches)} stretch(es)")
     L.append(f"  metric: {rep['metric']}")
+    base = ", ".join(f"{e['cause']} {e['parameters']}" for e in d.carried)
+    L.append(f"  base model: the paper's{' with ' + base if base else ''}")
     L.append("")
     L.append(f"  {'candidate':<16} {'parameters':<34} {'gain':>8} {'t':>7}  {'best channel (gain, t)':<24} named?")
     for c in rep["candidates"]:

@@ -1,6 +1,7 @@
-"""The verdict of diagnose: run every candidate of the registry on the data set, judge each one's
-held-out gain, name the best significant one or `none`, and write the JSON report of
-measured-data.md (docs/diagnose.md, "Significance")."""
+"""The verdict of diagnose: carry the parameter file's effects into the base model, run every
+candidate of the registry on the data set, judge each one's held-out gain, name the best significant
+one or `none`, and write the JSON report of measured-data.md (docs/diagnose.md, "Significance" and
+"A base model with effects")."""
 from __future__ import annotations
 
 import math
@@ -11,8 +12,8 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import Table
-from flightctl.params import Airframe
-from flightctl.sim.causes import CAUSES
+from flightctl.params import Airframe, EffectSpec
+from flightctl.sim.causes import CAUSES, make
 from flightctl.sim.identify.diagnose.candidate import Result
 from flightctl.sim.identify.diagnose.data import MIN_STRETCH_S, Z_AIRBORNE, load_file
 from flightctl.sim.identify.diagnose.dataset import CHANNELS, LOWPASS_HZ, N_BLOCKS, UNITS, DataSet
@@ -51,6 +52,7 @@ class Diagnosis:
     ds: DataSet
     notes: list[str]
     significant: dict[str, str]      # cause -> why significant: "all channels" or the one channel
+    carried: list[dict]              # the parameter file's effects in the base model
 
     def report(self) -> dict:
         """The JSON report: the keys of measured-data.md, then the project's extras."""
@@ -82,7 +84,7 @@ class Diagnosis:
                              "window_s": DM_WINDOW_S, "min_channel_gain": _num(MIN_CHANNEL_GAIN, 4),
                              "t_channel": T_CHANNEL, "channel_window_s": DM_CHANNEL_WINDOW_S},
             "data": {"files": [f.path for f in self.ds.files], "airborne_s": round(self.ds.seconds, 2),
-                     "lowpass_hz": LOWPASS_HZ},
+                     "lowpass_hz": LOWPASS_HZ, "base_effects": self.carried},
             "notes": self.notes,
         }
 
@@ -109,11 +111,34 @@ def _dataset(tables: list[Table], a: Airframe, notes: list[str], progress) -> Da
     return DataSet(files, a)
 
 
-def diagnose(tables: list[Table], a: Airframe, progress=say) -> Diagnosis:
-    """Every candidate of `flightctl.sim.causes` fitted and scored on the logs; the verdict."""
+def carry(ds: DataSet, effects: tuple[EffectSpec, ...], notes: list[str], progress) -> list[dict]:
+    """Put each effect of the parameter file into the base model at its given parameters, through its
+    candidate's own prediction (`Candidate.predict`), in the file's order; one whose prediction the
+    logs cannot give is left out with a note. Returns the carried effects for the report."""
+    carried = []
+    for e in effects:
+        parameters = dict(e.parameters)
+        cand = CAUSES[e.cause].candidate(ds)
+        why = cand.why_not_carried()
+        if why is not None:
+            notes.append(f"base model: {e.cause} {parameters} of the parameter file left out ({why})")
+            progress(f"base model: {e.cause} left out ({why})")
+            continue
+        ds.carry(e.cause, parameters, cand.predict(parameters))
+        carried.append({"cause": e.cause, "parameters": parameters})
+        progress(f"base model carries {e.cause} {parameters}")
+    return carried
+
+
+def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[EffectSpec, ...] = ()) -> Diagnosis:
+    """Every candidate of `flightctl.sim.causes` fitted and scored on the logs, on top of the base
+    model with `effects` (a parameter file's `[[effect]]` tables); the verdict."""
+    for e in effects:
+        make(e.cause, **dict(e.parameters))     # the registry's checks (known cause, names, ranges) first
     notes: list[str] = []
     ds = _dataset(tables, a, notes, progress)
     progress(f"{ds.n} samples airborne ({ds.seconds:.1f} s), {N_BLOCKS} blocks")
+    carried = carry(ds, effects, notes, progress)
     base = Result("none", {}, heldout(ds, lambda train: ds.r_base), ds.r_base)
     results, not_judged, judged = [], [], {}
     for c in CAUSES.values():
@@ -144,4 +169,5 @@ def diagnose(tables: list[Table], a: Airframe, progress=say) -> Diagnosis:
         cause, params, re, gain = "none", {}, rb, 0.0
     else:
         cause, params, re, gain = best.cause, best.parameters, geomean(best.score.rmse()), best.gain
-    return Diagnosis(cause, params, rb, re, gain, METRIC, results, not_judged, base, ds, notes, significant)
+    return Diagnosis(cause, params, rb, re, gain, METRIC, results, not_judged, base, ds, notes, significant,
+                     carried)
