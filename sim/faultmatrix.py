@@ -15,6 +15,7 @@ from flightctl.errors import InputError
 from flightctl.logfile import read_flight_log
 from flightctl.params import Params
 from flightctl.plan import Move, Plan
+from flightctl.sim.progress import Progress
 from flightctl.sim import faults
 from flightctl.sim.board import SIM_CALIBRATE_S
 from flightctl.sim.run import fly
@@ -87,8 +88,16 @@ def fly_fault(spec: str, params: Params, log_dir: Path, fault_after: float = FAU
             "cut_alt": round(float(L["true_z"][cut]), 3)}   # true altitude (m) when the motors stopped
 
 
-def run_matrix(params: Params, log_dir: Path, names=faults.FAULTS, **kw) -> list[dict]:
-    return [fly_fault(f"{n}:{OPTIONS[n]}" if n in OPTIONS else n, params, log_dir, **kw) for n in names]
+def run_matrix(params: Params, log_dir: Path, names=faults.FAULTS, progress: bool = True, **kw) -> list[dict]:
+    """Fly every fault; one progress line per fault on stderr (`progress=False` for tests)."""
+    names = list(names)
+    bar = Progress(len(names), "faults ") if progress else None
+    rows = []
+    for n in names:
+        rows.append(fly_fault(f"{n}:{OPTIONS[n]}" if n in OPTIONS else n, params, log_dir, **kw))
+        if bar:
+            bar.step(n)
+    return rows
 
 
 def markdown(rows: list[dict]) -> str:

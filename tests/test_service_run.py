@@ -106,7 +106,7 @@ def test_a_queued_plan_is_flown_once_and_a_restart_does_not_re_arm(tmp_path):
         (queue / "hop.toml").write_text('name = "hop"\nduration = 1.5\n'
                                         '[[move]]\nt = 0.0\nchannel = "alt"\nvalue = 0.3\nramp = 0.5\n'
                                         '[[move]]\nt = 0.7\nchannel = "alt"\nvalue = 0.0\nramp = 0.5\n')
-        assert svc.wait_for("disarmed after hop", 15), svc.messages
+        assert svc.wait_for("disarmed after hop", 45), svc.messages   # real time: calibrate, fly, land
     finally:
         rc, err = svc.stop()
     assert rc == 0, err
