@@ -121,8 +121,9 @@ def demo_plan(seconds: float) -> Plan:
 
 
 def _spawn_serve(args, tmp: Path):
-    """The PC side in a child process; returns (process, the flight side's --link, fds to close)."""
-    cmd = [sys.executable, "-m", "flightctl.cli", "hil", "serve", "--mode", args.mode, "--seed", str(args.seed),
+    """The PC side in a child process; returns (process, the flight side's --link, fds to close).
+    `-P`: the child imports the installed flightctl, never a source tree in the current directory."""
+    cmd = [sys.executable, "-P", "-m", "flightctl.cli", "hil", "serve", "--mode", args.mode, "--seed", str(args.seed),
            "--json", str(tmp / "serve.json")]
     if args.params:
         cmd += ["--params", args.params]

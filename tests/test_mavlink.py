@@ -225,7 +225,7 @@ def test_losing_the_link_does_not_stop_the_plan(tmp_path, capsys):
 def run_service(tmp_path, gcs, *extra):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     env.pop("NOTIFY_SOCKET", None)
-    return subprocess.Popen([sys.executable, "-m", "flightctl.cli", "run", "--board", "sim", "--log",
+    return subprocess.Popen([sys.executable, "-P", "-m", "flightctl.cli", "run", "--board", "sim", "--log",
                              str(tmp_path), "--calibrate", "0.5", "--mavlink", gcs.url, *extra],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 

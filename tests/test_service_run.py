@@ -25,7 +25,6 @@ from flightctl.service import TeardownLog, main
 from flightctl.sim.board import TRUTH_COLUMNS
 from without import PI_LIBRARIES, run_without
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 class Service:
@@ -36,8 +35,8 @@ class Service:
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         self.sock.bind(self.sock_path)
         self.messages: list[str] = []
-        env = dict(os.environ, NOTIFY_SOCKET=self.sock_path, PYTHONPATH=str(ROOT))
-        self.proc = subprocess.Popen([sys.executable, "-m", "flightctl.cli", "run", *args], cwd=tmp_path, env=env,
+        env = dict(os.environ, NOTIFY_SOCKET=self.sock_path)   # the installed package, never the source tree
+        self.proc = subprocess.Popen([sys.executable, "-P", "-m", "flightctl.cli", "run", *args], cwd=tmp_path, env=env,
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
     def wait_for(self, message: str, timeout: float) -> bool:
