@@ -67,8 +67,11 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
     every loop (the paper's own simulation); otherwise the full onboard path. `telemetry`: a ground
     station link (flightctl/mavlink.py) the loop streams to and takes commands from. `faults`:
     `flightctl.sim.faults.Fault`s, applied to the board's devices and the log (issue 10)."""
+    # With a ground station the simulated world runs in real time, as SITL does: the station's
+    # clock (heartbeats, commands) and the flight's then agree.
     board = open_board(params, BoardOptions(seed=seed, effects=tuple(effects), substeps=substeps,
-                                            noise=SensorNoise() if noise else SensorNoise.off()))
+                                            noise=SensorNoise() if noise else SensorNoise.off(),
+                                            realtime=telemetry is not None))
     hal, world = board.hal, board.world
     truth_est = None
     if truth:
