@@ -36,7 +36,7 @@ class HilPlant:
     """The simulated quadcopter at its devices' boundary."""
 
     def __init__(self, params: Params, seed: int = 0, noise: SensorNoise | None = None, substeps: int = 2):
-        carried = tuple(causes.make(e.cause, **dict(e.parameters)) for e in params.effects)
+        carried = causes.carried(params)
         self.world = w = World(params.airframe, carried, noise if noise is not None else SensorNoise(), seed, substeps)
         self.imu = SimMpu9250(w)
         self.bus = SimSMBus(SimIna219(w))

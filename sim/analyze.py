@@ -48,7 +48,7 @@ def analyse(params: Params, effects=(), estimators=(TRUTH, DEFAULT_ESTIMATOR), a
     effects and then `effects`, as the simulated board builds it (`flightctl.sim.board`), so that
     their terms and states are in the linearisation."""
     a = params.airframe
-    effects = tuple(causes.make(e.cause, **dict(e.parameters)) for e in params.effects) + tuple(effects)
+    effects = causes.carried(params) + tuple(effects)
     plant = linearise(Model(a, effects), alt, a.battery_nominal_v)
     loops = {}
     for est in estimators:

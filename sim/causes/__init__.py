@@ -64,6 +64,11 @@ def make(cause: str, **parameters: float) -> Effect:
     return CAUSES[cause].effect(**parameters)
 
 
+def carried(params) -> tuple[Effect, ...]:
+    """The plant effects a parameter file carries (`[[effect]]` tables, measured-data.md)."""
+    return tuple(make(e.cause, **dict(e.parameters)) for e in params.effects)
+
+
 def parse(text: str) -> Effect:
     """`CAUSE:name=value,name=value`, as `flightctl sim --effect` takes it."""
     cause, _, args = text.partition(":")
