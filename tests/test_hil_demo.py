@@ -7,7 +7,14 @@ from __future__ import annotations
 import json
 import math
 
+import pytest
+
 from flightctl.cli import main as cli
+
+# Real time on a shared machine: a test that measures wall-clock timing (frame rates, durations, pacing)
+# is run again, up to twice, when the machine stalls it; what it asserts is unchanged.
+pytestmark = pytest.mark.flaky(reruns=2)
+
 
 
 def demo(tmp_path, *args):

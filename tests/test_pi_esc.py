@@ -12,6 +12,11 @@ from fakes.pigpiod import running
 from flightctl.drivers.esc import EscError, PigpioEsc, deadman_script, stop_motors, wave_pulses
 from flightctl.hal import PWM_RANGE, ArmingRefused
 
+# Real time on a shared machine: a test that measures wall-clock timing (frame rates, durations, pacing)
+# is run again, up to twice, when the machine stalls it; what it asserts is unchanged.
+pytestmark = pytest.mark.flaky(reruns=2)
+
+
 PINS = (17, 27, 22, 25)
 PERIOD_US = 2227           # round(1e6 / 449)
 

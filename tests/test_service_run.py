@@ -25,6 +25,11 @@ from flightctl.service import TeardownLog, main
 from flightctl.sim.board import TRUTH_COLUMNS
 from without import PI_LIBRARIES, run_without
 
+# Real time on a shared machine: a test that measures wall-clock timing (frame rates, durations, pacing)
+# is run again, up to twice, when the machine stalls it; what it asserts is unchanged.
+pytestmark = pytest.mark.flaky(reruns=2)
+
+
 
 
 class Service:
