@@ -5,10 +5,11 @@
 
 Lifecycle: calibrate sitting still (motors stopped), arm (the motors refuse for a named reason),
 fly the plan, disarm on touchdown. The log starts at arming (its gyro columns are calibrated). Checks, each with a named reason: IMU frames going bad, a crash
-(flightctl/safety.py: tilt past 60 degrees), a low battery (land), the altitude lost (descend slowly).
+(flightctl/safety.py: tilt past 60 degrees), a low battery (land), the altitude lost (land on the
+accelerometer).
 The motors are cut in the air only for a crash, bad IMU frames or a stop request (SIGTERM, the kill
-command); every ordinary event lands under control (`_land`: level, descend at LAND_SPEED, touch
-down, stop): the plan ending in the air (a landing move after `duration` included), the log writer
+command); every ordinary event lands under control (`_land`: level, descend at LAND_SPEED on the
+vertical estimate, feel for the floor, stop when the accelerometer confirms it: control/landing.py): the plan ending in the air (a landing move after `duration` included), the log writer
 failing (a full disk; the writer drops rows, never stops the loop), a failed watchdog ping (the notify
 socket lost: systemd would kill the process), a plan that fails or gives a non-finite setpoint.
 Event times are seconds since arming, the log's `t`. Whatever ends the loop - the plan, a stop
@@ -36,7 +37,7 @@ LAND_SPEED = 0.3                # m/s, a landing commanded by the checks
 LOST_ALT_S = 1.0                # no valid echo for this long in the air: descend blind
 TOUCHDOWN_ALT, TOUCHDOWN_S = 0.05, 0.5
 LAND_LEVEL_S = 1.0              # s: roll and pitch ramp back to level when a landing begins
-LAND_SLACK_S = 10.0             # s beyond the descent for the touchdown to be detected
+LAND_SLACK_S = 30.0             # s beyond the descent for the touchdown to be detected
 STALL_PERIODS = 1.5             # a tick later than this many periods after the last: the loop stalled
 MAX_STALL_EVENTS = 10           # stalls named in events (a loaded CPU is not a flood); all are counted
 ATTITUDE_LOST = math.radians(20)   # roll or pitch this far from its setpoint ...
@@ -106,7 +107,7 @@ class FlightLoop:
         imu_saturated = False
         battery_v, _ = power.read()
         last_echo = t_touch = None
-        landing = log_failed = False
+        landing = log_failed = blind = finished = False
         max_alt = 0.0
         i = 0
         t_prev = None
@@ -162,6 +163,7 @@ class FlightLoop:
                     if tel is not None and tel.arm_required:   # armed by the ground station: the log starts now
                         self.t_arm = t_arm = t
                     calibration.apply(ctl.est)
+                    ctl.arm(sample)
                     motors.arm()
                     armed = flying = ctl.est.in_flight = True
                     last_echo = t
@@ -217,24 +219,32 @@ class FlightLoop:
                     if not landing and battery_v < LOW_CELL_V * CELLS:
                         landing = self._land(t, ctl.alt, "battery low: landing")
                         plan = self.plan
-                    if t - last_echo > LOST_ALT_S and ctl.alt > TOUCHDOWN_ALT:
-                        ctl.uz = -0.1 * a.B    # no altitude: descend slowly, open loop
-                        ctl.alt = max(ctl.alt - LAND_SPEED * dt, 0.0)
-                        if not landing:
-                            landing = self._land(t, ctl.alt, "altitude lost: descending")
+                    if not blind and t - last_echo > LOST_ALT_S and ctl.alt > TOUCHDOWN_ALT:   # (NaN at the floor)
+                        blind = True           # descend on the accelerometer (control/landing.py)
+                        why = f"altitude lost (no valid echo for {LOST_ALT_S:g} s)"
+                        if landing:
+                            self._event(t, why + ": the landing goes on, on the accelerometer")
+                        else:
+                            landing = self._land(t, ctl.vert.z, why + ": landing")
                             plan = self.plan
-                    if sp[3] <= 0.0 and ctl.alt < TOUCHDOWN_ALT and (plan.lands() or landing):
-                        t_touch = t_touch if t_touch is not None else t
-                        if t - t_touch > TOUCHDOWN_S:
-                            flying = ctl.est.in_flight = False
-                            motors.stop()
-                            self._event(t, "landed: motors stopped")
-                            if max_alt < LEFT_GROUND_ALT:
-                                self._event(t, f"never left the ground (highest altitude {max_alt:.2f} m)")
-                            if self._why:
-                                res.reason = "landed: " + self._why.rsplit(": ", 1)[0]
-                    else:
-                        t_touch = None
+                    if landing:                # the accelerometer confirms the floor
+                        touched = ctl.landing.landed
+                    else:                      # the plan's own landing, on the sonar
+                        if sp[3] <= 0.0 and ctl.alt < TOUCHDOWN_ALT and plan.lands():
+                            t_touch = t_touch if t_touch is not None else t
+                        else:
+                            t_touch = None
+                        touched = t_touch is not None and t - t_touch > TOUCHDOWN_S
+                    if touched:
+                        flying = ctl.est.in_flight = False
+                        motors.stop()
+                        self._event(t, "landed: motors stopped")
+                        if max_alt < LEFT_GROUND_ALT:
+                            self._event(t, f"never left the ground (highest altitude {max_alt:.2f} m)")
+                        if self._why:
+                            res.reason = "landed: " + self._why.rsplit(": ", 1)[0]
+                        counts = stop_counts
+                        finished = landing     # the loop's own landing is the plan's end
                 else:
                     counts = stop_counts
                     ctl.step(sample, dt, 0.0, 0.0, ctl.est.yaw, 0.0)   # keep estimating on the ground
@@ -258,6 +268,8 @@ class FlightLoop:
                 log_append(row + extra() if extra is not None else row)
             if tel is not None:
                 tel.tick(t, armed, flying, landing, sample, ctl.est, ctl.alt, echo, battery_v, counts, sp)
+            if finished:
+                break
         res.iterations = i
         res.max_alt = max_alt
         if self.stop.is_set():
@@ -266,8 +278,11 @@ class FlightLoop:
 
     def _land(self, t: float, alt: float, why: str) -> bool:
         """From clock time `t`: replace the rest of the plan by roll and pitch back to level and a
-        descent at LAND_SPEED to a touchdown, within LAND_SLACK_S of the descent's end."""
+        descent at LAND_SPEED to a touchdown, within LAND_SLACK_S of the descent's end. The thrust
+        comes from the landing (control/landing.py) from now on; the plan's altitude ramp is the log's
+        setpoint."""
         self._event(t, why)
+        self.ctl.land(LAND_SPEED)
         alt_sp = self.plan.sp[3]
         self._why = why if not alt_sp <= TOUCHDOWN_ALT else ""     # the plan was not landing already
         t_plan = t - self.t_arm

@@ -5,11 +5,16 @@ each period in `substeps` RK4 steps with the input constant across a step; an ac
 realised on the substep grid. Time is counted in integers, loop periods and substeps, and computed
 from them (`t = n dt + j h`), never summed: after n periods it is `n dt` whatever the substep count,
 so that the loop sees the same clock at 2 and at 20 substeps. The floor: the vehicle rests on z = 0 until its thrust lifts it, and
-a touchdown stops it (level, at rest), recording the touchdown speed.
+a touchdown stops it (level, at rest), recording the touchdown speed. The floor's stopping force is
+in the accelerometer's truth: the speed lost, spread evenly over CONTACT_S after the contact (a stiff
+landing gear; what matters is its integral, the speed lost, which an integrating estimator needs;
+the chip clips the peak at its full scale as a real one does).
 """
 from __future__ import annotations
 
 from collections import deque
+
+CONTACT_S = 0.02   # s: the landing gear's stopping time at a touchdown
 
 from flightctl.sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Forces, Model, P
 
@@ -27,6 +32,7 @@ class Plant:
         self.x = model.initial_state(self.u)
         self.on_ground = True
         self.touchdowns: list[tuple[float, float]] = []  # (time, vertical speed at contact)
+        self._stop = (-1.0, 0.0)                          # (time, vertical speed) of the last contact
         self._lag = round(model.delay / self.h)           # delay in substeps
         self._queue: deque = deque([self.u] * self._lag)
         self._forces_at = None                            # (t, x, u) of `_forces`
@@ -89,15 +95,20 @@ class Plant:
         x = self.x
         if x[VZ] < -0.01:   # not the hop of a thrust that only just equals the weight
             self.touchdowns.append((self.t, x[VZ]))
+        self._stop = (self.t, x[VZ])
         for i in (Z, VX, VY, VZ, PHI, THETA, P, Q, R):
             x[i] = 0.0
         self.on_ground = True
 
     def specific_force(self) -> tuple[float, float, float]:
-        """Accelerometer truth: on the floor the reaction of the floor, (0, 0, g)."""
+        """Accelerometer truth: on the floor the reaction of the floor, (0, 0, g), and for CONTACT_S
+        after a touchdown the force that stopped it."""
+        t_stop, vz = self._stop
+        stopping = -vz / CONTACT_S if 0.0 <= self.t - t_stop < CONTACT_S else 0.0   # level at contact
         if self.on_ground:
-            return 0.0, 0.0, self.model.a.g
-        return self.model.specific_force(self.t, self.x, self.u, self.forces())
+            return 0.0, 0.0, self.model.a.g + stopping
+        fx, fy, fz = self.model.specific_force(self.t, self.x, self.u, self.forces())
+        return fx, fy, fz + stopping
 
     @property
     def position(self):

@@ -424,11 +424,17 @@ def test_controller_altitude_task():
     assert ctl.uz == pytest.approx(2.4 * 1.0 - 0.14 * (0.5 / (1 / 45)))
     ctl.on_range(0.6, 10.03)
     assert ctl.uz == pytest.approx(2.4 * 0.9 - 0.14 * (0.1 / 0.03))
-    ctl.on_range(math.nan, 10.06)                        # failed echo: hold the altitude
-    assert ctl.alt == pytest.approx(0.6)
-    assert ctl.uz == pytest.approx(2.4 * 0.9)
+    ctl.on_range(math.nan, 10.06)          # failed echo in the air: the vertical estimate stands in
+    z = ctl.vert.z
+    assert ctl.alt == z and abs(z - 0.6) > 1e-3
+    assert ctl.uz == pytest.approx(min(B, 2.4 * (1.5 - z) - 0.14 * (z - 0.6) / 0.03))
+    uz = ctl.uz
     ctl.step(sample(), DT, 0.0, 0.0, 0.0, 1.5)
-    assert ctl.mixer.f == pytest.approx([B + 2.4 * 0.9] * 4, rel=1e-9)
+    assert ctl.mixer.f == pytest.approx([B + uz] * 4, rel=1e-9)
+    low = FlightController(Params())
+    low.on_range(0.05, 10.0)
+    low.on_range(math.nan, 10.03)          # near the floor (a lost echo is the floor's): held
+    assert low.alt == pytest.approx(0.05)
 
 
 def test_controller_altitude_levelled_by_tilt():

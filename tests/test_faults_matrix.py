@@ -13,9 +13,6 @@ from flightctl.sim import faultmatrix, faults
 from flightctl.sim.run import ON_GROUND
 
 PARAMS = load(None)
-# the blind descent after "altitude lost" ends in the air: the loop's altitude estimate reaches the
-# floor first (docs/safety.md, "Known defects")
-BLIND = {"sonar_silent", "sonar_stuck"}
 
 
 @pytest.fixture(scope="module")
@@ -32,13 +29,12 @@ def test_every_fault_is_named_by_the_loop_and_the_log_reads_back(matrix, name):
     assert r["log_intact"], r
 
 
-@pytest.mark.parametrize("name", [n for n in faults.FAULTS if n not in BLIND]
-                         + [pytest.param(n, marks=pytest.mark.xfail(strict=True, reason="blind descent"))
-                            for n in sorted(BLIND)])
+@pytest.mark.parametrize("name", faults.FAULTS)
 def test_the_motors_stop_in_the_air_only_when_the_action_is_stop(matrix, name):
     r = matrix[name]
     if r["action"] != "stop":
         assert r["cut_alt"] <= ON_GROUND, r
+        assert r["outcome"] == "landed upright", r     # the landings on the sonar and on the accelerometer
 
 
 def test_the_actions_are_the_stated_ones(matrix):

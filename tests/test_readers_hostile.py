@@ -78,6 +78,42 @@ def test_huge_values_are_refused_naming_the_column(tmp_path, capsys, cell):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("column", ["torque", "yaw_rate"])
+def test_huge_yaw_drag_value_is_refused_naming_the_column(tmp_path, capsys, column):
+    """The old fit took 1e300: a torque gave exit 0 with Infinity in the JSON, a yaw rate a traceback."""
+    rows = yaw_rows()
+    cells = rows[0].split(",")
+    cells[HEADER["yaw-drag"].split(",").index(column)] = "1e300"
+    rows[0] = ",".join(cells)
+    path, out, argv = _identify(tmp_path, "yaw-drag", (HEADER["yaw-drag"] + "\n" + "\n".join(rows) + "\n").encode())
+    _refused(capsys, argv, str(path), "row 2", repr(column))
+    assert not out.exists()
+
+
+def test_plausible_duplicated_column_is_refused(tmp_path, capsys):
+    """A second 'thrust' column at twice the first: the old reader used the last copy and wrote h1
+    doubled, exit 0."""
+    rows = [r + f",{2 * float(r.split(',')[2]):.6g}" for r in bench_rows()]
+    path, out, argv = _identify(tmp_path, "bench", (HEADER["bench"] + ",thrust\n" + "\n".join(rows) + "\n").encode())
+    _refused(capsys, argv, str(path), "'thrust'", "twice")
+    assert not out.exists()
+
+
+def test_negative_g1_is_refused(tmp_path, capsys):
+    """Torque from V I / w falling as the thrust rises (tau = 0.3 - 0.02 f, every current positive):
+    eq. 28 fits g1 = -0.02, outside the schema's physical range."""
+    P = np.arange(130.0, 210.0, 10.0)
+    f = 1.49e-3 * (P - 120) ** 2
+    w = np.sqrt(f / 1.47e-5)
+    current = (0.3 - 0.02 * f) * w / 14.8
+    assert (current > 0).all()
+    rows = [f"1,{p:g},{fi:.6g},{wi:.6g},14.8,{i:.6g}" for p, fi, wi, i in zip(P, f, w, current)]
+    path, out, argv = _identify(tmp_path, "bench", _bench(rows).encode())
+    err = _refused(capsys, argv, str(path), "g1", "physical range")
+    assert "gamma1" not in err and "-0.02" in err, err
+    assert not out.exists()
+
+
 def test_zero_current_gives_no_nan_in_the_json(tmp_path, capsys):
     rows = [",".join(r.split(",")[:5] + ["0"]) for r in bench_rows()]
     path, out, argv = _identify(tmp_path, "bench", _bench(rows).encode())
@@ -148,8 +184,32 @@ def test_named_pipe_is_refused_without_opening_it_for_a_read(tmp_path, reader):
 
 
 def test_directory_is_refused(tmp_path):
+    """A regression guard, not a reproduction: the old readers already refused a directory."""
     with pytest.raises(InputError, match="a directory"):
         read_text(tmp_path)
+
+
+READERS = [read_text, read_flight_log, read_plan_file, load_board, paramfile.load]
+READER_IDS = ["text", "flight log", "plan", "board", "params"]
+
+
+@pytest.mark.parametrize("reader", READERS, ids=READER_IDS)
+def test_character_device_is_refused_without_reading_it(reader):
+    """/dev/zero never ends: a reader that opens it and reads reads forever (the old readers did)."""
+    got = _with_timeout(lambda: reader("/dev/zero"))
+    assert isinstance(got, InputError), got
+    assert "/dev/zero" in str(got) and "a character device" in str(got) and "\n" not in str(got)
+
+
+@pytest.mark.parametrize("command", [["identify", "bench", "/dev/zero", "--json"],
+                                     ["diagnose", "/dev/zero", "--quiet", "--json"]], ids=["identify", "diagnose"])
+def test_character_device_is_refused_at_the_cli(tmp_path, capsys, command):
+    out = tmp_path / "out.json"
+    got = _with_timeout(lambda: main([*command, str(out)]))
+    assert got == 2, got
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "/dev/zero" in err and "a character device" in err, err
+    assert not out.exists()
 
 
 # ---- diagnose's reader: a flight log made in the simulator, then damaged --------------------------
@@ -192,3 +252,18 @@ def test_diagnose_reads_a_byte_order_mark(tmp_path, flight):  # noqa: F811
     log.write_bytes(b"\xef\xbb\xbf" + flight.read_bytes())
     table = read_flight_log(log)
     assert np.array_equal(table["t"], read_flight_log(flight)["t"])
+
+
+@pytest.mark.parametrize("column, second", [("P1", lambda v: f"{0.9 * float(v):.3f}"),
+                                            ("battery_v", lambda v: f"{float(v) - 0.3:.3f}" if v else v)],
+                         ids=["P1 at 0.9x", "battery_v 0.3 V lower"])
+def test_diagnose_refuses_a_duplicated_column(tmp_path, capsys, flight, column, second):  # noqa: F811
+    """A plausible second copy of a column (another logger's): the old reader silently used the last
+    copy and diagnosed the flight, exit 0."""
+    def dup(header, rows):
+        i = header.index(column)
+        return header + [column], [r + [second(r[i])] for r in rows]
+    log = _rewrite(flight, tmp_path / "f.csv", dup)
+    out = tmp_path / "out.json"
+    _refused(capsys, ["diagnose", str(log), "--json", str(out), "--quiet"], str(log), repr(column), "twice")
+    assert not out.exists()

@@ -5,15 +5,19 @@ from __future__ import annotations
 from math import cos
 
 from flightctl.control.estimator import AttitudeEstimator
+from flightctl.control.landing import Landing, Vertical
 from flightctl.control.mixer import Mixer
 from flightctl.control.pid import Pid
 from flightctl.hal import ImuSample
 from flightctl.params import Params
+from flightctl.safety import LEFT_GROUND_ALT
+
+MAX_CORRECT_DT = 0.05   # s: the vertical estimate's correction after a gap in the echoes, at most
 
 
 class FlightController:
     __slots__ = ("est", "mixer", "pid_z", "pid_roll", "pid_pitch", "pid_yaw", "counts",
-                 "uz", "alt", "alt_prev", "alt_sp", "alt_t", "sonar_period")
+                 "uz", "alt", "alt_prev", "alt_sp", "alt_t", "sonar_period", "vert", "landing", "landing_on")
 
     def __init__(self, params: Params, estimator=None, structure: str = "flight"):
         a, g = params.airframe, params.gains
@@ -26,6 +30,8 @@ class FlightController:
         self.pid_yaw = Pid(g.kp_psi, g.ki_psi, g.kd_psi, B, angle=True)
         self.counts = [0, 0, 0, 0]
         self.sonar_period = 1.0 / a.sonar_hz
+        self.vert = Vertical()
+        self.landing = Landing(a.M)
         self.reset()
 
     def reset(self) -> None:
@@ -36,17 +42,36 @@ class FlightController:
         self.alt = self.alt_prev = 0.0
         self.alt_sp = 0.0
         self.alt_t = None
+        self.landing_on = False
+
+    def arm(self, s: ImuSample) -> None:
+        """At arming, on the floor: the vertical estimate starts at rest at z = 0."""
+        self.vert.reset(s.ax, s.ay, s.az)
+
+    def land(self, speed: float) -> None:
+        """From now on u_z comes from the landing (flightctl/control/landing.py), not the altitude
+        PID: a descent at `speed` (m/s) from the hover thrust the PID has learned, to a touchdown the
+        accelerometer confirms (`landing.landed`)."""
+        self.landing.start(self.pid_z.integral, speed)
+        self.landing_on = True
 
     def on_range(self, distance: float, t: float) -> None:
         """The altitude task, run on each echo (about 45 Hz): the range along -z_b, levelled by the
         estimated tilt, is the altitude. A failed measurement (NaN: no echo, or closer than the
-        sensor's 2 cm, as on the floor) holds the last altitude and the task still runs, so a rising
-        setpoint lifts the vehicle off the floor."""
-        if distance == distance:
-            est = self.est
-            self.alt = distance * cos(est.roll) * cos(est.pitch)
+        sensor's 2 cm, as on the floor) holds the last altitude near the floor, so that a rising
+        setpoint lifts the vehicle off it; above LEFT_GROUND_ALT the vertical estimate
+        (flightctl/control/landing.py: the accelerometer since the last echo) stands in for it."""
         dt = t - self.alt_t if self.alt_t is not None else self.sonar_period
         self.alt_t = t
+        if distance == distance:
+            est = self.est
+            self.alt = alt = distance * cos(est.roll) * cos(est.pitch)
+            if dt > 0.0:
+                self.vert.correct(alt, dt if dt < MAX_CORRECT_DT else MAX_CORRECT_DT)
+        elif self.alt > LEFT_GROUND_ALT:   # lower, a lost echo is the floor's
+            self.alt = self.vert.z
+        if self.landing_on:
+            return
         if dt > 0.0:   # eq. 24: the derivative is the difference quotient of the altitude
             self.uz = self.pid_z.update(self.alt_sp, self.alt, (self.alt - self.alt_prev) / dt, dt)
             self.alt_prev = self.alt
@@ -57,6 +82,11 @@ class FlightController:
         est.update(s, dt)
         self.alt_sp = alt_sp
         roll, pitch = est.roll, est.pitch
+        vert = self.vert
+        vert.predict(s.ax, s.ay, s.az, roll, pitch, dt)
+        if self.landing_on:
+            self.uz = self.landing.step(vert, dt)
+            self.alt = vert.z
         self.mixer.mix(self.uz,
                        self.pid_roll.update(roll_sp, roll, est.droll, dt),
                        self.pid_pitch.update(pitch_sp, pitch, est.dpitch, dt),
