@@ -255,6 +255,10 @@ class FlightLoop:
                         res.reason = "stopped: no touchdown detected by the end of the landing"
                         self._event(t, res.reason)
                         break
+                    if max_alt < LEFT_GROUND_ALT:   # the sonar never saw it leave the floor: nothing to land
+                        motors.stop()
+                        self._event(t, f"never left the ground (highest altitude {max_alt:.2f} m): motors stopped")
+                        break
                     landing = self._land(t, ctl.alt, f"plan ended in the air at {ctl.alt:.2f} m: landing")
                     plan = self.plan
             if flying:

@@ -9,7 +9,7 @@ from flightctl.control.controller import FlightController
 from flightctl.control.estimator import AttitudeEstimator, Calibration, heading_from_mag, tilt_from_accel
 from flightctl.control.mixer import Mixer
 from flightctl.control.pid import Pid, wrap
-from flightctl.hal import ImuSample
+from flightctl.hal import PWM_RANGE, ImuSample
 from flightctl.params import Airframe, Filters, Params
 from flightctl.sim.model import Model
 from hand import R_hand
@@ -152,6 +152,18 @@ def test_mixer_tilt_correction_held_beyond_60_degrees():
     assert mx.f == pytest.approx([B + 0.4 / 0.5] * 4)
     mx.mix(0.4, 0.0, 0.0, 0.0, 0.5, 0.5, c)          # cos^2 0.5 = 0.77
     assert mx.f == pytest.approx([B + 0.4 / math.cos(0.5) ** 2] * 4)
+
+
+
+def test_mixer_never_commands_beyond_the_escs_range():
+    """A heavy airframe's 2B maps past P = 255 through eq. 26: the counts stop at the range's end."""
+    heavy = Airframe(M=50.0)
+    mx = Mixer(heavy)
+    c = [0, 0, 0, 0]
+    mx.mix(heavy.B, 0.0, 0.0, 0.0, 0.0, 0.0, c)      # full thrust asked
+    assert all(count == PWM_RANGE for count in c)
+    mx.mix(-heavy.B, 0.0, 0.0, 0.0, 0.0, 0.0, c)
+    assert all(0 <= count < PWM_RANGE for count in c)
 
 
 # --- estimator -------------------------------------------------------------------------------------

@@ -179,13 +179,18 @@ def test_a_hard_touchdown_is_a_crash_and_exits_non_zero(tmp_path, capsys):
     assert "crashed: hit the floor at 5." in out and "plan complete" not in out
 
 
-def test_a_vehicle_that_never_flew_says_so(tmp_path, capsys):
-    heavy = tmp_path / "heavy.toml"
-    heavy.write_text("M = 50.0\n")
-    rc = sim_main(["hover", "--params", str(heavy), "--log", str(tmp_path / "h.csv"), "--no-plot"])
+@pytest.mark.parametrize("params", ["M = 50.0\n",
+                                    "[gains]\n" + "".join(f"{k}_{a} = 0.0\n" for a in ("z", "phi", "theta", "psi")
+                                                         for k in ("kp", "ki", "kd"))],
+                         ids=["heavy", "zero gains"])
+def test_a_vehicle_that_never_flew_says_so(tmp_path, capsys, params):
+    (tmp_path / "p.toml").write_text(params)
+    rc = sim_main(["hover", "--params", str(tmp_path / "p.toml"), "--log", str(tmp_path / "h.csv"), "--no-plot"])
     out = capsys.readouterr().out
     assert rc == 1
     assert "never left the ground" in out and "within" not in out and "plan complete" not in out
+    assert "no touchdown detected" not in out          # nothing to land: the motors stop on the floor
+    assert read_flight_log(tmp_path / "h.csv")["t"][-1] <= 24.0 + 1e-6   # within the plan's 24 s
 
 
 def test_console_times_are_log_times(tmp_path, capsys):

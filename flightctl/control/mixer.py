@@ -37,4 +37,5 @@ class Mixer:
             fi = f[i]
             fi = fmax if fi > fmax else fi if fi > 0.0 else 0.0   # NaN -> 0: never a NaN command
             f[i] = fi
-            counts[i] = int(scale * command(fi, h1, h2) + 0.5)    # eq. 26 inverted, then rounded counts
+            P = command(fi, h1, h2)                               # eq. 26 inverted ...
+            counts[i] = int(scale * (P if P < 255.0 else 255.0) + 0.5)   # ... within the ESC's range, counts
