@@ -23,7 +23,9 @@ from flightctl.sim.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, 
 from flightctl.sim.power import SimIna219, SimSMBus
 
 TRUTH_COLUMNS = ("true_x", "true_y", "true_z", "true_roll", "true_pitch", "true_yaw")
-SIM_CALIBRATE_S = 2.0   # the paper sat still for 60 s; the simulated gyro bias needs less
+SIM_CALIBRATE_S = 2.0   # s; the paper sat still for 60 s. 900 reads of the simulated gyro's white noise
+#                         (sigma 0.17 deg/s, docs/estimator.md) average to a bias error near 0.006 deg/s;
+#                         the die's warming and the bias walk go on after it, as on the vehicle
 SONAR_TRIGGER_PIN, SONAR_ECHO_PIN = 23, 24   # pins of the simulated GPIO
 
 

@@ -150,12 +150,14 @@ def figures(d: Diagnosis) -> dict[str, bytes]:
     step = max(1, ds.n // 6000)
     for c, ax in enumerate(axes):
         ax.plot(t[::step], base[c, ::step], ",", color="tab:red", label="base model")
-        ax.plot(t[::step], ext[c, ::step], ",", color="tab:blue",
-                label=f"with {shown.cause}" if shown is not None else "")
+        if shown is not None:   # no candidate judged: the base residual alone, not twice
+            ax.plot(t[::step], ext[c, ::step], ",", color="tab:blue", label=f"with {shown.cause}")
         ax.set_ylabel(f"{CHANNELS[c]}\n[{UNITS[c]}]", fontsize=8)
         ax.tick_params(labelsize=7)
-    axes[0].set_title(f"held-out residual, base (red) and {shown.cause if shown else '-'} (blue); "
-                      f"verdict: {d.cause}", fontsize=9)
+    axes[0].set_title(f"held-out residual, base (red) and {shown.cause} (blue); verdict: {d.cause}"
+                      if shown is not None else
+                      f"held-out residual of the base model (no candidate could be judged); verdict: {d.cause}",
+                      fontsize=9)
     axes[-1].set_xlabel("time in the log [s] (airborne stretches only)")
     out["residuals"] = png(fig)
 
