@@ -8,13 +8,15 @@
 child process, the flight side here on the "hil" board (the real loop on the wall clock), over a
 pseudo-terminal pair (the flight side through pyserial) or loopback TCP, flying the hover plan.
 Latency, jitter and loss are printed at the end; `--json` holds frames_sent, frames_lost,
-latency_p50_ms, latency_p99_ms and outcome.
+latency_p50_ms, latency_p99_ms and outcome, the PC side's part of the latency (pc_turnaround_*), each
+end's CPU time per tick and the machine's CPU over the flight (busy, stolen by a virtual machine's host).
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import resource
 import socket
 import subprocess
 import sys
@@ -143,12 +145,39 @@ def _spawn_serve(args, tmp: Path):
     return proc, f"tcp:127.0.0.1:{int(line.rsplit(' ', 1)[1])}", []
 
 
+def _machine() -> tuple:
+    """The machine's CPU times (/proc/stat: user, nice, system, idle, iowait, irq, softirq, steal) and
+    this process's and its children's CPU seconds, to tell the demo's own load from the rest."""
+    try:
+        with open("/proc/stat") as f:
+            cpu = [int(x) for x in f.readline().split()[1:9]]
+    except (OSError, ValueError):
+        cpu = []
+    own = [resource.getrusage(who) for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]
+    return cpu, [r.ru_utime + r.ru_stime for r in own]
+
+
+def _load_figures(before: tuple, after: tuple, ticks: int) -> dict:
+    """Where the machine's CPU went during the demo: busy (both ends included), stolen by the
+    hypervisor (a virtual machine's CPU not run by its host), idle; and each end's CPU time per tick."""
+    (c0, own0), (c1, own1) = before, after
+    out = {"flight_cpu_ms_per_tick": 1e3 * (own1[0] - own0[0]) / max(ticks, 1),
+           "pc_cpu_ms_per_tick": 1e3 * (own1[1] - own0[1]) / max(ticks, 1)}
+    if len(c0) == len(c1) == 8 and sum(c1) > sum(c0):
+        d = [b - a for a, b in zip(c0, c1)]
+        total = sum(d)
+        out.update(machine_busy_pct=100.0 * (total - d[3] - d[4] - d[7]) / total,
+                   machine_steal_pct=100.0 * d[7] / total, machine_idle_pct=100.0 * (d[3] + d[4]) / total)
+    return out
+
+
 def demo_main(args) -> int:
     if not 0 < args.seconds <= 3600:
         raise InputError("--seconds: 0 < S <= 3600")
     params = load(args.params)
     with tempfile.TemporaryDirectory(prefix="flightctl-hil-") as tmpdir:
         tmp = Path(tmpdir)
+        before = _machine()
         proc, spec, fds = _spawn_serve(args, tmp)
         try:
             try:
@@ -178,6 +207,7 @@ def demo_main(args) -> int:
             finally:
                 board.close()
             proc.wait(timeout=10)
+            after = _machine()
         finally:
             if proc.poll() is None:
                 proc.kill()
@@ -197,11 +227,16 @@ def demo_main(args) -> int:
                "outcome": outcome, "events": [f"{t:.3f} s: {what}" for t, what in result.events],
                "link_events": pi["events"], "link": args.link, "mode": args.mode,
                "max_alt_m": pc["max_alt_m"], "final_alt_m": pc["final_alt_m"], "crashed": pc["crashed"],
-               "flight_side": pi, "pc_side": pc}
+               "pc_turnaround_p50_ms": pc["turnaround_p50_ms"], "pc_turnaround_p99_ms": pc["turnaround_p99_ms"],
+               **_load_figures(before, after, pi["commands_sent"]), "flight_side": pi, "pc_side": pc}
+    steal = figures.get("machine_steal_pct")
     print(f"hil demo ({args.link}, {args.mode}): {sent} frames sent, {lost} lost; latency p50 "
-          f"{figures['latency_p50_ms']:.2f} ms, p99 {figures['latency_p99_ms']:.2f} ms, jitter "
+          f"{figures['latency_p50_ms']:.2f} ms, p99 {figures['latency_p99_ms']:.2f} ms (the PC side's part: "
+          f"p50 {figures['pc_turnaround_p50_ms']:.2f} ms, p99 {figures['pc_turnaround_p99_ms']:.2f} ms), jitter "
           f"{figures['jitter_ms']:.2f} ms; {figures['stale_ticks']} ticks without a new frame; outcome: "
-          f"{outcome}; max altitude {pc['max_alt_m']:.2f} m, final {pc['final_alt_m']:.2f} m")
+          f"{outcome}; max altitude {pc['max_alt_m']:.2f} m, final {pc['final_alt_m']:.2f} m"
+          + (f"; machine CPU {figures['machine_busy_pct']:.0f} % busy, {steal:.0f} % stolen by the host"
+             if steal is not None else ""))
     if args.json:
         Path(args.json).write_text(json.dumps(figures, indent=2) + "\n")
     return 0

@@ -116,11 +116,22 @@ class ServeResult:
     max_alt: float = 0.0
     final_alt: float = 0.0
     crashed: bool = False
+    turnaround: list = field(default_factory=list)   # s: a command read (free: the step's wake-up)
+    #                                                  -> its sensor frame ready to write
 
     def as_dict(self) -> dict:
         return {"reason": self.reason, "frames_sent": self.frames_sent, "rx": self.rx, "sim_s": self.sim_s,
                 "commands": self.commands, "max_alt_m": self.max_alt, "final_alt_m": self.final_alt,
-                "crashed": self.crashed}
+                "crashed": self.crashed, **percentiles("turnaround", self.turnaround)}
+
+
+def percentiles(name: str, values: list) -> dict:
+    """`name`_p50_ms, _p99_ms and _max_ms of durations in seconds (NaN when there are none)."""
+    v = sorted(values)
+
+    def pct(p: float) -> float:
+        return 1e3 * v[min(len(v) - 1, int(p / 100.0 * len(v)))] if v else float("nan")
+    return {f"{name}_p50_ms": pct(50), f"{name}_p99_ms": pct(99), f"{name}_max_ms": 1e3 * v[-1] if v else float("nan")}
 
 
 def serve(port: lk.Port, plant: HilPlant, mode: str = "lockstep", seconds: float | None = None,
@@ -138,11 +149,13 @@ def serve(port: lk.Port, plant: HilPlant, mode: str = "lockstep", seconds: float
     def send(ftype: int, payload: bytes = b"") -> None:
         port.write(enc.frame(ftype, payload))
 
-    def advance() -> None:
+    def advance(t_read: float) -> None:
         nonlocal trigger
         plant.step(counts, trigger)
         trigger = False
-        send(lk.SENSORS, plant.sensors(cmd_seq))
+        frame = enc.frame(lk.SENSORS, plant.sensors(cmd_seq))
+        res.turnaround.append(now() - t_read)
+        port.write(frame)
 
     try:
         while True:
@@ -170,7 +183,7 @@ def serve(port: lk.Port, plant: HilPlant, mode: str = "lockstep", seconds: float
                         if mode == "free":
                             k_step = 0
                     if mode == "lockstep":
-                        advance()
+                        advance(t)
                 elif ftype == lk.REQUEST:
                     send(lk.REPLY, plant.request(payload))
                 elif ftype == lk.BYE:
@@ -179,7 +192,7 @@ def serve(port: lk.Port, plant: HilPlant, mode: str = "lockstep", seconds: float
                     _linger(port, now)
                     return res
             if k_step is not None and not cutting and t >= t_first + k_step * period:
-                advance()
+                advance(t)
                 k_step = max(k_step + 1, int((t - t_first) / period))   # late: whole periods are skipped
             if seconds is not None and plant.world.t >= seconds:
                 send(lk.BYE)

@@ -28,6 +28,8 @@ def test_the_demo_flies_over_a_pty_pair_and_loses_no_frame(tmp_path):
     assert d["frames_lost"] == 0 and d["frames_sent"] > 2 * 450 * 2
     assert d["flight_side"]["rx_bad_crc"] == d["pc_side"]["rx"]["bad_crc"] == 0
     assert 0 < d["latency_p50_ms"] <= d["latency_p99_ms"] and math.isfinite(d["latency_p99_ms"])
+    assert 0 < d["pc_turnaround_p50_ms"] < d["latency_p50_ms"]       # the PC side's part of the round trip
+    assert d["flight_cpu_ms_per_tick"] > 0 and d["pc_cpu_ms_per_tick"] > 0
     assert d["max_alt_m"] > 0.2 and not d["crashed"]                  # it took off on the frames' sensors
     assert d["outcome"].startswith("landed") and d["final_alt_m"] < 0.05
 
@@ -36,8 +38,8 @@ def test_link_loss_in_the_air_lands_over_tcp(tmp_path):
     """The cable is pulled 2 s after arming for 1.5 s: the flight side sees the link lost, descends
     (the altitude-lost failsafe), and lands on the sensors once the link is back."""
     d = demo(tmp_path, "--seconds", "5", "--link", "tcp", "--cut", "2.3", "1.5")
-    # The cut is lost at its start and restored at its end. (Short stalls elsewhere can also be seen
-    # as losses: the open tail-latency defect of docs/hil.md; they are not what this test is about.)
+    # The cut is lost at its start and restored at its end. (A machine that stalls one end for 0.1 s,
+    # a virtual machine's CPU taken by its host, also shows as a loss: docs/hil.md; not this test's.)
     events = [(float(e.split(" s: ")[0]), e.split(": ", 1)[1]) for e in d["link_events"]]
     lost = [t for t, what in events if what == "link lost" and 2.3 <= t <= 2.6]
     back = [t for t, what in events if what == "link restored" and 3.8 <= t <= 4.1]

@@ -3,6 +3,9 @@ truncated or out-of-order bytes are counted and dropped, never raised."""
 from __future__ import annotations
 
 import os
+import socket
+import time
+import types
 
 import pytest
 from hypothesis import given, settings
@@ -126,3 +129,53 @@ def test_frames_cross_a_pty_pair_through_pyserial():
     finally:
         os.close(master)
         os.close(slave)
+
+
+def test_a_pc_side_on_this_machine_is_recognised():
+    """A pty or a loopback address: the PC side runs on this machine, and the hil board's clock sleeps
+    to each deadline instead of busy-waiting its last 0.2 ms (which takes the CPU the PC side needs for
+    the answer: docs/hil.md); a real UART keeps the busy-wait."""
+    from flightctl.hil_board import HilClock, peer_is_local
+
+    master, slave = os.openpty()
+    srv = socket.create_server(("127.0.0.1", 0))
+    try:
+        pty = lk.SerialPort(os.ttyname(slave), 921600)
+        tcp = lk.connect(f"tcp:127.0.0.1:{srv.getsockname()[1]}")
+        assert peer_is_local(pty) and peer_is_local(tcp) and peer_is_local(lk.FdPort(master))
+        uart = object.__new__(lk.SerialPort)                 # a Pi's /dev/serial0, not opened here
+        uart.ser = types.SimpleNamespace(port="/dev/serial0")
+        assert not peer_is_local(uart)
+        assert HilClock(None, 1 / 450, 0.0).wall.spin_s == 0.0
+        pty.close()
+        tcp.close()
+    finally:
+        srv.close()
+        os.close(master)
+        os.close(slave)
+
+
+def test_every_answered_command_counts_once_in_the_latency_however_late():
+    """The latency is the time from a command to the first sensor frame acknowledging it: an answer
+    arriving 300 commands later (a stalled PC side) is counted, a second frame with the same ack is not."""
+    from flightctl.hil_board import HilLink
+
+    a, b = socket.socketpair()
+    try:
+        link = HilLink(lk.FdPort(a.detach()))              # the link closes the descriptor
+        for _ in range(300):
+            link.send_command()
+            b.recv(64)                                       # the PC side takes the command, answers none
+        pc = lk.Encoder()
+
+        def answer(ack: int) -> bytes:
+            return pc.frame(lk.SENSORS, lk.SENSORS_HEAD.pack(ack, 0, bytes(21), 0, 0, 0))
+        b.sendall(answer(1) + answer(300) + answer(300))
+        deadline = time.monotonic() + 5.0
+        while link.dec.stats.frames < 3 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert link.dec.stats.frames == 3 and len(link.latencies) == 2
+        assert link.latencies[0] > link.latencies[1] > 0
+        link.close(wait_s=0.05)
+    finally:
+        b.close()
