@@ -204,7 +204,7 @@ class FlightLoop:
                     counts = ctl.step(sample, dt, sp[0], sp[1], sp[2], sp[3])
                     est = ctl.est
                     if not (abs(est.roll) <= CRASH_TILT and abs(est.pitch) <= CRASH_TILT):   # NaN too
-                        res.reason = "stopped: crash (tilt past 60 degrees)"
+                        res.reason = f"stopped: crash (tilt past {math.degrees(CRASH_TILT):.0f} degrees)"
                         self._event(t, res.reason)
                         break
                     if abs(est.roll - sp[0]) > ATTITUDE_LOST or abs(est.pitch - sp[1]) > ATTITUDE_LOST:
