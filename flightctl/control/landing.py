@@ -77,34 +77,27 @@ class Vertical:
 class Landing:
     """A descent at -speed, then the touchdown (see the module's docstring). `step` gives u_z."""
     __slots__ = ("M4", "B", "speed", "trim", "integral", "feeling", "uz", "a_low", "t_still", "landed",
-                 "misses", "t_retry", "v_feel", "descending", "t_stalled")
+                 "t_retry", "v_feel", "descending", "t_stalled")
 
     def __init__(self, M: float):
-        self.M4, self.B, self.speed = M / 4.0, M * G / 4.0, 0.0
-        self.trim = self.integral = self.uz = self.a_low = self.t_still = self.t_retry = self.v_feel = self.t_stalled = 0.0
-        self.descending = False
-        self.feeling = self.landed = self.descending = False
-        self.misses = 0
-        self.t_stalled = 0.0
+        self.M4, self.B = M / 4.0, M * G / 4.0
+        self.start(0.0, 0.0)
 
     def start(self, trim: float, speed: float) -> None:
         """Begin a descent at `speed` (m/s) from the hover u_z the altitude loop had learned (its
         integral)."""
         self.trim, self.uz, self.speed = trim, trim, speed
         self.integral = self.a_low = self.t_still = self.t_retry = self.v_feel = self.t_stalled = 0.0
-        self.descending = False
         self.feeling = self.landed = self.descending = False
-        self.misses = 0
-        self.t_stalled = 0.0
 
     def step(self, vert: Vertical, dt: float) -> float:
         B, hover = self.B, self.B + self.trim            # per-motor thrust holding the weight
         self.a_low += (vert.a - self.a_low) * (dt / ACCEL_TAU)
         if not self.feeling:
-            e = -self.speed - vert.v
+            v = vert.v
+            e = -self.speed - v
             self.integral += KI * e * dt
             uz = self.trim + self.M4 * (KV * e + self.integral)
-            v = vert.v
             if v < -0.5 * self.speed:
                 self.descending = True
             self.t_stalled = self.t_stalled + dt if self.descending and v > -STALLED_SPEED else 0.0
@@ -114,8 +107,8 @@ class Landing:
                 self.feeling, self.t_still, self.v_feel = True, 0.0, v
         else:
             uz = self.uz - RAMP * hover * dt
-            if self.a_low < -FALLING_ACCEL or vert.v - self.v_feel < -FALLING_SPEED:   # still in the air: descend again
-                self.feeling, self.misses, self.t_retry = False, self.misses + 1, RETRY_S
+            if self.a_low < -FALLING_ACCEL or vert.v - self.v_feel < -FALLING_SPEED:   # in the air: descend again
+                self.feeling, self.t_retry = False, RETRY_S
                 self.descending, self.t_stalled = False, 0.0
                 self.integral = 0.0
                 uz = self.uz
