@@ -20,13 +20,22 @@ class ActuationDelay(Effect):
         self.delay = self.parameters["delay"]
 
 
+def shift(F, s: float):
+    """F (..., n) delayed by s samples, linearly interpolated between samples (the average over the
+    period when s is a delay in loop periods), the first value held before the start."""
+    if s <= 0:
+        return F
+    m, frac = int(math.floor(s)), s - math.floor(s)
+    return (1.0 - frac) * _shift(F, m) + frac * _shift(F, m + 1)
+
+
 def _shift(F, m):
     """F delayed by m samples, the first value held before the start."""
     if m <= 0:
         return F
     out = np.empty_like(F)
-    out[:, m:] = F[:, :-m]
-    out[:, :m] = F[:, :1]
+    out[..., m:] = F[..., :-m]
+    out[..., :m] = F[..., :1]
     return out
 
 
@@ -37,17 +46,13 @@ class ActuationDelayFit(GridCandidate):
     explains = MotorLagFit.explains
     grid = np.linspace(0.0, 0.12, 49)
 
+    def thrusts(self, parameters):
+        ds, d = self.ds, parameters["delay"]
+        return [shift(D, d * ds.fs) for D in ds.D]      # the delay in loop periods
+
     def delta(self, d):
         ds = self.ds
-        preds = []
-        for i in range(len(ds.files)):
-            F = ds.F[i]
-            if d > 0:
-                s = d * ds.fs                      # delay in loop periods; average over the period
-                m, frac = int(math.floor(s)), s - math.floor(s)
-                F = (1.0 - frac) * _shift(F, m) + frac * _shift(F, m + 1)
-            preds.append(ds.predict_file(i, F))
-        return ds.delta_filtered(preds)
+        return ds.delta_filtered([ds.predict_file(i, D) for i, D in enumerate(self.thrusts({"delay": d}))])
 
     def not_named(self, result):
         return too_short_to_time(result, self.ds)

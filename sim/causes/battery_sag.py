@@ -46,6 +46,9 @@ class BatterySagFit(AffineCandidate):
         G1 = ds.flat_filtered([g * f.battery_v ** 2 for g, f in zip(G, ds.files)])
         return G0, [G1]
 
+    def scales(self, parameters):
+        return [(f.battery_v / parameters["v_nominal"]) ** 2 for f in self.ds.files]
+
     def why_not_carried(self):
         return None if np.isfinite(self.ds.V).all() else "battery_v is missing in flight"
 

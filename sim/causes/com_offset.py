@@ -31,7 +31,7 @@ class ComOffsetFit(AffineCandidate):
         ds = self.ds
         Gx, Gy = [], []
         for i in range(len(ds.files)):
-            T = ds.F[i].sum(axis=0)
+            T = ds.thrust_of(i).sum(axis=0)
             x = np.zeros((C, T.size))
             y = np.zeros((C, T.size))
             x[1] = T / ds.a.Jyy

@@ -48,15 +48,19 @@ class GroundEffectFit(GridCandidate):
                     f"({GE_MIN_S:g} s needed) to see the thrust rise near the ground")
         return None
 
+    def _factors(self, R):
+        return [factor(np.maximum(np.nan_to_num(f.z, nan=10.0), 0.5 * R), R) for f in self.ds.files]
+
+    def scales(self, parameters):
+        R = parameters["rotor_radius"]
+        return self._factors(R) if R > 0 else [1.0] * len(self.ds.files)
+
     def delta(self, R):
         ds = self.ds
         if R <= 0:
             return np.zeros((C, ds.n))
-        preds = []
-        for i, f in enumerate(ds.files):
-            s = factor(np.maximum(np.nan_to_num(f.z, nan=10.0), 0.5 * R), R)
-            preds.append(ds.predict_file(i, ds.F[i], scale=np.broadcast_to(s, ds.F[i].shape)))
-        return ds.delta_filtered(preds)
+        return ds.delta_filtered([ds.predict_file(i, D, scale=np.broadcast_to(s, D.shape[1:]))
+                                  for i, (D, s) in enumerate(zip(ds.D, self._factors(R)))])
 
     def explanatory(self):
         return self.ds.z

@@ -27,6 +27,7 @@ import numpy as np
 from flightctl.physics import rotor_speed, thrust_from_speed
 from flightctl.sim.causes.motor_lag import MotorLagFit, lag_held
 from flightctl.sim.identify.diagnose.candidate import GridCandidate, too_short_to_time
+from flightctl.sim.identify.diagnose.dataset import C, Change
 from flightctl.sim.model import Effect, Parameter
 
 SPIN = (-1.0, 1.0, -1.0, 1.0)   # s_i: +1 counter-clockwise seen from above (motors 2, 4), -1 clockwise
@@ -69,31 +70,58 @@ class MotorDynamics(Effect):
 class MotorDynamicsFit(GridCandidate):
     """The commanded speeds (eq. 26, 27) through the exact lag of the held command: thrust c1
     Omega^2 from the speed averaged over the period, and -Jp sum s_i dOmega_i/dt / Jzz on r_dot
-    from the speed change over the period; the grid of `motor_lag`."""
+    from the speed change over the period; the grid of `motor_lag`. For an identified vehicle, whose
+    Jp / Jzz is not known, that reaction is a free column of the fit (its coefficient is reported
+    in the identification)."""
     effect = MotorDynamics
     explains = "rotor spin-up sum s_i dOmega_i/dt (rad/s^2)"
     grid = MotorLagFit.grid
 
     def _speeds(self, i, tau):
-        """(thrust (4, n) from the lagged speeds, sum s_i dOmega_i/dt (n,)) of file i."""
+        """(the drive (K, 4, n) of the lagged speeds, sum s_i dOmega_i/dt (n,)) of file i."""
         ds, a = self.ds, self.ds.a
         W = rotor_speed(ds.F[i], a.c1)
         if tau <= 0:
-            return ds.F[i], np.zeros(W.shape[1])
+            return ds.D[i], np.zeros(W.shape[1])
         at_rows, mean = lag_held(W, tau, ds.fs)
         dW = np.zeros_like(W)
         dW[:, :-1] = np.diff(at_rows, axis=1) * ds.fs
-        return thrust_from_speed(mean, a.c1), np.asarray(SPIN) @ dW
+        return ds.drive(thrust_from_speed(mean, a.c1), mean), np.asarray(ds.vehicle.layout.spin) @ dW
 
     def delta(self, tau):
         ds = self.ds
-        preds = []
+        preds, reaction = [], []
         for i in range(len(ds.files)):
-            F, spin_up = self._speeds(i, tau)
-            extra = np.zeros((3, F.shape[1]))
+            D, spin_up = self._speeds(i, tau)
+            extra = np.zeros((3, D.shape[-1]))
             extra[2] = -ds.a.Jp * spin_up
-            preds.append(ds.predict_file(i, F, torque_extra=extra))
-        return ds.delta_filtered(preds)
+            preds.append(ds.predict_file(i, D, torque_extra=extra))
+            r = np.zeros((C, D.shape[-1]))
+            r[2] = -spin_up
+            reaction.append(r)
+        ch = ds.delta_filtered(preds)
+        if not ds.vehicle.identified:
+            return ch
+        return Change(ch.delta, np.concatenate([ds.flat_filtered(reaction)[None], ch.free]))
+
+    def fold(self, parameters):
+        """The lagged speeds' thrusts into the base; the reaction a carried term (a free column of
+        an identified vehicle)."""
+        ds, tau = self.ds, parameters["tau"]
+        D, reaction = [], []
+        for i in range(len(ds.files)):
+            Di, spin_up = self._speeds(i, tau)
+            r = np.zeros((C, Di.shape[-1]))
+            r[2] = -spin_up
+            D.append(Di)
+            reaction.append(r)
+        ds.rebase(D)
+        column = ds.flat_filtered(reaction)
+        if ds.vehicle.identified:
+            ds.extra_free.append(column)
+            ds.rebase()
+        else:
+            ds.carry(self.cause, parameters, column * ds.a.Jp / ds.a.Jzz)
 
     def run(self):
         result = super().run()

@@ -44,15 +44,13 @@ class MotorLagFit(GridCandidate):
     explains = "rate of change of the commanded total |thrust differences| (N/s)"
     grid = np.concatenate([[0.0], np.geomspace(0.002, 0.3, 40)])
 
+    def thrusts(self, parameters):
+        ds, tau = self.ds, parameters["tau"]
+        return [lag_held(D.reshape(-1, D.shape[-1]), tau, ds.fs)[1].reshape(D.shape) if tau > 0 else D for D in ds.D]
+
     def delta(self, tau):
         ds = self.ds
-        preds = []
-        for i in range(len(ds.files)):
-            F = ds.F[i]
-            if tau > 0:
-                F = lag_held(F, tau, ds.fs)[1]
-            preds.append(ds.predict_file(i, F))
-        return ds.delta_filtered(preds)
+        return ds.delta_filtered([ds.predict_file(i, D) for i, D in enumerate(self.thrusts({"tau": tau}))])
 
     def not_named(self, result):
         return too_short_to_time(result, self.ds)

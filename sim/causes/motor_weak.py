@@ -4,8 +4,9 @@ from __future__ import annotations
 import numpy as np
 
 from flightctl.errors import InputError
-from flightctl.sim.identify.diagnose.candidate import AffineCandidate, Result
-from flightctl.sim.identify.diagnose.scoring import heldout, objective
+from flightctl.sim.identify.diagnose.candidate import AffineCandidate, Result, columns_of
+from flightctl.sim.identify.diagnose.dataset import N_BLOCKS, Change
+from flightctl.sim.identify.diagnose.scoring import fitted, heldout, linear_stats, solve
 from flightctl.sim.model import Effect, Parameter
 
 
@@ -25,40 +26,65 @@ class MotorWeak(Effect):
 
 
 class MotorWeakFit(AffineCandidate):
-    """Rotor m's thrust and torque times `scale`: D = (scale - 1) G_m. Each fold picks the motor
-    whose fit is best on its training blocks."""
+    """Rotor m's thrust and torque times `scale`. The change is linear in the scale but for the
+    rotor's momentum of eq. 9 (its speed goes as the square root of the thrust), which a fit of the
+    linear column G_m (`DataSet.thrust_columns`) leaves out: the fit is repeated on the secant
+    column (D(s0) - D(1)) / (s0 - 1) through the exact change at the first fit's scale s0, so that
+    the scale is exact there (a biased scale leaves a constant torque that `com_offset` would take
+    up). Each fold picks the motor whose fit is best on its training blocks."""
     effect = MotorWeak
     explains = "thrust of the weak motor (N)"
 
-    def _column(self, m):
+    def _exact(self, m, scale):
+        """The filtered change of the prediction with rotor m's thrust and torque times `scale`."""
         ds = self.ds
-        return ds.flat_filtered([ds.thrust_columns(i)[m] for i in range(len(ds.files))])
+        s = np.ones((4, 1))
+        s[m] = scale
+        return ds.delta_filtered([ds.predict_file(i, D, scale=s) for i, D in enumerate(ds.D)]).delta
 
     def predict(self, parameters):
-        return (parameters["scale"] - 1.0) * self._column(int(parameters["motor"]) - 1)
+        return self._exact(int(parameters["motor"]) - 1, parameters["scale"])
+
+    def scales(self, parameters):
+        s = np.ones((4, 1))
+        s[int(parameters["motor"]) - 1] = parameters["scale"]
+        return [s] * len(self.ds.files)
+
+    def _fit(self, columns):
+        """(designs, stats, best) of the single-column fits, one per motor."""
+        ds = self.ds
+        designs = [columns_of(Change(None, ds.base_free), [g]) for g in columns]
+        stats = [linear_stats(ds, self.r_base, A) for A in designs]
+
+        def best(keep):
+            return min((solve(st, keep, ds.block_counts), m) for m, st in enumerate(stats))
+        return designs, best
 
     def run(self):
         ds = self.ds
-        Gm = [self._column(m) for m in range(4)]
+        e = self.r_base
+        allb = np.ones(N_BLOCKS, bool)
+        linear = [ds.flat_filtered([ds.thrust_columns(i)[m] for i in range(len(ds.files))]) for m in range(4)]
+        designs, best = self._fit(linear)
+        secant = []
+        for m in range(4):
+            s0 = 1.0 + float(solve(linear_stats(ds, e, designs[m]), allb, ds.block_counts)[1][0])
+            secant.append(self._exact(m, s0) / (s0 - 1.0) if abs(s0 - 1.0) > 1e-6 else linear[m])
+        designs, best = self._fit(secant)
         folds = []
+        blocks = np.arange(N_BLOCKS)
 
-        def best(train):
-            out = []
-            for m in range(4):
-                th = self.fit(None, [Gm[m]], train)
-                out.append((objective(self.residual_at(None, [Gm[m]], th), train), m, float(th[0])))
-            return min(out)
-
-        def fold(train):
-            _, m, th = best(train)
-            folds.append({"motor": m + 1, "scale": 1.0 + th})
-            return self.residual_at(None, [Gm[m]], [th])
+        def fold(b):
+            (_, th, off), m = best(blocks != b)
+            folds.append({"motor": m + 1, "scale": 1.0 + float(th[0])})
+            i0, i1 = ds.block_edges[b]
+            return fitted(e[:, i0:i1], designs[m][:, i0:i1], th), off
 
         score = heldout(ds, fold)
-        _, m, th = best(np.ones(ds.n, bool))
+        (_, th, _), m = best(allb)
         self._m = m
-        return Result(self.cause, {"motor": m + 1, "scale": round(1.0 + th, 4)}, score,
-                      self.residual_at(None, [Gm[m]], [th]), explains=self.explains, folds=folds)
+        return Result(self.cause, {"motor": m + 1, "scale": round(1.0 + float(th[0]), 4)}, score,
+                      fitted(e, designs[m], th), explains=self.explains, folds=folds)
 
     def explanatory(self):
         return self.ds.thrust[getattr(self, "_m", 0)]

@@ -102,16 +102,17 @@ class RotorInflowFit(AffineCandidate):
 
     def columns(self):
         ds, a = self.ds, self.ds.a
+        lay = ds.vehicle.layout
+        x, y = (np.asarray(c)[:, None] for c in (lay.x, lay.y))
         self._w = climb_speed(ds)
         G = []
         for i in range(len(ds.files)):
-            F = ds.F[i]
+            F = ds.thrust_of(i)
             p, q, _ = ds.wmid[i]
-            d = thrust_change(*F, 1.0, a.M * a.g / 4.0, a.l, self._w[i], p, q)
-            t_phi, t_theta, _ = body_torques(*d, 0.0, 0.0, 0.0, 0.0, a.l)
-            x = np.zeros((C, F.shape[1]))
-            x[0], x[1], x[5] = t_phi / a.Jxx, t_theta / a.Jyy, sum(d) / a.M
-            G.append(x)
+            d = -np.sqrt(F / (a.M * a.g / 4.0)) * (self._w[i] + p * y - q * x)   # per unit k, each rotor
+            g = np.zeros((C, F.shape[1]))
+            g[0], g[1], g[5] = (y * d).sum(axis=0) / a.Jxx, -(x * d).sum(axis=0) / a.Jyy, d.sum(axis=0) / a.M
+            G.append(g)
         return None, [ds.flat_filtered(G)]
 
     def to_parameters(self, theta):

@@ -9,9 +9,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.dataset import OFFSET, DataSet
-from flightctl.sim.identify.diagnose.scoring import (Score, Significance, block_stats, heldout, objective,
-                                                     stats_objective)
+from flightctl.sim.identify.diagnose.dataset import N_BLOCKS, Change, DataSet
+from flightctl.sim.identify.diagnose.scoring import (Score, Significance, fitted, heldout, heldout_linear,
+                                                     linear_stats, solve)
 from flightctl.sim.model import Effect
 
 MIN_TIMING_PERIODS = 1.5  # lag or delay shorter than this many loop periods is not named
@@ -28,6 +28,7 @@ class Result:
     explanatory: np.ndarray | None = None
     folds: list = field(default_factory=list)
     significance: Significance | None = None
+    note: str | None = None                # why a significant-looking result is not named, if it is not
 
     @property
     def gain(self) -> float:
@@ -111,6 +112,27 @@ class Candidate:
         """A reason the logs cannot give this cause's prediction, or None."""
         return None
 
+    def thrusts(self, parameters: dict) -> list[np.ndarray] | None:
+        """A cause that changes the rotors' thrusts in time: the per-file drives (K, 4, n) at
+        `parameters` (`DataSet.drive`: each component goes through the same change)."""
+        return None
+
+    def scales(self, parameters: dict) -> list | None:
+        """A cause that scales each rotor's thrust and torque: the per-file scales ((4, n), (n,) or
+        a number) at `parameters`."""
+        return None
+
+    def fold(self, parameters: dict) -> None:
+        """Put this cause at `parameters` into the data set's base model (the chain of causes): the
+        thrusts or scales it changes, else its change of the prediction as a carried term."""
+        D, S = self.thrusts(parameters), self.scales(parameters)
+        if S is not None:
+            S = [s * t for s, t in zip(self.ds.S, S)]
+        if D is not None or S is not None:
+            self.ds.rebase(D, S)
+        else:
+            self.ds.carry(self.cause, parameters, self.predict(parameters))
+
 
 def too_short_to_time(result: Result, ds: DataSet) -> str | None:
     """`not_named` of a lag or delay: one shorter than MIN_TIMING_PERIODS loop periods."""
@@ -121,10 +143,18 @@ def too_short_to_time(result: Result, ds: DataSet) -> str | None:
     return None
 
 
+def columns_of(change: Change, own=()) -> np.ndarray | None:
+    """(C, n, P) free columns of a fit: the candidate's own (each (C, n)), then the change's (the
+    identified vehicle's effectiveness at the candidate's thrusts); None when there are none."""
+    cols = list(own) + list(change.free)
+    return np.stack(cols, axis=-1) if cols else None
+
+
 class GridCandidate(Candidate):
     """One nonlinear parameter: predictions on a grid, folds choose the best grid point, the
     full-data fit is refined between the best point's neighbours by a bounded scalar search.
-    Implement `delta(theta)`: the filtered (C, n) change of the prediction at parameter theta."""
+    Implement `delta(theta) -> Change` (`DataSet.delta_filtered` of the per-file predictions) or a
+    filtered (C, n) change of the prediction at parameter theta."""
     grid: np.ndarray = np.array([])
     round_to = 4
 
@@ -133,13 +163,24 @@ class GridCandidate(Candidate):
         (name,) = self.effect.required
         return name
 
-    def residual(self, theta) -> np.ndarray:
-        return self.r_base - self.delta(theta)
+    def change(self, theta) -> Change:
+        d = self.delta(theta)
+        return d if isinstance(d, Change) else Change(d, self.ds.base_free)
+
+    def design(self, theta):
+        """(e, A): the residual before the free columns, and the free columns, at theta."""
+        ch = self.change(theta)
+        return self.r_base - ch.delta, columns_of(ch)
+
+    def objective(self, theta, keep=None) -> float:
+        e, A = self.design(theta)
+        keep = np.ones(N_BLOCKS, bool) if keep is None else keep
+        return solve(linear_stats(self.ds, e, A), keep, self.ds.block_counts)[0]
 
     def predict(self, parameters):
-        return self.delta(float(parameters[self.name]))
+        return self.change(float(parameters[self.name])).delta
 
-    def delta(self, theta) -> np.ndarray:
+    def delta(self, theta):
         raise NotImplementedError
 
     def _best(self, objs):
@@ -149,8 +190,7 @@ class GridCandidate(Candidate):
         if 0 < j < len(g) - 1:
             lo, hi = g[j - 1], g[j + 1]
             try:
-                res = optimize.minimize_scalar(lambda th: objective(self.residual(th), self._mask),
-                                               bounds=(lo, hi), method="bounded",
+                res = optimize.minimize_scalar(self.objective, bounds=(lo, hi), method="bounded",
                                                options={"xatol": (hi - lo) * 1e-3})
                 return float(res.x)
             except ValueError:
@@ -159,30 +199,41 @@ class GridCandidate(Candidate):
 
     def run(self) -> Result:
         ds = self.ds
-        deltas = [self.delta(th) for th in self.grid]
-        stats = np.stack([block_stats(ds, self.r_base - d) for d in deltas])    # (J, 2, B, C)
+        stats = []
+        for th in self.grid:
+            e, A = self.design(th)
+            stats.append(linear_stats(ds, e, A))
+        cache: dict[int, tuple] = {}
         folds = []
+        blocks = np.arange(N_BLOCKS)
 
-        def fold(train):
-            test_block = int(ds.block[~train][0])
-            objs = [stats_objective(st, test_block, ds.block_counts) for st in stats]
-            j = int(np.argmin(objs))
+        def fold(b):
+            keep = blocks != b
+            fits = [solve(st, keep, ds.block_counts) for st in stats]
+            j = int(np.argmin([f[0] for f in fits]))
             folds.append(float(self.grid[j]))
-            return self.r_base - deltas[j]
+            if j not in cache:
+                cache.clear()
+                cache[j] = self.design(self.grid[j])
+            e, A = cache[j]
+            i0, i1 = ds.block_edges[b]
+            return fitted(e[:, i0:i1], None if A is None else A[:, i0:i1], fits[j][1]), fits[j][2]
 
         score = heldout(ds, fold)
-        self._mask = np.ones(ds.n, bool)
-        objs = [objective(self.r_base - d, self._mask) for d in deltas]
-        theta = self._best(objs)
-        return Result(self.cause, {self.name: round(theta, self.round_to)}, score, self.residual(theta),
+        allb = np.ones(N_BLOCKS, bool)
+        theta = self._best([solve(st, allb, ds.block_counts)[0] for st in stats])
+        e, A = self.design(theta)
+        coef = solve(linear_stats(ds, e, A), allb, ds.block_counts)[1]
+        return Result(self.cause, {self.name: round(theta, self.round_to)}, score, fitted(e, A, coef),
                       explains=self.explains, folds=folds)
 
 
 class AffineCandidate(Candidate):
     """Prediction change D = G0 + sum_p theta_p G_p with filtered columns: weighted least squares,
     each channel weighted by the inverse of its residual variance (three reweighting passes), with
-    the offset channels centred on the training data. Implement `columns()`, and `to_parameters`
-    and `from_parameters` when the parameters are not the thetas themselves."""
+    the offset channels centred on the training data, beside the base model's free columns.
+    Implement `columns()`, and `to_parameters` and `from_parameters` when the parameters are not
+    the thetas themselves."""
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -206,38 +257,20 @@ class AffineCandidate(Candidate):
             d += th * g
         return d
 
-    def fit(self, G0, Gs, mask):
-        r = self.r_base[:, mask] - (G0[:, mask] if G0 is not None else 0.0)
-        A = np.stack([g[:, mask] for g in Gs], axis=-1)          # (C, n, P)
-        r = r - np.where(OFFSET, r.mean(axis=1), 0.0)[:, None]
-        A = A - np.where(OFFSET[:, None], A.mean(axis=1), 0.0)[:, None, :]
-        w = 1.0 / np.maximum(np.einsum("cn,cn->c", r, r), 1e-300)
-        theta = np.zeros(len(Gs))
-        for _ in range(3):
-            M = np.einsum("c,cnp,cnq->pq", w, A, A)
-            h = np.einsum("c,cnp,cn->p", w, A, r)
-            theta = np.linalg.lstsq(M, h, rcond=None)[0]
-            e = r - A @ theta
-            w = 1.0 / np.maximum(np.einsum("cn,cn->c", e, e), 1e-300)
-        return theta
-
-    def residual_at(self, G0, Gs, theta):
-        res = self.r_base - (G0 if G0 is not None else 0.0)
-        for g, th in zip(Gs, theta):
-            res = res - th * g
-        return res
+    def linear_run(self, G0, Gs) -> tuple[Score, np.ndarray, np.ndarray, list]:
+        """(held-out score, full-data thetas of Gs, full-data residual, per-fold thetas) of the fit
+        of the columns Gs (with the base model's free columns) to r_base - G0."""
+        ds = self.ds
+        e = self.r_base if G0 is None else self.r_base - G0
+        A = columns_of(Change(None, ds.base_free), Gs)
+        st = linear_stats(ds, e, A)
+        folds = []
+        score = heldout_linear(ds, e, A, st, record=lambda th: folds.append(th[:len(Gs)]))
+        theta = solve(st, np.ones(N_BLOCKS, bool), ds.block_counts)[1]
+        return score, theta[:len(Gs)], fitted(e, A, theta), folds
 
     def run(self) -> Result:
-        ds = self.ds
         G0, Gs = self.columns()
-        folds = []
-
-        def fold(train):
-            th = self.fit(G0, Gs, train)
-            folds.append(self.to_parameters(th))
-            return self.residual_at(G0, Gs, th)
-
-        score = heldout(ds, fold)
-        theta = self.fit(G0, Gs, np.ones(ds.n, bool))
-        return Result(self.cause, self.to_parameters(theta), score, self.residual_at(G0, Gs, theta),
-                      explains=self.explains, folds=folds)
+        score, theta, residual, folds = self.linear_run(G0, Gs)
+        return Result(self.cause, self.to_parameters(theta), score, residual, explains=self.explains,
+                      folds=[self.to_parameters(th) for th in folds])

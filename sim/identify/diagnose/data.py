@@ -1,6 +1,7 @@
 """Reading a flight log for diagnose: one file reduced to per-row arrays (commands, gyro,
-accelerometer, battery, levelled range altitude, the attitude from the integrated gyro) and the mask
-of its usable airborne rows (docs/diagnose.md, "Only airborne data are used")."""
+accelerometer, battery, altitude, the attitude from the integrated gyro), the rotor layout and the
+sensor filters the log declares, and the mask of its usable airborne rows (docs/diagnose.md, "Only
+airborne data are used"; docs/real-flights.md for logs of other vehicles)."""
 from __future__ import annotations
 
 import math
@@ -18,6 +19,67 @@ MIN_STRETCH_S = 0.5      # s: shorter airborne stretches are dropped
 RANGE_GAP_S = 0.25       # s: a range older than this does not give the altitude
 MOTOR_ON_MARGIN = 1.0    # P units above the dead zone h2 for a motor to count as running
 IMU_COLUMNS = ("gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z")
+# Logs of other vehicles (docs/real-flights.md): the command is the ESC's range mapped onto 0-255, so a
+# motor runs above 1 % of it; without a height above the ground, airborne needs the mean command at
+# least THROTTLE_SHARE of its median while all four run (a vehicle on the ground idles far below it).
+IDLE_P = 2.55
+THROTTLE_SHARE = 0.5
+HEIGHT_SOURCES = ("mocap", "rangefinder")   # heights good to a few cm: they also give the airborne test
+FOREIGN_COLUMNS = ("height", "current", "omega1", "omega2", "omega3", "omega4")
+FILTER_KINDS = ("pt1", "pt2", "pt3", "biquad")
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where the rotors are and how they spin: positions in the body frame (x forward, y left; m, or
+    arm lengths when the log gives no length) and the spin seen from above, +1 counter-clockwise and
+    -1 clockwise (measured-data.md's s_i); a rotor's reaction torque on the body is -s_i tau_i."""
+    x: tuple[float, ...]
+    y: tuple[float, ...]
+    spin: tuple[float, ...]
+    unit: str = "m"
+    source: str = "conventions.md"
+
+    @classmethod
+    def plus(cls, l: float) -> "Layout":
+        """The paper's "+" layout (conventions.md, eq. 25): motor 1 North, 2 West, 3 South, 4 East;
+        1 and 3 clockwise."""
+        return cls((l, 0.0, -l, 0.0), (0.0, l, 0.0, -l), (-1.0, 1.0, -1.0, 1.0), "m",
+                   "conventions.md (the paper's + layout, eq. 25)")
+
+    @classmethod
+    def parse(cls, text: str, source: str, fail) -> "Layout":
+        """`x1 y1 s1; x2 y2 s2; x3 y3 s3; x4 y4 s4` (a log's `# rotors:` line, in arm lengths)."""
+        rotors = [r.split() for r in text.split(";") if r.strip()]
+        if len(rotors) != 4:
+            fail(f"# rotors: {len(rotors)} rotors; diagnose knows quadrotors (4)")
+        try:
+            x, y, s = (tuple(float(r[k]) for r in rotors) for k in range(3))
+        except (ValueError, IndexError):
+            fail(f"# rotors: {text!r} is not 'x y spin' for each rotor")
+        if any(v not in (-1.0, 1.0) for v in s) or sum(s) != 0:
+            fail(f"# rotors: spins {s}: each is +1 or -1, two of each")
+        if not all(math.isfinite(v) and abs(v) <= 10 for v in x + y):
+            fail(f"# rotors: positions {x}, {y} are not arm lengths")
+        return cls(x, y, s, "arm", source)
+
+
+def parse_filters(text: str, fail) -> tuple[tuple[str, float], ...]:
+    """A `# gyro_filter:` line: `none`, or `KIND HZ; KIND HZ` with KIND in FILTER_KINDS."""
+    text = text.strip()
+    if text in ("", "none"):
+        return ()
+    out = []
+    for item in text.split(";"):
+        parts = item.split()
+        try:
+            kind, hz = parts[0], float(parts[1])
+        except (IndexError, ValueError):
+            kind, hz = "", math.nan
+        if kind not in FILTER_KINDS or not (0.0 < hz < 1e5) or len(parts) != 2:
+            fail(f"filter {item.strip()!r}: expected one of {', '.join(FILTER_KINDS)} and a cut-off in Hz")
+        out.append((kind, hz))
+    return tuple(out)
 
 
 @dataclass
@@ -29,9 +91,15 @@ class FileData:
     gyro: np.ndarray        # (3, n)
     acc: np.ndarray         # (3, n)
     battery_v: np.ndarray   # (n,), NaN where unknown
-    z: np.ndarray           # (n,) altitude from the range, NaN where unknown
+    z: np.ndarray           # (n,) altitude above the ground, NaN where unknown
     Rm: np.ndarray          # (9, n) attitude from the integrated gyro
     airborne: np.ndarray    # (n,) bool, for input rows k whose pair (k, k+1) is usable
+    running: np.ndarray     # (n,) bool, every motor running
+    layout: Layout
+    foreign: bool = False   # a log of another vehicle (its `# vehicle: foreign`): the base model is identified
+    gyro_filter: tuple = ()  # the causal filters between the sensor and the logged gyro (parse_filters)
+    acc_filter: tuple = ()
+    omega: np.ndarray | None = None   # (4, n) measured rotor speed (rad/s) when logged
     notes: list[str] = field(default_factory=list)
 
 
@@ -95,31 +163,88 @@ def motors_on(P: np.ndarray, a: Airframe) -> np.ndarray:
     return (P > a.h2 + MOTOR_ON_MARGIN).any(axis=0)
 
 
-def _check_columns(table: Table, P: np.ndarray, a: Airframe) -> None:
+def _check_columns(table: Table, P: np.ndarray, low: float, what: str) -> None:
     """Refuse what would give a confident verdict from no measurement: a sensor column that never
     changes (a dead or unlogged sensor; a real IMU always reads noise), and a motor whose command
-    never leaves the dead zone while the others fly (the quadcopter cannot fly so: not logged)."""
+    never leaves its lowest range while the others fly (the quadcopter cannot fly so: not logged)."""
     for name in IMU_COLUMNS:
         x = table[name]
         if np.ptp(x) == 0:
             table.fail(f"{x[0]:g} on every row: a dead or unlogged sensor cannot be judged", column=name)
-    running = P > a.h2 + MOTOR_ON_MARGIN
+    running = P > low
     if running.any():
         for i in np.flatnonzero(~running.any(axis=1)):
-            table.fail(f"motor {i + 1} never runs (P at most {P[i].max():g}, its dead zone h2 = {a.h2:g}) "
+            table.fail(f"motor {i + 1} never runs (P at most {P[i].max():g}, {what}) "
                        "while the others do: its command was not logged", column=f"P{i + 1}")
 
 
+def _levelled_range(t, rng, Rm):
+    """The altitude from a downward range (along -z_b, levelled by cos(phi) cos(theta)), interpolated
+    between readings and NaN across gaps longer than RANGE_GAP_S."""
+    n = t.size
+    have = np.isfinite(rng)
+    z = np.full(n, np.nan)
+    if have.sum() >= 2:
+        tr = t[have]
+        z = np.interp(t, tr, rng[have] * Rm[8, have])
+        idx = np.clip(np.searchsorted(tr, t), 1, tr.size - 1)
+        gap = np.minimum(np.abs(t - tr[idx - 1]), np.abs(tr[idx] - t))
+        z[gap > RANGE_GAP_S] = np.nan
+    return z
+
+
+def _foreign(table: Table, P: np.ndarray, notes: list[str]):
+    """A log of another vehicle (docs/real-flights.md): its rotor layout and sensor filters from the
+    metadata, its height above the ground when a precise one was logged, and its airborne rows: all
+    four motors running, the mean command at least THROTTLE_SHARE of its median while they run, and
+    above Z_AIRBORNE when the height is precise."""
+    meta = table.meta
+
+    def fail(what):
+        table.fail(what)
+
+    if "rotors" not in meta:
+        table.fail("# vehicle: foreign without a '# rotors:' line: the rotor layout is unknown")
+    layout = Layout.parse(meta["rotors"], meta.get("rotors_source", "the log's '# rotors:' line"), fail)
+    filters = tuple(parse_filters(meta.get(k, "none"), lambda w, k=k: fail(f"# {k}: {w}"))
+                    for k in ("gyro_filter", "acc_filter"))
+    running = (P > IDLE_P).all(axis=0)
+    n = P.shape[1]
+    z = np.full(n, np.nan)
+    if "height" in table and meta.get("height_source", "") in HEIGHT_SOURCES and np.isfinite(table["height"]).any():
+        h = table["height"]
+        z = h - np.nanpercentile(h, 1)
+    mean_p = P.mean(axis=0)
+    up = running & (mean_p >= THROTTLE_SHARE * np.median(mean_p[running])) if running.any() else running
+    if np.isfinite(z).any():
+        up &= np.nan_to_num(z, nan=-1.0) > Z_AIRBORNE
+    else:
+        notes.append(f"no precise height: airborne taken as all motors running with the mean command at least "
+                     f"{THROTTLE_SHARE:g} of its median")
+    omega = None
+    if all(f"omega{i}" in table for i in range(1, 5)):
+        omega = np.vstack([table[f"omega{i}"] for i in range(1, 5)])
+    return layout, filters, running, up, z, omega
+
+
 def load_file(table: Table, a: Airframe) -> FileData:
-    """The arrays of one flight log (already read and checked by `flightctl.logfile`)."""
+    """The arrays of one flight log (already read and checked by `flightctl.logfile`). A log of this
+    project's vehicle has the paper's + layout with the arm of `a`; a foreign one (`# vehicle:
+    foreign`) says its layout and filters in its metadata."""
     t = table["t"]
     n = t.size
     P = np.vstack([table[f"P{i}"] for i in range(1, 5)])
     gyro = np.vstack([table[c] for c in ("gyro_x", "gyro_y", "gyro_z")])
     acc = np.vstack([table[c] for c in ("acc_x", "acc_y", "acc_z")])
     notes = []
-    on = motors_on(P, a)
-    _check_columns(table, P, a)
+    foreign = table.meta.get("vehicle") == "foreign"
+    if foreign:
+        _check_columns(table, P, IDLE_P, f"1 % of the command range")
+        layout, (gyro_filter, acc_filter), on, up, z, omega = _foreign(table, P, notes)
+    else:
+        _check_columns(table, P, a.h2 + MOTOR_ON_MARGIN, f"its dead zone h2 = {a.h2:g}")
+        layout, gyro_filter, acc_filter, omega = Layout.plus(a.l), (), (), None
+        on = motors_on(P, a)
     # at rest before the first take-off: the initial tilt
     first_on = int(np.argmax(on)) if on.any() else n
     still = slice(0, first_on)
@@ -134,26 +259,18 @@ def load_file(table: Table, a: Airframe) -> FileData:
     Rm[:, :first_on] = R0.reshape(9, 1)
     if first_on < n:
         Rm[:, first_on:] = _rotations(t[first_on:], gyro[:, first_on:], R0)
-    rng = table["range"]
-    have = np.isfinite(rng)
-    z = np.full(n, np.nan)
-    if have.sum() >= 2:
-        tr = t[have]
-        zr = rng[have] * Rm[8, have]          # along -z_b, levelled by cos(phi) cos(theta)
-        z = np.interp(t, tr, zr)
-        idx = np.clip(np.searchsorted(tr, t), 1, tr.size - 1)
-        gap = np.minimum(np.abs(t - tr[idx - 1]), np.abs(tr[idx] - t))
-        z[gap > RANGE_GAP_S] = np.nan
     bv = table["battery_v"].copy()
     if np.isfinite(bv).sum() >= 2:
         ok = np.isfinite(bv)
         bv = np.interp(t, t[ok], bv[ok])
-    if np.isfinite(z).any():
-        up = on & (np.nan_to_num(z, nan=-1.0) > Z_AIRBORNE)
-    else:
-        notes.append("no range readings: airborne taken as motors running with thrust above 90 % of the weight")
-        f = thrust_from_command(P, a.h1, a.h2).sum(axis=0)
-        up = on & (f > 0.9 * a.M * a.g)
+    if not foreign:
+        z = _levelled_range(t, table["range"], Rm)
+        if np.isfinite(z).any():
+            up = on & (np.nan_to_num(z, nan=-1.0) > Z_AIRBORNE)
+        else:
+            notes.append("no range readings: airborne taken as motors running with thrust above 90 % of the weight")
+            f = thrust_from_command(P, a.h1, a.h2).sum(axis=0)
+            up = on & (f > 0.9 * a.M * a.g)
     # a usable input row k needs rows k and k+1 airborne; trim the stretch edges; drop short ones
     pair = np.zeros(n, bool)
     pair[:-1] = up[:-1] & up[1:]
@@ -164,6 +281,5 @@ def load_file(table: Table, a: Airframe) -> FileData:
         i0, i1 = i0 + edge, i1 - edge
         if (i1 - i0) * dt_nom >= MIN_STRETCH_S:
             keep[i0:i1] = True
-    return FileData(table.path, t, P, gyro, acc, bv, z, Rm, keep, notes)
-
-
+    return FileData(table.path, t, P, gyro, acc, bv, z, Rm, keep, on, layout, foreign, gyro_filter, acc_filter,
+                    omega, notes)

@@ -5,40 +5,113 @@ candidates that need history (a lag, a delay, a velocity filter).
 
 The channels (docs/diagnose.md, "What is predicted"): row k pairs the command held from row k to
 k+1 with the gyro difference k -> k+1 (angular acceleration) and the accelerometer on row k+1.
+
+The base model is a `Vehicle`: this project's airframe with its known parameters, or, for a log of
+another vehicle, the one `flightctl.sim.identify.diagnose.base` identifies from the flight (an
+equivalent airframe per unit mass and inertia whose effectiveness on each channel is refitted on the
+training blocks of every fold: the `free` columns of a prediction).
 """
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from flightctl.params import Airframe
-from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, yaw_drag
-from flightctl.sim.identify.diagnose.data import FileData, stretches
-from flightctl.sim.model import angular_acceleration, body_torques
+from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, thrust_from_speed, yaw_drag
+from flightctl.sim.identify.diagnose.data import FileData, Layout, stretches
 
 CHANNELS = ("p_dot", "q_dot", "r_dot", "acc_x", "acc_y", "acc_z")
 UNITS = ("rad/s^2", "rad/s^2", "rad/s^2", "m/s^2", "m/s^2", "m/s^2")
 OFFSET = np.array([False, False, False, True, True, True])   # channels with a bias nuisance
 C = len(CHANNELS)
+GYRO, ACC = slice(0, 3), slice(3, 6)
+THRUST_CHANNELS = (0, 1, 2, 5)   # the channels the rotors' thrust drives (roll, pitch, yaw torque; thrust)
 
 LOWPASS_HZ = 12.0        # zero-phase low-pass applied to every residual (2nd-order Butterworth, twice)
 N_BLOCKS = 8             # blocked cross-validation
 
 
+@dataclass(frozen=True)
+class Vehicle:
+    """What the base model knows of the airframe: its parameters `a` (eq. 6-9, 26-28), the rotor
+    `layout`, and eq. 7's inertia coupling per channel `coupling = (a_p, a_q, a_r)`:
+    p_dot += a_p q r, q_dot += a_q p r, r_dot += a_r p q. For a known airframe these follow from its
+    inertia; an `identified` vehicle has them fitted, and its `a` is an equivalent airframe (M = 1,
+    Jzz = 1, arm lengths as unit) whose effectiveness the fits refine fold by fold."""
+    a: Airframe
+    layout: Layout
+    coupling: tuple[float, float, float]
+    identified: bool = False
+    identification: dict = field(default_factory=dict, compare=False)   # the report of `base.identify`
+
+    @classmethod
+    def known(cls, a: Airframe, layout: Layout) -> "Vehicle":
+        Jxx, Jyy, Jzz = a.Jxx, a.Jyy, a.Jzz
+        return cls(a, layout, ((Jyy - Jzz) / Jxx, (Jzz - Jxx) / Jyy, (Jxx - Jyy) / Jzz))
+
+
+class Pred(NamedTuple):
+    """A per-file prediction (C, n), and for an identified vehicle the thrust channels of each
+    component of the drive at unit effectiveness (K, C, n), whose coefficients the fits refine."""
+    value: np.ndarray
+    unit: np.ndarray | None = None
+
+
+class Change(NamedTuple):
+    """A candidate's filtered change of the prediction (C, n) against the base model, and the free
+    columns (K, C, n) its fit refits beside its own parameters: an identified vehicle's
+    effectiveness at the candidate's thrusts (none for a known airframe)."""
+    delta: np.ndarray
+    free: np.ndarray
+
+
+def _pt1(hz: float, fs: float):
+    a = math.exp(-2.0 * math.pi * hz / fs)
+    return [1.0 - a, 0.0], [1.0, -a]
+
+
+def sensor_filters(chain, fs: float) -> list[tuple[list, list]]:
+    """(b, a) stages of a log's declared low-pass chain at the log's rate (docs/real-flights.md):
+    Betaflight's pt1, pt2 and pt3 (cascaded first-order stages, cut-off corrected so the chain's
+    -3 dB point is the stated one) and biquad (2nd-order Butterworth). A biquad above 0.4 fs, which
+    the log's rate cannot represent, becomes two first-order stages of the same low-frequency delay."""
+    from scipy import signal
+    out = []
+    for kind, hz in chain:
+        if kind == "biquad" and hz < 0.4 * fs:
+            b, a = signal.butter(2, hz, fs=fs)
+            out.append((list(b), list(a)))
+            continue
+        order = {"pt1": 1, "pt2": 2, "pt3": 3, "biquad": 2}[kind]
+        corr = 1.0 / math.sqrt(2.0 ** (1.0 / order) - 1.0) if kind != "biquad" else math.sqrt(2.0)
+        out += [_pt1(hz * corr, fs)] * order
+    return out
+
+
 class DataSet:
     """`r_base` (C, n) is the low-passed base residual over the airborne samples; `block` gives each
-    sample's block, `block_edges` the (start, stop) of each. The base model is the paper's until
-    `carry` adds a parameter file's effects to it (docs/diagnose.md, "A base model with effects")."""
+    sample's block, `block_edges` the (start, stop) of each; `base_free` (K, C, n) the identified
+    vehicle's free columns at the base thrusts. The base model is `vehicle` until `carry` adds a
+    parameter file's effects, or the causes of the chain, to it (docs/diagnose.md)."""
 
-    def __init__(self, files: list[FileData], a: Airframe, lowpass_hz: float = LOWPASS_HZ):
+    def __init__(self, files: list[FileData], vehicle: Vehicle, lowpass_hz: float = LOWPASS_HZ):
         from scipy import signal   # here, not at the top: `flightctl sim` imports the causes for their effects
-        self.files, self.a = files, a
+        self.files, self.vehicle, self.a = files, vehicle, vehicle.a
         self.fs = 1.0 / float(np.median(np.concatenate([np.diff(f.t) for f in files])))
+        self.lowpass_hz = lowpass_hz
         self.sos = signal.butter(2, lowpass_hz, fs=self.fs, output="sos")
+        self._sensor = [(sensor_filters(f.gyro_filter, self.fs), sensor_filters(f.acc_filter, self.fs))
+                        for f in files]
         # the stretches: (file index, start, stop) of input rows
         self.stretches = [(i, s0, s1) for i, f in enumerate(files) for s0, s1 in stretches(f.airborne)]
         self.n = sum(s1 - s0 for _, s0, s1 in self.stretches)
         self.seconds = self.n / self.fs
-        self.F = [thrust_from_command(f.P, a.h1, a.h2) for f in files]          # eq. 26, (4, n) each
+        a = self.a
+        self.D = [self.drive(thrust_from_command(f.P, a.h1, a.h2)) for f in files]   # eq. 26
+        self.S: list[np.ndarray | float] = [1.0] * len(files)   # the chain's scales of thrust and torque
         # measured channels per file (row k: gyro difference k -> k+1, accelerometer at k+1)
         self.meas, self.wmid = [], []
         for f in files:
@@ -50,12 +123,9 @@ class DataSet:
             w[:, :-1] = 0.5 * (f.gyro[:, :-1] + f.gyro[:, 1:])
             self.meas.append(m)
             self.wmid.append(w)
-        self.base_pred = [self.predict_file(i, self.F[i]) for i in range(len(files))]
-        self.r_base = self.flat_filtered([m - p for m, p in zip(self.meas, self.base_pred)])
         self.V = self.flat([f.battery_v for f in files])
         self.z = self.flat([f.z for f in files])
         self.w = self.flat(self.wmid)
-        self.thrust = self.flat(self.F)
         self.time = self.flat([f.t for f in files])
         self.file_index = np.concatenate([np.full(s1 - s0, i) for i, s0, s1 in self.stretches])
         edges = np.linspace(0, self.n, N_BLOCKS + 1).round().astype(int)
@@ -64,8 +134,42 @@ class DataSet:
             self.block[edges[b]:edges[b + 1]] = b
         self.block_edges = list(zip(edges[:-1], edges[1:]))
         self.block_counts = np.diff(edges).astype(float)
+        self.measured = self.flat_filtered(self.meas, sensor=False)
         self.carried: dict[str, np.ndarray] = {}     # cause -> its filtered term in the base prediction
         self.carried_parameters: dict[str, dict] = {}
+        self.extra_free: list[np.ndarray] = []       # free columns a cause of the chain brought (C, n)
+        self.rebase()
+
+    def drive(self, F: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
+        """The rotors' drive (K, 4, n) of thrusts F (4, n): the thrusts, and for an identified vehicle
+        also the speeds W (eq. 27 from F unless given), whose columns free the thrust curve's shape in
+        every fit (with both, the curve h1 (P - h2)^2 of each channel is linear in its coefficients)."""
+        if not self.vehicle.identified:
+            return F[None]
+        return np.stack([F, rotor_speed(F, self.a.c1) if W is None else W])
+
+    @property
+    def F(self) -> list[np.ndarray]:
+        """The per-file thrusts (4, n) of the base model's drive (before the chain's scales)."""
+        return [d[0] for d in self.D]
+
+    def thrust_of(self, i) -> np.ndarray:
+        """File i's thrusts (4, n) as the base model has them, the chain's scales applied."""
+        return self.D[i][0] * self.S[i]
+
+    def rebase(self, D: list[np.ndarray] | None = None, S: list | None = None) -> None:
+        """The base prediction and residual from the per-file drives `D` (default: eq. 26 of the
+        commands; a cause of the chain that changes the thrusts passes them) and the scales `S` of
+        each rotor's thrust and torque ((4, n), (n,) or a number per file), the carried terms kept."""
+        if D is not None:
+            self.D = D
+        if S is not None:
+            self.S = S
+        self.thrust = self.flat([F * s for F, s in zip(self.F, self.S)])
+        preds = [self.predict_file(i, self.D[i]) for i in range(len(self.files))]
+        self.base_pred = [p.value for p in preds]
+        self.r_base = self.measured - self.flat_filtered(self.base_pred) - sum(self.carried.values())
+        self.base_free = self.free_columns(preds)
 
     def carry(self, cause: str, parameters: dict, delta: np.ndarray) -> None:
         """Add a carried effect's filtered prediction change `delta` (C, n) at `parameters` to the
@@ -84,12 +188,30 @@ class DataSet:
     def flat(self, per_file):
         return np.concatenate([per_file[i][..., s0:s1] for i, s0, s1 in self.stretches], axis=-1)
 
-    def flat_filtered(self, per_file):
-        """The stretches of per-file (C, n) arrays, each stretch low-passed forward and backward."""
+    def _sense(self, i, x):
+        """What the sensors show of a model-side (C, n) array of file i: the log's declared gyro and
+        accelerometer filters, causal, over the whole file."""
+        from scipy import signal
+        gyro, acc = self._sensor[i]
+        if not (gyro or acc):
+            return x
+        x = np.array(x, dtype=float)
+        for rows, stages in ((GYRO, gyro), (ACC, acc)):
+            for b, a in stages:
+                x[rows] = signal.lfilter(b, a, x[rows], axis=-1)
+        return x
+
+    def flat_filtered(self, per_file, sensor: bool = True):
+        """The stretches of per-file (C, n) arrays, each stretch low-passed forward and backward.
+        `sensor`: the arrays are the model's, so they first go through the log's sensor filters (the
+        measurements went through them on the vehicle)."""
         from scipy import signal
         parts = []
         for i, s0, s1 in self.stretches:
-            x = per_file[i][..., s0:s1]
+            x = per_file[i]
+            if sensor and x.ndim == 2:
+                x = self._sense(i, x)
+            x = x[..., s0:s1]
             if x.ndim == 2:      # rows that are zero stay zero: filter only the others (speed)
                 y = np.zeros_like(x)
                 rows = np.flatnonzero(np.any(x != 0.0, axis=1))
@@ -100,43 +222,74 @@ class DataSet:
                 parts.append(signal.sosfiltfilt(self.sos, x, axis=-1))
         return np.concatenate(parts, axis=-1)
 
-    def predict_file(self, i, F, scale=None, torque_extra=None, force_extra=None):
-        """The model's channels for file i from per-rotor thrusts F (4, n) (eq. 7, 25-28, 6, 9).
-        `scale` (4, n) multiplies thrust and torque of each rotor; `torque_extra` (3, n) and
-        `force_extra` (2, n) add a body wrench."""
-        a = self.a
+    def predict_file(self, i, D, scale=None, torque_extra=None, force_extra=None) -> Pred:
+        """The model's channels for file i from the rotors' drive D (K, 4, n) (`drive`): eq. 7 with the
+        torques of the rotor layout (eq. 25's structure), the rotor torque of eq. 28, the rotor
+        momentum of eq. 9 (speed from eq. 27) and the yaw drag of eq. 6. `scale` (4, n) multiplies
+        thrust and torque of each rotor; `torque_extra` (3, n) and `force_extra` (2, n) add a body wrench."""
+        v = self.vehicle
+        a, lay = v.a, v.layout
+        F = D[0]
         tq = rotor_torque(F, a.g1, a.g2)                                       # eq. 28
-        if scale is not None:
-            F, tq = F * scale, tq * scale
-        tphi, ttheta, tpsi = body_torques(*F, *tq, a.l)                        # "+" layout, eq. 25
+        scale = self.S[i] if scale is None else scale * self.S[i]
+        if not (isinstance(scale, float) and scale == 1.0):
+            F, tq, D = F * scale, tq * scale, D * scale
+        x, y, s = (np.asarray(c)[:, None] for c in (lay.x, lay.y, lay.spin))
+        tphi, ttheta, tpsi = (y * F).sum(axis=0), -(x * F).sum(axis=0), -(s * tq).sum(axis=0)
+        unit = None
+        if v.identified:     # eq. 28 with g2 = 0 is linear in the drive: each component's channels
+            unit = np.zeros((D.shape[0], C, F.shape[1]))
+            for k, d in enumerate(D):
+                unit[k, 0], unit[k, 1] = (y * d).sum(axis=0) / a.Jxx, -(x * d).sum(axis=0) / a.Jyy
+                unit[k, 2], unit[k, 5] = -(s * a.g1 * d).sum(axis=0) / a.Jzz, d.sum(axis=0) / a.M
         if torque_extra is not None:
             tphi, ttheta, tpsi = tphi + torque_extra[0], ttheta + torque_extra[1], tpsi + torque_extra[2]
-        w = rotor_speed(F, a.c1)                                                # eq. 27
-        Omega = -w[0] + w[1] - w[2] + w[3]                                     # eq. 9
         p, q, r = self.wmid[i]
+        hz = 0.0
+        if a.Jp:
+            w = rotor_speed(F, a.c1)                                            # eq. 27
+            hz = a.Jp * (s * w).sum(axis=0)                                     # eq. 9: Jp Omega
         tau_d = yaw_drag(r, a.gamma1, 0.0)                                      # eq. 6, gamma2 = 0 in flight
+        cp, cq, cr = v.coupling
         out = np.zeros((C, F.shape[1]))
-        out[0], out[1], out[2] = angular_acceleration(p, q, r, tphi, ttheta, tpsi, Omega, tau_d, a)  # eq. 7
+        out[0] = (tphi - q * hz) / a.Jxx + cp * q * r                           # eq. 7, vector form
+        out[1] = (ttheta + p * hz) / a.Jyy + cq * p * r
+        out[2] = (tpsi - tau_d) / a.Jzz + cr * p * q
         out[5] = F.sum(axis=0) / a.M
         if force_extra is not None:
             out[3], out[4] = force_extra[0] / a.M, force_extra[1] / a.M
-        return out
+        return Pred(out, unit)
 
-    def delta_filtered(self, per_file_pred):
-        """Filtered change of the prediction against the base model, flattened: D = L(pred - base)."""
-        return self.flat_filtered([p - b for p, b in zip(per_file_pred, self.base_pred)])
+    def free_columns(self, preds: list[Pred]) -> np.ndarray:
+        """(K, C, n): an identified vehicle's free columns at the drives of `preds` (each thrust
+        channel's coefficients on each drive component), then those the chain's causes brought."""
+        extra = np.stack(self.extra_free) if self.extra_free else np.zeros((0, C, self.n))
+        if not self.vehicle.identified:
+            return extra
+        K = preds[0].unit.shape[0]
+        cols = np.zeros((K * len(THRUST_CHANNELS), C, self.n))
+        for k in range(K):
+            U = self.flat_filtered([p.unit[k] for p in preds])
+            for j, c in enumerate(THRUST_CHANNELS):
+                cols[k * len(THRUST_CHANNELS) + j, c] = U[c]
+        return np.concatenate([cols, extra])
+
+    def delta_filtered(self, per_file_pred: list[Pred]) -> Change:
+        """Filtered change of the prediction against the base model, flattened: D = L(pred - base),
+        with the free columns at the new thrusts."""
+        delta = self.flat_filtered([p.value - b for p, b in zip(per_file_pred, self.base_pred)])
+        return Change(delta, self.free_columns(per_file_pred))
 
     def thrust_columns(self, i, F=None):
         """Per-file (4, C, n): the part of the channels proportional to each rotor's thrust and torque."""
-        a = self.a
+        a, lay = self.a, self.vehicle.layout
         F = self.F[i] if F is None else F
         tq = rotor_torque(F, a.g1, a.g2)
+        F, tq = F * self.S[i], tq * self.S[i]
         G = np.zeros((4, C, F.shape[1]))
-        G[0, 1], G[2, 1] = -a.l * F[0] / a.Jyy, a.l * F[2] / a.Jyy
-        G[1, 0], G[3, 0] = a.l * F[1] / a.Jxx, -a.l * F[3] / a.Jxx
-        for m, sgn in enumerate((1.0, -1.0, 1.0, -1.0)):
-            G[m, 2] = sgn * tq[m] / a.Jzz
+        for m in range(4):
+            G[m, 0] = lay.y[m] * F[m] / a.Jxx
+            G[m, 1] = -lay.x[m] * F[m] / a.Jyy
+            G[m, 2] = -lay.spin[m] * tq[m] / a.Jzz
             G[m, 5] = F[m] / a.M
         return G
-
-

@@ -3,6 +3,8 @@ whiteness, its cross-correlation with each input) and figures (residual against 
 against the variable that explains it). matplotlib is imported only when figures are asked for."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from flightctl.sim.identify.diagnose.candidate import Result
@@ -71,7 +73,16 @@ def text(d: Diagnosis) -> str:
     L.append(f"  {ds.seconds:.1f} s airborne, {ds.n} samples at {ds.fs:.0f} Hz, {len(ds.stretches)} stretch(es)")
     L.append(f"  metric: {rep['metric']}")
     base = ", ".join(f"{e['cause']} {e['parameters']}" for e in d.carried)
-    L.append(f"  base model: the paper's{' with ' + base if base else ''}")
+    if ds.vehicle.identified:
+        L.append("  base model: identified from the flight (another vehicle; docs/real-flights.md), per unit mass "
+                 "and inertia, arm lengths as unit:")
+        for name, v in rep["base_model"].items():
+            if isinstance(v, dict) and "stderr" in v:
+                L.append(f"    {name:<7} {v['value']:>11.5g} +- {v['stderr']:<9.2g} {v['unit']:<22} {v['what']}")
+        bm = rep["base_model"]
+        L.append(f"    median command in flight P = {bm['median_P']['value']}; rotors: {bm['layout']['source']}")
+    else:
+        L.append(f"  base model: the paper's{' with ' + base if base else ''}")
     L.append("")
     L.append(f"  {'candidate':<16} {'parameters':<34} {'gain':>8} {'t':>7}  {'best channel (gain, t)':<24} named?")
     for c in rep["candidates"]:
@@ -86,6 +97,14 @@ def text(d: Diagnosis) -> str:
     for nj in rep["not_judged"]:
         L.append(f"  {nj['cause']:<16} not judged: {nj['why']}")
     L.append("")
+    if rep["causes"]:
+        L.append("  causes, each fitted on top of the ones before it (gain: held-out, over the model before it):")
+        for k, c in enumerate(rep["causes"], 1):
+            params = ", ".join(f"{n}={v:.4g}" if isinstance(v, (int, float)) else f"{n}={v}"
+                               for n, v in c["parameters"].items())
+            L.append(f"    {k}. {c['cause']:<16} {params:<34} gain {c['gain']:+.3f} (t = {c['t_stat']:.1f}, "
+                     f"in {c['significant_in']}); on top of all the others: gain {c['gain_last']:+.3f}")
+        L.append("    (parameters: each cause refitted on top of all the others)")
     if d.cause == "none":
         sig = rep["significance"]
         L.append(f"  verdict: none (no candidate has a held-out gain >= {sig['min_gain']} with t >= "
@@ -95,6 +114,15 @@ def text(d: Diagnosis) -> str:
         L.append(f"  verdict: {d.cause} {d.parameters}: held-out RMSE {d.rmse_base:.4g} -> {d.rmse_extended:.4g}, "
                  f"gain {d.gain:.3f} (significant in {d.significant[d.cause]})")
     best = next((r for r in d.results if r.cause == d.cause), None)
+    check = rep.get("rotor_speed_check")
+    if check:
+        L.append(f"  check against the log's rotor speeds: commanded speed -> measured, lag {1e3 * check['tau']:.1f} ms "
+                 f"(per motor {', '.join(f'{1e3 * t:.0f}' for t in check['per_motor_tau'])} ms) and delay "
+                 f"{1e3 * check['delay']:.1f} ms")
+    val = rep.get("validation")
+    if val:
+        L.append(f"  validation on {', '.join(val['files'])} ({val['airborne_s']} s airborne), the model as fitted here: "
+                 f"RMSE {val['rmse_base']:.4g} (base) -> {val['rmse_extended']:.4g} (with the causes), gain {val['gain']:+.3f}")
     L.append("")
     L.append(_residual_table(d, best))
     if d.notes:
@@ -133,16 +161,22 @@ def _residual_table(d: Diagnosis, best: Result | None) -> str:
     return "\n".join(L)
 
 
+CHAIN_COLOURS = ("tab:blue", "tab:green", "tab:purple", "tab:orange", "tab:brown", "tab:pink")
+
+
 def figures(d: Diagnosis) -> dict[str, bytes]:
-    """{"residuals": png, "explained": png}: residual (base, extended) against time for every channel,
-    and the base residual of the most changed channel against the variable that explains it."""
-    from flightctl.sim.plots import empty_panel, figure, legend, png
+    """{"residuals": png, "explained": png}: the held-out residual against time for every channel,
+    of the base model and after each cause of the chain (each on top of the ones before it), and
+    the base residual of the most changed channel against the variable that explains the first
+    cause (or the best candidate when none is named)."""
+    from flightctl.sim.plots import empty_panel, figure, figure_legend, legend, png
 
     ds = d.ds
     best = next((r for r in d.results if r.cause == d.cause), None)
     shown = best if best is not None else (d.results[0] if d.results else None)
     base = d.base.score.residual
     ext = shown.score.residual if shown is not None else base
+    steps = d.chain if d.chain else ([shown] if shown is not None else [])
     t = ds.time
     out = {}
     fig, axes = figure(C, 1, size=(9, 11), sharex="col")
@@ -150,12 +184,17 @@ def figures(d: Diagnosis) -> dict[str, bytes]:
     step = max(1, ds.n // 6000)
     for c, ax in enumerate(axes):
         ax.plot(t[::step], base[c, ::step], ",", color="tab:red", label="base model")
-        if shown is not None:   # no candidate judged: the base residual alone, not twice
-            ax.plot(t[::step], ext[c, ::step], ",", color="tab:blue", label=f"with {shown.cause}")
+        after = []
+        for k, r in enumerate(steps):   # no candidate judged: the base residual alone, not twice
+            after.append(r.cause)
+            ax.plot(t[::step], r.score.residual[c, ::step], ",", color=CHAIN_COLOURS[k % len(CHAIN_COLOURS)],
+                    label="with " + " + ".join(after))
         ax.set_ylabel(f"{CHANNELS[c]}\n[{UNITS[c]}]", fontsize=8)
         ax.tick_params(labelsize=7)
-    axes[0].set_title(f"held-out residual, base (red) and {shown.cause} (blue); verdict: {d.cause}"
-                      if shown is not None else
+    if steps:
+        figure_legend(fig, axes[0], ncol=min(len(steps) + 1, 4))
+    axes[0].set_title(("held-out residual of the base model (red) and after each cause of the chain; causes: "
+                       + (" + ".join(r.cause for r in d.chain) or "none")) if steps else
                       f"held-out residual of the base model (no candidate could be judged); verdict: {d.cause}",
                       fontsize=9)
     axes[-1].set_xlabel("time in the log [s] (airborne stretches only)")

@@ -28,14 +28,6 @@ T_CHANNEL = 3.5
 DM_CHANNEL_WINDOW_S = 0.25
 
 
-def _rss(res, mask, offsets=None):
-    """Per-channel residual sum of squares over `mask`; offset channels centred by `offsets`."""
-    r = res[:, mask]
-    if offsets is not None:
-        r = r - offsets[:, None]
-    return np.einsum("cn,cn->c", r, r)
-
-
 def offsets(res, mask):
     """(C,): the mean of each offset channel over `mask`, 0 for the others."""
     m = np.zeros(C)
@@ -43,28 +35,73 @@ def offsets(res, mask):
     return m
 
 
-def objective(res, mask):
-    """Gaussian log-likelihood with one variance per channel (up to constants): sum_c log RSS_c."""
-    return float(np.log(_rss(res, mask, offsets(res, mask)) + 1e-300).sum())
+@dataclass
+class LinearStats:
+    """Per block b and channel c, sums over the block's samples of a residual e (C, n) and of free
+    columns A (C, n, P) that a fit may subtract: e, A, e^2, A e and A A^T. Every fit of diagnose is
+    a weighted least-squares fit of the free columns' coefficients from these, so that the folds of
+    the held-out scoring cost sums over blocks, not passes over the data."""
+    se: np.ndarray     # (B, C)
+    sA: np.ndarray     # (B, C, P)
+    ee: np.ndarray     # (B, C)
+    Ae: np.ndarray     # (B, C, P)
+    AA: np.ndarray     # (B, C, P, P)
+
+    @property
+    def P(self) -> int:
+        return self.sA.shape[2]
 
 
-def block_stats(ds: DataSet, res):
-    """(2, B, C): per block and channel, the sum and the sum of squares of a residual."""
-    out = np.zeros((2, N_BLOCKS, C))
+def linear_stats(ds: DataSet, e: np.ndarray, A: np.ndarray | None = None) -> LinearStats:
+    """The block sums of e (C, n) and A (C, n, P) (None: no free columns)."""
+    if A is None:
+        A = np.zeros((C, e.shape[1], 0))
+    P = A.shape[2]
+    st = LinearStats(np.zeros((N_BLOCKS, C)), np.zeros((N_BLOCKS, C, P)), np.zeros((N_BLOCKS, C)),
+                     np.zeros((N_BLOCKS, C, P)), np.zeros((N_BLOCKS, C, P, P)))
     for b, (i0, i1) in enumerate(ds.block_edges):
-        r = res[:, i0:i1]
-        out[0, b] = r.sum(axis=1)
-        out[1, b] = np.einsum("cn,cn->c", r, r)
-    return out
+        eb, Ab = e[:, i0:i1], A[:, i0:i1]
+        st.se[b] = eb.sum(axis=1)
+        st.ee[b] = np.einsum("cn,cn->c", eb, eb)
+        if P:
+            st.sA[b] = Ab.sum(axis=1)
+            st.Ae[b] = np.einsum("cnp,cn->cp", Ab, eb)
+            st.AA[b] = np.einsum("cnp,cnq->cpq", Ab, Ab)
+    return st
 
 
-def stats_objective(st, test_block, counts):
-    """`objective` on all blocks but one, from `block_stats` and the samples per block."""
-    keep = np.arange(N_BLOCKS) != test_block
+def solve(st: LinearStats, keep, counts) -> tuple[float, np.ndarray, np.ndarray]:
+    """The fit on the blocks `keep` (a boolean mask or indices): the coefficients theta (P,) of the
+    free columns by least squares weighted per channel by the inverse of its residual variance
+    (three reweighting passes: the maximum-likelihood fit of one variance per channel), the offset
+    channels centred. Returns (sum_c log RSS_c, theta, offsets (C,))."""
+    keep = np.asarray(keep)
     n = counts[keep].sum()
-    s1, s2 = st[0, keep].sum(axis=0), st[1, keep].sum(axis=0)
-    rss = s2 - np.where(OFFSET, s1 * s1 / n, 0.0)
-    return float(np.log(np.maximum(rss, 1e-300)).sum())
+    cen = np.where(OFFSET, 1.0 / n, 0.0)
+    se, ee = st.se[keep].sum(axis=0), st.ee[keep].sum(axis=0)
+    ee = ee - cen * se * se
+    theta = np.zeros(st.P)
+    if st.P:
+        sA = st.sA[keep].sum(axis=0)
+        Ae = st.Ae[keep].sum(axis=0) - cen[:, None] * sA * se[:, None]
+        AA = st.AA[keep].sum(axis=0) - cen[:, None, None] * sA[:, :, None] * sA[:, None, :]
+        w = 1.0 / np.maximum(ee, 1e-300)
+        for _ in range(3):
+            M = np.einsum("c,cpq->pq", w, AA)
+            h = np.einsum("c,cp->p", w, Ae)
+            theta = np.linalg.lstsq(M + 1e-12 * np.trace(M) * np.eye(st.P), h, rcond=None)[0]
+            rss = ee - 2.0 * Ae @ theta + np.einsum("p,cpq,q->c", theta, AA, theta)
+            w = 1.0 / np.maximum(rss, 1e-300)
+        ee = rss
+        se = se - sA @ theta
+    return float(np.log(np.maximum(ee, 1e-300)).sum()), theta, np.where(OFFSET, se / n, 0.0)
+
+
+def fitted(e: np.ndarray, A: np.ndarray | None, theta: np.ndarray) -> np.ndarray:
+    """e - A theta: the residual with the free columns subtracted (offsets not removed)."""
+    if A is None or not theta.size:
+        return e
+    return e - A @ theta
 
 
 @dataclass
@@ -77,18 +114,33 @@ class Score:
         return np.sqrt(self.rss.sum(axis=0) / self.count.sum())
 
 
-def heldout(ds: DataSet, residual_for_fold) -> Score:
-    """`residual_for_fold(train_mask) -> (C, n) residual` of the model fitted on train_mask."""
+def heldout(ds: DataSet, fold) -> Score:
+    """`fold(test_block) -> ((C, n_test) residual on the test block, offsets (C,))` of the model
+    fitted on the other blocks; the held-out residual is that residual less those offsets."""
     rss = np.zeros((N_BLOCKS, C))
-    count = np.zeros(N_BLOCKS)
     out = np.empty((C, ds.n))
-    for b in range(N_BLOCKS):
-        test = ds.block == b
-        res = residual_for_fold(~test)
-        out[:, test] = res[:, test] - offsets(res, ~test)[:, None]
-        rss[b] = np.einsum("cn,cn->c", out[:, test], out[:, test])
-        count[b] = test.sum()
-    return Score(rss, count, out)
+    for b, (i0, i1) in enumerate(ds.block_edges):
+        res, off = fold(b)
+        out[:, i0:i1] = res - off[:, None]
+        rss[b] = np.einsum("cn,cn->c", out[:, i0:i1], out[:, i0:i1])
+    return Score(rss, ds.block_counts.copy(), out)
+
+
+def heldout_linear(ds: DataSet, e: np.ndarray, A: np.ndarray | None, st: LinearStats | None = None,
+                   record=None) -> Score:
+    """The held-out Score of a linear model: each block predicted with the coefficients fitted on
+    the others. `record(theta)` sees each fold's coefficients."""
+    st = linear_stats(ds, e, A) if st is None else st
+    blocks = np.arange(N_BLOCKS)
+
+    def fold(b):
+        _, theta, off = solve(st, blocks != b, ds.block_counts)
+        if record is not None:
+            record(theta)
+        i0, i1 = ds.block_edges[b]
+        return fitted(e[:, i0:i1], None if A is None else A[:, i0:i1], theta), off
+
+    return heldout(ds, fold)
 
 
 def geomean(x):

@@ -1,12 +1,15 @@
-"""The verdict of diagnose: carry the parameter file's effects into the base model, run every
-candidate of the registry on the data set, judge each one's held-out gain, name the best significant
-one or `none`, and write the JSON report of measured-data.md (docs/diagnose.md, "Significance" and
-"A base model with effects")."""
+"""The verdict of diagnose: the base model (this project's airframe with a parameter file's effects, or
+one identified from the flight of another vehicle), every candidate of the registry run on the data
+set and judged by its held-out gain, and the chain of causes: the strongest significant candidate is
+named and folded into the model, the others are refitted on top of it, until none is significant.
+The JSON report of measured-data.md (docs/diagnose.md, "Significance", "Every cause" and "A base
+model with effects"; docs/real-flights.md)."""
 from __future__ import annotations
 
+import copy
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -14,17 +17,26 @@ from flightctl.errors import InputError
 from flightctl.logfile import Table
 from flightctl.params import Airframe, EffectSpec
 from flightctl.sim.causes import CAUSES, make
-from flightctl.sim.identify.diagnose.candidate import Result
-from flightctl.sim.identify.diagnose.data import MIN_STRETCH_S, Z_AIRBORNE, load_file
-from flightctl.sim.identify.diagnose.dataset import CHANNELS, LOWPASS_HZ, N_BLOCKS, UNITS, DataSet
+from flightctl.sim.identify.diagnose.base import identify
+from flightctl.sim.identify.diagnose.candidate import Result, columns_of
+from flightctl.sim.identify.diagnose.data import MIN_STRETCH_S, Layout, load_file
+from flightctl.sim.identify.diagnose.dataset import (CHANNELS, LOWPASS_HZ, N_BLOCKS, OFFSET, UNITS, Change,
+                                                     DataSet, Vehicle)
+from flightctl.sim.identify.diagnose.rotorspeed import rotor_speed_lag
 from flightctl.sim.identify.diagnose.scoring import (DM_CHANNEL_WINDOW_S, DM_WINDOW_S, MIN_CHANNEL_GAIN, MIN_GAIN,
-                                                     T_CHANNEL, T_CRIT, geomean, heldout, significance)
+                                                     T_CHANNEL, T_CRIT, geomean, heldout_linear, significance)
 
 MIN_AIRBORNE_S = 1.0     # s of airborne data needed in total to judge anything
+# A lag or a delay of tens of milliseconds shows only in commands logged at several times the
+# low-pass bandwidth; a log whose motor outputs are slower is judged for its static effects only,
+# low-passed at a quarter of its motor rate.
+DYNAMIC_MIN_HZ = 4.0 * LOWPASS_HZ
+# Causes that are one physical effect modelled two ways: once one is in the chain the other is not tried.
+TWINS = {"motor_lag": "motor_dynamics", "motor_dynamics": "motor_lag"}
 
 METRIC = ("geometric mean over 6 channels of the held-out RMSE of the one-loop-period equation error: "
           "angular acceleration p, q, r (rad/s^2, differenced gyro) and specific force x, y, z (m/s^2, "
-          f"accelerometer, one bias each), both sides low-passed at {LOWPASS_HZ:g} Hz; held out by "
+          "accelerometer, one bias each), both sides low-passed at {lowpass:g} Hz; held out by "
           f"{N_BLOCKS}-block cross-validation over the airborne data")
 
 
@@ -39,57 +51,137 @@ def _num(x, digits=5):
 
 
 @dataclass
-class Diagnosis:
-    cause: str
-    parameters: dict
-    rmse_base: float
-    rmse_extended: float
-    gain: float
-    metric: str
-    results: list[Result]            # judged candidates, best first
-    not_judged: list[dict]
+class Round:
+    """One step of the chain: the model so far (`base`, held out) and every candidate judged on top."""
     base: Result
-    ds: DataSet
+    results: list[Result]                  # judged candidates, best first
+    not_judged: list[dict]
+    significant: dict[str, str]            # cause -> why significant: "all channels" or the one channel
+    named: Result | None = None
+
+    def candidates(self) -> list[dict]:
+        out = []
+        for r in self.results:
+            s = r.significance
+            out.append({"cause": r.cause, "parameters": r.parameters, "gain": _num(r.gain),
+                        "rmse_extended": _num(geomean(r.score.rmse()), 6),
+                        "t_stat": _num(r.t_stat, 2), "significant": r.cause in self.significant,
+                        "significant_in": self.significant.get(r.cause),
+                        "channels": {c: {"gain": _num(g), "t": _num(t, 2)}
+                                     for c, g, t in zip(CHANNELS, s.channel_gain, s.channel_t)},
+                        "block_gains": [_num(g, 4) for g in s.block_gain]})
+        return out
+
+
+@dataclass
+class Diagnosis:
+    rounds: list[Round]
+    ds: DataSet                      # the data set of the first round (the base model alone)
     notes: list[str]
-    significant: dict[str, str]      # cause -> why significant: "all channels" or the one channel
     carried: list[dict]              # the parameter file's effects in the base model
+    lowpass_hz: float = LOWPASS_HZ
+    final: dict[str, Result] = field(default_factory=dict)   # the chain's causes, each refitted on top of the others
+    rotor_speed_check: dict | None = None
+    validation: dict | None = field(default=None)
+
+    # the first round is the contract's top level: the strongest cause and every candidate
+    @property
+    def first(self) -> Round:
+        return self.rounds[0]
+
+    @property
+    def base(self) -> Result:
+        return self.first.base
+
+    @property
+    def results(self) -> list[Result]:
+        return self.first.results
+
+    @property
+    def not_judged(self) -> list[dict]:
+        return self.first.not_judged
+
+    @property
+    def significant(self) -> dict[str, str]:
+        return self.first.significant
+
+    @property
+    def steps(self) -> list[Round]:
+        """The rounds whose named cause survived the backfit, in the chain's order."""
+        return [r for r in self.rounds if r.named is not None and r.named.cause in self.final]
+
+    @property
+    def chain(self) -> list[Result]:
+        """The chain of causes: each named on top of the causes before it (its gain, its residual)."""
+        return [r.named for r in self.steps]
+
+    @property
+    def cause(self) -> str:
+        return self.chain[0].cause if self.chain else "none"
+
+    @property
+    def parameters(self) -> dict:
+        return self.final[self.cause].parameters if self.chain else {}
+
+    @property
+    def rmse_base(self) -> float:
+        return geomean(self.steps[0].base.score.rmse() if self.chain else self.base.score.rmse())
+
+    @property
+    def rmse_extended(self) -> float:
+        return geomean(self.chain[0].score.rmse()) if self.chain else self.rmse_base
+
+    @property
+    def gain(self) -> float:
+        return self.chain[0].gain if self.chain else 0.0
 
     def report(self) -> dict:
         """The JSON report: the keys of measured-data.md, then the project's extras."""
-        cands = []
-        for r in self.results:
-            s = r.significance
-            cands.append({"cause": r.cause, "parameters": r.parameters, "gain": _num(r.gain),
-                          "rmse_extended": _num(geomean(r.score.rmse()), 6),
-                          "t_stat": _num(r.t_stat, 2), "significant": r.cause in self.significant,
-                          "significant_in": self.significant.get(r.cause),
-                          "channels": {c: {"gain": _num(g), "t": _num(t, 2)}
-                                       for c, g, t in zip(CHANNELS, s.channel_gain, s.channel_t)},
-                          "block_gains": [_num(g, 4) for g in s.block_gain]})
         base_rmse = self.base.score.rmse()
-        best = next((r for r in self.results if r.cause == self.cause), None)
-        ext_rmse = best.score.rmse() if best is not None else base_rmse
-        return {
+        ext_rmse = self.chain[0].score.rmse() if self.chain else base_rmse
+        causes = []
+        for rnd in self.steps:
+            r, last = rnd.named, self.final[rnd.named.cause]
+            causes.append({"cause": r.cause, "parameters": last.parameters, "gain": _num(r.gain),
+                           "t_stat": _num(r.t_stat, 2), "significant_in": rnd.significant[r.cause],
+                           "rmse_before": _num(geomean(rnd.base.score.rmse()), 6),
+                           "rmse_after": _num(geomean(r.score.rmse()), 6),
+                           "parameters_in_order": r.parameters, "gain_last": _num(last.gain)})
+        v = self.ds.vehicle
+        out = {
             "cause": self.cause,
             "parameters": self.parameters,
             "rmse_base": _num(self.rmse_base, 6),
             "rmse_extended": _num(self.rmse_extended, 6),
             "gain": _num(self.gain),
-            "metric": self.metric,
-            "candidates": cands,
+            "metric": METRIC.format(lowpass=self.lowpass_hz),
+            "candidates": self.first.candidates(),
+            "causes": causes,
             "not_judged": self.not_judged,
+            "rounds": [{"candidates": [{"cause": c["cause"], "parameters": c["parameters"], "gain": c["gain"],
+                                        "significant": c["significant"]} for c in rnd.candidates()],
+                        "not_judged": rnd.not_judged} for rnd in self.rounds[1:]],
             "channels": {c: {"unit": u, "rmse_base": _num(b, 6), "rmse_extended": _num(e, 6)}
                          for c, u, b, e in zip(CHANNELS, UNITS, base_rmse, ext_rmse)},
             "significance": {"min_gain": MIN_GAIN, "t_crit": T_CRIT, "blocks": N_BLOCKS,
                              "window_s": DM_WINDOW_S, "min_channel_gain": _num(MIN_CHANNEL_GAIN, 4),
                              "t_channel": T_CHANNEL, "channel_window_s": DM_CHANNEL_WINDOW_S},
+            "base_model": ({"identified": True, "what": "identified from the flight (docs/real-flights.md); "
+                            "the candidates' parameters are per unit mass (kg), inertia (kg m^2) and arm length",
+                            **v.identification} if v.identified else
+                           {"identified": False, "what": "this project's airframe (conventions.md or --params)"}),
             "data": {"files": [f.path for f in self.ds.files], "airborne_s": round(self.ds.seconds, 2),
-                     "lowpass_hz": LOWPASS_HZ, "base_effects": self.carried},
+                     "lowpass_hz": self.lowpass_hz, "base_effects": self.carried},
             "notes": self.notes,
         }
+        if self.rotor_speed_check is not None:
+            out["rotor_speed_check"] = self.rotor_speed_check
+        if self.validation is not None:
+            out["validation"] = self.validation
+        return out
 
 
-def _dataset(tables: list[Table], a: Airframe, notes: list[str], progress) -> DataSet:
+def _files(tables: list[Table], a: Airframe, notes: list[str], progress):
     """The airborne data of every log; a log without any is noted and left out."""
     files = []
     for tab in tables:
@@ -103,12 +195,42 @@ def _dataset(tables: list[Table], a: Airframe, notes: list[str], progress) -> Da
         files.append(fd)
     total = sum(f.airborne.sum() * float(np.median(np.diff(f.t))) for f in files)
     if total < MIN_AIRBORNE_S:
-        what = (f"too short to judge: {total:.1f} s of airborne data (motors running, above "
-                f"{Z_AIRBORNE:g} m), at least {MIN_AIRBORNE_S:g} s needed")
+        what = (f"too short to judge: {total:.1f} s of airborne data (motors running, off the ground), "
+                f"at least {MIN_AIRBORNE_S:g} s needed")
         if len(tables) == 1:
             tables[0].fail(what)
         raise InputError(f"{', '.join(t.path for t in tables)}: {what}")
-    return DataSet(files, a)
+    return files
+
+
+def _motor_rate(tables: list[Table]) -> float | None:
+    """The slowest motor-output rate any log declares (`# motor_rate_hz:`), or None."""
+    rates = []
+    for t in tables:
+        try:
+            rates.append(float(t.meta["motor_rate_hz"]))
+        except (KeyError, ValueError):
+            pass
+    return min(rates) if rates else None
+
+
+def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, notes: list[str], progress) -> Vehicle:
+    """The base model: a foreign vehicle's identified from the flight unless a parameter file is
+    given; this project's airframe otherwise."""
+    foreign = [f.foreign for f in files]
+    if any(foreign) and not all(foreign):
+        raise InputError("the logs mix this project's vehicle with another one: diagnose them apart")
+    if not all(foreign):
+        return Vehicle.known(a, files[0].layout)
+    if given:
+        lay = files[0].layout
+        scale = a.l if lay.unit == "arm" else 1.0
+        layout = Layout(tuple(v * scale for v in lay.x), tuple(v * scale for v in lay.y), lay.spin, "m", lay.source)
+        notes.append("base model: the parameter file's airframe with the log's rotor layout (arm = l)")
+        return Vehicle.known(a, layout)
+    vehicle, more = identify(files, lowpass_hz, progress)
+    notes += [f"base model: {n}" for n in more]
+    return vehicle
 
 
 def carry(ds: DataSet, effects: tuple[EffectSpec, ...], notes: list[str], progress) -> list[dict]:
@@ -130,30 +252,27 @@ def carry(ds: DataSet, effects: tuple[EffectSpec, ...], notes: list[str], progre
     return carried
 
 
-def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[EffectSpec, ...] = ()) -> Diagnosis:
-    """Every candidate of `flightctl.sim.causes` fitted and scored on the logs, on top of the base
-    model with `effects` (a parameter file's `[[effect]]` tables); the verdict."""
-    for e in effects:
-        make(e.cause, **dict(e.parameters))     # the registry's checks (known cause, names, ranges) first
-    notes: list[str] = []
-    ds = _dataset(tables, a, notes, progress)
-    progress(f"{ds.n} samples airborne ({ds.seconds:.1f} s), {N_BLOCKS} blocks")
-    carried = carry(ds, effects, notes, progress)
-    base = Result("none", {}, heldout(ds, lambda train: ds.r_base), ds.r_base)
+def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str], progress, label: str) -> tuple[Round, dict]:
+    """Every candidate not in `skip` fitted and judged on top of the data set's base model."""
+    base = Result("none", {}, heldout_linear(ds, ds.r_base, columns_of(Change(None, ds.base_free))), ds.r_base)
     results, not_judged, judged = [], [], {}
     for c in CAUSES.values():
+        if c.name in skip:
+            continue
         cand = c.candidate(ds)
         why = cand.why_not()
+        if why is None and static_only and getattr(cand, "dynamic", False):
+            why = static_only
         if why is not None:
             not_judged.append({"cause": cand.cause, "why": why})
-            progress(f"{cand.cause}: not judged ({why})")
+            progress(f"{label}{cand.cause}: not judged ({why})")
             continue
         r = cand.run()
         r.significance = significance(r.score, base.score, ds.fs)
         r.explanatory = cand.explanatory()
         results.append(r)
         judged[r.cause] = cand
-        progress(f"{cand.cause}: {r.parameters} held-out gain {r.gain:+.4f} (t = {r.t_stat:.1f})")
+        progress(f"{label}{cand.cause}: {r.parameters} held-out gain {r.gain:+.4f} (t = {r.t_stat:.1f})")
     results.sort(key=lambda r: -r.gain)
     significant = {}
     for r in results:
@@ -163,11 +282,132 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
             notes.append(why)
         elif by:
             significant[r.cause] = by
-    rb = geomean(base.score.rmse())
-    best = next((r for r in results if r.cause in significant), None)
-    if best is None:
-        cause, params, re, gain = "none", {}, rb, 0.0
-    else:
-        cause, params, re, gain = best.cause, best.parameters, geomean(best.score.rmse()), best.gain
-    return Diagnosis(cause, params, rb, re, gain, METRIC, results, not_judged, base, ds, notes, significant,
-                     carried)
+    rnd = Round(base, results, not_judged, significant)
+    rnd.named = next((r for r in results if r.cause in significant), None)
+    return rnd, judged
+
+
+def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[EffectSpec, ...] = (),
+             params_given: bool = False) -> Diagnosis:
+    """Every candidate of `flightctl.sim.causes` fitted and scored on the logs, on top of the base
+    model (with `effects`, a parameter file's `[[effect]]` tables), and the chain of causes."""
+    for e in effects:
+        make(e.cause, **dict(e.parameters))     # the registry's checks (known cause, names, ranges) first
+    notes: list[str] = []
+    files = _files(tables, a, notes, progress)
+    lowpass, static_only = LOWPASS_HZ, None
+    rate = _motor_rate(tables)
+    if rate is not None and rate < DYNAMIC_MIN_HZ:
+        lowpass = rate / 4.0
+        static_only = (f"the motor outputs were logged at {rate:.1f} Hz: a lag or a delay of tens of ms needs "
+                       f"them at {DYNAMIC_MIN_HZ:g} Hz or more")
+        notes.append(f"{static_only}; only static effects are judged, on data low-passed at {lowpass:.2g} Hz")
+    vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, notes, progress)
+    ds = DataSet(files, vehicle, lowpass)
+    progress(f"{ds.n} samples airborne ({ds.seconds:.1f} s), {N_BLOCKS} blocks")
+    carried = carry(ds, effects, notes, progress)
+    rounds, skip = [], set()
+    first = ds
+    while True:
+        label = f"[cause {len(rounds) + 1}] " if rounds else ""
+        rnd, _ = _round(ds, skip, static_only, notes, progress, label)
+        rounds.append(rnd)
+        r = rnd.named
+        if r is None:
+            break
+        progress(f"cause {len(rounds)}: {r.cause} {r.parameters}, held-out gain {r.gain:.3f}; folded into the model")
+        skip |= {r.cause, TWINS.get(r.cause, r.cause)}
+        ds = _folded(ds, [(r.cause, r.parameters)])
+    final = _backfit(first, [(r.named.cause, r.named.parameters) for r in rounds if r.named is not None],
+                     notes, progress)
+    check = rotor_speed_lag(files)
+    return Diagnosis(rounds, first, notes, carried, lowpass, final=final, rotor_speed_check=check)
+
+
+def validate(d: Diagnosis, tables: list[Table], a: Airframe, progress=say) -> dict:
+    """The model as fitted by the diagnosis (its base model, the parameter file's effects and the
+    chain's causes at their parameters, nothing refitted but each accelerometer's bias) predicting
+    other flights of the same vehicle: the RMSE of the base model and of the model with the causes,
+    and the gain (the metric of the report, on data no fit has seen)."""
+    notes: list[str] = []
+    files = _files(tables, a, notes, progress)
+    if any(f.foreign != d.ds.files[0].foreign for f in files):
+        raise InputError("--validate: the validation logs are not of the diagnosed vehicle's kind")
+    ds = DataSet(files, d.ds.vehicle, d.lowpass_hz)
+    for e in d.carried:
+        ds.carry(e["cause"], e["parameters"], CAUSES[e["cause"]].candidate(ds).predict(e["parameters"]))
+    chain = [(c, r.parameters) for c, r in d.final.items()]
+    folded = _folded(ds, chain)
+
+    def rmse(r):
+        r = r - np.where(OFFSET, r.mean(axis=1), 0.0)[:, None]
+        return np.sqrt(np.mean(r * r, axis=1))
+
+    rb, re = rmse(ds.r_base), rmse(folded.r_base)
+    progress(f"validation: RMSE {geomean(rb):.4g} (base) -> {geomean(re):.4g} (with {', '.join(c for c, _ in chain) or 'no cause'})")
+    return {"files": [f.path for f in files], "airborne_s": round(ds.seconds, 2), "causes": [c for c, _ in chain],
+            "rmse_base": _num(geomean(rb), 6), "rmse_extended": _num(geomean(re), 6),
+            "gain": _num(1.0 - geomean(re) / geomean(rb)),
+            "channels": {c: {"rmse_base": _num(b, 6), "rmse_extended": _num(e, 6)}
+                         for c, b, e in zip(CHANNELS, rb, re)},
+            "notes": notes}
+
+
+def _folded(ds: DataSet, causes) -> DataSet:
+    """A copy of the data set with `causes` ((cause, parameters), in order) folded into its base model."""
+    for cause, parameters in causes:
+        ds = copy.copy(ds)
+        ds.carried, ds.carried_parameters, ds.extra_free = dict(ds.carried), dict(ds.carried_parameters), list(ds.extra_free)
+        CAUSES[cause].candidate(ds).fold(parameters)
+    return ds
+
+
+def _on_top(ds0: DataSet, chain: list[tuple[str, dict]], i: int) -> Result:
+    """Cause i of the chain refitted on top of all the others at their parameters, and judged there."""
+    ds = _folded(ds0, chain[:i] + chain[i + 1:])
+    cand = CAUSES[chain[i][0]].candidate(ds)
+    base = heldout_linear(ds, ds.r_base, columns_of(Change(None, ds.base_free)))
+    r = cand.run()
+    r.significance = significance(r.score, base, ds.fs)
+    r.explanatory = cand.explanatory()
+    r.note = cand.not_named(r) if r.significance.named_by() else "not significant"
+    return r
+
+
+def _refit(ds0: DataSet, chain: list[tuple[str, dict]], passes: int) -> tuple[list, list[Result]]:
+    """Each cause refitted on top of the others, in turn (Gauss-Seidel: the latest parameters of the
+    others), `passes` times: (the chain with its new parameters, each one's last Result)."""
+    chain, results = list(chain), [None] * len(chain)
+    for _ in range(passes):
+        for i, (cause, _) in enumerate(chain):
+            results[i] = _on_top(ds0, chain, i)
+            chain[i] = (cause, results[i].parameters)
+    return chain, results
+
+
+def _backfit(ds0: DataSet, chain: list[tuple[str, dict]], notes: list[str], progress) -> dict[str, Result]:
+    """The chain refitted jointly (each cause on top of all the others, twice over), then each cause
+    tested on top of the others refitted without it: one that is then not significant is dropped (a
+    cause named early can take up part of one named later, and a small one can stand in for the
+    bias that leaves). Returns {cause: its Result on top of the others}, in chain order."""
+    if not chain:
+        return {}
+    while True:
+        chain, results = _refit(ds0, chain, 2 if len(chain) > 1 else 0)
+        if len(chain) == 1:
+            return {chain[0][0]: _on_top(ds0, chain, 0)}
+        for r in results:
+            progress(f"{r.cause} on top of the other causes: {r.parameters}, held-out gain {r.gain:.3f}")
+        dropped = None
+        for i in sorted(range(len(chain)), key=lambda k: results[k].gain):
+            others, _ = _refit(ds0, chain[:i] + chain[i + 1:], 1)
+            r = _on_top(ds0, others[:i] + [chain[i]] + others[i:], i)
+            if r.note:
+                dropped = chain[i][0]
+                break
+        if dropped is None:
+            return {cause: r for (cause, _), r in zip(chain, results)}
+        notes.append(f"{dropped}: named in the chain, but not significant once the other causes are refitted "
+                     "without it: dropped")
+        progress(f"{dropped}: not significant once the others are refitted without it: dropped from the chain")
+        chain = [c for c in chain if c[0] != dropped]

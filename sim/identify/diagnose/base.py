@@ -1,0 +1,140 @@
+"""A base model from the flight itself, for a vehicle that is not the paper's (docs/real-flights.md).
+
+The structure is the paper's: each rotor's thrust follows eq. 26's form, f_i = h1 (P_i - h2)^2 with
+one curve for the four rotors; the thrusts act through the rotor layout the log declares (eq. 25's
+structure: roll torque sum y_i f_i, pitch -sum x_i f_i, yaw -sum s_i g1 f_i by eq. 28 with g2 = 0)
+on eq. 7 with its inertia coupling and eq. 6's yaw drag. Mass, inertia, arm length, h1 and g1 are
+not known, so what is identified is each channel's effectiveness per unit of them:
+
+    acc_z = k_z sum_i (P_i - h2)^2                  k_z = h1 / M
+    p_dot = k_p sum_i y_i (P_i - h2)^2 + a_p q r     k_p = h1 l / Jxx   (y_i in arm lengths)
+    q_dot = -k_q sum_i x_i (P_i - h2)^2 + a_q p r    k_q = h1 l / Jyy
+    r_dot = -k_r sum_i s_i (P_i - h2)^2 + a_r p q - gamma r |r|     k_r = h1 g1 / Jzz, gamma = gamma1 / Jzz
+
+and one offset per accelerometer channel. Eq. 7's coupling a_p = (Jyy - Jzz) / Jxx, a_q = (Jzz - Jxx)
+/ Jyy, a_r = (Jxx - Jyy) / Jzz is not fitted: in steady flight q r, p r and p q hardly move, and a fit
+lets them stand in for whatever else the base model lacks (on the indiflight logs they came out of
+the physical range [-1, 1] with the wrong signs). A quadrotor is nearly flat, so the perpendicular-axis
+theorem, Jzz = Jxx + Jyy (the paper's Table 2 meets it within 4 %), gives a_p = -1, a_q = +1 and,
+with Jxx / Jyy = k_q / k_p for rotors at the declared positions, a_r = (k_q - k_p) / (k_q + k_p). Expanded, (P - h2)^2 = P^2 - 2 h2 P + h2^2, every channel is linear in its
+coefficients on P^2 and P (the constant cancels in the torques of a symmetric layout and joins the
+accelerometer's offset in acc_z): one weighted least-squares fit (`scoring.solve`), and h2 from the
+thrust channel, h2 = -c_1 / (2 c_2). The result is an equivalent airframe (M = 1 kg, Jzz = 1 kg m^2,
+arm lengths in units of the arm, h1 = k_z, Jxx = k_z / k_p, Jyy = k_z / k_q, g1 = k_r / k_z,
+gamma1 = gamma, c1 = k_z so that a rotor's speed is P - h2 in command units, Jp = 0): the candidates'
+parameters come out per unit mass and inertia. Every score refits each channel's coefficients on
+its drive's thrust and speed parts (so the curve's scale and shape per channel) on the training blocks
+of each fold (`DataSet.base_free`): the base model is identified on training data only, except for
+gamma. Yaw rates large enough to show eq. 6's drag come in short bursts (a throw, a fast turn), so a
+gamma fitted without the block that holds them is noise and, extrapolated to it, ruins its
+prediction (on the indiflight logs a hover-only fit gave 25/rad against 0.3/rad, and 250 rad/s^2 of
+error in the held-out recovery): it is fitted once, with the curves, on all the data. Uncertainties: the delete-one-block jackknife over the scoring's blocks, which
+respects the residual's correlation in time.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from flightctl.errors import InputError
+from flightctl.params import Airframe
+from flightctl.physics import G, thrust_from_command
+from flightctl.sim.identify.diagnose.candidate import columns_of
+from flightctl.sim.identify.diagnose.data import FileData, Layout
+from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, THRUST_CHANNELS, Change, DataSet, Vehicle
+from flightctl.sim.identify.diagnose.scoring import linear_stats, solve
+
+H2_LOW = -1000.0   # P units: far below the idle, the curve is nearly linear in P over the flight
+NAMES = ("k_p", "k_q", "k_r", "k_z", "gamma")
+UNITS = ("rad/s^2 per P^2 (arm)", "rad/s^2 per P^2 (arm)", "rad/s^2 per P^2", "m/s^2 per P^2", "1/rad")
+WHAT = ("h1 l / Jxx: roll", "h1 l / Jyy: pitch", "h1 g1 / Jzz: yaw", "h1 / M: specific force",
+        "gamma1 / Jzz: eq. 6's yaw drag")
+
+
+def equivalent(h2: float, theta=None) -> Airframe:
+    """The equivalent airframe of the coefficients `theta` (NAMES order); unit effectiveness and
+    h2 = 0 without them (the identification's own predictions: drive P^2 and P)."""
+    if theta is None:
+        return Airframe(M=1.0, l=1.0, Jxx=1.0, Jyy=1.0, Jzz=1.0, Jp=0.0, gamma1=0.0, gamma2=0.0, h1=1.0,
+                        h2=h2, c1=1.0, g1=1.0, g2=0.0, g=G)
+    k_p, k_q, k_r, k_z, gamma = theta
+    return Airframe(M=1.0, l=1.0, Jxx=k_z / k_p, Jyy=k_z / k_q, Jzz=1.0, Jp=0.0, gamma1=gamma, gamma2=0.0,
+                    h1=k_z, h2=h2, c1=k_z, g1=k_r / k_z, g2=0.0, g=G)
+
+
+def identify(files: list[FileData], lowpass_hz: float, progress) -> tuple[Vehicle, list[str]]:
+    """The base model of a vehicle that is not the paper's, from its flights (module docstring):
+    (the identified Vehicle with its report, notes)."""
+    layout: Layout = files[0].layout
+    notes = []
+    if any(f.layout != layout for f in files[1:]):
+        notes.append("the logs declare different rotor layouts: the first one's is used")
+    ds = DataSet(files, Vehicle(equivalent(0.0), layout, (0.0, 0.0, 0.0), identified=True), lowpass_hz)
+    drag = []
+    for w in ds.wmid:                      # eq. 6 on r_dot: -r |r| per unit gamma
+        x = np.zeros((C, w.shape[1]))
+        x[2] = -w[2] * np.abs(w[2])
+        drag.append(x)
+    drag = ds.flat_filtered(drag)
+    allb = np.ones(N_BLOCKS, bool)
+
+    def fit(A):
+        """The coefficients on all blocks and on each block left out (the jackknife)."""
+        st = linear_stats(ds, ds.measured, A)
+        return (solve(st, allb, ds.block_counts)[1],
+                np.array([solve(st, np.arange(N_BLOCKS) != b, ds.block_counts)[1] for b in range(N_BLOCKS)]))
+
+    def jackknife_sd(jack):
+        return np.sqrt((N_BLOCKS - 1) / N_BLOCKS * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
+
+    # one curve for the four rotors: h2 by a bounded scalar search (below every command in flight, where
+    # the curve is zero), the effectiveness of each channel on it by least squares
+    P_air = np.concatenate([f.P[:, f.airborne] for f in files], axis=1)
+    hi = float(P_air.min()) - 1.0
+
+    def columns(h2):
+        F = [thrust_from_command(f.P, 1.0, h2) for f in files]
+        U = ds.flat_filtered([ds.predict_file(i, ds.drive(F[i])).unit[0] for i in range(len(files))])
+        cols = []
+        for c in THRUST_CHANNELS:
+            x = np.zeros_like(U)
+            x[c] = U[c]
+            cols.append(x)
+        return columns_of(Change(None, np.zeros((0, C, ds.n))), cols + [drag])
+
+    def best_h2(keep):
+        from scipy import optimize
+        obj = lambda h: solve(linear_stats(ds, ds.measured, columns(h)), keep, ds.block_counts)[0]
+        grid = np.concatenate([np.linspace(H2_LOW, -100.0, 4), np.linspace(-100.0, hi, 12)])
+        j = int(np.argmin([obj(h) for h in grid]))
+        lo, up = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
+        return float(optimize.minimize_scalar(obj, bounds=(lo, up), method="bounded", options={"xatol": 0.1}).x)
+
+    h2 = best_h2(allb)
+    theta, jack = fit(columns(h2))
+    h2_jack = np.array([best_h2(np.arange(N_BLOCKS) != b) for b in range(N_BLOCKS)])
+    sd = np.concatenate([[jackknife_sd(h2_jack)], jackknife_sd(jack)])
+    progress(f"base model identified from the flight: h2 = {h2:.1f}, "
+             + ", ".join(f"{n} = {v:.4g}" for n, v in zip(NAMES, theta)))
+    k_p, k_q, k_r, k_z = theta[:4]
+    if k_z <= 0 or 0.0 in (k_p, k_q, k_r):
+        raise InputError(f"{', '.join(f.path for f in files)}: nothing to judge: the commands do not explain "
+                         "the thrust and torques the sensors show (no base model can be identified)")
+    if min(k_p, k_q) <= 0:
+        notes.append("the identified roll or pitch effectiveness is not positive: the log's rotor layout "
+                     "or frame contradicts its data")
+    if k_r <= 0:
+        notes.append("the identified yaw effectiveness has the sign opposite to the declared spin directions: "
+                     "the rotors spin the other way")
+    report = {"h2": {"value": float(f"{h2:.5g}"), "stderr": float(f"{sd[0]:.2g}"), "unit": "P units",
+                     "what": "eq. 26: the thrust is zero at P = h2"}}
+    report.update({name: {"value": float(f"{v:.5g}"), "stderr": float(f"{e:.2g}"), "unit": u, "what": w}
+                   for name, v, e, u, w in zip(NAMES, theta, sd[1:], UNITS, WHAT)})
+    report["median_P"] = {"value": round(float(np.median(P_air)), 1), "unit": "P units",
+                          "what": "the median command in flight (the accelerometer's bias hides the thrust's level)"}
+    report["layout"] = {"x": list(layout.x), "y": list(layout.y), "spin": list(layout.spin), "unit": layout.unit,
+                        "source": layout.source}
+    coupling = (-1.0, 1.0, float((k_q - k_p) / (k_q + k_p)))
+    report["coupling"] = {"value": list(coupling), "what": "eq. 7's a_p, a_q, a_r of a flat vehicle, Jzz = Jxx + Jyy"}
+    return Vehicle(equivalent(h2, theta), layout, coupling, identified=True, identification=report), notes
