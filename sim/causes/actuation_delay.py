@@ -43,6 +43,7 @@ class ActuationDelayFit(GridCandidate):
     """The thrust series shifted by the delay, linearly interpolated between periods (the average
     over the period); a 49-point grid from 0 to 120 ms."""
     effect = ActuationDelay
+    changes_thrust = dynamic = True
     explains = MotorLagFit.explains
     grid = np.linspace(0.0, 0.12, 49)
 

@@ -26,6 +26,7 @@ class BatterySagFit(AffineCandidate):
     """Thrust times (V / v_nominal)^2: D = (c V^2 - 1) G with G the thrust-proportional part of the
     prediction, affine in c = 1 / v_nominal^2."""
     effect = BatterySag
+    changes_thrust = True
     explains = "battery voltage (V)"
 
     def why_not(self):

@@ -35,6 +35,7 @@ class GroundEffectFit(GridCandidate):
     """Every rotor's thrust and torque times the factor at the levelled range (interpolated between
     echoes); a 46-point grid over R from 0 to 0.45 m."""
     effect = GroundEffect
+    changes_thrust = True
     explains = "altitude from the range (m)"
     grid = np.linspace(0.0, 0.45, 46)
 

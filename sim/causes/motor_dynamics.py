@@ -74,6 +74,7 @@ class MotorDynamicsFit(GridCandidate):
     Jp / Jzz is not known, that reaction is a free column of the fit (its coefficient is reported
     in the identification)."""
     effect = MotorDynamics
+    changes_thrust = dynamic = True
     explains = "rotor spin-up sum s_i dOmega_i/dt (rad/s^2)"
     grid = MotorLagFit.grid
 

@@ -41,6 +41,7 @@ class MotorLagFit(GridCandidate):
     """Each rotor's eq. 26 thrust through the exact lag of the held command, averaged over the
     period; a 41-point grid over tau (0 and 2 ms to 0.3 s, geometric)."""
     effect = MotorLag
+    changes_thrust = dynamic = True
     explains = "rate of change of the commanded total |thrust differences| (N/s)"
     grid = np.concatenate([[0.0], np.geomspace(0.002, 0.3, 40)])
 

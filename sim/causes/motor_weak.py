@@ -33,6 +33,7 @@ class MotorWeakFit(AffineCandidate):
     the scale is exact there (a biased scale leaves a constant torque that `com_offset` would take
     up). Each fold picks the motor whose fit is best on its training blocks."""
     effect = MotorWeak
+    changes_thrust = True
     explains = "thrust of the weak motor (N)"
 
     def _exact(self, m, scale):

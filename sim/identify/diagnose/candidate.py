@@ -75,6 +75,8 @@ class Candidate:
     """
     effect: type[Effect] = Effect
     explains = ""
+    changes_thrust = False   # its `fold` changes the rotors' thrusts (`thrusts`, `scales`) rather than adding a term
+    dynamic = False          # it needs the commands logged faster than the dynamics it times (verdict.DYNAMIC_MIN_HZ)
 
     def __init__(self, ds: DataSet):
         self.ds = ds

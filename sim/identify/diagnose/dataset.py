@@ -189,8 +189,8 @@ class DataSet:
         return np.concatenate([per_file[i][..., s0:s1] for i, s0, s1 in self.stretches], axis=-1)
 
     def _sense(self, i, x):
-        """What the sensors show of a model-side (C, n) array of file i: the log's declared gyro and
-        accelerometer filters, causal, over the whole file."""
+        """What the sensors show of model-side (..., C, n) arrays of file i: the log's declared gyro
+        and accelerometer filters, causal, over the whole file."""
         from scipy import signal
         gyro, acc = self._sensor[i]
         if not (gyro or acc):
@@ -198,26 +198,27 @@ class DataSet:
         x = np.array(x, dtype=float)
         for rows, stages in ((GYRO, gyro), (ACC, acc)):
             for b, a in stages:
-                x[rows] = signal.lfilter(b, a, x[rows], axis=-1)
+                x[..., rows, :] = signal.lfilter(b, a, x[..., rows, :], axis=-1)
         return x
 
     def flat_filtered(self, per_file, sensor: bool = True):
-        """The stretches of per-file (C, n) arrays, each stretch low-passed forward and backward.
-        `sensor`: the arrays are the model's, so they first go through the log's sensor filters (the
-        measurements went through them on the vehicle)."""
+        """The stretches of per-file (..., n) arrays, each stretch low-passed forward and backward.
+        `sensor`: the arrays are the model's channels (..., C, n), so they first go through the log's
+        sensor filters (the measurements went through them on the vehicle)."""
         from scipy import signal
         parts = []
         for i, s0, s1 in self.stretches:
             x = per_file[i]
-            if sensor and x.ndim == 2:
+            if sensor and x.ndim >= 2:
                 x = self._sense(i, x)
             x = x[..., s0:s1]
-            if x.ndim == 2:      # rows that are zero stay zero: filter only the others (speed)
-                y = np.zeros_like(x)
-                rows = np.flatnonzero(np.any(x != 0.0, axis=1))
+            if x.ndim >= 2:      # rows that are zero stay zero: filter only the others (speed)
+                flat = x.reshape(-1, x.shape[-1])
+                y = np.zeros_like(flat)
+                rows = np.flatnonzero(np.any(flat != 0.0, axis=1))
                 if rows.size:
-                    y[rows] = signal.sosfiltfilt(self.sos, x[rows], axis=-1)
-                parts.append(y)
+                    y[rows] = signal.sosfiltfilt(self.sos, flat[rows], axis=-1)
+                parts.append(y.reshape(x.shape))
             else:
                 parts.append(signal.sosfiltfilt(self.sos, x, axis=-1))
         return np.concatenate(parts, axis=-1)
@@ -263,22 +264,28 @@ class DataSet:
     def free_columns(self, preds: list[Pred]) -> np.ndarray:
         """(K, C, n): an identified vehicle's free columns at the drives of `preds` (each thrust
         channel's coefficients on each drive component), then those the chain's causes brought."""
+        return self._free(self.flat_filtered([p.unit for p in preds]) if self.vehicle.identified else None)
+
+    def _free(self, U: np.ndarray | None) -> np.ndarray:
+        """The free columns from the filtered unit channels U (K, C, n) of the drive's components."""
         extra = np.stack(self.extra_free) if self.extra_free else np.zeros((0, C, self.n))
-        if not self.vehicle.identified:
+        if U is None:
             return extra
-        K = preds[0].unit.shape[0]
-        cols = np.zeros((K * len(THRUST_CHANNELS), C, self.n))
-        for k in range(K):
-            U = self.flat_filtered([p.unit[k] for p in preds])
+        cols = np.zeros((U.shape[0] * len(THRUST_CHANNELS), C, self.n))
+        for k in range(U.shape[0]):
             for j, c in enumerate(THRUST_CHANNELS):
-                cols[k * len(THRUST_CHANNELS) + j, c] = U[c]
+                cols[k * len(THRUST_CHANNELS) + j, c] = U[k, c]
         return np.concatenate([cols, extra])
 
     def delta_filtered(self, per_file_pred: list[Pred]) -> Change:
         """Filtered change of the prediction against the base model, flattened: D = L(pred - base),
-        with the free columns at the new thrusts."""
-        delta = self.flat_filtered([p.value - b for p, b in zip(per_file_pred, self.base_pred)])
-        return Change(delta, self.free_columns(per_file_pred))
+        with the free columns at the new thrusts (filtered together, in one pass)."""
+        if not self.vehicle.identified:
+            return Change(self.flat_filtered([p.value - b for p, b in zip(per_file_pred, self.base_pred)]),
+                          self._free(None))
+        both = self.flat_filtered([np.concatenate([(p.value - b)[None], p.unit])
+                                   for p, b in zip(per_file_pred, self.base_pred)])
+        return Change(both[0], self._free(both[1:]))
 
     def thrust_columns(self, i, F=None):
         """Per-file (4, C, n): the part of the channels proportional to each rotor's thrust and torque."""

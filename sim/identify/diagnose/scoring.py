@@ -59,14 +59,18 @@ def linear_stats(ds: DataSet, e: np.ndarray, A: np.ndarray | None = None) -> Lin
     P = A.shape[2]
     st = LinearStats(np.zeros((N_BLOCKS, C)), np.zeros((N_BLOCKS, C, P)), np.zeros((N_BLOCKS, C)),
                      np.zeros((N_BLOCKS, C, P)), np.zeros((N_BLOCKS, C, P, P)))
+    # most columns act in one channel or two: the products are taken per channel over its own columns
+    active = [np.flatnonzero(np.any(A[c] != 0.0, axis=0)) for c in range(C)] if P else [np.arange(0)] * C
     for b, (i0, i1) in enumerate(ds.block_edges):
-        eb, Ab = e[:, i0:i1], A[:, i0:i1]
+        eb = e[:, i0:i1]
         st.se[b] = eb.sum(axis=1)
         st.ee[b] = np.einsum("cn,cn->c", eb, eb)
-        if P:
-            st.sA[b] = Ab.sum(axis=1)
-            st.Ae[b] = np.einsum("cnp,cn->cp", Ab, eb)
-            st.AA[b] = np.einsum("cnp,cnq->cpq", Ab, Ab)
+        for c, cols in enumerate(active):
+            if cols.size:
+                Ab = A[c, i0:i1][:, cols]
+                st.sA[b, c, cols] = Ab.sum(axis=0)
+                st.Ae[b, c, cols] = eb[c] @ Ab
+                st.AA[b, c, cols[:, None], cols[None, :]] = Ab.T @ Ab
     return st
 
 

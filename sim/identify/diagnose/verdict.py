@@ -317,7 +317,7 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
             break
         progress(f"cause {len(rounds)}: {r.cause} {r.parameters}, held-out gain {r.gain:.3f}; folded into the model")
         skip |= {r.cause, TWINS.get(r.cause, r.cause)}
-        ds = _folded(ds, [(r.cause, r.parameters)])
+        ds = _folded(first, [(r.named.cause, r.named.parameters) for r in rounds])
     final = _backfit(first, [(r.named.cause, r.named.parameters) for r in rounds if r.named is not None],
                      notes, progress)
     check = rotor_speed_lag(files)
@@ -354,7 +354,10 @@ def validate(d: Diagnosis, tables: list[Table], a: Airframe, progress=say) -> di
 
 
 def _folded(ds: DataSet, causes) -> DataSet:
-    """A copy of the data set with `causes` ((cause, parameters), in order) folded into its base model."""
+    """A copy of the data set with `causes` ((cause, parameters)) folded into its base model: those
+    that change the rotors' thrusts first, in their order, then those that add to the prediction
+    (computed on the final thrusts), as the plant composes them (`flightctl.sim.model.Effect`)."""
+    causes = sorted(causes, key=lambda c: not CAUSES[c[0]].candidate.changes_thrust)
     for cause, parameters in causes:
         ds = copy.copy(ds)
         ds.carried, ds.carried_parameters, ds.extra_free = dict(ds.carried), dict(ds.carried_parameters), list(ds.extra_free)
