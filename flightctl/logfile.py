@@ -24,6 +24,9 @@ FLIGHT_COLUMNS = ("t", "P1", "P2", "P3", "P4", "gyro_x", "gyro_y", "gyro_z", "ac
 MAG_COLUMNS = ("mag_x", "mag_y", "mag_z")
 # Columns that may be empty on most rows: range is only written on rows where an echo arrived.
 SPARSE_COLUMNS = ("range",) + MAG_COLUMNS
+# The controller's own estimates and setpoints: a log of another autopilot may not have them
+# (measured-data.md: empty cells are missing values); the measurements and commands are required.
+ESTIMATE_COLUMNS = ("roll", "pitch", "yaw", "alt", "roll_sp", "pitch_sp", "yaw_sp", "alt_sp")
 BENCH_COLUMNS = ("motor", "P", "thrust", "omega", "voltage", "current")
 YAW_DRAG_COLUMNS = ("torque", "yaw_rate")
 PENDULUM_COLUMNS = ("axis", "pivot_distance", "period")
@@ -59,11 +62,12 @@ class Table:
 
 def read_table(path: str | Path, required: tuple[str, ...], text_columns: tuple[str, ...] = (),
                optional: tuple[str, ...] = (), min_rows: int = 1,
-               allow_missing: tuple[str, ...] = ()) -> Table:
+               allow_missing: tuple[str, ...] = (), text: str | None = None) -> Table:
     """Read a CSV with a header row. `required` columns must be present; cells in them must be
-    numbers (or, in `allow_missing`, empty/nan). `text_columns` are kept as strings."""
+    numbers (or, in `allow_missing`, empty/nan). `text_columns` are kept as strings. `text`: the
+    file's content already in hand (a log imported in memory), named `path` in messages."""
     path = str(path)
-    f = io.StringIO(read_text(path), newline="")   # regular file, UTF-8 (BOM dropped), bounded lines
+    f = io.StringIO(read_text(path) if text is None else text, newline="")   # regular file, UTF-8, bounded lines
     meta: dict[str, str] = {}
     with f:
         header, header_line = None, 0
@@ -154,11 +158,11 @@ def _checked_columns(path, rows, lines, index, wanted, text_columns, allow_missi
 
 
 def read_flight_log(path: str | Path, min_seconds: float = 0.0, min_rows: int = 2,
-                    extra: tuple[str, ...] = ()) -> Table:
+                    extra: tuple[str, ...] = (), text: str | None = None) -> Table:
     """A flight log as the contract defines it; time must be strictly increasing. `extra` names
-    further columns to keep when present."""
+    further columns to keep when present (they may be empty). `text`: as for `read_table`."""
     table = read_table(path, FLIGHT_COLUMNS, optional=MAG_COLUMNS + tuple(extra), min_rows=min_rows,
-                       allow_missing=SPARSE_COLUMNS + ("battery_v",))
+                       allow_missing=SPARSE_COLUMNS + ESTIMATE_COLUMNS + ("battery_v",) + tuple(extra), text=text)
     t = table["t"]
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:

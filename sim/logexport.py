@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import struct
+import sys
 import tomllib
 from pathlib import Path
 
@@ -215,6 +216,34 @@ class _Parser(argparse.ArgumentParser):
         raise InputError(message)
 
 
+def _import(args) -> int:
+    """`flightctl log import FOREIGN OUT.csv`: another autopilot's log as this project's flight log."""
+    from flightctl.sim.logs import import_text, read_figure
+    from flightctl.sim.logs.common import to_table
+    from flightctl.sim.plots import png
+    out = Path(args.out)
+    for path, suffix in ((out, ".csv"), (Path(args.plot) if args.plot else None, ".png")):
+        if path is None:
+            continue
+        if path.suffix != suffix:
+            raise InputError(f"{path}: the output should end in {suffix}")
+        if not path.resolve().parent.is_dir():
+            raise InputError(f"{path}: the directory does not exist")
+        if path.is_dir():
+            raise InputError(f"{path}: is a directory")
+    if args.index is not None and args.index < 1:
+        raise InputError(f"--index {args.index}: logs are counted from 1")
+    say = (lambda *a: None) if args.quiet else (lambda m: print(f"log import: {m}", file=sys.stderr, flush=True))
+    text = import_text(args.foreign, args.index, say)
+    image = png(read_figure(to_table(text, str(out)))) if args.plot else None     # everything before writing
+    out.write_text(text)
+    if image is not None:
+        Path(args.plot).write_bytes(image)
+    rows = text.count("\n") - sum(1 for line in text.splitlines() if line.startswith("#")) - 1
+    print(f"{args.foreign}: {rows} rows -> {out}" + (f", figure -> {args.plot}" if args.plot else ""))
+    return 0
+
+
 def main(argv: list[str]) -> int:
     p = _Parser(prog="flightctl log", description="Flight log tools.")
     sub = p.add_subparsers(dest="action", required=True)
@@ -222,7 +251,19 @@ def main(argv: list[str]) -> int:
                        description=__doc__.split("\n\n")[0])
     e.add_argument("csv", metavar="FLIGHT.csv")
     e.add_argument("ulg", metavar="FLIGHT.ulg")
+    i = sub.add_parser("import", help="write another autopilot's log (PX4 .ulg, Betaflight .bbl/.bfl) as a "
+                                      "flight log (CSV, measured-data.md); needs the logs extra",
+                       description="Read a PX4 ULog or a Betaflight blackbox log and write it as this project's "
+                                   "flight log, on the gyro's time base, with the rotor layout, the command scale "
+                                   "and the sensor filters in '# key: value' lines (docs/log-import.md).")
+    i.add_argument("foreign", metavar="FOREIGN_LOG", help="a .ulg, .bbl, .bfl or .BFL file")
+    i.add_argument("out", metavar="OUT.csv", help="the flight log to write")
+    i.add_argument("--index", type=int, metavar="N", help="of a blackbox file holding several logs, log N (from 1)")
+    i.add_argument("--plot", metavar="OUT.png", help="also write the figure of what was read: rates, gaps, channels")
+    i.add_argument("--quiet", action="store_true", help="no progress on stderr")
     args = p.parse_args(argv)
+    if args.action == "import":
+        return _import(args)
     out = Path(args.ulg)
     if out.suffix != ".ulg":
         raise InputError(f"{out}: the output should end in .ulg")

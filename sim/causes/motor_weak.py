@@ -36,6 +36,12 @@ class MotorWeakFit(AffineCandidate):
     changes_thrust = True
     explains = "thrust of the weak motor (N)"
 
+    def why_not(self):
+        if self.ds.vehicle.identified:
+            return ("each rotor's own gain is identified in the base model of this vehicle "
+                    "(base_model.rotor_gain): a weak motor is one below 1 there")
+        return None
+
     def _exact(self, m, scale):
         """The filtered change of the prediction with rotor m's thrust and torque times `scale`."""
         ds = self.ds

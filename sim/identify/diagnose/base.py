@@ -43,7 +43,7 @@ from flightctl.physics import G, thrust_from_command
 from flightctl.sim.identify.diagnose.candidate import columns_of
 from flightctl.sim.identify.diagnose.data import FileData, Layout
 from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, THRUST_CHANNELS, Change, DataSet, Vehicle
-from flightctl.sim.identify.diagnose.scoring import linear_stats, solve
+from flightctl.sim.identify.diagnose.scoring import linear_stats, reparametrized, solve
 
 H2_LOW = -1000.0   # P units: far below the idle, the curve is nearly linear in P over the flight
 NAMES = ("k_p", "k_q", "k_r", "k_z", "gamma")
@@ -63,7 +63,7 @@ def equivalent(h2: float, theta=None) -> Airframe:
                     h1=k_z, h2=h2, c1=k_z, g1=k_r / k_z, g2=0.0, g=G)
 
 
-def identify(files: list[FileData], lowpass_hz: float, progress) -> tuple[Vehicle, list[str]]:
+def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | None = None) -> tuple[Vehicle, list[str]]:
     """The base model of a vehicle that is not the paper's, from its flights (module docstring):
     (the identified Vehicle with its report, notes)."""
     layout: Layout = files[0].layout
@@ -78,12 +78,6 @@ def identify(files: list[FileData], lowpass_hz: float, progress) -> tuple[Vehicl
         drag.append(x)
     drag = ds.flat_filtered(drag)
     allb = np.ones(N_BLOCKS, bool)
-
-    def fit(A):
-        """The coefficients on all blocks and on each block left out (the jackknife)."""
-        st = linear_stats(ds, ds.measured, A)
-        return (solve(st, allb, ds.block_counts)[1],
-                np.array([solve(st, np.arange(N_BLOCKS) != b, ds.block_counts)[1] for b in range(N_BLOCKS)]))
 
     def jackknife_sd(jack):
         return np.sqrt((N_BLOCKS - 1) / N_BLOCKS * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
@@ -111,10 +105,22 @@ def identify(files: list[FileData], lowpass_hz: float, progress) -> tuple[Vehicl
         lo, up = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
         return float(optimize.minimize_scalar(obj, bounds=(lo, up), method="bounded", options={"xatol": 0.1}).x)
 
-    h2 = best_h2(allb)
-    theta, jack = fit(columns(h2))
-    h2_jack = np.array([best_h2(np.arange(N_BLOCKS) != b) for b in range(N_BLOCKS)])
-    sd = np.concatenate([[jackknife_sd(h2_jack)], jackknife_sd(jack)])
+    if speeds is not None and speeds["h2"] < hi:
+        # the rotors' measured speeds give the curve's zero directly (rotorspeed.py): Omega = a (P - h2)
+        h2, h2_sd, h2_source = speeds["h2"], speeds["h2_spread"], "the log's measured rotor speeds"
+    else:
+        h2 = best_h2(allb)
+        h2_sd = float(jackknife_sd(np.array([best_h2(np.arange(N_BLOCKS) != b) for b in range(N_BLOCKS)])))
+        h2_source = "the flight's thrust and torques (one curve for the four rotors)"
+        if h2 <= H2_LOW + 1.0 or h2 >= hi - 0.5:
+            notes.append(f"h2 = {h2:.1f} is at the end of its range: this flight does not show the curve's shape "
+                         "(every fit refines it: the speed part of the drive is a free column)")
+    # each channel's effectiveness a_c and each rotor's gain g_i: channel c = a_c sum_i g_i X_ci
+    st = linear_stats(ds, ds.measured, _rotor_columns(ds, files, h2, drag))
+    theta, gains = _effectiveness(st, allb, ds.block_counts)
+    jack = [_effectiveness(st, np.arange(N_BLOCKS) != b, ds.block_counts) for b in range(N_BLOCKS)]
+    sd = np.concatenate([[h2_sd], jackknife_sd(np.array([j[0] for j in jack]))])
+    gains_sd = jackknife_sd(np.array([j[1] for j in jack]))
     progress(f"base model identified from the flight: h2 = {h2:.1f}, "
              + ", ".join(f"{n} = {v:.4g}" for n, v in zip(NAMES, theta)))
     k_p, k_q, k_r, k_z = theta[:4]
@@ -124,17 +130,66 @@ def identify(files: list[FileData], lowpass_hz: float, progress) -> tuple[Vehicl
     if min(k_p, k_q) <= 0:
         notes.append("the identified roll or pitch effectiveness is not positive: the log's rotor layout "
                      "or frame contradicts its data")
-    if k_r <= 0:
-        notes.append("the identified yaw effectiveness has the sign opposite to the declared spin directions: "
-                     "the rotors spin the other way")
+    if k_r < -2.0 * sd[3]:
+        # a log may not say which way its rotors turn (Betaflight's props-in or props-out): the yaw
+        # data do; the layout is mirrored in spin, which only flips the sign of the yaw column
+        layout = Layout(layout.x, layout.y, tuple(-s for s in layout.spin), layout.unit,
+                        layout.source + "; spins reversed: the yaw data say so")
+        theta[2] = k_r = -k_r
+        notes.append(f"the yaw effectiveness had the sign opposite to the declared spin directions "
+                     f"({-k_r:.3g} +- {sd[3]:.2g}): the rotors spin the other way, and are taken so")
+    elif k_r <= 0:
+        notes.append("the yaw effectiveness is not positive: the spin directions are not clear from the data")
     report = {"h2": {"value": float(f"{h2:.5g}"), "stderr": float(f"{sd[0]:.2g}"), "unit": "P units",
-                     "what": "eq. 26: the thrust is zero at P = h2"}}
+                     "what": f"eq. 26: the thrust is zero at P = h2 (from {h2_source})"}}
     report.update({name: {"value": float(f"{v:.5g}"), "stderr": float(f"{e:.2g}"), "unit": u, "what": w}
                    for name, v, e, u, w in zip(NAMES, theta, sd[1:], UNITS, WHAT)})
+    report["rotor_gain"] = {"value": [round(float(g), 4) for g in gains],
+                            "stderr": [float(f"{e:.2g}") for e in gains_sd], "unit": "-",
+                            "what": "each rotor's thrust and torque against the mean of the four (eq. 7's "
+                                    "effectiveness of each rotor; a weak motor is one below 1)"}
     report["median_P"] = {"value": round(float(np.median(P_air)), 1), "unit": "P units",
                           "what": "the median command in flight (the accelerometer's bias hides the thrust's level)"}
     report["layout"] = {"x": list(layout.x), "y": list(layout.y), "spin": list(layout.spin), "unit": layout.unit,
                         "source": layout.source}
     coupling = (-1.0, 1.0, float((k_q - k_p) / (k_q + k_p)))
     report["coupling"] = {"value": list(coupling), "what": "eq. 7's a_p, a_q, a_r of a flat vehicle, Jzz = Jxx + Jyy"}
-    return Vehicle(equivalent(h2, theta), layout, coupling, identified=True, identification=report), notes
+    return Vehicle(equivalent(h2, theta), layout, coupling, identified=True, identification=report,
+                   gains=tuple(float(g) for g in gains)), notes
+
+
+def _rotor_columns(ds: DataSet, files, h2: float, drag: np.ndarray) -> np.ndarray:
+    """(C, n, 17): each rotor's unit thrust on each thrust channel (16 columns, channel-major), and
+    the yaw drag."""
+    cols = []
+    F = [thrust_from_command(f.P, 1.0, h2) for f in files]
+    per_rotor = []
+    for m in range(4):
+        Fm = [np.where(np.arange(4)[:, None] == m, x, 0.0) for x in F]
+        per_rotor.append(ds.flat_filtered([ds.predict_file(i, ds.drive(Fm[i])).unit[0] for i in range(len(files))]))
+    for c in THRUST_CHANNELS:
+        for m in range(4):
+            x = np.zeros((C, ds.n))
+            x[c] = per_rotor[m][c]
+            cols.append(x)
+    return np.stack(cols + [drag], axis=-1)
+
+
+def _effectiveness(st, keep, counts, passes: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """((k_p, k_q, k_r, k_z, gamma), the rotors' gains with mean 1) of channel c = a_c sum_i g_i X_ci
+    (+ gamma on r_dot): bilinear, fitted by alternating least squares on the block statistics of the
+    17 columns of `_rotor_columns`, each step a linear fit through `reparametrized`."""
+    g = np.ones(4)
+    for _ in range(passes):
+        M = np.zeros((17, 5))                   # the columns' coefficients from (a_p, a_q, a_r, a_z, gamma)
+        for c in range(4):
+            M[4 * c:4 * c + 4, c] = g
+        M[16, 4] = 1.0
+        a = solve(reparametrized(st, M), keep, counts)[1]
+        M = np.zeros((17, 5))                   # ... from (g_1..g_4, gamma)
+        for c in range(4):
+            M[4 * c:4 * c + 4, :4] = a[c] * np.eye(4)
+        M[16, 4] = 1.0
+        th = solve(reparametrized(st, M), keep, counts)[1]
+        g = th[:4] / th[:4].mean()
+    return np.concatenate([a[:4] * th[:4].mean(), [th[4]]]), g

@@ -23,6 +23,7 @@ from flightctl import params as paramfile
 from flightctl.errors import InputError
 from flightctl.logfile import read_flight_log
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
+from flightctl.sim.logs import FOREIGN_SUFFIXES
 from flightctl.sim.identify.diagnose import report as diagnose_report
 from flightctl.sim.identify.diagnose.verdict import diagnose, say, validate
 
@@ -65,7 +66,7 @@ def read_logs(paths: list[str], index: int | None, progress) -> list:
     tables = []
     for log in paths:
         progress(f"reading {log}")
-        if Path(log).suffix.lower() in (".ulg", ".bbl", ".bfl"):
+        if Path(log).suffix.lower() in FOREIGN_SUFFIXES:
             from flightctl.sim.logs import read_foreign
             tables += read_foreign(log, index, progress)
         else:

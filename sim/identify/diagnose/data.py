@@ -193,27 +193,21 @@ def _levelled_range(t, rng, Rm):
     return z
 
 
-def _foreign(table: Table, P: np.ndarray, notes: list[str]):
-    """A log of another vehicle (docs/real-flights.md): its rotor layout and sensor filters from the
-    metadata, its height above the ground when a precise one was logged, and its airborne rows: all
-    four motors running, the mean command at least THROTTLE_SHARE of its median while they run, and
-    above Z_AIRBORNE when the height is precise."""
+def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, notes: list[str]):
+    """A log of another vehicle (docs/real-flights.md): its rotor layout from the metadata, its height
+    above the ground (a precise logged height, else a downward range levelled), and its airborne rows:
+    all four motors running, the mean command at least THROTTLE_SHARE of its median while they run,
+    and above Z_AIRBORNE when the height is known."""
     meta = table.meta
-
-    def fail(what):
-        table.fail(what)
-
     if "rotors" not in meta:
         table.fail("# vehicle: foreign without a '# rotors:' line: the rotor layout is unknown")
-    layout = Layout.parse(meta["rotors"], meta.get("rotors_source", "the log's '# rotors:' line"), fail)
-    filters = tuple(parse_filters(meta.get(k, "none"), lambda w, k=k: fail(f"# {k}: {w}"))
-                    for k in ("gyro_filter", "acc_filter"))
+    layout = Layout.parse(meta["rotors"], meta.get("rotors_source", "the log's '# rotors:' line"), table.fail)
     running = (P > IDLE_P).all(axis=0)
-    n = P.shape[1]
-    z = np.full(n, np.nan)
     if "height" in table and meta.get("height_source", "") in HEIGHT_SOURCES and np.isfinite(table["height"]).any():
         h = table["height"]
         z = h - np.nanpercentile(h, 1)
+    else:
+        z = _levelled_range(table["t"], table["range"], Rm)
     mean_p = P.mean(axis=0)
     up = running & (mean_p >= THROTTLE_SHARE * np.median(mean_p[running])) if running.any() else running
     if np.isfinite(z).any():
@@ -224,13 +218,13 @@ def _foreign(table: Table, P: np.ndarray, notes: list[str]):
     omega = None
     if all(f"omega{i}" in table for i in range(1, 5)):
         omega = np.vstack([table[f"omega{i}"] for i in range(1, 5)])
-    return layout, filters, running, up, z, omega
+    return layout, up, z, omega
 
 
 def load_file(table: Table, a: Airframe) -> FileData:
     """The arrays of one flight log (already read and checked by `flightctl.logfile`). A log of this
     project's vehicle has the paper's + layout with the arm of `a`; a foreign one (`# vehicle:
-    foreign`) says its layout and filters in its metadata."""
+    foreign`) says its layout in its metadata. Either may declare its sensor filters."""
     t = table["t"]
     n = t.size
     P = np.vstack([table[f"P{i}"] for i in range(1, 5)])
@@ -238,12 +232,13 @@ def load_file(table: Table, a: Airframe) -> FileData:
     acc = np.vstack([table[c] for c in ("acc_x", "acc_y", "acc_z")])
     notes = []
     foreign = table.meta.get("vehicle") == "foreign"
+    gyro_filter, acc_filter = (parse_filters(table.meta.get(k, "none"), lambda w, k=k: table.fail(f"# {k}: {w}"))
+                               for k in ("gyro_filter", "acc_filter"))
     if foreign:
-        _check_columns(table, P, IDLE_P, f"1 % of the command range")
-        layout, (gyro_filter, acc_filter), on, up, z, omega = _foreign(table, P, notes)
+        _check_columns(table, P, IDLE_P, "1 % of the command range")
+        on = (P > IDLE_P).all(axis=0)
     else:
         _check_columns(table, P, a.h2 + MOTOR_ON_MARGIN, f"its dead zone h2 = {a.h2:g}")
-        layout, gyro_filter, acc_filter, omega = Layout.plus(a.l), (), (), None
         on = motors_on(P, a)
     # at rest before the first take-off: the initial tilt
     first_on = int(np.argmax(on)) if on.any() else n
@@ -263,7 +258,10 @@ def load_file(table: Table, a: Airframe) -> FileData:
     if np.isfinite(bv).sum() >= 2:
         ok = np.isfinite(bv)
         bv = np.interp(t, t[ok], bv[ok])
-    if not foreign:
+    if foreign:
+        layout, up, z, omega = _foreign(table, P, Rm, notes)
+    else:
+        layout, omega = Layout.plus(a.l), None
         z = _levelled_range(t, table["range"], Rm)
         if np.isfinite(z).any():
             up = on & (np.nan_to_num(z, nan=-1.0) > Z_AIRBORNE)

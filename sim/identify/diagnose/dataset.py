@@ -46,6 +46,7 @@ class Vehicle:
     coupling: tuple[float, float, float]
     identified: bool = False
     identification: dict = field(default_factory=dict, compare=False)   # the report of `base.identify`
+    gains: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)                     # each rotor's, of an identified vehicle
 
     @classmethod
     def known(cls, a: Airframe, layout: Layout) -> "Vehicle":
@@ -111,7 +112,9 @@ class DataSet:
         self.seconds = self.n / self.fs
         a = self.a
         self.D = [self.drive(thrust_from_command(f.P, a.h1, a.h2)) for f in files]   # eq. 26
-        self.S: list[np.ndarray | float] = [1.0] * len(files)   # the chain's scales of thrust and torque
+        # each rotor's thrust and torque scale: an identified vehicle's rotor gains, then the chain's causes
+        gains = np.asarray(vehicle.gains, float)[:, None]
+        self.S: list[np.ndarray | float] = [gains if np.any(gains != 1.0) else 1.0] * len(files)
         # measured channels per file (row k: gyro difference k -> k+1, accelerometer at k+1)
         self.meas, self.wmid = [], []
         for f in files:
@@ -267,14 +270,17 @@ class DataSet:
         return self._free(self.flat_filtered([p.unit for p in preds]) if self.vehicle.identified else None)
 
     def _free(self, U: np.ndarray | None) -> np.ndarray:
-        """The free columns from the filtered unit channels U (K, C, n) of the drive's components."""
+        """The free columns from the filtered unit channels U (K, C, n) of the drive's components: each
+        thrust channel's effectiveness (its thrust part, channel by channel), and one shape of the
+        curve for all of them (the speed part of every channel, one column: h2 is the rotors', so a
+        trim torque, a centre of mass off the thrust centre, is not taken for a channel's curve)."""
         extra = np.stack(self.extra_free) if self.extra_free else np.zeros((0, C, self.n))
         if U is None:
             return extra
-        cols = np.zeros((U.shape[0] * len(THRUST_CHANNELS), C, self.n))
-        for k in range(U.shape[0]):
-            for j, c in enumerate(THRUST_CHANNELS):
-                cols[k * len(THRUST_CHANNELS) + j, c] = U[k, c]
+        cols = np.zeros((len(THRUST_CHANNELS) + 1, C, self.n))
+        for j, c in enumerate(THRUST_CHANNELS):
+            cols[j, c] = U[0, c]
+            cols[-1, c] = U[1, c]
         return np.concatenate([cols, extra])
 
     def delta_filtered(self, per_file_pred: list[Pred]) -> Change:

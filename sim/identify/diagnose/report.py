@@ -77,8 +77,11 @@ def text(d: Diagnosis) -> str:
         L.append("  base model: identified from the flight (another vehicle; docs/real-flights.md), per unit mass "
                  "and inertia, arm lengths as unit:")
         for name, v in rep["base_model"].items():
-            if isinstance(v, dict) and "stderr" in v:
+            if isinstance(v, dict) and "stderr" in v and not isinstance(v["value"], list):
                 L.append(f"    {name:<7} {v['value']:>11.5g} +- {v['stderr']:<9.2g} {v['unit']:<22} {v['what']}")
+        g = rep["base_model"]["rotor_gain"]
+        L.append("    rotor gains (each rotor's thrust against the mean of the four): "
+                 + ", ".join(f"{k + 1}: {v:.3f} +- {e:.2g}" for k, (v, e) in enumerate(zip(g["value"], g["stderr"]))))
         bm = rep["base_model"]
         L.append(f"    median command in flight P = {bm['median_P']['value']}; rotors: {bm['layout']['source']}")
     else:

@@ -41,23 +41,27 @@ def rotor_speed_lag(files: list[FileData]) -> dict | None:
             ys.append(f.omega[:, f.airborne])
         return np.concatenate(xs, axis=1), np.concatenate(ys, axis=1)
 
-    def err(tau, delay):
+    def fit(tau, delay):
+        """(RMSE per rotor, h2 per rotor) of Omega = a (x - h2), x the lagged command."""
         x, y = rows(tau, delay)
-        x = x - x.mean(axis=1, keepdims=True)                               # an offset per rotor
-        y = y - y.mean(axis=1, keepdims=True)
-        k = np.einsum("mn,mn->m", x, y) / np.einsum("mn,mn->m", x, x)      # and a scale
-        e = y - k[:, None] * x
-        return np.sqrt(np.mean(e * e, axis=1))
+        xm, ym = x.mean(axis=1, keepdims=True), y.mean(axis=1, keepdims=True)
+        k = np.einsum("mn,mn->m", x - xm, y - ym) / np.einsum("mn,mn->m", x - xm, x - xm)
+        e = (y - ym) - k[:, None] * (x - xm)
+        return np.sqrt(np.mean(e * e, axis=1)), (xm[:, 0] - ym[:, 0] / k)
+
+    def err(tau, delay):
+        return fit(tau, delay)[0]
 
     best = min(((float(err(t, d).mean()), t, d) for t in TAUS[::5] for d in DELAYS[::2]))
     _, t0, d0 = best
     fine = [(float(err(t, d).mean()), t, d) for t in TAUS[(TAUS >= t0 - 0.005) & (TAUS <= t0 + 0.005)]
             for d in DELAYS[(DELAYS >= d0 - 0.002) & (DELAYS <= d0 + 0.002)]]
     rmse, tau, delay = min(fine)
-    per_motor = []
-    for m in range(4):
-        per_motor.append(float(TAUS[int(np.argmin([err(t, delay)[m] for t in TAUS]))]))
+    errs = np.array([err(t, delay) for t in TAUS[::2]])        # (taus, 4)
+    per_motor = [float(TAUS[::2][j]) for j in np.argmin(errs, axis=0)]
+    h2 = fit(tau, delay)[1]
     return {"tau": round(float(tau), 4), "delay": round(float(delay), 4), "rmse": round(rmse, 2),
-            "per_motor_tau": [round(t, 4) for t in per_motor], "samples": int(sum(f.airborne.sum() for f in have)),
-            "what": "first-order lag and pure delay from the commanded rotor speed (P - h2) to the measured "
-                    "rotor speed, fitted on the airborne rows"}
+            "per_motor_tau": [round(t, 4) for t in per_motor], "h2": round(float(np.median(h2)), 1),
+            "h2_spread": round(float(np.std(h2)), 1), "samples": int(sum(f.airborne.sum() for f in have)),
+            "what": "first-order lag and pure delay from the command to the measured rotor speed, "
+                    "Omega = a (P - h2) per rotor (eq. 26, 27), fitted on the airborne rows"}

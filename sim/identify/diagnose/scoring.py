@@ -74,6 +74,12 @@ def linear_stats(ds: DataSet, e: np.ndarray, A: np.ndarray | None = None) -> Lin
     return st
 
 
+def reparametrized(st: LinearStats, M: np.ndarray) -> LinearStats:
+    """The statistics of the columns A M (P x Q): a fit of Q coefficients that set the P columns'
+    linearly, without another pass over the data."""
+    return LinearStats(st.se, st.sA @ M, st.ee, st.Ae @ M, np.einsum("pq,bcpr,rs->bcqs", M, st.AA, M))
+
+
 def solve(st: LinearStats, keep, counts) -> tuple[float, np.ndarray, np.ndarray]:
     """The fit on the blocks `keep` (a boolean mask or indices): the coefficients theta (P,) of the
     free columns by least squares weighted per channel by the inverse of its residual variance

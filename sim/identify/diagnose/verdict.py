@@ -214,7 +214,7 @@ def _motor_rate(tables: list[Table]) -> float | None:
     return min(rates) if rates else None
 
 
-def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, notes: list[str], progress) -> Vehicle:
+def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, speeds, notes: list[str], progress) -> Vehicle:
     """The base model: a foreign vehicle's identified from the flight unless a parameter file is
     given; this project's airframe otherwise."""
     foreign = [f.foreign for f in files]
@@ -228,7 +228,7 @@ def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, notes: list[str
         layout = Layout(tuple(v * scale for v in lay.x), tuple(v * scale for v in lay.y), lay.spin, "m", lay.source)
         notes.append("base model: the parameter file's airframe with the log's rotor layout (arm = l)")
         return Vehicle.known(a, layout)
-    vehicle, more = identify(files, lowpass_hz, progress)
+    vehicle, more = identify(files, lowpass_hz, progress, speeds)
     notes += [f"base model: {n}" for n in more]
     return vehicle
 
@@ -302,7 +302,8 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
         static_only = (f"the motor outputs were logged at {rate:.1f} Hz: a lag or a delay of tens of ms needs "
                        f"them at {DYNAMIC_MIN_HZ:g} Hz or more")
         notes.append(f"{static_only}; only static effects are judged, on data low-passed at {lowpass:.2g} Hz")
-    vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, notes, progress)
+    speeds = rotor_speed_lag(files)
+    vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, speeds, notes, progress)
     ds = DataSet(files, vehicle, lowpass)
     progress(f"{ds.n} samples airborne ({ds.seconds:.1f} s), {N_BLOCKS} blocks")
     carried = carry(ds, effects, notes, progress)
@@ -320,8 +321,7 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
         ds = _folded(first, [(r.named.cause, r.named.parameters) for r in rounds])
     final = _backfit(first, [(r.named.cause, r.named.parameters) for r in rounds if r.named is not None],
                      notes, progress)
-    check = rotor_speed_lag(files)
-    return Diagnosis(rounds, first, notes, carried, lowpass, final=final, rotor_speed_check=check)
+    return Diagnosis(rounds, first, notes, carried, lowpass, final=final, rotor_speed_check=speeds)
 
 
 def validate(d: Diagnosis, tables: list[Table], a: Airframe, progress=say) -> dict:

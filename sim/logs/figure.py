@@ -1,0 +1,68 @@
+"""The figure of what was read from a log (`flightctl log import --plot`, `flightctl diagnose --plot`):
+each stream's rate of distinct samples with its gaps, then the channels the diagnosis uses over time.
+Drawn from the table and its metadata only, so a foreign log and the CSV imported from it give the
+same figure."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from flightctl.logfile import Table
+from flightctl.sim.plots import empty_panel, figure, legend
+
+STREAM = re.compile(r"(.+?) rate_hz=([\d.]+) samples=(\d+) gaps=(\d+) longest_gap_s=([\d.]+)")
+STRIPS = (("commands P (0-255)", ("P1", "P2", "P3", "P4")),
+          ("gyro (rad/s)", ("gyro_x", "gyro_y", "gyro_z")),
+          ("specific force (m/s^2)", ("acc_x", "acc_y", "acc_z")),
+          ("battery (V, A)", ("battery_v", "current")),
+          ("height (m)", ("height", "alt", "range")),
+          ("rotor speed (rad/s)", ("omega1", "omega2", "omega3", "omega4")))
+
+
+def streams(table: Table) -> list[tuple[str, float, int, int, float]]:
+    """(name, rate in Hz, samples, gaps, longest interval in s) of each stream the metadata lists."""
+    out = []
+    for line in table.meta.get("stream", "").splitlines():
+        m = STREAM.match(line.strip())
+        if m:
+            out.append((m[1], float(m[2]), int(m[3]), int(m[4]), float(m[5])))
+    return out
+
+
+def read_figure(table: Table):
+    t = table["t"]
+    fig, axes = figure(1 + len(STRIPS), 1, size=(9.5, 13),
+                       gridspec_kw={"height_ratios": [1.4] + [1.0] * len(STRIPS)})
+    axes = axes[:, 0]
+    ax = axes[0]
+    info = streams(table)
+    if info:
+        y = np.arange(len(info))
+        ax.barh(y, [s[1] for s in info], color="tab:blue")
+        ax.set_yticks(y, [s[0] for s in info], fontsize=7)
+        ax.set_xscale("log")
+        ax.set_xlabel("rate of distinct samples [Hz] (log scale)")
+        for k, (_, rate, n, gaps, longest) in enumerate(info):
+            ax.text(rate, k, f"  {n} samples, {gaps} gaps, longest {1e3 * longest:.0f} ms", va="center", fontsize=7)
+    else:
+        empty_panel(ax, "This log lists no streams: it was not imported from another autopilot.")
+    meta = table.meta
+    ax.set_title(f"{meta.get('source', table.path)}: {meta.get('format', 'flightctl log')}, "
+                 f"{t[-1] - t[0]:.1f} s, rows at {meta.get('rate_hz', '?')} Hz, motors at "
+                 f"{meta.get('motor_rate_hz', '?')} Hz", fontsize=9)
+    step = max(1, t.size // 6000)
+    for ax, (label, names) in zip(axes[1:], STRIPS):
+        shown = [n for n in names if n in table and np.isfinite(table[n]).any()]
+        for n in shown:
+            x = table[n]
+            ok = np.isfinite(x)
+            ax.plot(t[ok][::step], x[ok][::step], lw=0.6, label=n)
+        if shown:
+            legend(ax, fontsize=7)
+        else:
+            empty_panel(ax, f"not in this log: {', '.join(names)}")
+        ax.set_ylabel(label, fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes[-1].set_xlabel("time since the log's first row [s]")
+    return fig
