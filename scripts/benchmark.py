@@ -8,6 +8,10 @@ state-dependent), and what one control-loop iteration costs, decode to PWM count
 The iteration is timed on the onboard code only: `Mpu9250.read` decoding a 22-byte burst (from a
 fixed frame, so the simulated chip's cost is not counted), the calibration, the estimator, the four
 PIDs, the mixer and eq. 26 inverted to counts. Targets: >= 30x real time, < 3 % of the period.
+
+And how long `flightctl diagnose` takes on a real 500 Hz flight log (INDIflight's LOG00230, 26 s, from
+../shared/data/real/flights, with the `logs` extra): the import, then the diagnosis (its base model
+identified from the flight, every candidate, the chain). Target: a 30 s, 500 Hz log in under 60 s.
 """
 from __future__ import annotations
 
@@ -62,6 +66,29 @@ def iteration_us(n: int = 20000) -> float:
     return (time.perf_counter() - start) / n * 1e6
 
 
+def diagnose_seconds() -> tuple[float, float, float] | None:
+    """(seconds of log, seconds to read it, seconds to diagnose it), or None without the shared data."""
+    import contextlib
+    import io
+    import json
+
+    from flightctl.cli import main as flightctl
+    from flightctl.sim.logs import read_foreign
+    log = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / "flights" / "indiflight" / "LOG00230.BFL"
+    if not log.exists():
+        return None
+    start = time.perf_counter()
+    (table,) = read_foreign(str(log))
+    read = time.perf_counter() - start
+    out = Path(tempfile.mkdtemp()) / "report.json"
+    start = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert flightctl(["diagnose", str(log), "--json", str(out), "--quiet"]) == 0
+    total = time.perf_counter() - start
+    json.loads(out.read_text())
+    return float(table["t"][-1]), read, total
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--repeat", type=int, default=3)
@@ -83,6 +110,13 @@ def main() -> None:
     us = min(costs)
     print(f"control iteration (decode -> PWM counts): {us:.1f} us = {100 * us / period_us:.2f} % of the "
           f"{period_us:.0f} us loop period (best of {args.repeat}), target < 3 %")
+    timed = diagnose_seconds()
+    if timed is None:
+        print("flightctl diagnose on a real log: ../shared/data/real/flights is not here")
+    else:
+        span, read, total = timed
+        print(f"flightctl diagnose LOG00230.BFL ({span:.0f} s at 500 Hz, real): {total:.1f} s in all, "
+              f"{read:.1f} s of it reading the blackbox; scaled to 30 s of log: {total * 30 / span:.1f} s, target < 60 s")
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from flightctl.errors import InputError, read_bytes
 from flightctl.logfile import Table
+from flightctl.sim.logs.common import EXTRA as EXTRA_COLUMNS
 from flightctl.sim.logs.common import Imported, flight_text, to_table
 
 FOREIGN_SUFFIXES = (".ulg", ".bbl", ".bfl")      # compared in lower case: .BFL is Betaflight's too

@@ -87,9 +87,13 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     P_air = np.concatenate([f.P[:, f.airborne] for f in files], axis=1)
     hi = float(P_air.min()) - 1.0
 
+    # (P - h2)^2 = P^2 - 2 h2 P + h2^2 (every airborne P is above h2): the channels of the three parts,
+    # filtered once, give the columns at any h2
+    parts = [ds.flat_filtered([ds.predict_file(i, ds.drive(f.P ** k)).unit[0] for i, f in enumerate(files)])
+             for k in (2, 1, 0)]
+
     def columns(h2):
-        F = [thrust_from_command(f.P, 1.0, h2) for f in files]
-        U = ds.flat_filtered([ds.predict_file(i, ds.drive(F[i])).unit[0] for i in range(len(files))])
+        U = parts[0] - 2.0 * h2 * parts[1] + h2 * h2 * parts[2]
         cols = []
         for c in THRUST_CHANNELS:
             x = np.zeros_like(U)
