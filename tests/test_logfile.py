@@ -76,18 +76,26 @@ def test_non_numeric_cell_names_row_and_column(tmp_path):
 
 
 def test_empty_required_cell(tmp_path):
-    p = write(tmp_path, [header(), row(0.0), row(0.01), row(0.02, alt_sp="")])
+    p = write(tmp_path, [header(), row(0.0), row(0.01), row(0.02, gyro_y="")])
     with pytest.raises(InputError) as e:
         read_flight_log(p)
     msg = str(e.value)
-    assert "row 4" in msg and "'alt_sp'" in msg and "empty" in msg
+    assert "row 4" in msg and "'gyro_y'" in msg and "empty" in msg
+
+
+def test_an_empty_estimate_or_setpoint_is_a_missing_value(tmp_path):
+    """measured-data.md: empty cells are missing values; a log of another autopilot may have no
+    angle setpoints or estimates. The measurements and commands stay required on every row."""
+    p = write(tmp_path, [header(), row(0.0), row(0.01, roll="", alt_sp=""), row(0.02)])
+    t = read_flight_log(p)
+    assert np.isnan(t["roll"][1]) and np.isnan(t["alt_sp"][1]) and t["roll"][0] == t["roll"][2]
 
 
 def test_short_row_is_an_empty_cell(tmp_path):
-    p = write(tmp_path, [header(), row(0.0), row(0.01).rsplit(",", 1)[0]])
+    p = write(tmp_path, [header(), row(0.0), ",".join(row(0.01).split(",")[:7])])   # cut after gyro_y
     with pytest.raises(InputError) as e:
         read_flight_log(p)
-    assert "row 3" in str(e.value) and "'alt_sp'" in str(e.value)
+    assert "row 3" in str(e.value) and "'gyro_z'" in str(e.value)
 
 
 def test_infinite_cell(tmp_path):
