@@ -75,7 +75,8 @@ class Candidate:
     """
     effect: type[Effect] = Effect
     explains = ""
-    changes_thrust = False   # its `fold` changes the rotors' thrusts (`thrusts`, `scales`) rather than adding a term
+    changes_thrust = False   # its `fold` changes the base model (the thrusts, their scales, the rotors'
+                             # positions) rather than adding a term to it: folded first
     dynamic = False          # it needs the commands logged faster than the dynamics it times (verdict.DYNAMIC_MIN_HZ)
 
     def __init__(self, ds: DataSet):
