@@ -35,7 +35,7 @@ class Entry(NamedTuple):
 
 BOARDS = {
     "pi": Entry("flightctl.pi:open_board", "the quadcopter: the drivers wired from the board file",
-                "flightctl.pi:stop_motors", "install the Pi libraries with pip install 'flightctl[pi]'"),
+                "flightctl.pi:stop_motors", "install the Pi libraries with pip install '.[pi]' in the flightctl checkout"),
     "sim": Entry("flightctl.sim.board:open_board",
                  "the simulated quadcopter behind the real IMU and sonar drivers"),
     "hil": Entry("flightctl.hil_board:open_board", "the flight code flying a plant on a PC over --link (flightctl hil serve)"),

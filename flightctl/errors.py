@@ -14,6 +14,20 @@ class InputError(Exception):
     """Bad input (file, parameter, flag): the message names the file, row or column and what is wrong."""
 
 
+def output_file(path, what: str = "", suffix: str | None = None) -> Path:
+    """A file a command will write, checked before any work: its directory exists, it is not a
+    directory, and (if given) it ends in `suffix`. `what`: the flag it came from, for the message."""
+    p = Path(path)
+    name = f"{what} {p}" if what else str(p)
+    if suffix is not None and p.suffix.lower() != suffix:
+        raise InputError(f"{name}: the output should end in {suffix}")
+    if p.is_dir():
+        raise InputError(f"{name}: is a directory, a file name is needed")
+    if not p.resolve().parent.is_dir():
+        raise InputError(f"{name}: the directory {p.resolve().parent} does not exist")
+    return p
+
+
 def _kind(mode: int) -> str:
     for test, name in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a named pipe"),
                        (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),

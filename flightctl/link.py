@@ -197,7 +197,7 @@ class SerialPort(Port):
         try:
             import serial
         except ModuleNotFoundError:
-            raise LinkError("a serial link needs pyserial (pip install pyserial, or 'flightctl[pi]')") from None
+            raise LinkError("a serial link needs pyserial (pip install pyserial: it comes with pip install . from the checkout)") from None
         try:
             self.ser = serial.Serial(path, baud, timeout=0)
         except (serial.SerialException, OSError) as e:

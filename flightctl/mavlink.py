@@ -1,5 +1,5 @@
 """MAVLink to a ground station (QGroundControl, Mission Planner, pymavlink): `--mavlink URL` on
-`flightctl run` and `flightctl sim`. Needs pymavlink, an optional extra (`pip install 'flightctl[mavlink]'`);
+`flightctl run` and `flightctl sim`. Needs pymavlink, an optional extra (`pip install '.[mavlink]' in the flightctl checkout`);
 imported only when `--mavlink` is given.
 
 URL is pymavlink's connection string: `udpout:HOST:PORT` (send to a ground station), `udpin:HOST:PORT`
@@ -297,6 +297,6 @@ def open_link(url: str, params: Params, arm_required: bool = False) -> MavlinkLi
         return MavlinkLink(url, params, arm_required)
     except ModuleNotFoundError as e:
         raise InputError(f"--mavlink needs the Python module {e.name!r}: "
-                         "pip install 'flightctl[mavlink]'") from None
+                         "pip install '.[mavlink]' in the flightctl checkout") from None
     except (OSError, ValueError) as e:
         raise InputError(f"--mavlink {url}: cannot open ({e})") from None

@@ -215,7 +215,10 @@ def load(path: str | Path | None, gains: Gains | None = None) -> Params:
     """Load and validate a parameter file; None gives the shipped reference airframe."""
     if path is None:
         return from_dict({}, gains)
-    path = resolve(path)
+    spec, path = path, resolve(path)
+    if not path.exists():
+        shipped = ", ".join(sorted(f.stem for f in VEHICLES.glob("*.toml")))
+        raise InputError(f"{spec}: neither a parameter file nor a shipped vehicle (shipped: {shipped})")
     data = read_toml(path)
     try:
         return from_dict(data, gains)

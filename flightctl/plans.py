@@ -39,9 +39,14 @@ def paper() -> Plan:
 
 
 def step_alt() -> Plan:
-    """Figure 13: ascend from 0 to 2 m, and land from 2 m, as steps."""
-    return Plan([Move(0.0, "alt", 2.0), Move(12.0, "alt", 0.0)], 20.0, "step_alt",
-                "figure 13: altitude steps 0 -> 2 m -> 0")
+    """Figure 13: (a) ascend from 0 to 2 m as a step; (b) the paper's "controlled landing" from 2 m.
+    The landing is an 8 s ramp, not a step: the paper's simulation has no floor, and a step to 0 m
+    makes the altitude PID cut the thrust, so the vehicle falls and meets the floor at 5.4 m/s
+    (a crash, on the base model with Table 6); the ramp touches down at 0.1-0.6 m/s with either
+    table on either model."""
+    return Plan([Move(0.0, "alt", 2.0), Move(12.0, "alt", 0.0, 8.0)], 24.0, "step_alt",
+                "figure 13: an altitude step 0 -> 2 m, then a controlled landing (8 s ramp; a step to "
+                "the floor would be a fall)")
 
 
 def _single(name: str, channel: str, deg: float, fig: str) -> Plan:
@@ -55,16 +60,17 @@ def step_yaw() -> Plan:
 
 
 def excite() -> Plan:
-    """What `flightctl diagnose` needs to see (docs/diagnose.md), 44 s after arming: a low hover at
+    """What `flightctl diagnose` needs to see (docs/diagnose.md), 48 s after arming: a low hover at
     0.25 m (ground effect), a climb, roll and pitch steps of +-4 degrees (horizontal speed: rotor drag;
     sharp command edges: lag against delay), yaw steps of +-60 degrees (yaw rates of 2-3 rad/s: linear
     yaw drag), a climb to 2 m and a slow descent back to 0.25 m and to the floor (thrust changes:
-    battery sag, ground effect again)."""
+    battery sag, ground effect again). The descent from 2 m takes 5 s: in 3 s the base model with
+    Table 6 (whose altitude loop overshoots) undershoots 0.25 m and meets the floor at 1.2 m/s."""
     moves = ([Move(0.0, "alt", 0.25, 2.0), Move(6.0, "alt", 1.2, 3.0)]
              + _steps("roll", [(10, 4), (12, -4), (14, 0)]) + _steps("pitch", [(16, 4), (18, -4), (20, 0)])
              + _steps("yaw", [(22, 60), (27, -60), (32, 0)])
-             + [Move(35.0, "alt", 2.0, 2.0), Move(38.0, "alt", 0.25, 3.0), Move(42.0, "alt", 0.0, 1.5)])
-    return Plan(moves, 44.0, "excite", "low hover at 0.25 m, roll/pitch steps +-4 deg, yaw steps +-60 deg, "
+             + [Move(35.0, "alt", 2.0, 2.0), Move(38.0, "alt", 0.25, 5.0), Move(45.0, "alt", 0.0, 2.0)])
+    return Plan(moves, 48.0, "excite", "low hover at 0.25 m, roll/pitch steps +-4 deg, yaw steps +-60 deg, "
                 "climb to 2 m, descend to 0.25 m, land")
 
 

@@ -263,7 +263,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--stop-motors", action="store_true", help="only put the stop pulse on the ESCs and exit")
     p.add_argument("--mavlink", metavar="URL",
                    help="a ground station (udpout:HOST:PORT, udpin:HOST:PORT, /dev/ttyAMA0,57600): telemetry, "
-                        "and the pilot arms (ARM_DISARM), lands or kills from it; pip install 'flightctl[mavlink]'")
+                        "and the pilot arms (ARM_DISARM), lands or kills from it; pip install '.[mavlink]' in the flightctl checkout")
     args = p.parse_args(argv)
     if args.plan and args.plan_queue:
         p.error("--plan and --plan-queue exclude each other")

@@ -257,21 +257,33 @@ class Bench:
         self.hal.motors.stop()
 
 
-def fit_time_constant(t0: float, samples: list[tuple[float, float]]) -> tuple[float, float, float]:
+def fit_time_constant(t0: float, samples: list[tuple[float, float]], w0: float) -> tuple[float, float, float]:
     """The first-order response omega(t) = w1 + (w0 - w1) exp(-(t - t0) / tau) (the motor_dynamics
-    cause's lag) fitted to the speed samples after a step at t0: (tau s, w0, w1 rad/s)."""
+    cause's lag) fitted to the speed samples after a step at t0, from the steady speed w0 before it:
+    (tau s, w0, w1 rad/s). A response already complete at the first sample has no measurable tau
+    (a motor without lag, as on the base model): refused, never a tau fitted to the noise."""
     import numpy as np
     from scipy.optimize import curve_fit
     t = np.array([s[0] for s in samples if s[0] >= t0]) - t0
     w = np.array([s[1] for s in samples if s[0] >= t0])
-    if len(t) < 6 or abs(w[-1] - w[0]) < 1.0:
-        raise BenchStop("the step response has too few samples or no speed change to fit a time constant")
+    if len(t) < 6:
+        raise BenchStop("the step response has too few samples to fit a time constant")
+    w_end = float(w[-len(w) // 4:].mean())
+    noise = float(np.std(w[-len(w) // 4:]))
+    if abs(w_end - w0) < max(1.0, 5 * noise):
+        raise BenchStop(f"the speed did not change ({w0:.0f} -> {w_end:.0f} rad/s) to fit a time constant")
+    done = (w[0] - w0) / (w_end - w0)
+    if done > 0.9 and abs(w[0] - w_end) < 3 * noise + 1.0:
+        bound = t[0] / np.log(10.0)
+        raise BenchStop(f"the speed was at its new value ({w0:.0f} -> {w_end:.0f} rad/s) already at the first "
+                        f"sample, {t[0] * 1e3:.1f} ms after the step: the motor is faster than this tachometer "
+                        f"resolves (tau < {bound * 1e3:.1f} ms), no time constant fitted (the base model has "
+                        "no motor lag: --params paper-as-flown has one)")
 
-    def model(t, tau, w0, w1):
+    def model(t, tau, w1):
         return w1 + (w0 - w1) * np.exp(-t / tau)
     try:
-        (tau, w0, w1), _ = curve_fit(model, t, w, p0=(0.05, w[0], w[-len(w) // 4:].mean()),
-                                     bounds=((1e-4, 0.0, 0.0), (5.0, np.inf, np.inf)))
+        (tau, w1), _ = curve_fit(model, t, w, p0=(0.05, w_end), bounds=((1e-4, 0.0), (5.0, np.inf)))
     except (RuntimeError, ValueError) as e:
         raise BenchStop(f"the first-order fit of the step response failed: {e}") from None
     return float(tau), float(w0), float(w1)
@@ -334,7 +346,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--instruments", help="pty (simulated; the default on --board sim), serial:PATH[,BAUD] "
                    "(the line protocol; the default on hardware: serial:/dev/ttyACM0,115200), rcbenchmark:PATH[,BAUD]")
     p.add_argument("--motors", "--motor", default="1,2,3,4", help="motors in turn, e.g. 1,2,3,4 (the default) or 3")
-    p.add_argument("--profile", choices=PROFILES, default="staircase")
+    p.add_argument("--profile", choices=PROFILES, default="staircase",
+                   help="staircase: steady points for eq. 26; step: the motor's time constant; both (default staircase)")
     p.add_argument("--steps", default=STEPS, help=f"staircase command values P (0..255), default {STEPS}")
     p.add_argument("--settle", type=float, default=SETTLE_S, help="seconds at each P before averaging")
     p.add_argument("--hold", type=float, default=HOLD_S, help="seconds of averaging at each P")
@@ -349,12 +362,12 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--out", default="bench.csv", help="bench log to write (default bench.csv)")
     p.add_argument("--raw", help="raw samples (default: OUT's name with -raw)")
     p.add_argument("--plot", help="figure at the end (default: OUT's name with .png)")
-    p.add_argument("--no-plot", action="store_true")
+    p.add_argument("--no-plot", action="store_true", help="write no figure")
     p.add_argument("--write-params", metavar="P.toml", help="step profile: write the fitted tau (motor_dynamics)")
     p.add_argument("--params", help="parameter file (TOML) or a vehicle name")
     p.add_argument("--board-file", help="pi board wiring (TOML)")
     p.add_argument("--realtime", action="store_true", help="on a simulated board: pace it in real time")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="on a simulated board: seed of the sensor noise")
     args = p.parse_args(argv)
     if not 0 < args.ramp <= 500:
         p.error("--ramp: 0 < P/s <= 500")
@@ -397,7 +410,7 @@ def run_profile(bench: Bench, args, motors, steps, step, writer, flush, progress
             for row in rows:
                 writer.writerow([_cell(v) for v in row])
             flush()
-            tau, w0, w1 = fit_time_constant(t0, samples)
+            tau, w0, w1 = fit_time_constant(t0, samples, rows[0][BENCH_COLUMNS.index("omega")])
             taus.append(tau)
             fitted.append((m, t0, samples, tau, w0, w1))
             progress.step(f"motor {m} step {step[0]:g} -> {step[1]:g}: tau {tau * 1e3:.1f} ms "

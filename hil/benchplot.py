@@ -40,9 +40,9 @@ def plot_bench(out: Path, raw_path: Path, step_fits, path) -> None:
     for m, t0, samples, tau, w0, w1 in step_fits:
         t = np.array([s[0] for s in samples]) - t0
         w = np.array([s[1] for s in samples])
-        ax[1, 1].plot(t * 1e3, w, ".", ms=2, label=f"motor {m}")
-        ax[1, 1].plot(t * 1e3, w1 + (w0 - w1) * np.exp(-np.clip(t, 0, None) / tau), "-",
-                      label=f"fit, tau {tau * 1e3:.1f} ms")
+        dots, = ax[1, 1].plot(t * 1e3, w, ".", ms=2, label=f"motor {m}")
+        ax[1, 1].plot(t * 1e3, w1 + (w0 - w1) * np.exp(-np.clip(t, 0, None) / tau), "-",  # its motor's colour
+                      color=dots.get_color(), label=f"motor {m} fit, tau {tau * 1e3:.1f} ms")
     if step_fits:
         legend(ax[1, 1])
     else:

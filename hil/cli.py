@@ -49,20 +49,23 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="what", required=True, metavar="serve|demo")
     s = sub.add_parser("serve", help="the PC side: the simulated plant answering the flight side")
     s.add_argument("--link", required=True, help="serial:/dev/ttyUSB0,921600 or tcp:PORT (tcp:0: any free port)")
-    s.add_argument("--mode", choices=MODES, default="lockstep")
+    s.add_argument("--mode", choices=MODES, default="lockstep",
+                   help="lockstep (default): the plant steps one period per command; "
+                        "free: on the PC's wall clock")
     s.add_argument("--params", help="parameter file (TOML) of the simulated vehicle")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
     s.add_argument("--seconds", type=float, help="end after this much simulated time")
     s.add_argument("--json", help="write the PC side's figures here")
     s.add_argument("--cut", nargs=2, type=float, metavar=("AT", "FOR"),
                    help="pull the cable AT s after the first command, for FOR s (tests the failsafe)")
     d = sub.add_parser("demo", help="both ends on this machine, flying the hover plan")
     d.add_argument("--seconds", type=float, default=20.0, help="flight time after arming (default 20)")
-    d.add_argument("--link", choices=("pty", "tcp"), default="pty")
-    d.add_argument("--mode", choices=MODES, default="lockstep")
+    d.add_argument("--link", choices=("pty", "tcp"), default="pty",
+                   help="pty: a pseudo-terminal as the serial cable (default); tcp: a loopback socket")
+    d.add_argument("--mode", choices=MODES, default="lockstep", help="as serve --mode")
     d.add_argument("--calibrate", type=float, default=1.0, help="seconds sitting still before arming")
     d.add_argument("--params", help="parameter file (TOML)")
-    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
     d.add_argument("--json", help="write the figures here")
     d.add_argument("--cut", nargs=2, type=float, metavar=("AT", "FOR"), help="as serve --cut")
     return p

@@ -201,7 +201,7 @@ def open_serial(path: str, baud: int):
     try:
         import serial
     except ModuleNotFoundError:
-        raise InputError("serial instruments need pyserial (pip install pyserial, or 'flightctl[pi]')") from None
+        raise InputError("serial instruments need pyserial (pip install pyserial: it comes with pip install . from the checkout)") from None
     try:
         return serial.Serial(path, baud, timeout=0)
     except (serial.SerialException, OSError) as e:

@@ -11,7 +11,7 @@ import dataclasses
 import math
 from pathlib import Path
 
-from flightctl.params import VEHICLES, EffectSpec, Filters, Params, dumps
+from flightctl.params import EffectSpec, Filters, Params, dumps
 
 RHO = 1.225                 # kg/m^3, ISA sea level (the UIUC data's density)
 BLADES = 2
@@ -66,10 +66,17 @@ def as_flown(d: dict) -> Params:
 
 
 def main() -> None:
+    import argparse
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "flightctl" / "vehicles" /
+                                         "paper-as-flown.toml"),
+                    help="the parameter file to write (default: the checkout's flightctl/vehicles/paper-as-flown.toml, "
+                         "never the installed package's)")
+    args = ap.parse_args()
     d = derive()
     for k, v in d.items():
         print(f"{k:>20} = {v:.4g}")
-    path = VEHICLES / "paper-as-flown.toml"
+    path = Path(args.out)
     text = ("# The paper's vehicle as flown: the reference airframe (conventions.md) plus the terms its\n"
             "# model lacks, each with its provenance. Written by scripts/as_flown.py; do not edit by hand.\n"
             + dumps(as_flown(d), tables=("filters",)))

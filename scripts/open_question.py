@@ -58,8 +58,8 @@ def one(gains: str, path: str, cause: str, ms: float, log: Path, seed: int = 0, 
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="docs/open-question.png")
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
+    ap.add_argument("--out", default="docs/open-question.png", help="the figure (PNG); its numbers go beside it as .json")
     ap.add_argument("--quick", action="store_true", help="three sizes per effect (a smoke run)")
     ap.add_argument("--replot", action="store_true", help="redraw the figure from the .json beside it")
     ap.add_argument("--params", help="parameter file or shipped name (default: the paper's base model)")

@@ -46,6 +46,9 @@ def row(model: str, gains: str, path: str, step: str, out: Path) -> str:
     worst = max(m.coupling.items(), key=lambda kv: kv[1] * (180 / math.pi if kv[0] != "alt" else 100))
     wk, wu = (180 / math.pi, "deg") if worst[0] != "alt" else (100.0, "cm")
     outcome = flight.outcome            # the one definition of a crash (flightctl/safety.py)
+    if m.flown_s <= 0.0:                # the flight ended before the step: nothing to measure
+        return (f"| {model} | {gains} | {path} | {s.channel} {s.end * k:+g} {unit} | not flown | - | - | - | - | "
+                f"{outcome} |")
     return (f"| {model} | {gains} | {path} | {s.channel} {s.end * k:+g} {unit} | {fmt(m.rise_s)} | "
             f"{fmt(m.overshoot, 100, 1)} | {fmt(m.settling_s)} | {fmt(m.steady_error, k, 3)} {unit} | "
             f"{worst[0]} {fmt(worst[1], wk, 2)} {wu} | {outcome} |")

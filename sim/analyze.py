@@ -21,8 +21,8 @@ import numpy as np
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError
-from flightctl.params import GAIN_SETS, Params, load
+from flightctl.errors import InputError, output_file
+from flightctl.params import GAIN_SETS, Params
 from flightctl.plans import HOVER_ALT
 from flightctl.sim import causes
 from flightctl.sim.analysis.linear import LinearPlant, linearise
@@ -48,7 +48,7 @@ def analyse(params: Params, effects=(), estimators=(TRUTH, DEFAULT_ESTIMATOR), a
     effects and then `effects`, as the simulated board builds it (`flightctl.sim.board`), so that
     their terms and states are in the linearisation."""
     a = params.airframe
-    effects = causes.carried(params) + tuple(effects)
+    effects = causes.combined(params, effects)
     plant = linearise(Model(a, effects), alt, a.battery_nominal_v)
     loops = {}
     for est in estimators:
@@ -132,6 +132,7 @@ def plot(an: Analysis, prefix: str, title: str) -> list[Path]:
 
     fig, axes = figure(2, 2, size=(11, 7))
     for ax, ch in zip(axes.ravel(), CHANNELS):
+        end = 0.0                                        # each loop on its own time axis
         for est, loops in an.loops.items():
             loop = loops[ch]
             y = loop.y.copy()
@@ -140,7 +141,11 @@ def plot(an: Analysis, prefix: str, title: str) -> list[Path]:
                 y[out[0]:] = np.nan
             every = max(1, loop.t.size // 2000)          # a screen's worth of points
             ax.plot(loop.t[::every], y[::every], label=est)
+            away = np.flatnonzero(~(np.abs(y - 1.0) <= 0.02))    # outside 2 %, or gone
+            end = max(end, loop.t[-1] if out.size or away.size == 0 or away[-1] == y.size - 1
+                      else min(loop.t[-1], 1.5 * loop.t[away[-1]]))
         ax.axhline(1.0, color="0.4", lw=0.8)
+        ax.set_xlim(0.0, max(end, 0.5))
         ax.set_ylim(-1.0, 3.0)
         ax.set_title(f"{UNITS[ch]}: the true response to a setpoint step")
         ax.set_xlabel("time (s)")
@@ -174,10 +179,12 @@ def main(argv: list[str]) -> int:
     args = parser().parse_args(argv)
     if not (0.05 <= args.alt <= 4.0) or not math.isfinite(args.alt):
         raise InputError(f"--alt {args.alt:g}: the sonar reads 0.05 to 4 m")
-    for path in (args.json, args.plot and f"{args.plot}-bode.png"):
-        if path and not Path(path).parent.is_dir():
-            raise InputError(f"{path}: the directory does not exist")
-    params = load(args.params, GAIN_SETS[args.gains])
+    if args.json:
+        output_file(args.json, "--json")
+    if args.plot:
+        for kind in ("bode", "step"):
+            output_file(f"{args.plot}-{kind}.png", "--plot")
+    params = causes.load_vehicle(args.params, GAIN_SETS[args.gains])
     effects = tuple(causes.parse(e) for e in args.effect)
     estimators = tuple(dict.fromkeys(args.estimator or (TRUTH, DEFAULT_ESTIMATOR)))
     an = analyse(params, effects, estimators, args.alt)

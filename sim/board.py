@@ -31,9 +31,9 @@ SONAR_TRIGGER_PIN, SONAR_ECHO_PIN = 23, 24   # pins of the simulated GPIO
 
 def sim_board(params: Params, effects=(), noise=None, seed: int = 0, substeps: int = 2) -> tuple[Hal, World]:
     """The Hal of the simulated quadcopter, and the simulated world (for its true values). The plant
-    carries the parameter file's effects (measured-data.md), then `effects`."""
-    carried = causes.carried(params)
-    world = World(params.airframe, carried + tuple(effects), noise if noise is not None else SensorNoise(), seed, substeps)
+    carries the parameter file's effects (measured-data.md), then `effects` (`causes.combined`: an
+    effect of a cause the file carries replaces it)."""
+    world = World(params.airframe, causes.combined(params, effects), noise if noise is not None else SensorNoise(), seed, substeps)
     n = world.noise   # an ideal chip (no white noise) repeats its frames: no frozen-frame check
     imu = Mpu9250(SimMpu9250(world), sleep=lambda s: None,
                   frozen_frames=0 if n.gyro_density == 0.0 and n.accel_density == 0.0 else FROZEN_FRAMES)

@@ -17,10 +17,10 @@ import time
 from pathlib import Path
 
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError
-from flightctl.params import GAIN_SETS, load
+from flightctl.errors import InputError, output_file
+from flightctl.params import GAIN_SETS
 from flightctl.sim import causes, faults
-from flightctl.sim.metrics import hold_metrics, step_metrics
+from flightctl.sim.metrics import LEGEND, hold_metrics, step_metrics
 from flightctl.plans import load_plan
 from flightctl.sim.scenarios import SCENARIOS, scenario
 
@@ -34,7 +34,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--effect", action="append", default=[], metavar="CAUSE:name=value,...",
                    help=f"add an extension to the simulated plant ({', '.join(causes.CAUSES)}); repeatable")
     p.add_argument("--fault", action="append", default=[], metavar="NAME[:at=S,k=v]",
-                   help="inject a fault at the simulated devices (at: s of simulated time, from power-on; "
+                   help="inject a fault at the simulated devices (at: s after arming, the log's time; "
                         "faults: " + ", ".join(faults.FAULTS) + "); repeatable")
     p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
     p.add_argument("--gains", choices=sorted(GAIN_SETS), default="table6",
@@ -47,11 +47,12 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
     p.add_argument("--substeps", type=int, default=2, help="plant integration steps per loop period")
     p.add_argument("--plot", help="PNG of the responses (default: beside the log, .png)")
-    p.add_argument("--no-plot", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--no-plot", action="store_true", help="write no PNG")
+    p.add_argument("--quiet", action="store_true",
+                   help="nothing on stderr (the flight's announcement and progress); the results still print")
     p.add_argument("--mavlink", metavar="URL",
                    help="stream to a ground station and take its commands (pymavlink's connection string, "
-                        "e.g. udpout:127.0.0.1:14550; needs pip install 'flightctl[mavlink]'; README)")
+                        "e.g. udpout:127.0.0.1:14550; needs pip install '.[mavlink]' in the flightctl checkout; README)")
     p.add_argument("--json", metavar="METRICS.json",
                    help="write the outcome and the metrics as JSON (SI units: s, m, rad)")
     return p
@@ -71,10 +72,11 @@ def metrics_json(flown, flight, wall_s: float) -> dict:
            "outcome": flight.outcome, "crashed": flight.crashed, "flew": flight.flew,
            "log_dropped_rows": flight.log_dropped, "steps": []}
     if flown.name == "hover" and flight.flew:
-        out["hold_last_10s"] = hold_metrics(log, until=flown.plan.duration)
+        out["hold_last_10s"] = hold_metrics(log, until=flown.plan.duration)   # null: the hover was cut short
     for step in flown.steps:
         m = step_metrics(log, step, flight.t_arm)
         out["steps"].append({"channel": step.channel, "t": step.t, "start": step.start, "end": step.end,
+                             "window_s": step.window, "flown_s": m.flown_s, "flown": m.flown,
                              "rise_s": _finite(m.rise_s), "overshoot": _finite(m.overshoot),
                              "settling_s": _finite(m.settling_s), "steady_error": _finite(m.steady_error),
                              "coupling": {k: _finite(v) for k, v in m.coupling.items()}})
@@ -92,19 +94,23 @@ def main(argv: list[str]) -> int:
         p.error("give exactly one of SCENARIO and --plan PLAN.toml")
     if args.substeps < 1:
         raise InputError("--substeps: at least 1")
-    params = load(args.params, GAIN_SETS[args.gains])
+    params = causes.load_vehicle(args.params, GAIN_SETS[args.gains])
     effects = tuple(causes.parse(e) for e in args.effect)
     injected = tuple(faults.parse(f) for f in args.fault)
     flown = SCENARIOS[args.scenario]() if args.scenario else scenario(load_plan(args.plan))
-    log_path = Path(args.log)
-    if not log_path.parent.is_dir():
-        raise InputError(f"--log {log_path}: the directory does not exist")
-    if args.json and not Path(args.json).parent.is_dir():
-        raise InputError(f"--json {args.json}: the directory does not exist")
+    log_path = output_file(args.log, "--log")
+    if args.json:
+        output_file(args.json, "--json")
+    if not args.no_plot:
+        output_file(args.plot or log_path.with_suffix(".png"), "--plot", ".png")
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     path = "perfect state feedback" if args.truth else f"full onboard path, {args.estimator} estimator"
     say(f"flying {flown.name} ({flown.doc}); {args.gains}, {path}"
         + (f"; plant with {', '.join(map(repr, effects))}" if effects else ""))
+    for e in params.effects:
+        if e.cause in {x.cause for x in effects}:
+            say(f"  --effect {e.cause} replaces the one the parameter file carries "
+                f"({', '.join(f'{k}={v:g}' for k, v in e.parameters)})")
     start = time.perf_counter()
     link = None
     if args.mavlink:
@@ -131,10 +137,13 @@ def main(argv: list[str]) -> int:
         print(f"  touchdown at t = {t:6.2f} s, {abs(vz):.2f} m/s")
     if args.scenario == "hover" and flight.flew and not flight.crashed:
         h = hold_metrics(log, until=flown.plan.duration)
-        print(f"  last 10 s: altitude within {100 * h['alt_error']:.1f} cm of 1.5 m, "
-              f"tilt within {h['tilt'] * 57.2958:.2f} deg")
+        print(f"  last 10 s: altitude within {100 * h['alt_error']:.1f} cm of 1.5 m, tilt within "
+              f"{h['tilt'] * 57.2958:.2f} deg" if h else
+              f"  the hover was cut short at t = {duration:.1f} s, before the plan's {flown.plan.duration:g} s")
     for step in flown.steps:
         print("  " + step_metrics(log, step, flight.t_arm).row())
+    if flown.steps:
+        print(LEGEND)
     if args.json:
         Path(args.json).write_text(json.dumps(metrics_json(flown, flight, wall), indent=1) + "\n")
         print(f"  metrics -> {args.json}")
@@ -165,7 +174,7 @@ def faults_main(argv: list[str]) -> int:
             raise InputError(f"{what}: the directory {d} does not exist")
     if args.doc and not Path(args.doc).is_file():
         raise InputError(f"--doc {args.doc}: no such file")
-    rows = faultmatrix.run_matrix(load(args.params, GAIN_SETS["table6"]), logs, seed=args.seed)
+    rows = faultmatrix.run_matrix(causes.load_vehicle(args.params, GAIN_SETS["table6"]), logs, seed=args.seed)
     out.write_text(json.dumps(rows, indent=1) + "\n")
     table = faultmatrix.markdown(rows)
     print(table, end="")

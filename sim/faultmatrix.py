@@ -1,4 +1,4 @@
-"""`flightctl sim faults --json M.json` (issue 10): fly every fault of flightctl/sim/faults.py in a
+"""`flightctl sim faults --json M.json`: fly every fault of flightctl/sim/faults.py in a
 short hover and report, per fault, whether the onboard loop named it (`detected`, `detect_ms` from the
 injection to the loop's first event naming it), what it did (`action`: hold, land or stop, from its
 events), the outcome on the true state (flightctl/safety.py's crash definition, through
@@ -17,7 +17,6 @@ from flightctl.params import Params
 from flightctl.plan import Move, Plan
 from flightctl.sim.progress import Progress
 from flightctl.sim import faults
-from flightctl.sim.board import SIM_CALIBRATE_S
 from flightctl.sim.run import fly
 from flightctl.sim.scenarios import scenario
 
@@ -68,12 +67,11 @@ def fly_fault(spec: str, params: Params, log_dir: Path, fault_after: float = FAU
               hold: float = 4.0, seed: int = 0) -> dict:
     """One row of the matrix: `spec` is NAME[:k=v] without `at` (set to `fault_after` after arming)."""
     name = spec.partition(":")[0]
-    at = SIM_CALIBRATE_S + fault_after
-    fault = faults.parse(f"{spec}{',' if ':' in spec else ':'}at={at}")
+    fault = faults.parse(f"{spec}{',' if ':' in spec else ':'}at={fault_after}")   # after arming
     log = log_dir / f"fault-{name}.csv"
     flight = fly(scenario(hover_plan(fault_after, hold)), params, log, faults=[fault], seed=seed)
     res = flight.result
-    t_fault = at - (res.t_arm if res.t_arm is not None else SIM_CALIBRATE_S)   # log time of injection
+    t_fault = fault_after                                                     # log time of injection
     t_named = next((t for t, what in res.events if NAMED_BY[name] in what and t >= t_fault - 1e-9), None)
     outcome = "crashed" if flight.crashed else flight.outcome
     L = flight.log

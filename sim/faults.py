@@ -1,4 +1,4 @@
-"""Faults injected at the simulated devices' boundary (issue 10): each wraps a device of the sim board
+"""Faults injected at the simulated devices' boundary: each wraps a device of the sim board
 after it is built, from `at` seconds of simulated time, so that the real drivers and the onboard loop
 meet them exactly as on the quadcopter. `parse("imu_frozen:at=5")` -> a Fault;
 `Fault.apply(hal, world, log)` (`log`: the flight log writer, for the disk fault only).
@@ -34,7 +34,8 @@ CELLS = 4         # the simulated 4S pack (sim/power.py)
 @dataclass
 class Fault:
     name: str
-    at: float = 5.0                       # s of simulated time (the world's clock) when it begins
+    at: float = 5.0                       # s of simulated time (the world's clock) when it begins;
+                                          # `flightctl sim --fault` and sim.run.fly count it from arming
     options: dict = field(default_factory=dict)
 
     def apply(self, hal, world, log=None) -> None:

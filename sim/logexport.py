@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from flightctl import __version__
-from flightctl.errors import InputError
+from flightctl.errors import InputError, output_file
 from flightctl.frames import euler_ned, pulse_us, quaternion, vector_ned
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe, from_dict
@@ -221,16 +221,9 @@ def _import(args) -> int:
     from flightctl.sim.logs import import_text, read_figure
     from flightctl.sim.logs.common import to_table
     from flightctl.sim.plots import png
-    out = Path(args.out)
-    for path, suffix in ((out, ".csv"), (Path(args.plot) if args.plot else None, ".png")):
-        if path is None:
-            continue
-        if path.suffix != suffix:
-            raise InputError(f"{path}: the output should end in {suffix}")
-        if not path.resolve().parent.is_dir():
-            raise InputError(f"{path}: the directory does not exist")
-        if path.is_dir():
-            raise InputError(f"{path}: is a directory")
+    out = output_file(args.out, suffix=".csv")
+    if args.plot:
+        output_file(args.plot, "--plot", ".png")
     if args.index is not None and args.index < 1:
         raise InputError(f"--index {args.index}: logs are counted from 1")
     say = (lambda *a: None) if args.quiet else (lambda m: print(f"log import: {m}", file=sys.stderr, flush=True))
@@ -249,8 +242,8 @@ def main(argv: list[str]) -> int:
     sub = p.add_subparsers(dest="action", required=True)
     e = sub.add_parser("export", help="write a flight log (CSV, measured-data.md) as PX4's ULog",
                        description=__doc__.split("\n\n")[0])
-    e.add_argument("csv", metavar="FLIGHT.csv")
-    e.add_argument("ulg", metavar="FLIGHT.ulg")
+    e.add_argument("csv", metavar="FLIGHT.csv", help="a flightctl flight log")
+    e.add_argument("ulg", metavar="FLIGHT.ulg", help="the ULog to write")
     i = sub.add_parser("import", help="write another autopilot's log (PX4 .ulg, Betaflight .bbl/.bfl) as a "
                                       "flight log (CSV, measured-data.md); needs the logs extra",
                        description="Read a PX4 ULog or a Betaflight blackbox log and write it as this project's "
@@ -264,11 +257,7 @@ def main(argv: list[str]) -> int:
     args = p.parse_args(argv)
     if args.action == "import":
         return _import(args)
-    out = Path(args.ulg)
-    if out.suffix != ".ulg":
-        raise InputError(f"{out}: the output should end in .ulg")
-    if not out.parent.is_dir():
-        raise InputError(f"{out}: the directory does not exist")
+    out = output_file(args.ulg, suffix=".ulg")
     counts = export(args.csv, out)
     rows = counts.pop("rows")
     print(f"{args.csv}: {rows} rows -> {out} ({out.stat().st_size} bytes; "

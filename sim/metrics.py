@@ -22,18 +22,32 @@ class StepMetrics:
     step: Step
     rise_s: float           # 10 % to 90 % of the change
     overshoot: float        # fraction of the change beyond the target
-    settling_s: float       # last exit from the +-5 % band, after the step
+    settling_s: float       # last exit from the +-5 % band, after the step; inf: still outside it at the end
     steady_error: float     # mean error over the last second (rad or m)
     coupling: dict[str, float]   # largest departure of each other channel from its setpoint
+    flown_s: float = 0.0    # how much of the step's window the flight covered (it may end first)
+
+    @property
+    def flown(self) -> bool:
+        return self.flown_s >= self.step.window - 1e-6
 
     def row(self) -> str:
         s = self.step
         unit, k = ("deg", 180 / math.pi) if s.channel in ANGLES else ("m", 1.0)
+        head = f"{s.channel:>5} {s.start * k:+6.1f} -> {s.end * k:+6.1f} {unit:<3}  "
+        if self.flown_s <= 0.0:
+            return head + "not flown: the flight ended before this step"
         couple = ", ".join(f"{c} {v * (180 / math.pi if c in ANGLES else 1):.2f}"
                            for c, v in self.coupling.items())
-        return (f"{s.channel:>5} {s.start * k:+6.1f} -> {s.end * k:+6.1f} {unit:<3}  rise {self.rise_s:5.2f} s  "
-                f"overshoot {100 * self.overshoot:5.1f} %  settling {self.settling_s:5.2f} s  "
-                f"steady error {self.steady_error * k:+7.3f} {unit}  coupling: {couple}")
+        settling = (f"{self.settling_s:5.2f} s" if math.isfinite(self.settling_s)
+                    else f"not settled in {self.step.window:.1f} s")
+        cut = "" if self.flown else f"  (the flight ended {self.flown_s:.1f} s into its {self.step.window:.1f} s)"
+        return (head + f"rise {self.rise_s:5.2f} s  overshoot {100 * self.overshoot:5.1f} %  settling {settling}  "
+                f"steady error {self.steady_error * k:+7.3f} {unit}  coupling: {couple}{cut}")
+
+
+LEGEND = (f"  (settling: the last time outside +-{100 * SETTLING_BAND:g} % of the step's change; coupling: the "
+          "largest departure of each other channel from its setpoint in the step's window, true values)")
 
 
 def _error(channel: str, y: np.ndarray, target) -> np.ndarray:
@@ -43,7 +57,7 @@ def _error(channel: str, y: np.ndarray, target) -> np.ndarray:
 
 def step_metrics(log: Table, step: Step, t_arm: float, source: str = "true") -> StepMetrics:
     t = log["t"] - t_arm
-    sel = (t >= step.t) & (t <= step.t + step.window)
+    sel = (t >= step.t) & (t < step.t + step.window)      # the next move starts at the window's end
     ts = t[sel] - step.t
     col = TRUE[step.channel] if source == "true" else step.channel
     y = log[col][sel]
@@ -69,14 +83,17 @@ def step_metrics(log: Table, step: Step, t_arm: float, source: str = "true") -> 
         col = TRUE[other] if source == "true" else other
         err = np.abs(_error(other, log[col][sel], log[f"{other}_sp"][sel]))
         coupling[other] = float(np.max(err)) if err.size else math.nan
-    return StepMetrics(step, rise, overshoot, settling, steady, coupling)
+    flown = float(min(t[-1], step.t + step.window) - step.t) if t.size else 0.0
+    return StepMetrics(step, rise, overshoot, settling, steady, coupling, max(flown, 0.0))
 
 
-def hold_metrics(log: Table, last_s: float = 10.0, until: float | None = None) -> dict[str, float]:
+def hold_metrics(log: Table, last_s: float = 10.0, until: float | None = None) -> dict[str, float] | None:
     """Over the last `last_s` seconds before `until` (the plan's end; default: the log's end, which
     after a plan that ends in the air is the landing): the largest altitude error (m) and tilt (rad),
-    true values."""
+    true values. None when the flight did not last until then (a fault landed it, a crash)."""
     end = log["t"][-1] if until is None else until
+    if log["t"][-1] < end - 1e-6:
+        return None
     sel = (log["t"] >= end - last_s) & (log["t"] <= end)
     return {"alt_error": float(np.max(np.abs(log["true_z"][sel] - log["alt_sp"][sel]))),
             "tilt": float(np.max(np.maximum(np.abs(log["true_roll"][sel]), np.abs(log["true_pitch"][sel]))))}

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from flightctl.errors import InputError, read_text, read_toml
 from flightctl.params import GAIN_SETS, VEHICLES, Params, dumps, load, resolve
+from flightctl.sim.causes import load_vehicle
 
 DEFAULTS = "defaults"
 TABLES = ("airframe", "gains", "filters")
@@ -35,7 +36,7 @@ def _read(spec: str | None, gains: str) -> tuple[Params, dict[str, str], str]:
     if spec is None or spec == DEFAULTS:
         return load(None, GAIN_SETS[gains]), {}, "defaults"
     path = resolve(spec)
-    params = load(path, GAIN_SETS[gains])
+    params = load_vehicle(path, GAIN_SETS[gains])
     origin = f"vehicle {path.stem}" if path.parent == VEHICLES else f"file {path}"
     keys = {f.name for t in TABLES for f in dataclasses.fields(getattr(params, t))}
     sources = {}
@@ -104,8 +105,8 @@ def main(argv: list[str]) -> int:
     s = sub.add_parser("show", help="print a full parameter file with units and sources")
     s.add_argument("spec", nargs="?", metavar="NAME|FILE", help="a shipped vehicle or a file (default: the defaults)")
     d = sub.add_parser("diff", help="the differences between two parameter sets")
-    d.add_argument("a", metavar="A")
-    d.add_argument("b", metavar="B")
+    d.add_argument("a", metavar="A", help="a parameter file or a shipped name")
+    d.add_argument("b", metavar="B", help="the other")
     for q in (s, d):
         q.add_argument("--gains", choices=sorted(GAIN_SETS), default="table6",
                        help="the gain set a file without [gains] uses (default table6)")

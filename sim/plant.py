@@ -12,9 +12,19 @@ the chip clips the peak at its full scale as a real one does).
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 
 CONTACT_S = 0.02   # s: the landing gear's stopping time at a touchdown
+
+
+class Diverged(Exception):
+    """The plant's state is no longer finite at plant time `t`: the simulated vehicle (or its
+    integration) blew up."""
+
+    def __init__(self, t: float):
+        super().__init__(f"the plant's state is not finite at t = {t:.3f} s")
+        self.t = t
 
 from flightctl.sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Forces, Model, P
 
@@ -61,7 +71,12 @@ class Plant:
                 self.t = t_end
                 continue
             self.on_ground = False
-            self.x = self._rk4(x, t, u, h)
+            try:
+                self.x = self._rk4(x, t, u, h)
+            except (ValueError, OverflowError):          # math on an infinite angle
+                raise Diverged(t) from None
+            if not all(map(math.isfinite, self.x)):
+                raise Diverged(t_end)
             self.t = t_end
             if self.x[Z] < 0.0:
                 self._touch_down()

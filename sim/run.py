@@ -5,7 +5,7 @@ never reads), and judge the outcome on the true state with the one definition of
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +19,7 @@ from flightctl.params import Params, dumps
 from flightctl.safety import LEFT_GROUND_ALT, crash_reason
 from flightctl.sim.board import SIM_CALIBRATE_S, open_board
 from flightctl.sim.devices import SensorNoise, TruthEstimator, TruthRangefinder
+from flightctl.sim.plant import Diverged
 from flightctl.sim.scenarios import Scenario
 
 
@@ -60,13 +61,26 @@ def judge(result: FlightResult, log: Table, touchdowns, g: float) -> tuple[str, 
     return "landed upright", False, True
 
 
+def unstable_axis(params: Params) -> str:
+    """The axis whose derivative term moves its rate most in one loop period (eq. 24 and 25: a torque
+    2 l u_phi, 2 l u_theta, 4 g1 u_psi per unit output): above 2 the sampled loop cannot be stable,
+    whatever the integrator, as on the real vehicle."""
+    a, g = params.airframe, params.gains
+    loops = {"roll": (2 * a.l * g.kd_phi / a.Jxx, "Jxx", a.Jxx), "pitch": (2 * a.l * g.kd_theta / a.Jyy, "Jyy", a.Jyy),
+             "yaw": (4 * a.g1 * g.kd_psi / a.Jzz, "Jzz", a.Jzz)}
+    axis, (k, name, value) = max(loops.items(), key=lambda kv: kv[1][0])
+    return (f"the {axis} loop's D term moves its rate by {k * a.dt:.2g} of itself per loop period with "
+            f"{name} = {value:g} kg m^2: {'above 2, unstable at ' + format(a.loop_hz, 'g') + ' Hz' if k * a.dt > 2 else 'stable'}")
+
+
 def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), noise: bool = True,
         seed: int = 0, truth: bool = False, substeps: int = 2, calibrate_s: float = SIM_CALIBRATE_S,
         estimator: str = "flight", telemetry=None, faults=()) -> Flight:
     """`truth=True` is perfect state feedback: the controller sees the true attitude and altitude at
     every loop (the paper's own simulation); otherwise the full onboard path. `telemetry`: a ground
     station link (flightctl/mavlink.py) the loop streams to and takes commands from. `faults`:
-    `flightctl.sim.faults.Fault`s, applied to the board's devices and the log (issue 10)."""
+    `flightctl.sim.faults.Fault`s, applied to the board's devices and the log; their `at` counts
+    from arming, as the log's time does."""
     # With a ground station the simulated world runs in real time, as SITL does: the station's
     # clock (heartbeats, commands) and the flight's then agree.
     board = open_board(params, BoardOptions(seed=seed, effects=tuple(effects), substeps=substeps,
@@ -81,14 +95,21 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
             "path": "perfect state feedback" if truth else f"full onboard path ({estimator} estimator)",
             "calibrate_s": calibrate_s, **board.meta, "params": dumps(params)}
     if faults:
-        meta["faults"] = ", ".join(f"{f.name} at {f.at:g} s" for f in faults)
+        meta["faults"] = ", ".join(f"{f.name} at {f.at:g} s after arming" for f in faults)
     log = FlightLogWriter(log_path, meta, extra=MAG_COLUMNS + board.extra_columns, keep=True)
+    armed_at = hal.clock.now() + calibrate_s      # the simulated time the loop arms at (FlightLoop.run)
     for fault in faults:
-        fault.apply(hal, world, log)
+        replace(fault, at=fault.at + armed_at).apply(hal, world, log)
     scenario.plan.restart()
     loop = FlightLoop(hal, params, scenario.plan, log, FlightController(params, truth_est, estimator),
                       calibrate_s=calibrate_s, extra_row=board.extra_row, telemetry=telemetry)
-    result = loop.run()
+    try:
+        result = loop.run()
+    except Diverged as e:          # the loop has stopped the motors and closed the log
+        result = loop.result
+        t_arm = result.t_arm if result.t_arm is not None else calibrate_s
+        result.reason = (f"stopped: the simulation diverged (the plant's state is not finite at t = "
+                         f"{e.t - t_arm:.2f} s; {unstable_axis(params)})")
     board.close()
     t_arm = result.t_arm if result.t_arm is not None else calibrate_s
     touchdowns = [(t - t_arm, vz) for t, vz in world.plant.touchdowns]

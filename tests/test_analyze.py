@@ -245,3 +245,26 @@ def test_bad_input_is_one_line(capsys, argv, needle):
     assert cli(["analyze"] + argv) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and needle in err and err.startswith("flightctl analyze: error:")
+
+
+def test_damping_is_the_least_damped_mode_the_margin_speaks_of():
+    """Issue 17: Table 4 roll on the as-flown model with an 80 ms motor lag has a phase margin of about
+    4 degrees, and `analyze` printed a damping of 1.000 (the mode with the largest share was real).
+    The damping is now that of the least damped closed-loop mode the step response sees: near the
+    margin's own estimate (zeta ~ PM / 100 deg for small margins), checked here against the closed
+    loop's eigenvalues computed apart; and negative for a loop that is unstable."""
+    lag = causes.make("motor_dynamics", tau=0.08)
+    an = analyse(load("paper-as-flown", TABLE4), (lag,), estimators=(TRUTH,), channels=("roll",))
+    roll = an.loops[TRUTH]["roll"]
+    f = roll.figures
+    assert 0.0 < f["phase_margin_deg"] < 6.0
+    assert 0.0 < f["damping"] < 0.06
+    assert f["damping"] == pytest.approx(f["phase_margin_deg"] / 100.0, rel=0.5)
+    s = np.log(np.linalg.eigvals(roll.T.A).astype(complex)) / roll.T.dt   # continuous-time poles
+    oscillating = s[np.abs(s.imag) > 1.0]
+    zetas = -oscillating.real / np.abs(oscillating)
+    assert f["damping"] == pytest.approx(zetas.min(), abs=1e-3)
+    assert f["natural_rad_s"] == pytest.approx(np.abs(oscillating[np.argmin(zetas)]), rel=1e-3)
+    unstable = analyse(load(None, TABLE4), (lag,), estimators=(TRUTH,), channels=("roll",))
+    g = unstable.loops[TRUTH]["roll"].figures
+    assert not g["stable"] and g["damping"] < 0.0

@@ -44,6 +44,18 @@ def test_sim_bench_through_the_pty_instruments_feeds_identify(tmp_path):
         assert f == pytest.approx(a.h1 * (P - a.h2) ** 2, rel=0.02, abs=0.02)
 
 
+def test_step_profile_refuses_a_motor_without_lag_instead_of_fitting_the_noise(tmp_path, capsys):
+    """Issue 19: on the base model (no motor lag) the speed is at its new value at the first sample;
+    the fit gave 123 ms from the noise. Now: no tau, a stop that says why, the rows kept, nothing written."""
+    out, params = tmp_path / "step.csv", tmp_path / "fitted.toml"
+    assert bench.main(["--board", "sim", "--profile", "step", "--motors", "1", "--step", "140,180",
+                       "--record", "0.4", "--out", str(out), "--write-params", str(params), *FAST]) == 1
+    err = capsys.readouterr().err
+    assert "faster than this tachometer resolves" in err and "tau " not in err.split("stopped:")[0]
+    assert not params.exists()
+    assert list(read_table(out, BENCH_COLUMNS)["P"]) == [140, 180]
+
+
 def test_step_profile_fits_the_motor_time_constant_and_writes_it(tmp_path):
     out, params = tmp_path / "step.csv", tmp_path / "fitted.toml"
     assert bench.main(["--board", "sim", "--params", "paper-as-flown", "--profile", "step", "--motors", "1,4",
@@ -181,5 +193,5 @@ def test_the_pi_bench_on_a_machine_without_the_pi_libraries_is_one_line(tmp_path
     assert r.returncode == 3
     assert r.stderr.strip().splitlines() == [
         "flightctl bench: cannot open the pi board: the pi board needs the Python module 'pigpio', which is not "
-        "installed (install the Pi libraries with pip install 'flightctl[pi]')"]
+        "installed (install the Pi libraries with pip install '.[pi]' in the flightctl checkout)"]
     assert not (tmp_path / "bench.csv").exists()

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from fakes.pigpiod import running
+from real import need
 from flightctl.boards import Board
 from flightctl.errors import InputError
 from flightctl.hil import bench
@@ -55,9 +56,8 @@ def _pty_port(parse, commands=False):
     return master, ins.Instruments(ser, parse, "test", commands)
 
 
-@pytest.mark.skipif(not RCB_DIR.is_dir(), reason=f"no real data at {RCB_DIR}")
 def test_the_rcbenchmark_stream_through_a_pty_gives_its_rows_in_si():
-    path = sorted(RCB_DIR.glob("StepsTest_2020*.csv"))[0]
+    path = sorted(need(RCB_DIR).glob("StepsTest_2020*.csv"))[0]
     text = path.read_text(encoding="utf-8")
     rows = list(csv.DictReader(text.lstrip("\ufeff").splitlines()))
     master, port = _pty_port(ins.RcbenchmarkParser())

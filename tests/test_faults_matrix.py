@@ -52,8 +52,10 @@ def test_the_cli_flies_one_fault_and_refuses_a_bad_one(tmp_path, capsys):
     log = tmp_path / "f.csv"
     rc = cli_main(["sim", "hover_low", "--log", str(log), "--no-plot", "--quiet",
                    "--fault", "cpu_stall:at=6,ms=30", "--json", str(tmp_path / "m.json")])
-    events = [e["what"] for e in json.loads((tmp_path / "m.json").read_text())["events"]]
-    assert rc == 0 and any(w.startswith("loop stalled") for w in events)
+    events = json.loads((tmp_path / "m.json").read_text())["events"]
+    stalls = [e["t"] for e in events if e["what"].startswith("loop stalled")]
+    assert rc == 0 and len(stalls) == 1
+    assert 6.0 <= stalls[0] <= 6.1        # `at` counts from arming, as the log's time does
     assert cli_main(["sim", "hover", "--log", str(log), "--fault", "cpu_stall:ms=500"]) == 2
     assert "ms must be" in capsys.readouterr().err.strip().splitlines()[-1]
 

@@ -125,6 +125,6 @@ def test_missing_output_directory_and_missing_flag(tmp_path, capsys):
     csv.write_text(HEADER["yaw-drag"] + "\n" + "\n".join(yaw_rows()) + "\n")
     code, err = run(capsys, ["identify", "yaw-drag", str(csv), "--json", str(tmp_path / "out.json"),
                              "--plot", str(tmp_path / "no" / "such" / "dir.png")])
-    assert_refused(code, err, tmp_path, ["no directory"])
+    assert_refused(code, err, tmp_path, ["--plot", "does not exist"])
     code, err = run(capsys, ["identify", "yaw-drag", str(csv)])
     assert_refused(code, err, tmp_path, ["--json"])

@@ -7,15 +7,20 @@ import pytest
 from flightctl.cli import main
 from flightctl.logfile import read_table
 from flightctl.sim.identify import realdata
+from real import FLIGHTS, need
 
-DATA = realdata.default_data_dir()
-pytestmark = pytest.mark.skipif(not (DATA / "rcbenchmark").is_dir(), reason=f"no real data at {DATA}")
+DATA = FLIGHTS.parent
 STEP_FILES = sorted((DATA / "rcbenchmark").glob("StepsTest_2020*.csv"))
+
+
+@pytest.fixture(autouse=True)
+def real_data():
+    need(DATA / "rcbenchmark")      # skipped without the shared data, but never in CI
 
 
 @pytest.fixture(scope="module")
 def analysis():
-    return realdata.analyse(DATA)
+    return realdata.analyse(need(DATA))
 
 
 def test_adapter_efficiency_agrees_with_the_stands_own_motor_efficiency():

@@ -14,7 +14,6 @@ from flightctl.physics import G
 from flightctl.plan import Move, Plan
 from flightctl.safety import CRASH_TOUCHDOWN_SPEED
 from flightctl.sim import faults
-from flightctl.sim.board import SIM_CALIBRATE_S
 from flightctl.sim.run import fly
 from flightctl.sim.scenarios import scenario
 
@@ -88,7 +87,7 @@ def test_the_touchdown_is_declared_only_on_the_floor(z_error):
 def _blind(alt: float, lost_at: float, seed: int, params):
     plan = Plan([Move(0.0, "alt", alt, 4.0), Move(lost_at + 6.0, "alt", 0.0, 3.0)], lost_at + 30.0, "blind",
                 "climb, the sonar goes silent, land")
-    fault = faults.parse(f"sonar_silent:at={SIM_CALIBRATE_S + lost_at}")
+    fault = faults.parse(f"sonar_silent:at={lost_at}")   # after arming, as the log counts
     return fly(scenario(plan), params, "/dev/null", faults=[fault], seed=seed)
 
 

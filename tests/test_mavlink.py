@@ -279,5 +279,5 @@ def test_without_pymavlink_mavlink_is_one_line_saying_how_to_get_it(tmp_path, co
     r = run_without(("pymavlink",), command + ["--mavlink", "udpout:127.0.0.1:9"], cwd=tmp_path)
     assert r.returncode == 2, r.stderr
     (line,) = r.stderr.strip().splitlines()[-1:]
-    assert "pip install 'flightctl[mavlink]'" in line and "Traceback" not in r.stderr
+    assert "pip install '.[mavlink]' in the flightctl checkout" in line and "Traceback" not in r.stderr
     assert not list(tmp_path.glob("*.csv"))                          # nothing flown

@@ -149,7 +149,7 @@ def test_load_bad_file_prefixes_path(tmp_path, text, words):
 def test_load_missing_file(tmp_path):
     with pytest.raises(InputError) as e:
         load(tmp_path / "nope.toml")
-    assert str(tmp_path / "nope.toml") in str(e.value) and "cannot read" in str(e.value)
+    assert str(tmp_path / "nope.toml") in str(e.value) and "neither a parameter file nor a shipped vehicle" in str(e.value)
 
 
 def test_update_file_creates_and_keeps_other_values(tmp_path):

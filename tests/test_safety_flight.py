@@ -173,7 +173,12 @@ def test_one_definition_of_a_crash():
 
 
 def test_a_hard_touchdown_is_a_crash_and_exits_non_zero(tmp_path, capsys):
-    rc = sim_main(["step_alt", "--log", str(tmp_path / "s.csv"), "--no-plot"])
+    """Figure 13 flown as two true steps, 0 -> 2 m -> 0: the step to the floor is a fall (the shipped
+    `step_alt` lands on a ramp instead)."""
+    plan = tmp_path / "steps.toml"
+    plan.write_text('name = "steps"\nduration = 20.0\n[[move]]\nt = 0.0\nchannel = "alt"\nvalue = 2.0\n'
+                    '[[move]]\nt = 12.0\nchannel = "alt"\nvalue = 0.0\n')
+    rc = sim_main(["--plan", str(plan), "--log", str(tmp_path / "s.csv"), "--no-plot"])
     out = capsys.readouterr().out
     assert rc == 1
     assert "crashed: hit the floor at 5." in out and "plan complete" not in out

@@ -229,4 +229,4 @@ def test_the_pi_board_on_a_machine_without_the_pi_libraries_is_one_line(tmp_path
     assert r.returncode == 3, r.stderr
     assert r.stderr.strip().splitlines() == [
         "flightctl run: not flying: the pi board needs the Python module 'pigpio', which is not installed "
-        "(install the Pi libraries with pip install 'flightctl[pi]')"]
+        "(install the Pi libraries with pip install '.[pi]' in the flightctl checkout)"]

@@ -39,6 +39,7 @@ TRIGGER_S = 10e-6           # the HC-SR04 trigger pulse (flightctl.drivers.hcsr0
 MIN_HORIZON, MAX_HORIZON = 20.0, 120.0   # s, of the step responses
 DRIFT_RATE = 1e-4           # 1/s: a closed-loop mode slower than this (a time constant beyond 2.8 h)
                             # is drift, not dynamics (rounding moves a pole at 0 by ~1e-6 at most)
+SEEN_SHARE = 0.01           # a mode with 1 % of the largest share of the step response is one it shows
 
 
 @dataclass
@@ -225,6 +226,24 @@ def dominant(s, share, period: float) -> tuple[float, float]:
     return (-sc.real / wn if wn > 0 else 1.0), wn
 
 
+def least_damped(s, share, period: float) -> tuple[float, float]:
+    """Damping ratio and natural frequency (rad/s) of the least damped closed-loop mode that the step
+    response sees (its share at least SEEN_SHARE of the largest), drift modes aside: the figure a
+    phase margin speaks of. The largest share alone can be a real pole (damping 1) while a small,
+    barely damped or growing oscillation rides on it (issue 17: 1.000 printed at a 4 degree margin).
+    Negative for a growing mode."""
+    live = np.abs(s) >= DRIFT_RATE
+    size = np.where(np.isfinite(np.abs(share)), np.abs(share), np.inf)
+    seen = live & (size >= SEEN_SHARE * np.max(size[live], initial=0.0))
+    if not seen.any():
+        return math.nan, math.nan
+    sc = np.log((1.0 + period * s[seen]).astype(complex)) / period
+    wn = np.abs(sc)
+    zeta = np.where(wn > 0, -sc.real / np.where(wn > 0, wn, 1.0), 1.0)
+    i = int(np.lexsort((-size[seen], np.round(zeta, 9)))[0])   # among equals (real poles), the largest share
+    return float(zeta[i]), float(wn[i])
+
+
 def margins(L: control.StateSpace) -> dict[str, float]:
     """Margins of the loop L over 0.01 rad/s to the Nyquist frequency (below, a period of ten minutes
     is not the loop's business): the phase margin at the gain crossover where it is smallest, and the
@@ -249,7 +268,7 @@ def figures(L, s, share, period: float, t, y, final: float) -> dict[str, float]:
     drift = bool(np.any(np.abs(s) < DRIFT_RATE))
     stable = not drift and bool(np.all(np.abs(1.0 + period * s) < 1.0))
     out = {"stable": stable, "drift": drift, **margins(L)}
-    zeta, wn = dominant(s, share, period)
+    zeta, wn = least_damped(s, share, period)
     out.update(damping=float(zeta), natural_rad_s=float(wn))
     if stable:   # the final value is given: a lightly damped loop still rings at the horizon
         info = control.step_info(y, t, final_output=final, SettlingTimeThreshold=SETTLING_BAND)

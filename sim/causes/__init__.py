@@ -69,6 +69,26 @@ def carried(params) -> tuple[Effect, ...]:
     return tuple(make(e.cause, **dict(e.parameters)) for e in params.effects)
 
 
+def combined(params, effects=()) -> tuple[Effect, ...]:
+    """The plant's effects: the parameter file's, then `effects` (`--effect`). An added effect of a
+    cause the file carries replaces it (one motor lag, one rotor inertia), never adds a second."""
+    added = {e.cause for e in effects}
+    return tuple(e for e in carried(params) if e.cause not in added) + tuple(effects)
+
+
+def load_vehicle(spec, gains=None):
+    """`flightctl.params.load`, then every `[[effect]]` built once, so that an unknown cause or a
+    parameter out of its range is refused naming the file and the table, before anything flies."""
+    from flightctl.params import load, resolve
+    params = load(spec, gains)
+    for k, e in enumerate(params.effects, start=1):
+        try:
+            make(e.cause, **dict(e.parameters))
+        except InputError as err:
+            raise InputError(f"{resolve(spec)}: [[effect]] {k}: {err}") from None
+    return params
+
+
 def parse(text: str) -> Effect:
     """`CAUSE:name=value,name=value`, as `flightctl sim --effect` takes it."""
     cause, _, args = text.partition(":")

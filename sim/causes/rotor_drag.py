@@ -85,6 +85,12 @@ class RotorDragFit(GridCandidate):
         self._k = result.parameters["k"]
         return result
 
+    def not_named(self, result):
+        if result.parameters["k"] <= 0:   # the folds chose some drag, the whole flight none: the held-out
+            return ("rotor_drag: the fit on all the data finds no drag (k = 0); the held-out gain is its "
+                    "nuisance biases': not named")    # gain came from the biases riding on the folds' k
+        return None
+
     def explanatory(self):
         k = max(getattr(self, "_k", 0.0), 1e-3)
         ds = self.ds

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from flightctl import params as paramfile
-from flightctl.errors import InputError, read_toml
+from flightctl.errors import InputError, output_file, read_toml
 from flightctl.logfile import BENCH_COLUMNS, PENDULUM_COLUMNS, YAW_DRAG_COLUMNS, read_table
 from flightctl.sim.identify import inertia, propeller, yaw_drag
 from flightctl.sim.identify.fits import FitError, Identified, check_result
@@ -43,27 +43,19 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="kind", required=True, metavar="KIND")
     for kind, (doc, *_rest) in KINDS.items():
         p = sub.add_parser(kind, help=doc, description=doc)
-        p.add_argument("file", metavar="FILE.csv")
+        p.add_argument("file", metavar="FILE.csv", help="the measured data (measured-data.md)")
         p.add_argument("--json", required=True, metavar="OUT.json", help="the fitted parameters with stderr")
         p.add_argument("--params", metavar="P.toml", help="parameter file (the pendulum takes M and g from it)")
         p.add_argument("--write-params", metavar="P.toml", help="write the fitted values into this parameter file")
         p.add_argument("--plot", metavar="OUT.png", help="data, fit and residuals like the paper's figures 6-9")
     p = sub.add_parser("rcbenchmark", help="convert RCbenchmark stand exports (one per motor, at most 4) "
                        "to a bench.csv")
-    p.add_argument("runs", nargs="+", metavar="RUN.csv")
-    p.add_argument("--out", required=True, metavar="bench.csv")
+    p.add_argument("runs", nargs="+", metavar="RUN.csv", help="the stand's CSV exports, motor 1 first")
+    p.add_argument("--out", required=True, metavar="bench.csv", help="the bench file to write")
     p = sub.add_parser("real-data", help="report: the paper's propeller method against real thrust-stand data")
-    p.add_argument("--data", metavar="DIR", help="the real data (default: ../shared/data/real from the repo root)")
+    p.add_argument("--data", metavar="DIR", help="the real data (default: ../shared/data/real beside the checkout you run in)")
     p.add_argument("--out", required=True, metavar="DIR", help="where the figures and identification.md go")
     return parser
-
-
-def _check_writable(path: str) -> None:
-    parent = Path(path).resolve().parent
-    if not parent.is_dir():
-        raise InputError(f"{path}: cannot write, no directory {parent}")
-    if Path(path).is_dir():
-        raise InputError(f"{path}: cannot write, it is a directory")
 
 
 def _check_params_update(path: str, values: dict[str, float]) -> None:
@@ -89,9 +81,9 @@ def identify(args) -> Identified:
         check_result(result)
     except FitError as e:
         table.fail(str(e))
-    for path in (args.json, args.write_params, args.plot):
+    for flag, path in (("--json", args.json), ("--write-params", args.write_params), ("--plot", args.plot)):
         if path:
-            _check_writable(path)
+            output_file(path, flag)
     if args.write_params:
         _check_params_update(args.write_params, result.values)
     image = None

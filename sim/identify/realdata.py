@@ -223,13 +223,13 @@ def analyse(data: Path) -> dict:
 
 # ---- the report -----------------------------------------------------------------------------------
 
-def default_data_dir() -> Path:
-    return Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
-
-
 def report_dirs(data: str | None, out: str) -> tuple[Path, Path]:
-    """The real data (`--data`, default `default_data_dir()`) and the output directory, checked."""
-    data_dir = Path(data) if data else default_data_dir()
+    """The real data (`--data`, default ../shared/data/real beside the checkout the command runs in)
+    and the output directory, checked."""
+    from flightctl.sim.checkout import shared_real_data
+    data_dir = Path(data) if data else shared_real_data()
+    if data_dir is None:
+        raise InputError("not in a checkout of flightctl: give the real data with --data DIR (../shared/data/real)")
     if not (data_dir / "rcbenchmark").is_dir() or not (data_dir / "uiuc-static").is_dir():
         raise InputError(f"{data_dir}: no rcbenchmark/ and uiuc-static/ here; give the real data with --data DIR")
     out_dir = Path(out)

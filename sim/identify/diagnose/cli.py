@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from flightctl import params as paramfile
-from flightctl.errors import InputError
+from flightctl.errors import InputError, output_file
 from flightctl.logfile import read_flight_log
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
 from flightctl.sim.logs import FOREIGN_SUFFIXES
@@ -51,7 +51,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--params", metavar="PARAMS.toml",
                    help="the base model: its airframe and its [[effect]] tables (default: the reference "
                         "airframe, no effects)")
-    p.add_argument("--json", required=True, metavar="REPORT.json")
+    p.add_argument("--json", required=True, metavar="REPORT.json", help="the report (measured-data.md, diagnose)")
     p.add_argument("--plot", metavar="PREFIX",
                    help="write PREFIX-residuals.png (residual vs time, base and after each cause), "
                         "PREFIX-explained.png (residual vs the variable that explains it) and, per log, "
@@ -74,14 +74,6 @@ def read_logs(paths: list[str], index: int | None, progress) -> list:
     return tables
 
 
-def _check_writable(path: Path) -> None:
-    parent = path.resolve().parent
-    if not parent.is_dir():
-        raise InputError(f"{path}: cannot write, no directory {parent}")
-    if path.exists() and path.is_dir():
-        raise InputError(f"{path}: cannot write, it is a directory")
-
-
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
     # On a terminal, progress is live. Otherwise (scripts, checks) it is held until the run succeeds,
@@ -100,8 +92,9 @@ def main(argv: list[str]) -> int:
     if args.plot:
         plots = {k: Path(f"{args.plot}-{k}.png") for k in ("residuals", "explained")}
         plots.update({f"read-{k}": Path(f"{args.plot}-read-{k}.png") for k in range(1, len(tables) + 1)})
-    for path in (out_json, *plots.values()):
-        _check_writable(path)
+    output_file(out_json, "--json")
+    for path in plots.values():
+        output_file(path, "--plot")
     d = diagnose(tables, params.airframe, progress, params.effects, params_given=args.params is not None)
     if others:
         d.validation = validate(d, others, params.airframe, progress)

@@ -130,7 +130,7 @@ def text(d: Diagnosis) -> str:
     L.append(_residual_table(d, best))
     if d.notes:
         L.append("")
-        L += [f"  note: {n}" for n in d.notes]
+        L += [f"  note: {n}" for n in dict.fromkeys(d.notes)]
     return "\n".join(L) + "\n"
 
 

@@ -172,7 +172,7 @@ class Diagnosis:
                            {"identified": False, "what": "this project's airframe (conventions.md or --params)"}),
             "data": {"files": [f.path for f in self.ds.files], "airborne_s": round(self.ds.seconds, 2),
                      "lowpass_hz": self.lowpass_hz, "base_effects": self.carried},
-            "notes": self.notes,
+            "notes": list(dict.fromkeys(self.notes)),   # a note said twice (two passes) once
         }
         if self.rotor_speed_check is not None:
             out["rotor_speed_check"] = self.rotor_speed_check
