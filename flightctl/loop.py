@@ -24,6 +24,7 @@ from typing import Callable
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import Calibration
+from flightctl.control.spin import MotorLossDetector, SpinController
 from flightctl.hal import PWM_RANGE, Hal, ImuSample
 from flightctl.logfile import FlightLogWriter
 from flightctl.params import Params
@@ -112,6 +113,9 @@ class FlightLoop:
         i = 0
         t_prev = None
         stalls = off_loops = 0
+        detector, spin = MotorLossDetector(self.params), SpinController(self.params)
+        spinning = False             # a motor lost: flying on two rotors, yaw given up (control/spin.py)
+        vert = ctl.vert
         tel = self.telemetry
         if tel is not None:
             tel.start(res)
@@ -166,6 +170,7 @@ class FlightLoop:
                     ctl.arm(sample)
                     motors.arm()
                     armed = flying = ctl.est.in_flight = True
+                    detector.reset(a.B)
                     last_echo = t
                     res.t_arm = t_arm
                     self._event(t, "armed")
@@ -201,13 +206,29 @@ class FlightLoop:
                     if flying:
                         ctl.on_range(echo, t)
                 if flying:
-                    counts = ctl.step(sample, dt, sp[0], sp[1], sp[2], sp[3])
+                    lost = 0 if spinning else detector.update(sample, ctl.mixer.f, ctl.alt, dt)
+                    if lost:
+                        spinning = landing = True
+                        self._spin(t, lost, spin, ctl.alt)
+                        plan = self.plan
+                        sp = plan.at(t - t_arm)
                     est = ctl.est
+                    if spinning:               # the landing's thrust, on two rotors
+                        uz = ctl.landing.step(vert, dt)
+                        counts = spin.step(sample, dt, 4.0 * (a.B + uz))
+                        est.roll, est.pitch = roll, pitch = spin.tilt()
+                        est.yaw = (spin.yaw + math.pi) % (2.0 * math.pi) - math.pi
+                        vert.predict(sample.ax, sample.ay, sample.az, roll, pitch, dt)
+                        ctl.alt = vert.z
+                    else:
+                        counts = ctl.step(sample, dt, sp[0], sp[1], sp[2], sp[3])
                     if not (abs(est.roll) <= CRASH_TILT and abs(est.pitch) <= CRASH_TILT):   # NaN too
                         res.reason = f"stopped: crash (tilt past {math.degrees(CRASH_TILT):.0f} degrees)"
                         self._event(t, res.reason)
                         break
-                    if abs(est.roll - sp[0]) > ATTITUDE_LOST or abs(est.pitch - sp[1]) > ATTITUDE_LOST:
+                    if spinning:
+                        pass
+                    elif abs(est.roll - sp[0]) > ATTITUDE_LOST or abs(est.pitch - sp[1]) > ATTITUDE_LOST:
                         off_loops += 1
                         if off_loops == ATTITUDE_LOST_LOOPS:     # the crash check stops at CRASH_TILT
                             self._event(t, "attitude not held for %d loops: motor %d commanded hardest "
@@ -279,6 +300,25 @@ class FlightLoop:
         if self.stop.is_set():
             res.reason = "stopped: stop requested"
             self._event(clock.now(), res.reason)
+
+    def _spin(self, t: float, lost: int, spin: SpinController, alt: float) -> None:
+        """Motor `lost` is gone (control/spin.py): from now on the spin controller flies the two rotors
+        of the other arm down; the rest of the plan is replaced by a descent, the log's setpoint."""
+        est = self.ctl.est
+        spin.start(lost, est.roll, est.pitch, est.yaw, self.ctl.mixer.f)
+        a, b = (m + 1 for m in spin.pair)
+        self._event(t, f"motor {lost} lost (its thrust missing in torque and collective): motors {lost} and "
+                       f"{spin.off[1] + 1} stopped, flying on motors {a} and {b} spinning at about "
+                       f"{spin.r_bar:.0f} rad/s, yaw given up: landing")
+        self.ctl.land(LAND_SPEED)        # the landing's thrust from now on (the altitude PID no longer flies)
+        self._why = f"motor {lost} lost: landing on two rotors"
+        t_plan = t - self.t_arm
+        ramp = max(alt, 0.0) / LAND_SPEED
+        kept = [m for m in self.plan.moves if m.t <= t_plan and math.isfinite(m.value)]
+        self.plan = plan = Plan(kept + [Move(t_plan, "roll", 0.0), Move(t_plan, "pitch", 0.0),
+                                        Move(t_plan, "alt", 0.0, ramp)],
+                                t_plan + ramp + LAND_SLACK_S, self.plan.name, self.plan.doc)
+        plan.at(t_plan)
 
     def _land(self, t: float, alt: float, why: str) -> bool:
         """From clock time `t`: replace the rest of the plan by roll and pitch back to level and a

@@ -18,7 +18,7 @@ from flightctl.sim.devices import SensorNoise, SimMpu9250, World
 OFF = SensorNoise.off()
 A = Airframe()
 HOVER_N = A.M * A.g / 4
-LSB_RAD_S = math.radians(1 / 65.5)   # gyro at +-500 deg/s and accelerometer at +-8 g, the driver's defaults
+LSB_RAD_S = math.radians(1 / 16.4)   # gyro at +-2000 deg/s and accelerometer at +-8 g, the driver's defaults
 ACCEL_LSB = A.g / 4096
 # 3-dB bandwidths (Hz) of the DLPF by DLPF_CFG / A_DLPF_CFG, from the register map's tables
 GYRO_BW = {1: 184.0, 3: 41.0}

@@ -48,7 +48,7 @@ class ImuError(Exception):
 class Mpu9250:
     """`start()` configures the chip; `read(sample)` does one burst read and fills the sample in SI."""
 
-    def __init__(self, spi: SpiDevice, accel_fs: int = 2, gyro_fs: int = 1, dlpf: int = 1,
+    def __init__(self, spi: SpiDevice, accel_fs: int = 2, gyro_fs: int = 3, dlpf: int = 1,
                  sleep=time.sleep, frozen_frames: int = FROZEN_FRAMES):
         """`frozen_frames` = 0 switches the frozen check off: only for an ideal, noise-free simulated
         chip, whose frames do repeat."""

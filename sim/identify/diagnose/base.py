@@ -33,7 +33,6 @@ respects the residual's correlation in time.
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 

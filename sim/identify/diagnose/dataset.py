@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from flightctl.params import Airframe
-from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, thrust_from_speed, yaw_drag
+from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, yaw_drag
 from flightctl.sim.identify.diagnose.data import FileData, Layout, stretches
 
 CHANNELS = ("p_dot", "q_dot", "r_dot", "acc_x", "acc_y", "acc_z")
