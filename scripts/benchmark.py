@@ -6,8 +6,8 @@ state-dependent), and what one control-loop iteration costs, decode to PWM count
     python scripts/benchmark.py [--repeat N]
 
 The iteration is timed on the onboard code only: `Mpu9250.read` decoding a 22-byte burst (from a
-fixed frame, so the simulated chip's cost is not counted), the calibration, the estimator, the four
-PIDs, the mixer and eq. 26 inverted to counts. Targets: >= 30x real time, < 3 % of the period.
+fixed frame, so the simulated chip's cost is not counted), the calibration, the motor-loss check, the
+estimator, the four PIDs, the mixer and eq. 26 inverted to counts. Targets: >= 30x real time, < 3 % of the period.
 
 And how long `flightctl diagnose` takes on a real 500 Hz flight log (INDIflight's LOG00230, 26 s, from
 ../shared/data/real/flights, with the `logs` extra): the import, then the diagnosis (its base model
@@ -23,6 +23,7 @@ from pathlib import Path
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import Calibration
+from flightctl.control.spin import MotorLossDetector
 from flightctl.drivers.mpu9250 import Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.params import load
@@ -58,10 +59,12 @@ def iteration_us(n: int = 20000) -> float:
     ctl.est.in_flight = True
     dt = params.airframe.dt
     read, correct, step = imu.read, cal.correct, ctl.step
+    watch, f = MotorLossDetector(params).update, ctl.mixer.f
     start = time.perf_counter()
     for _ in range(n):
         read(sample)
         correct(sample)
+        watch(sample, f, 1.5, dt)      # the motor-loss check, on the thrusts of the loop before
         step(sample, dt, 0.01, -0.02, 0.1, 1.5)
     return (time.perf_counter() - start) / n * 1e6
 
