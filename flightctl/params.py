@@ -116,6 +116,7 @@ class EffectSpec:
     cause: str
     parameters: tuple[tuple[str, float], ...]
     source: str = ""
+    ranges: tuple[tuple[str, float, float], ...] = ()   # (parameter, lo, hi): its plausible range
 
 
 @dataclass(frozen=True)
@@ -182,7 +183,8 @@ def from_dict(data: dict, gains: Gains | None = None) -> Params:
 
 
 def _effects(items) -> tuple[EffectSpec, ...]:
-    """`[[effect]]` tables: `cause = "name"`, optional `source = "..."`, numeric parameters."""
+    """`[[effect]]` tables: `cause = "name"`, optional `source = "..."`, numeric parameters, and
+    optionally each parameter's plausible range, `range.NAME = [lo, hi]` around its value."""
     if not isinstance(items, list):
         raise InputError("effect: expected [[effect]] tables")
     specs = []
@@ -191,7 +193,7 @@ def _effects(items) -> tuple[EffectSpec, ...]:
         if not isinstance(item, dict):
             raise InputError(f"{where}: expected an [[effect]] table")
         item = dict(item)
-        cause, source = item.pop("cause", None), item.pop("source", "")
+        cause, source, ranges = item.pop("cause", None), item.pop("source", ""), item.pop("range", {})
         if not isinstance(cause, str) or not cause:
             raise InputError(f"{where}: cause: a cause name is needed (measured-data.md)")
         if not isinstance(source, str):
@@ -199,7 +201,16 @@ def _effects(items) -> tuple[EffectSpec, ...]:
         for key, value in item.items():
             if number(value) is None:
                 raise InputError(f"{where} ({cause}): {key}: expected a finite number, got {_short(value)}")
-        specs.append(EffectSpec(cause, tuple((key, float(v)) for key, v in item.items()), source))
+        if not isinstance(ranges, dict):
+            raise InputError(f"{where} ({cause}): range: expected range.NAME = [lo, hi]")
+        spans = []
+        for key, span in ranges.items():
+            ok = isinstance(span, list) and len(span) == 2 and all(number(v) is not None for v in span)
+            if not ok or key not in item or not float(span[0]) <= float(item[key]) <= float(span[1]):
+                raise InputError(f"{where} ({cause}): range.{key}: expected [lo, hi] around the value of {key}, "
+                                 f"got {_short(span)}")
+            spans.append((key, float(span[0]), float(span[1])))
+        specs.append(EffectSpec(cause, tuple((key, float(v)) for key, v in item.items()), source, tuple(spans)))
     return tuple(specs)
 
 
@@ -245,6 +256,7 @@ def dumps(params: Params, sources: dict[str, str] | None = None, tables=("gains"
         lines.append("\n[[effect]]")
         lines.append(f"cause = {json.dumps(e.cause)}")
         lines += [f"{k} = {v!r}" for k, v in e.parameters]
+        lines += [f"range.{k} = [{lo!r}, {hi!r}]" for k, lo, hi in e.ranges]
         if e.source:
             lines.append(f"source = {json.dumps(e.source)}")
     return "\n".join(lines) + "\n"

@@ -180,3 +180,30 @@ def test_schema_metadata():
         lo, hi = f.metadata["lo"], f.metadata["hi"]
         assert lo <= f.default <= hi, f.name
         assert f.metadata["unit"] and f.metadata["source"]
+
+
+def test_every_as_flown_term_carries_a_range_and_its_provenance():
+    """Issue 17: each term of the as-flown file is a range with its source, not a tuned point; the
+    file's text round-trips through the writer."""
+    p = load("paper-as-flown")
+    for e in p.effects:
+        spans = {name: (lo, hi) for name, lo, hi in e.ranges}
+        assert set(spans) == {name for name, _ in e.parameters}, e.cause
+        for name, value in e.parameters:
+            lo, hi = spans[name]
+            assert lo <= value <= hi and lo < hi
+        assert "range" in e.source or "Range" in e.source
+    assert from_dict(tomllib.loads(dumps(p))).effects == p.effects
+
+
+@pytest.mark.parametrize("span,needle", [("[0.05, 0.1]", "around the value of tau"), ("0.02", "expected [lo, hi]"),
+                                         ("[0.01, 0.2]", None)])
+def test_an_effect_range_must_hold_its_value(tmp_path, span, needle):
+    f = tmp_path / "p.toml"
+    f.write_text(f'[[effect]]\ncause = "motor_dynamics"\ntau = 0.035\nrange.tau = {span}\n')
+    if needle is None:
+        assert load(f).effects[0].ranges == (("tau", 0.01, 0.2),)
+    else:
+        with pytest.raises(InputError) as e:
+            load(f)
+        assert needle in str(e.value) and str(f) in str(e.value)

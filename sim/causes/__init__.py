@@ -84,6 +84,9 @@ def load_vehicle(spec, gains=None):
     for k, e in enumerate(params.effects, start=1):
         try:
             make(e.cause, **dict(e.parameters))
+            for name, lo, hi in e.ranges:           # the range's ends are effects of the cause too
+                make(e.cause, **{**dict(e.parameters), name: lo})
+                make(e.cause, **{**dict(e.parameters), name: hi})
         except InputError as err:
             raise InputError(f"{resolve(spec)}: [[effect]] {k}: {err}") from None
     return params
