@@ -56,7 +56,7 @@ def as_flown(d: dict) -> Params:
     src_in = (f"theory: blade-element momentum, dT/dV at hover = {d['k_inflow']:.3f} N s/m per rotor "
               f"(v_h {d['v_h']:.2f} m/s, solidity {d['sigma']:.3f}, lift slope {LIFT_SLOPE}/rad; "
               f"rigid-pitch bound {d['k_inflow_max']:.2f}); scripts/as_flown.py")
-    src_in += f"; range: BEMT -30 % (lift slope, solidity) to the rigid-pitch bound"
+    src_in += "; range: BEMT -30 % (lift slope, solidity) to the rigid-pitch bound"
     src_md = (f"not measured on this vehicle: 35 ms is where the paper's real-flight facts hold (both tables "
               f"fly, Table 6 settles; up to 45-50 ms), chosen from those facts, not from physics. Range: "
               f"{TAU_RANGE[0] * 1e3:.0f} ms (fast ESCs; INDIflight's 5-inch rotors: 20 ms bench, 26 ms in "

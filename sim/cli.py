@@ -30,7 +30,7 @@ def parser() -> argparse.ArgumentParser:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", choices=sorted(SCENARIOS), help="the named plan to fly")
     p.add_argument("--plan", metavar="PLAN.toml", help="fly this plan file instead (as `flightctl run --plan`)")
-    p.add_argument("--log", required=True, help="the flight log to write (CSV, measured-data.md)")
+    p.add_argument("--log", help="the flight log to write (CSV, measured-data.md); required but with --monte-carlo")
     p.add_argument("--effect", action="append", default=[], metavar="CAUSE:name=value,...",
                    help=f"add an extension to the simulated plant ({', '.join(causes.CAUSES)}); repeatable")
     p.add_argument("--fault", action="append", default=[], metavar="NAME[:at=S,k=v]",
@@ -55,6 +55,9 @@ def parser() -> argparse.ArgumentParser:
                         "e.g. udpout:127.0.0.1:14550; needs pip install '.[mavlink]' in the flightctl checkout; README)")
     p.add_argument("--json", metavar="METRICS.json",
                    help="write the outcome and the metrics as JSON (SI units: s, m, rad)")
+    p.add_argument("--monte-carlo", type=int, metavar="N",
+                   help="fly N draws of the parameter file's plausible ranges with both gain sets, in parallel; "
+                        "report the shares that fly, land and settle (--json, --plot: a map); sim/montecarlo.py")
     return p
 
 
@@ -92,6 +95,10 @@ def main(argv: list[str]) -> int:
     args = p.parse_args(argv)
     if (args.scenario is None) == (args.plan is None):
         p.error("give exactly one of SCENARIO and --plan PLAN.toml")
+    if args.monte_carlo is not None:
+        return monte_carlo_main(args)
+    if args.log is None:
+        p.error("the following arguments are required: --log")
     if args.substeps < 1:
         raise InputError("--substeps: at least 1")
     params = causes.load_vehicle(args.params, GAIN_SETS[args.gains])
@@ -153,6 +160,31 @@ def main(argv: list[str]) -> int:
         plot_flight(log, png, f"flightctl sim {flown.name}: {args.gains}, {path}")
         print(f"  plot -> {png}")
     return 1 if flight.crashed or not flight.flew else 0
+
+
+def monte_carlo_main(args) -> int:
+    """`--monte-carlo N`: sim/montecarlo.py."""
+    from flightctl.sim import montecarlo
+    from flightctl.sim.progress import Progress
+    if args.scenario is None:
+        raise InputError("--monte-carlo flies a named scenario (e.g. paper), not a plan file")
+    if not 1 <= args.monte_carlo <= 10000:
+        raise InputError(f"--monte-carlo {args.monte_carlo}: between 1 and 10000 draws")
+    if args.json:
+        output_file(args.json, "--json")
+    if args.plot:
+        output_file(args.plot, "--plot", ".png")
+    bar = Progress(2 * args.monte_carlo, "monte carlo") if not args.quiet else None
+    result = montecarlo.run(args.params, args.scenario, args.monte_carlo, args.seed,
+                            progress=bar.step if bar is not None else None)
+    print(montecarlo.summary(result))
+    if args.json:
+        montecarlo.write_json(result, args.json)
+        print(f"  -> {args.json}")
+    if args.plot:
+        montecarlo.plot(result, args.plot)
+        print(f"  plot -> {args.plot}")
+    return 0
 
 
 def faults_main(argv: list[str]) -> int:

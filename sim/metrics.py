@@ -97,3 +97,28 @@ def hold_metrics(log: Table, last_s: float = 10.0, until: float | None = None) -
     sel = (log["t"] >= end - last_s) & (log["t"] <= end)
     return {"alt_error": float(np.max(np.abs(log["true_z"][sel] - log["alt_sp"][sel]))),
             "tilt": float(np.max(np.maximum(np.abs(log["true_roll"][sel]), np.abs(log["true_pitch"][sel]))))}
+
+
+SETTLE_AFTER_S = 3.0                                   # the paper's "quick stabilization", read as 3 s
+SETTLED_DEG = {"roll": 1.0, "pitch": 1.0, "yaw": 3.0}  # and "settle around the command values"
+
+
+def settled_errors(log: Table, steps, t_arm: float) -> list[tuple[str, float]]:
+    """Per attitude step: the largest true error (deg) from SETTLE_AFTER_S after the step to the next
+    step: the paper's real-flight facts as the tests and the Monte Carlo read them (a step not flown
+    that long counts as never settled, inf)."""
+    t = log["t"] - t_arm
+    out = []
+    for s in steps:
+        if s.channel == "alt":
+            continue
+        sel = (t >= s.t + SETTLE_AFTER_S - 1e-6) & (t <= s.t + s.window)
+        e = (log[TRUE[s.channel]][sel] - s.end + np.pi) % (2 * np.pi) - np.pi
+        out.append((s.channel, math.degrees(float(np.max(np.abs(e)))) if e.size and t[-1] >= s.t + s.window - 1e-6
+                    else math.inf))
+    return out
+
+
+def settles(log: Table, steps, t_arm: float) -> bool:
+    """Every attitude step within SETTLED_DEG of its command from SETTLE_AFTER_S on."""
+    return all(err < SETTLED_DEG[ch] for ch, err in settled_errors(log, steps, t_arm))

@@ -13,13 +13,13 @@ Tolerances, and why:
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 import pytest
 
 from flightctl.params import GAIN_SETS, EffectSpec, load
 from flightctl.plan import Move, Plan
+from flightctl.sim import metrics
 from flightctl.sim.run import fly
 from flightctl.sim.scenarios import SCENARIOS, Scenario
 
@@ -39,17 +39,7 @@ def as_flown(gains: str, tau: float | None = None):
 
 def settled_errors(flight) -> list[tuple[str, float]]:
     """Per step: the largest true error (deg) from 3 s after the step to the next step."""
-    log = flight.log
-    t = log["t"] - flight.t_arm
-    out = []
-    for s in flight.scenario.steps:
-        if s.channel == "alt":
-            continue
-        sel = (t >= s.t + 3.0 - 1e-6) & (t <= s.t + s.window)
-        e = log[f"true_{s.channel}"][sel] - s.end
-        e = (e + np.pi) % (2 * np.pi) - np.pi
-        out.append((s.channel, math.degrees(float(np.max(np.abs(e))))))
-    return out
+    return metrics.settled_errors(flight.log, flight.scenario.steps, flight.t_arm)
 
 
 @pytest.mark.parametrize("tau", TAUS)
@@ -63,7 +53,7 @@ def test_the_paper_flight_flies_and_lands_on_the_as_flown_model(tmp_path, gains,
         errors = settled_errors(flight)
         assert len(errors) == 12
         for channel, err in errors:
-            assert err < (3.0 if channel == "yaw" else 1.0), (channel, err, errors)
+            assert err < metrics.SETTLED_DEG[channel], (channel, err, errors)
 
 
 def test_the_as_flown_model_damps_what_the_base_model_lets_ring(tmp_path):
