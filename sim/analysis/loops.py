@@ -271,9 +271,12 @@ def figures(L, s, share, period: float, t, y, final: float) -> dict[str, float]:
     zeta, wn = least_damped(s, share, period)
     out.update(damping=float(zeta), natural_rad_s=float(wn))
     if stable:   # the final value is given: a lightly damped loop still rings at the horizon
-        info = control.step_info(y, t, final_output=final, SettlingTimeThreshold=SETTLING_BAND)
-        out.update(rise_s=float(info["RiseTime"]), overshoot=float(info["Overshoot"]) / 100.0,
-                   settling_s=float(info["SettlingTime"]))
+        try:
+            info = control.step_info(y, t, final_output=final, SettlingTimeThreshold=SETTLING_BAND)
+            out.update(rise_s=float(info["RiseTime"]), overshoot=float(info["Overshoot"]) / 100.0,
+                       settling_s=float(info["SettlingTime"]))
+        except (IndexError, ValueError):   # a response too slow to rise within the horizon
+            out.update(rise_s=math.nan, overshoot=math.nan, settling_s=math.nan)
     else:
         out.update(rise_s=math.nan, overshoot=math.nan, settling_s=math.nan)
     return out
