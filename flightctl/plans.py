@@ -63,7 +63,7 @@ def excite() -> Plan:
     """What `flightctl diagnose` needs to see (docs/diagnose.md), 44 s after arming: a low hover at
     0.25 m (ground effect), a climb, roll and pitch steps of +-4 degrees (horizontal speed: rotor drag;
     sharp command edges: lag against delay), yaw steps of +-60 degrees (yaw rates of 2-3 rad/s: linear
-    yaw drag), a climb to 2 m and a slow descent back to 0.25 m and to the floor (thrust changes:
+    yaw drag), a climb to 2 m and a fast descent back to 0.25 m and to the floor (thrust changes:
     battery sag, ground effect again). The descent from 2 m is fast on purpose (3 s: the vertical
     speed and thrust changes the inflow and ground-effect fits need; a 4-5 s descent lets diagnose
     confuse the two, tests/test_diagnose_hidden.py -m slow). It flies and lands on the as-flown model
