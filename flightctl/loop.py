@@ -211,7 +211,7 @@ class FlightLoop:
                         spinning = landing = True
                         self._spin(t, lost, spin, ctl.alt)
                         plan = self.plan
-                        sp = plan.at(t - t_arm)
+                        sp = plan.sp
                     est = ctl.est
                     if spinning:               # the landing's thrust, on two rotors
                         uz = ctl.landing.step(vert, dt)
@@ -226,9 +226,7 @@ class FlightLoop:
                         res.reason = f"stopped: crash (tilt past {math.degrees(CRASH_TILT):.0f} degrees)"
                         self._event(t, res.reason)
                         break
-                    if spinning:
-                        pass
-                    elif abs(est.roll - sp[0]) > ATTITUDE_LOST or abs(est.pitch - sp[1]) > ATTITUDE_LOST:
+                    if not spinning and (abs(est.roll - sp[0]) > ATTITUDE_LOST or abs(est.pitch - sp[1]) > ATTITUDE_LOST):
                         off_loops += 1
                         if off_loops == ATTITUDE_LOST_LOOPS:     # the crash check stops at CRASH_TILT
                             self._event(t, "attitude not held for %d loops: motor %d commanded hardest "
@@ -303,22 +301,15 @@ class FlightLoop:
 
     def _spin(self, t: float, lost: int, spin: SpinController, alt: float) -> None:
         """Motor `lost` is gone (control/spin.py): from now on the spin controller flies the two rotors
-        of the other arm down; the rest of the plan is replaced by a descent, the log's setpoint."""
+        of the other arm down, on the landing's thrust (`_land`: the rest of the plan becomes a descent,
+        the log's setpoint)."""
         est = self.ctl.est
         spin.start(lost, est.roll, est.pitch, est.yaw, self.ctl.mixer.f)
         a, b = (m + 1 for m in spin.pair)
-        self._event(t, f"motor {lost} lost (its thrust missing in torque and collective): motors {lost} and "
-                       f"{spin.off[1] + 1} stopped, flying on motors {a} and {b} spinning at about "
-                       f"{spin.r_bar:.0f} rad/s, yaw given up: landing")
-        self.ctl.land(LAND_SPEED)        # the landing's thrust from now on (the altitude PID no longer flies)
-        self._why = f"motor {lost} lost: landing on two rotors"
-        t_plan = t - self.t_arm
-        ramp = max(alt, 0.0) / LAND_SPEED
-        kept = [m for m in self.plan.moves if m.t <= t_plan and math.isfinite(m.value)]
-        self.plan = plan = Plan(kept + [Move(t_plan, "roll", 0.0), Move(t_plan, "pitch", 0.0),
-                                        Move(t_plan, "alt", 0.0, ramp)],
-                                t_plan + ramp + LAND_SLACK_S, self.plan.name, self.plan.doc)
-        plan.at(t_plan)
+        self._land(t, alt, f"motor {lost} lost (its thrust missing in torque and collective): motors {lost} "
+                           f"and {spin.off[1] + 1} stopped, flying on motors {a} and {b} spinning at about "
+                           f"{spin.r_bar:.0f} rad/s, yaw given up: landing")
+        self._why = f"motor {lost} lost: landing on two rotors"   # even where the plan was landing already
 
     def _land(self, t: float, alt: float, why: str) -> bool:
         """From clock time `t`: replace the rest of the plan by roll and pitch back to level and a

@@ -103,15 +103,16 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
     scenario.plan.restart()
     loop = FlightLoop(hal, params, scenario.plan, log, FlightController(params, truth_est, estimator),
                       calibrate_s=calibrate_s, extra_row=board.extra_row, telemetry=telemetry)
+    diverged = None
     try:
         result = loop.run()
     except Diverged as e:          # the loop has stopped the motors and closed the log
-        result = loop.result
-        t_arm = result.t_arm if result.t_arm is not None else calibrate_s
-        result.reason = (f"stopped: the simulation diverged (the plant's state is not finite at t = "
-                         f"{e.t - t_arm:.2f} s; {unstable_axis(params)})")
+        result, diverged = loop.result, e
     board.close()
     t_arm = result.t_arm if result.t_arm is not None else calibrate_s
+    if diverged is not None:
+        result.reason = (f"stopped: the simulation diverged (the plant's state is not finite at t = "
+                         f"{diverged.t - t_arm:.2f} s; {unstable_axis(params)})")
     touchdowns = [(t - t_arm, vz) for t, vz in world.plant.touchdowns]
     table = log.table()
     outcome, crashed, flew = judge(result, table, touchdowns, params.airframe.g)

@@ -9,16 +9,22 @@ from flightctl.params import Airframe
 from flightctl.physics import command_from_thrust
 
 MIN_TILT_COSINE = 0.5  # beyond 60 degrees of tilt the u_z correction is held (and the vehicle is lost)
+SCALE = PWM_RANGE / 255.0   # P (0..255) -> counts, conventions.md
+
+
+def count_from_thrust(f: float, h1: float, h2: float) -> int:
+    """Eq. 26 inverted (thrust f >= 0 -> command value P), within the ESC's range, as a PWM count."""
+    P = command_from_thrust(f, h1, h2)
+    return int(SCALE * (P if P < 255.0 else 255.0) + 0.5)
 
 
 class Mixer:
-    __slots__ = ("B", "fmax", "h1", "h2", "scale", "f")
+    __slots__ = ("B", "fmax", "h1", "h2", "f")
 
     def __init__(self, a: Airframe):
         self.B = a.B                       # base thrust M g / 4 (eq. 25)
         self.fmax = 2.0 * a.B              # Table 3: 0 <= f_i <= 2B
         self.h1, self.h2 = a.h1, a.h2
-        self.scale = PWM_RANGE / 255.0     # P (0..255) -> counts, conventions.md
         self.f = [0.0, 0.0, 0.0, 0.0]      # the last thrusts, N (for logs and tests)
 
     def mix(self, uz: float, uphi: float, utheta: float, upsi: float, roll: float, pitch: float,
@@ -32,10 +38,9 @@ class Mixer:
         f[1] = base + uphi - upsi
         f[2] = base + utheta + upsi
         f[3] = base - uphi - upsi
-        fmax, h1, h2, scale, command = self.fmax, self.h1, self.h2, self.scale, command_from_thrust
+        fmax, h1, h2, count = self.fmax, self.h1, self.h2, count_from_thrust
         for i in range(4):
             fi = f[i]
             fi = fmax if fi > fmax else fi if fi > 0.0 else 0.0   # NaN -> 0: never a NaN command
             f[i] = fi
-            P = command(fi, h1, h2)                               # eq. 26 inverted ...
-            counts[i] = int(scale * (P if P < 255.0 else 255.0) + 0.5)   # ... within the ESC's range, counts
+            counts[i] = count(fi, h1, h2)

@@ -33,9 +33,9 @@ from __future__ import annotations
 
 from math import asin, atan2, cos, sin, sqrt
 
-from flightctl.hal import PWM_RANGE, ImuSample
+from flightctl.control.mixer import count_from_thrust
+from flightctl.hal import ImuSample
 from flightctl.params import Params
-from flightctl.physics import command_from_thrust
 
 FILTER_S = 0.01          # s: the residuals' low-pass
 BIAS_S = 0.5             # s: their slow part, followed while no motor is suspected
@@ -46,8 +46,6 @@ CALM_S = 0.1
 MIN_ALT = 0.3            # m: below this a residual is the floor's
 HIGH = 1.6               # a residual beyond this many times the motor's thrust is not one motor's
 OPPOSITE = (2, 3, 0, 1)  # motor index -> the index of the motor across the frame
-MAX_P = 255.0            # the ESC's full command: on two rotors the limits of Table 3 (f <= 2B) would
-#                          leave no margin, and the motors can give far more (eq. 26 at P = 255)
 SPIN_STEP = 2.0          # rad/s between the scheduled gain sets, ...
 RATE_SCALE, AXIS_SCALE = 0.5, 0.2    # rad/s, -: the LQR's acceptable body rate and tilt of n
 OMEGA_STEPS = 4          # ... and steps of the rotors' momentum, from none to the pair's in hover
@@ -67,7 +65,7 @@ class MotorLossDetector:
     """`update` every loop in flight, before the controller mixes anew; it returns the lost motor
     (1..4) the loop it is sure, else 0."""
     __slots__ = ("a", "km", "kf", "kb", "kc", "fl", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
-                 "p", "q", "B")
+                 "p", "q", "half")
 
     def __init__(self, params: Params, tau_motor: float | None = None):
         a = self.a = params.airframe
@@ -75,7 +73,7 @@ class MotorLossDetector:
         tau = motor_time_constant(params) if tau_motor is None else tau_motor
         self.km = dt / (tau + dt)
         self.kf, self.kb, self.kc = dt / (FILTER_S + dt), dt / (BIAS_S + dt), dt / (CALM_S + dt)
-        self.B = a.B
+        self.half = 0.5 * a.B              # a commanded thrust counts as at least this (near-idle rotors)
         self.fl = [0.0, 0.0, 0.0, 0.0]
         self.count = [0, 0, 0, 0]
         self.reset(a.B)
@@ -111,7 +109,7 @@ class MotorLossDetector:
         self.rz += kf * (tz - self.rz)
         self.calm += self.kc * ((p if p > 0 else -p) + (q if q > 0 else -q) - self.calm)
         ex, ey, ez = self.rx - self.bx, self.ry - self.by, self.rz - self.bz
-        lost, count, half = 0, self.count, 0.5 * self.B
+        lost, count, half = 0, self.count, self.half
         suspected = False
         for i in range(4):
             fi = fl[i] if fl[i] > half else half
@@ -182,21 +180,22 @@ def _lqr(A, B, dt: float, weights) -> list[float]:
 class SpinController:
     """The loop's controller after a motor is lost: `start(lost, ...)` once, `step(...)` every loop."""
     __slots__ = ("a", "tau_m", "r_bar", "gains", "pair", "off", "sign", "nx", "ny", "nz", "u_act", "u",
-                 "counts", "lost", "F", "yaw", "w", "om_full")
+                 "counts", "idle", "yaw", "w", "om_full", "kw")
 
     def __init__(self, params: Params, tau_motor: float | None = None):
         a = self.a = params.airframe
         self.tau_m = motor_time_constant(params) if tau_motor is None else tau_motor
         f = a.M * a.g / 2.0
         self.r_bar = sqrt(2.0 * (a.g1 * f + a.g2) / a.gamma1)   # gamma1 r^2 = 2 (g1 f + g2), eq. 6 and 28
-        self.om_full = 2.0 * sqrt(f / a.c1)
+        self.om_full = 2.0 * sqrt(f / a.c1)         # the pair's summed speed carrying the weight (eq. 27)
+        self.kw = a.dt / self.tau_m if self.tau_m > a.dt else 1.0   # the rotors' speeds per loop
+        self.idle = count_from_thrust(0.0, a.h1, a.h2)   # the dead zone's edge: no thrust, the ESC armed
         key = (a, self.tau_m)
         if key not in _GAINS:        # once per vehicle and process: at start-up, never in the air
             _GAINS[key] = {pair: self._schedule(pair) for pair in ((0, 2), (1, 3))}
         self.gains = _GAINS[key]
         self.w = [0.0, 0.0, 0.0, 0.0]   # the rotors' speeds (eq. 27), through the motor time constant
         self.counts = [0, 0, 0, 0]
-        self.lost = 0
         self.pair = None
 
     def _schedule(self, pair: tuple[int, int]) -> list[list[list[float]]]:
@@ -206,7 +205,6 @@ class SpinController:
         a = self.a
         sign = 1.0 if pair == (0, 2) else -1.0   # 1 and 3 turn clockwise: their reaction is +z (conventions.md)
         F = a.M * a.g
-        om_full = 2.0 * sqrt(F / 2.0 / a.c1)     # the pair carrying the weight (eq. 27)
         # weights: 1 / (acceptable value)^2 of p, q (rad/s), n_x, n_y, and the torque (N m)
         u_max = a.l * F / 2.0
         weights = [1.0 / RATE_SCALE ** 2, 1.0 / RATE_SCALE ** 2, 1.0 / AXIS_SCALE ** 2, 1.0 / AXIS_SCALE ** 2, 0.0]
@@ -215,7 +213,8 @@ class SpinController:
         for j in range(OMEGA_STEPS + 1):
             row, k = [], 0
             while k * SPIN_STEP <= 1.5 * self.r_bar:
-                A, B = _pair_model(a, pair, sign * k * SPIN_STEP, -sign * om_full * j / OMEGA_STEPS, self.tau_m)
+                A, B = _pair_model(a, pair, sign * k * SPIN_STEP, -sign * self.om_full * j / OMEGA_STEPS,
+                                      self.tau_m)
                 try:
                     row.append([g * u_max for g in _lqr(A, B * u_max, a.dt, weights)])
                 except LinAlgError:   # e.g. no spin and no rotor momentum: the axis along the pair cannot
@@ -235,7 +234,7 @@ class SpinController:
         thrusts commanded last (the rotors' speeds now, for their momentum)."""
         i = lost - 1
         keep = tuple(sorted(j for j in range(4) if j not in (i, OPPOSITE[i])))
-        self.lost, self.pair, self.off = lost, keep, (i, OPPOSITE[i])
+        self.pair, self.off = keep, (i, OPPOSITE[i])
         c1 = self.a.c1
         for m in range(4):
             self.w[m] = sqrt((f[m] if f[m] > 0.0 else 0.0) / c1)
@@ -244,7 +243,6 @@ class SpinController:
         cr, cp = cos(roll), cos(pitch)
         self.nx, self.ny, self.nz = -sin(pitch), sin(roll) * cp, cr * cp   # the world's up in the body
         self.u_act = self.u = 0.0
-        self.F = self.a.M * self.a.g
         self.yaw = yaw
 
     def tilt(self) -> tuple[float, float]:
@@ -289,25 +287,22 @@ class SpinController:
         F = F if F > 0.0 else 0.0
         lim = a.l * F * 0.5                        # each rotor's thrust stays >= 0
         u = lim if u > lim else -lim if u < -lim else u
-        self.u, self.F = u, F
+        self.u = u
         i, j = self.pair
         half, d = 0.5 * F, u / (2.0 * a.l)
         # pair (1, 3): tau_theta = l (f3 - f1); pair (2, 4): tau_phi = l (f2 - f4)
         fi, fj = (half - d, half + d) if self.pair == (0, 2) else (half + d, half - d)
-        counts, h1, h2 = self.counts, a.h1, a.h2
-        scale = PWM_RANGE / 255.0
+        # up to the ESC's full command: on two rotors the limits of Table 3 (f <= 2B) would leave no
+        # margin, and the motors give far more (eq. 26 at P = 255)
+        counts = self.counts
         fi = fi if fi > 0.0 else 0.0
         fj = fj if fj > 0.0 else 0.0
-        P = command_from_thrust(fi, h1, h2)
-        counts[i] = int(scale * (P if P < MAX_P else MAX_P) + 0.5)
-        P = command_from_thrust(fj, h1, h2)
-        counts[j] = int(scale * (P if P < MAX_P else MAX_P) + 0.5)
+        counts[i] = count_from_thrust(fi, a.h1, a.h2)
+        counts[j] = count_from_thrust(fj, a.h1, a.h2)
         o1, o2 = self.off
-        counts[o1] = counts[o2] = int(scale * h2 + 0.5)   # the dead zone's edge: no thrust, the ESC armed
+        counts[o1] = counts[o2] = self.idle
         # the rotors' speeds (eq. 27) follow through the motor time constant: their momentum for the gains
-        tau = self.tau_m
-        k = dt / tau if tau > dt else 1.0
-        c1 = a.c1
+        k, c1 = self.kw, a.c1
         w[i] += k * (sqrt(fi / c1) - w[i])
         w[j] += k * (sqrt(fj / c1) - w[j])
         w[o1] -= k * w[o1]
