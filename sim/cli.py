@@ -58,6 +58,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--monte-carlo", type=int, metavar="N",
                    help="fly N draws of the parameter file's plausible ranges with both gain sets, in parallel; "
                         "report the shares that fly, land and settle (--json, --plot: a map); sim/montecarlo.py")
+    p.add_argument("--batch", action="store_true",
+                   help="with --monte-carlo: fly the draws on the batched simulator (sim/batch.py: ideal sensors, "
+                        "in the air from after the take-off; thousands of draws in minutes)")
     return p
 
 
@@ -97,6 +100,8 @@ def main(argv: list[str]) -> int:
         p.error("give exactly one of SCENARIO and --plan PLAN.toml")
     if args.monte_carlo is not None:
         return monte_carlo_main(args)
+    if args.batch:
+        p.error("--batch goes with --monte-carlo N")
     if args.log is None:
         p.error("the following arguments are required: --log")
     if args.substeps < 1:
@@ -168,15 +173,16 @@ def monte_carlo_main(args) -> int:
     from flightctl.sim.progress import Progress
     if args.scenario is None:
         raise InputError("--monte-carlo flies a named scenario (e.g. paper), not a plan file")
-    if not 1 <= args.monte_carlo <= 10000:
-        raise InputError(f"--monte-carlo {args.monte_carlo}: between 1 and 10000 draws")
+    most = 100000 if args.batch else 10000
+    if not 1 <= args.monte_carlo <= most:
+        raise InputError(f"--monte-carlo {args.monte_carlo}: between 1 and {most} draws")
     if args.json:
         output_file(args.json, "--json")
     if args.plot:
         output_file(args.plot, "--plot", ".png")
-    bar = Progress(2 * args.monte_carlo, "monte carlo") if not args.quiet else None
-    result = montecarlo.run(args.params, args.scenario, args.monte_carlo, args.seed,
-                            progress=bar.step if bar is not None else None)
+    bar = Progress(2 if args.batch else 2 * args.monte_carlo, "monte carlo") if not args.quiet else None
+    run = montecarlo.run_batch if args.batch else montecarlo.run
+    result = run(args.params, args.scenario, args.monte_carlo, args.seed, progress=bar.step if bar is not None else None)
     print(montecarlo.summary(result))
     if args.json:
         montecarlo.write_json(result, args.json)

@@ -106,7 +106,8 @@ SETTLED_DEG = {"roll": 1.0, "pitch": 1.0, "yaw": 3.0}  # and "settle around the 
 def settled_errors(log: Table, steps, t_arm: float) -> list[tuple[str, float]]:
     """Per attitude step: the largest true error (deg) from SETTLE_AFTER_S after the step to the next
     step: the paper's real-flight facts as the tests and the Monte Carlo read them (a step not flown
-    that long counts as never settled, inf)."""
+    that long counts as never settled, inf). The true columns may be (rows, N), N vehicles of the
+    batched simulator (sim/batch.py): each error is then an (N,) array."""
     t = log["t"] - t_arm
     out = []
     for s in steps:
@@ -114,11 +115,19 @@ def settled_errors(log: Table, steps, t_arm: float) -> list[tuple[str, float]]:
             continue
         sel = (t >= s.t + SETTLE_AFTER_S - 1e-6) & (t <= s.t + s.window)
         e = (log[TRUE[s.channel]][sel] - s.end + np.pi) % (2 * np.pi) - np.pi
-        out.append((s.channel, math.degrees(float(np.max(np.abs(e)))) if e.size and t[-1] >= s.t + s.window - 1e-6
-                    else math.inf))
+        if not (e.shape[0] and t[-1] >= s.t + s.window - 1e-6):
+            out.append((s.channel, math.inf if e.ndim == 1 else np.full(e.shape[1], math.inf)))
+        elif e.ndim == 1:
+            out.append((s.channel, math.degrees(float(np.max(np.abs(e))))))
+        else:
+            out.append((s.channel, np.degrees(np.max(np.abs(e), axis=0))))
     return out
 
 
-def settles(log: Table, steps, t_arm: float) -> bool:
-    """Every attitude step within SETTLED_DEG of its command from SETTLE_AFTER_S on."""
-    return all(err < SETTLED_DEG[ch] for ch, err in settled_errors(log, steps, t_arm))
+def settles(log: Table, steps, t_arm: float):
+    """Every attitude step within SETTLED_DEG of its command from SETTLE_AFTER_S on (an (N,) bool
+    array for the columns of N vehicles)."""
+    out = True
+    for ch, err in settled_errors(log, steps, t_arm):
+        out = out & (err < SETTLED_DEG[ch])
+    return out

@@ -11,6 +11,12 @@ to the next: `flightctl.sim.metrics.settles`, the tests' reading of the paper's 
 where one table settles and the other does not, and a map of the outcomes over the first two ranged
 parameters. The paper's facts (both tables fly; Table 6, retuned on the vehicle, settles) become
 probabilities over the plausible model. Flights run in parallel processes, one per core.
+
+`--batch` flies the draws on the batched simulator instead (sim/batch.py: thousands of vehicles at
+once, the vectorised copy of the controller, ideal sensors, no floor): from a hover after the
+take-off to the end of the scenario's last attitude step, the same settle criterion; it answers
+whether the control law holds over the ranges, without the estimator's and the sensors' share, and
+reports no landing.
 """
 from __future__ import annotations
 
@@ -77,12 +83,66 @@ def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, j
             "share": share, "paired": paired, "draws": rows}
 
 
+def _batch_window(sc) -> tuple[float, float, list]:
+    """(start, end, attitude steps) of a scenario for the batched flight: from 1 s after its take-off
+    ramp to the end of its last attitude step's window."""
+    steps = [st for st in sc.steps if st.channel != "alt"]
+    if not steps:
+        raise InputError(f"--batch: the scenario {sc.name} has no attitude steps to judge")
+    start = max((m.t + m.ramp for m in sc.plan.moves if m.channel == "alt" and m.t == 0.0), default=0.0) + 1.0
+    steps = [st for st in steps if st.t >= start]
+    return start, max(st.t + st.window for st in steps) + 0.05, steps
+
+
+def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, workers: int | None = None) -> dict:
+    """The draws flown on the batched simulator (module docstring), both gain sets on the same draws."""
+    import numpy as np
+
+    from flightctl.sim import causes
+    from flightctl.sim.batch import simulate
+    from flightctl.sim.metrics import settles
+    from flightctl.sim.model import PHI, PSI, THETA
+    from flightctl.sim.scenarios import SCENARIOS
+    params = causes.load_vehicle(spec)
+    spans = ranged(params)
+    if not spans:
+        raise InputError(f"--monte-carlo: {spec or 'the reference airframe'} carries no ranges")
+    sc = SCENARIOS[scenario]()
+    start, end, steps = _batch_window(sc)
+    rng = np.random.default_rng(seed)
+    draws = {(c, name): rng.uniform(lo, hi, n) for c, name, lo, hi in spans}
+    out = {}
+    for g in GAINS:
+        flight = simulate(causes.load_vehicle(spec, GAIN_SETS[g]), sc.plan, start, end, n, draws,
+                          workers=workers or os.cpu_count() or 1, record_every=9)
+        st = flight.states
+        log = {"t": flight.t, "true_roll": st[:, PHI], "true_pitch": st[:, THETA],
+               "true_yaw": (st[:, PSI] + np.pi) % (2 * np.pi) - np.pi}
+        flies = ~flight.crashed
+        out[g] = (flies, settles(log, steps, 0.0) & flies, flight.crash_t)
+        if progress is not None:
+            progress(f"{g}: {n} vehicles, {flight.vehicle_steps / 1e6:.1f} M vehicle-steps")
+    rows = [{"draw": {f"{c}.{name}": float(v[k]) for (c, name), v in draws.items()},
+             **{g: {"gains": g, "flies": bool(out[g][0][k]), "settles": bool(out[g][1][k]),
+                    "outcome": "in the air" if out[g][0][k] else f"crashed at {out[g][2][k]:.2f} s"} for g in GAINS}}
+            for k in range(n)]
+    share = {g: {what: sum(r[g][what] for r in rows) / n for what in ("flies", "settles")} for g in GAINS}
+    paired = {"table6 settles, table4 not": sum(r["table6"]["settles"] and not r["table4"]["settles"] for r in rows),
+              "table4 settles, table6 not": sum(r["table4"]["settles"] and not r["table6"]["settles"] for r in rows)}
+    return {"scenario": scenario, "params": spec or "reference airframe", "n": n, "seed": seed,
+            "simulator": f"batched simulator (sim/batch.py): ideal sensors, from {start:g} s to {end:g} s after arming",
+            "ranges": [{"cause": c, "parameter": name, "lo": lo, "hi": hi} for c, name, lo, hi in spans],
+            "share": share, "paired": paired, "draws": rows}
+
+
 def summary(result: dict) -> str:
     lines = [f"{result['scenario']} over {result['n']} draws of {result['params']}'s ranges "
              + ", ".join(f"{r['cause']}.{r['parameter']} [{r['lo']:.4g}, {r['hi']:.4g}]" for r in result["ranges"])]
+    if "simulator" in result:
+        lines.append(f"  on the {result['simulator']}")
     for g, s in result["share"].items():
-        lines.append(f"  {g}: flies {100 * s['flies']:.0f} %, lands upright {100 * s['lands']:.0f} %, "
-                     f"settles {100 * s['settles']:.0f} %")
+        lands = f"lands upright {100 * s['lands']:.0f} %, " if "lands" in s else ""
+        lines.append(f"  {g}: flies {100 * s['flies']:.0f} %, {lands}settles {100 * s['settles']:.0f} %")
     lines.append("  paired: " + "; ".join(f"{k}: {v}" for k, v in result["paired"].items()))
     return "\n".join(lines)
 
@@ -95,20 +155,21 @@ def plot(result: dict, path: str | Path) -> None:
     for j, g in enumerate(GAINS):
         a = ax[0, j]
         for label, colour, pick in (("settles", "tab:green", lambda r: r["settles"]),
-                                    ("lands, rings", "tab:orange", lambda r: r["lands"] and not r["settles"]),
-                                    ("crashes", "tab:red", lambda r: not r["lands"])):
+                                    ("flies, rings", "tab:orange", lambda r: r["flies"] and not r["settles"]),
+                                    ("crashes", "tab:red", lambda r: not r["flies"])):
             pts = [r["draw"] for r in result["draws"] if pick(r[g])]
             if pts and keys:
                 x = [p[keys[0]] for p in pts]
                 y = [p[keys[1]] if len(keys) > 1 else 0.0 for p in pts]
-                a.plot(x, y, "o", color=colour, ms=5, label=f"{label} ({len(pts)})")
+                a.plot(x, y, "o", color=colour, ms=5 if len(result["draws"]) <= 200 else 2, label=f"{label} ({len(pts)})")
         a.set_xlabel(keys[0] if keys else "")
         a.set_ylabel(keys[1] if len(keys) > 1 else "")
         s = result["share"][g]
         a.set_title(f"{g}: flies {100 * s['flies']:.0f} %, settles {100 * s['settles']:.0f} %")
         a.grid(alpha=0.3)
         legend(a)
-    fig.suptitle(f"flightctl sim {result['scenario']} --monte-carlo {result['n']} --params {result['params']}")
+    fig.suptitle(f"flightctl sim {result['scenario']} --monte-carlo {result['n']} --params {result['params']}"
+                 + (" --batch" if "simulator" in result else ""))
     save(fig, path)
 
 

@@ -19,6 +19,16 @@ Each response is the loop of `flightctl analyze` with perfect state feedback (si
 model linearised about the hover at 1.5 m, sampled at 450 Hz, the PID of eq. 24 as the loop runs it),
 the paper's own simulation setting; the tuned gains are then flown through the nonlinear simulator
 (the figure). ki stays 0, as in Table 4.
+
+`--robust N`: the procedure's gains are a point answer on one model; the parameter file's ranges
+(`range.NAME = [lo, hi]`, `--params paper-as-flown`) say the model is not known that well. The robust
+mode takes N draws of those ranges and flies the scenario's attitude steps on the batched simulator
+(sim/batch.py, the Monte Carlo's `--batch` setting) with the roll and pitch gains scaled, kp and kd
+each by a factor on a grid, every candidate on the same draws; the candidate that flies and settles
+(`flightctl.sim.metrics.settles`) in the largest share of the draws wins, a second, finer grid around
+it refines it, and the altitude and yaw gains stay the procedure's. Among candidates that tie, the
+least change from the procedure's gains wins (the factors nearest 1). Table 4 and Table 6 are flown on
+the same draws beside them.
 """
 from __future__ import annotations
 
@@ -32,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from flightctl.errors import InputError, output_file
-from flightctl.params import TABLE4, Gains, dumps
+from flightctl.params import TABLE4, TABLE6, Gains, dumps
 
 SETTLE_S = 3.0
 STEPS = {"alt": 2.0, "roll": math.radians(5), "pitch": math.radians(5), "yaw": math.radians(30)}
@@ -124,6 +134,99 @@ def tune(params, progress=None, strict: bool = False) -> tuple[Gains, dict]:
     return gains, found
 
 
+COARSE = (0.2, 0.3, 0.45, 0.7, 1.0, 1.5)   # factors on the procedure's roll and pitch kp and kd
+FINE = (0.8, 0.9, 1.0, 1.12, 1.25)         # ... then on the coarse grid's best
+
+
+def scaled(gains: Gains, kp: float, kd: float) -> Gains:
+    """The roll and pitch kp and kd times these factors."""
+    return dataclasses.replace(gains, kp_phi=gains.kp_phi * kp, kp_theta=gains.kp_theta * kp,
+                               kd_phi=gains.kd_phi * kd, kd_theta=gains.kd_theta * kd)
+
+
+def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str = "paper", workers=None,
+           progress=None) -> list[dict]:
+    """Per candidate, the shares of n draws of the file's ranges that fly and that settle, on the
+    batched simulator (every candidate on the same draws)."""
+    import os
+
+    from flightctl.sim.batch import simulate
+    from flightctl.sim.metrics import settles
+    from flightctl.sim.model import PHI, PSI, THETA
+    from flightctl.sim.montecarlo import _batch_window, ranged
+    from flightctl.sim.scenarios import SCENARIOS
+    spans = ranged(params)
+    if not spans:
+        raise InputError("--robust: the parameter file carries no ranges (range.NAME = [lo, hi]; "
+                         "--params paper-as-flown has them)")
+    sc = SCENARIOS[scenario]()
+    start, end, steps = _batch_window(sc)
+    rng = np.random.default_rng(seed)
+    draws = {(c, name): rng.uniform(lo, hi, n) for c, name, lo, hi in spans}
+    per = max(1, 400 // n)             # candidates per batch: at least 400 vehicles at once
+    out = []
+    for i in range(0, len(candidates), per):
+        group = candidates[i:i + per]
+        flight = simulate(params, sc.plan, start, end, n * len(group), {k: np.tile(v, len(group)) for k, v in draws.items()},
+                          [g for g in group for _ in range(n)], workers=workers or os.cpu_count() or 1)
+        st = flight.states
+        log = {"t": flight.t, "true_roll": st[:, PHI], "true_pitch": st[:, THETA],
+               "true_yaw": (st[:, PSI] + np.pi) % (2 * np.pi) - np.pi}
+        flies = ~flight.crashed
+        ok = settles(log, steps, 0.0) & flies
+        for j in range(len(group)):
+            out.append({"flies": float(flies[j * n:(j + 1) * n].mean()), "settles": float(ok[j * n:(j + 1) * n].mean())})
+            if progress:
+                progress(f"candidate {len(out)}/{len(candidates)}: settles {100 * out[-1]['settles']:.0f} %")
+    return out
+
+
+def robust(params, base: Gains, n: int, seed: int = 0, progress=None, workers=None,
+           scenario: str = "paper") -> tuple[Gains, dict]:
+    """The module docstring's robust mode, from the gains `base`: (the gains, what was found)."""
+    grid = [(kp, kd) for kp in COARSE for kd in COARSE]
+    coarse = shares(params, [scaled(base, kp, kd) for kp, kd in grid] + [TABLE4, TABLE6], n, seed, scenario,
+                    workers=workers, progress=progress)
+    coarse, table4, table6 = coarse[:-2], coarse[-2], coarse[-1]
+
+    def best(points, results):
+        # the largest share that settles, then that flies, then the least change from the procedure
+        return max(zip(points, results), key=lambda pr: (pr[1]["settles"], pr[1]["flies"],
+                                                         -abs(math.log(pr[0][0])) - abs(math.log(pr[0][1]))))
+    (kp0, kd0), _ = best(grid, coarse)
+    fine_grid = [(kp0 * a, kd0 * b) for a in FINE for b in FINE if (a, b) != (1.0, 1.0)]
+    fine = shares(params, [scaled(base, kp, kd) for kp, kd in fine_grid], n, seed, scenario, workers=workers,
+                  progress=progress)
+    (kp, kd), won = best(grid + fine_grid, coarse + fine)
+    return scaled(base, kp, kd), {"draws": n, "seed": seed, "kp_factor": kp, "kd_factor": kd, **won,
+                                  "procedure_gains": dataclasses.asdict(base),
+                                  "procedure": coarse[grid.index((1.0, 1.0))], "table4": table4, "table6": table6,
+                                  "table6_factors": (TABLE6.kp_phi / base.kp_phi, TABLE6.kd_phi / base.kd_phi),
+                                  "grid": [{"kp_factor": a, "kd_factor": b, **r} for (a, b), r in zip(grid + fine_grid, coarse + fine)]}
+
+
+def robust_plot(found: dict, path) -> None:
+    """The share that settles over the grid of factors on the procedure's roll and pitch kp and kd."""
+    from flightctl.sim.plots import figure, save
+    fig, ax = figure(1, 1, size=(7.0, 5.5))
+    a = ax[0, 0]
+    pts = found["grid"]
+    sc = a.scatter([p["kp_factor"] for p in pts], [p["kd_factor"] for p in pts], c=[100 * p["settles"] for p in pts],
+                   cmap="viridis", vmin=0, vmax=100, s=60, edgecolors="k", linewidths=0.3)
+    fig.colorbar(sc, ax=a, label="settles (% of the draws)")
+    a.plot([found["kp_factor"]], [found["kd_factor"]], "r*", ms=16, label=f"chosen: settles {100 * found['settles']:.0f} %")
+    a.plot([1.0], [1.0], "ks", ms=8, mfc="none", label=f"the procedure's: {100 * found['procedure']['settles']:.0f} %")
+    a.plot(*found["table6_factors"], "wD", ms=8, mec="k", label=f"Table 6 (roll): {100 * found['table6']['settles']:.0f} %")
+    a.set_xscale("log")
+    a.set_yscale("log")
+    a.set_xlabel("factor on roll and pitch kp")
+    a.set_ylabel("factor on roll and pitch kd")
+    a.set_title(f"flightctl tune --robust {found['draws']}: Table 4 settles in {100 * found['table4']['settles']:.0f} %", fontsize=10)
+    a.legend(fontsize=8)
+    a.grid(alpha=0.3, which="both")
+    save(fig, path)
+
+
 def plot(params, gains: Gains, path) -> None:
     """The tuned gains and Table 4 flown through the nonlinear simulator with perfect state feedback:
     the step of each channel (figures 13-16)."""
@@ -155,6 +258,7 @@ def plot(params, gains: Gains, path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     from flightctl.sim import causes
+    from flightctl.sim.montecarlo import ranged
     p = argparse.ArgumentParser(prog="flightctl tune", description=__doc__.split("\n\n")[0].replace("\n", " "))
     p.add_argument("--params", help="parameter file or shipped vehicle (default: the reference airframe)")
     p.add_argument("--out", required=True, metavar="GAINS.toml", help="the parameter file to write, with the tuned [gains]")
@@ -162,7 +266,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--plot", metavar="P.png", help="the tuned gains and Table 4 flown through the simulator")
     p.add_argument("--strict", action="store_true",
                    help="read 'no oscillation remains' as no overshoot beyond the allowable error either")
+    p.add_argument("--robust", type=int, metavar="N",
+                   help="then scale the roll and pitch gains for the largest share of N draws of the file's ranges "
+                        "that flies and settles (batched simulator; --plot also draws the grid)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the --robust draws")
+    p.add_argument("--scenario", default="paper", help="the scenario whose attitude steps --robust flies (default: paper)")
     args = p.parse_args(argv)
+    if args.robust is not None and not 1 <= args.robust <= 10000:
+        raise InputError(f"--robust {args.robust}: between 1 and 10000 draws")
+    from flightctl.sim.scenarios import SCENARIOS
+    if args.scenario not in SCENARIOS:
+        raise InputError(f"--scenario {args.scenario}: not a named scenario ({', '.join(sorted(SCENARIOS))})")
     out = output_file(args.out, "--out", ".toml")
     if args.json:
         output_file(args.json, "--json")
@@ -172,21 +286,52 @@ def main(argv: list[str] | None = None) -> int:
     if params.effects:
         print("flightctl tune: the plant carries " + ", ".join(e.cause for e in params.effects)
               + "; the linearised loops include them", file=sys.stderr)
-    gains, found = tune(params, lambda m: print(f"tune {m}", file=sys.stderr, flush=True), args.strict)
+    from flightctl.sim.progress import Progress
+    if args.robust is not None and not ranged(params):
+        raise InputError(f"--robust: {args.params or 'the reference airframe'} carries no ranges "
+                         "(range.NAME = [lo, hi]; --params paper-as-flown has them)")
+    bar = Progress(len(ORDER) * 2 + (len(COARSE) ** 2 + 2 + len(FINE) ** 2 - 1 if args.robust else 0), "tune")
+    if args.robust and params.effects:   # the procedure on the paper's model, then robust over the ranges
+        print("flightctl tune --robust: the procedure runs on the base model (the paper's), the robust "
+              "search over the file's ranges", file=sys.stderr)
+        gains, found = tune(dataclasses.replace(params, effects=()), bar.step, args.strict)
+    else:
+        gains, found = tune(params, bar.step, args.strict)
     src = {f"{k}_{NAME[ch]}": f"flightctl tune (paper sec. 3.3 automated: {OSCILLATIONS[ch]} oscillations "
            f"in {SETTLE_S:g} s, then no oscillation beyond {TOLERANCE[ch] if ch == 'alt' else 0.1:g} "
            f"{'m' if ch == 'alt' else 'deg'}); Table 4: {getattr(TABLE4, f'{k}_{NAME[ch]}'):g}"
            for ch in ORDER for k in ("kp", "ki", "kd")}
+    if args.robust:
+        procedure = gains
+        gains, rob = robust(params, procedure, args.robust, args.seed, progress=bar.step, scenario=args.scenario)
+        found["robust"] = rob
+        for k in ("kp", "kd"):
+            for ax in ("phi", "theta"):
+                name = f"{k}_{ax}"
+                src[name] = (f"flightctl tune --robust {args.robust}: the procedure's {getattr(procedure, name):.4g} "
+                             f"x {rob[k + '_factor']:.3g}, settles in {100 * rob['settles']:.0f} % of the draws of "
+                             f"{args.params}'s ranges (the procedure's {100 * rob['procedure']['settles']:.0f} %, "
+                             f"Table 4 {100 * rob['table4']['settles']:.0f} %); Table 4: {getattr(TABLE4, name):g}")
     out.write_text("# Gains tuned by flightctl tune on " + (args.params or "the reference airframe") + "\n"
                    + dumps(dataclasses.replace(params, gains=gains), src, tables=("gains",)))
     print("channel   kp (tuned / Table 4)    kd (tuned / Table 4)")
     for ch in ORDER:
-        f = found[ch]
-        print(f"{ch:<8} {f['kp']:8.3f} / {f['table4']['kp']:<8g}    {f['kd']:8.3f} / {f['table4']['kd']:<8g}")
+        kp, kd = f"kp_{NAME[ch]}", f"kd_{NAME[ch]}"
+        print(f"{ch:<8} {getattr(gains, kp):8.3f} / {getattr(TABLE4, kp):<8g}    {getattr(gains, kd):8.3f} / {getattr(TABLE4, kd):<8g}")
     print(f"  -> {out}")
     if args.json:
         Path(args.json).write_text(json.dumps(found, indent=1) + "\n")
+    if args.robust:
+        r = found["robust"]
+        print(f"robust over {r['draws']} draws: roll and pitch kp x {r['kp_factor']:.3g}, kd x {r['kd_factor']:.3g} "
+              f"of the procedure's: flies {100 * r['flies']:.0f} %, settles {100 * r['settles']:.0f} % "
+              f"(the procedure's {100 * r['procedure']['settles']:.0f} %, Table 4 {100 * r['table4']['settles']:.0f} %, "
+              f"Table 6 {100 * r['table6']['settles']:.0f} %)")
     if args.plot:
         plot(params, gains, args.plot)
         print(f"  plot -> {args.plot}")
+        if args.robust:
+            grid = Path(args.plot).with_name(Path(args.plot).stem + "-robust.png")
+            robust_plot(found["robust"], grid)
+            print(f"  plot -> {grid}")
     return 0

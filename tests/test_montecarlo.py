@@ -48,3 +48,33 @@ def test_draws_stay_in_their_ranges_and_the_shares_count_them(tmp_path):
 def test_a_file_without_ranges_is_one_line(tmp_path, capsys):
     assert main(["sim", "step_roll", "--monte-carlo", "2"]) == 2
     assert "carries no ranges" in capsys.readouterr().err
+
+
+def test_batched_monte_carlo_flies_the_narrow_ranges_and_fails_the_slow_motors(tmp_path):
+    """`--batch` (sim/batch.py): within 15 % of the as-flown values (tau 30-40 ms) every draw flies and
+    settles with Table 6, as on the full onboard path above; with the motors' time constant moved to
+    150-192 ms (the slow end of its range), Table 4's bank loops ring or crash in most draws."""
+    narrow = _narrow(tmp_path)
+    out = tmp_path / "mc.json"
+    rc = main(["sim", "step_roll", "--params", str(narrow), "--monte-carlo", "8", "--batch", "--json", str(out),
+               "--plot", str(tmp_path / "mc.png"), "--quiet"])
+    r = json.loads(out.read_text())
+    assert rc == 0 and r["n"] == 8 and "batched simulator" in r["simulator"]
+    assert r["share"]["table6"] == {"flies": 1.0, "settles": 1.0}
+    for g in ("table4", "table6"):
+        assert r["share"][g]["settles"] == sum(d[g]["settles"] for d in r["draws"]) / 8
+    slow = tmp_path / "slow.toml"
+    slow.write_text("\n".join(
+        "range.tau = [0.15, 0.192]" if line.startswith("range.tau") else "tau = 0.17" if line.startswith("tau =") else line
+        for line in narrow.read_text().splitlines()) + "\n")
+    rc = main(["sim", "step_roll", "--params", str(slow), "--monte-carlo", "8", "--batch", "--json", str(out), "--quiet"])
+    r = json.loads(out.read_text())
+    assert r["share"]["table4"]["settles"] <= 0.25
+    assert all(0.15 <= d["draw"]["motor_dynamics.tau"] <= 0.192 for d in r["draws"])
+
+
+def test_batch_needs_monte_carlo(capsys):
+    import pytest
+    with pytest.raises(SystemExit) as e:
+        main(["sim", "step_roll", "--log", "x.csv", "--batch"])
+    assert e.value.code == 2 and "--batch goes with --monte-carlo" in capsys.readouterr().err

@@ -26,7 +26,8 @@ class GroundEffect(Effect):
 
     def scale(self, t, x, u, s):
         radius = self.parameters["rotor_radius"]
-        k = factor(max(x[Z], 0.5 * radius), radius)
+        z, lo = x[Z], 0.5 * radius
+        k = factor((z + lo + abs(z - lo)) * 0.5, radius)   # max(z, R / 2) for floats and arrays alike
         for i in range(4):
             s[i] *= k
 
