@@ -55,7 +55,7 @@ class BoardOptions:
     realtime: bool = False          # sim: pace the world by the wall clock (flightctl run) instead of lock-step
     effects: tuple = ()             # sim: extensions of the plant (flightctl.sim.causes)
     noise: object = None            # sim: a SensorNoise; None: the default noise
-    substeps: int = 2               # sim: plant integration steps per loop period
+    substeps: int | None = None     # sim: plant integration steps per loop period (None: the plant's SUBSTEPS)
     devices: dict = field(default_factory=dict)   # pi: devices to use instead of opening them (pi, spi, smbus)
     link: str | None = None         # hil: serial:PATH[,BAUD] or tcp:[HOST:]PORT (flightctl.link)
 

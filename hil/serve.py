@@ -35,7 +35,7 @@ _U16 = struct.Struct("<H")
 class HilPlant:
     """The simulated quadcopter at its devices' boundary."""
 
-    def __init__(self, params: Params, seed: int = 0, noise: SensorNoise | None = None, substeps: int = 2):
+    def __init__(self, params: Params, seed: int = 0, noise: SensorNoise | None = None, substeps: int | None = None):
         carried = causes.carried(params)
         self.world = w = World(params.airframe, carried, noise if noise is not None else SensorNoise(), seed, substeps)
         self.imu = SimMpu9250(w)

@@ -89,6 +89,36 @@ def batch_rate(n: int = 10000, seconds: float = 1.0, workers: int = 1) -> float:
     return flight.vehicle_steps / (time.perf_counter() - start)
 
 
+def split_us(name: str | None) -> tuple[float, float]:
+    """Per loop period of `sim paper` (full onboard path): (us in the simulated world: the plant, the
+    chip's SPI answers, the sonar's edges, the battery; us in the onboard loop and the log). The second
+    bounds the simulator's speed whatever the plant costs: at most period / it times real time."""
+    from flightctl.sim import devices
+    spent = [0.0]
+
+    def timed(cls, name):
+        inner = getattr(cls, name)
+
+        def wrapper(*a):
+            t = time.perf_counter()
+            r = inner(*a)
+            spent[0] += time.perf_counter() - t
+            return r
+        return inner, wrapper
+    patches = [(cls, attr, *timed(cls, attr)) for cls, attr in ((devices.World, "advance"), (devices.SimMpu9250, "xfer2"))]
+    for cls, attr, _, wrapper in patches:
+        setattr(cls, attr, wrapper)
+    try:
+        start = time.perf_counter()
+        flight = fly(SCENARIOS["paper"](), load(name), Path(tempfile.mkdtemp()) / "paper.csv")
+        wall = time.perf_counter() - start
+    finally:
+        for cls, attr, inner, _ in patches:
+            setattr(cls, attr, inner)
+    n = len(flight.log)
+    return 1e6 * spent[0] / n, 1e6 * (wall - spent[0]) / n
+
+
 def diagnose_seconds() -> tuple[float, float, float] | None:
     """(seconds of log, seconds to read it, seconds to diagnose it), or None without the shared data."""
     import contextlib
@@ -129,6 +159,11 @@ def main() -> None:
         print(f"flightctl sim paper, {label}: {statistics.median(ratios):.1f}x real time "
               f"(median of {args.repeat}; {min(ratios):.1f}x to {max(ratios):.1f}x), target >= 30x")
     period_us = 1e6 * params.airframe.dt
+    for label, name in (("base model", None), ("paper-as-flown", "paper-as-flown")):
+        world, onboard = min((split_us(name) for _ in range(args.repeat)), key=sum)
+        print(f"  per loop period, {label}: {world:.0f} us in the simulated world (plant, chip, sonar, battery), "
+              f"{onboard:.0f} us in the onboard loop and the log: the loop alone caps the simulator at "
+              f"{period_us / onboard:.0f}x real time")
     costs = [iteration_us() for _ in range(args.repeat)]
     us = min(costs)
     print(f"control iteration (decode -> PWM counts): {us:.1f} us = {100 * us / period_us:.2f} % of the "

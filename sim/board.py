@@ -29,7 +29,7 @@ SIM_CALIBRATE_S = 2.0   # s; the paper sat still for 60 s. 900 reads of the simu
 SONAR_TRIGGER_PIN, SONAR_ECHO_PIN = 23, 24   # pins of the simulated GPIO
 
 
-def sim_board(params: Params, effects=(), noise=None, seed: int = 0, substeps: int = 2) -> tuple[Hal, World]:
+def sim_board(params: Params, effects=(), noise=None, seed: int = 0, substeps: int | None = None) -> tuple[Hal, World]:
     """The Hal of the simulated quadcopter, and the simulated world (for its true values). The plant
     carries the parameter file's effects (measured-data.md), then `effects` (`causes.combined`: an
     effect of a cause the file carries replaces it)."""

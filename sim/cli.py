@@ -45,7 +45,7 @@ def parser() -> argparse.ArgumentParser:
                    help="onboard estimator structure (docs/estimator.md); default: flight")
     p.add_argument("--no-noise", action="store_true", help="switch sensor noise and bias off")
     p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
-    p.add_argument("--substeps", type=int, default=2, help="plant integration steps per loop period")
+    p.add_argument("--substeps", type=int, help="plant RK4 steps per loop period (default: sim/plant.py SUBSTEPS, 1)")
     p.add_argument("--plot", help="PNG of the responses (default: beside the log, .png)")
     p.add_argument("--no-plot", action="store_true", help="write no PNG")
     p.add_argument("--quiet", action="store_true",
@@ -104,7 +104,7 @@ def main(argv: list[str]) -> int:
         p.error("--batch goes with --monte-carlo N")
     if args.log is None:
         p.error("the following arguments are required: --log")
-    if args.substeps < 1:
+    if args.substeps is not None and args.substeps < 1:
         raise InputError("--substeps: at least 1")
     params = causes.load_vehicle(args.params, GAIN_SETS[args.gains])
     effects = tuple(causes.parse(e) for e in args.effect)

@@ -28,7 +28,7 @@ from flightctl.hal import LEVEL_TIMEOUT, PWM_RANGE
 from flightctl.params import Airframe
 from flightctl.physics import G
 from flightctl.sim.model import Effect, Model, rotation
-from flightctl.sim.plant import Plant
+from flightctl.sim.plant import SUBSTEPS, Plant
 from flightctl.sim.power import SimBattery
 
 EARTH_FIELD_T = (20e-6, 0.0, -40e-6)  # North, West, Up: a mid-latitude field, dipping down
@@ -110,14 +110,14 @@ class World:
     """The plant, its environment and the true sensor values."""
 
     def __init__(self, airframe: Airframe, effects: tuple[Effect, ...] = (), noise: SensorNoise = SensorNoise(),
-                 seed: int = 0, substeps: int = 2, battery_soc: float = 0.9):
+                 seed: int = 0, substeps: int | None = None, battery_soc: float = 0.9):
         self.a = airframe
         self.dt = airframe.dt
         self.rng = random.Random(seed)
         self.normal = NoisePool(seed)
         self.noise = noise
         self.battery = SimBattery(self, battery_soc)
-        self.plant = Plant(Model(airframe, effects), self.dt, substeps, self.battery.voltage)
+        self.plant = Plant(Model(airframe, effects), self.dt, substeps or SUBSTEPS, self.battery.voltage)
         self.gpio = SimGpio(self)
 
     @property

@@ -74,7 +74,7 @@ def unstable_axis(params: Params) -> str:
 
 
 def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), noise: bool = True,
-        seed: int = 0, truth: bool = False, substeps: int = 2, calibrate_s: float = SIM_CALIBRATE_S,
+        seed: int = 0, truth: bool = False, substeps: int | None = None, calibrate_s: float = SIM_CALIBRATE_S,
         estimator: str = "flight", telemetry=None, faults=()) -> Flight:
     """`truth=True` is perfect state feedback: the controller sees the true attitude and altitude at
     every loop (the paper's own simulation); otherwise the full onboard path. `telemetry`: a ground

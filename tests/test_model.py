@@ -549,7 +549,7 @@ def test_rk4_against_solve_ivp():
     assert 16 / 1.5 < errs[1] / errs[2] < 16 * 1.5
 
 
-def fresh_plant(effects=(), dt=1 / 450, substeps=2):
+def fresh_plant(effects=(), dt=1 / 450, substeps=2):   # 2: the floor tests below time contacts within dt / 2
     return Plant(Model(Airframe(), effects), dt, substeps)
 
 
@@ -611,24 +611,30 @@ def test_motor_lag_vehicle_can_take_off():
     assert plant.x[2] > 0.0
 
 
-def test_actuation_delay_shifts_response_quantised_to_substep():
-    """delay 7 ms at h = dt/3 = 1/1350 s is 9.45 substeps, realised as 9 substeps = 3 loop periods."""
-    dt, sub = 1 / 450, 3
-    assert round(0.007 / (dt / sub)) == 9
-    runs = []
-    for eff in ((), (fx.make("actuation_delay", delay=0.007),)):
-        plant = fresh_plant(eff, dt=dt, substeps=sub)
-        zs, ps = [], []
+def test_actuation_delay_is_exact_at_any_value():
+    """A delay of whole periods shifts the response by those periods exactly; a delay of 7 ms = 3.15
+    periods lies between 3 and 4 periods' shifts, at 0.15 of the way (to first order), at 1 and at 3
+    substeps alike (the plant splits the period where the delayed command changes)."""
+    dt = 1 / 450
+
+    def run(delay, sub=1):
+        plant = fresh_plant((fx.make("actuation_delay", delay=delay),) if delay else (), dt=dt, substeps=sub)
+        zs, ps = [], []   # on the floor at hover thrust until the step lifts it
         for k in range(60):
             u = hover_u((0.0,) * 4) if k < 10 else hover_u((3.0, 5.0, 3.0, 1.0))
             plant.command(*u)
             plant.advance(dt)
             zs.append(plant.x[2])
             ps.append(plant.x[9])
-        runs.append((zs, ps))
-    (z0, p0), (z1, p1) = runs
-    assert z0[9] == 0.0 and z0[10] > 0.0            # lifts in the first period of the step
-    assert z1[12] == 0.0 and z1[13] > 0.0           # three periods later
-    assert z1[3:] == pytest.approx(z0[:-3], rel=1e-12, abs=0)
-    assert p1[3:] == pytest.approx(p0[:-3], rel=1e-12, abs=0)
+        return np.array(zs), np.array(ps)
+    z0, p0 = run(0.0)
+    z3, p3 = run(3 * dt)
+    assert z0[9] == 0.0 and z0[10] > 0.0 and z3[12] == 0.0 and z3[13] > 0.0   # lifts three periods later
+    assert z3[3:] == pytest.approx(z0[:-3], rel=1e-12, abs=1e-15)
+    assert p3[3:] == pytest.approx(p0[:-3], rel=1e-12, abs=1e-15)
+    z4, _ = run(4 * dt)
+    for sub in (1, 3):
+        z7, p7 = run(0.007, sub)
+        frac = (z3[20:40] - z7[20:40]) / (z3[20:40] - z4[20:40])
+        assert frac == pytest.approx(0.15, abs=0.02)
     assert p0[20] > 0.0                              # and it rolls (f2 > f4)
