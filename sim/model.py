@@ -75,7 +75,9 @@ class Effect:
     """A candidate extension (measured-data.md): the plant side of one cause of
     `flightctl.sim.causes`, whose module also holds its diagnose fit. A subclass declares
 
-    - `cause`: its name in measured-data.md; `required`: {parameter name: Parameter(unit, lo, hi)};
+    - `cause`: its name in measured-data.md; `required`: {parameter name: Parameter(unit, lo, hi)}
+      (what diagnose fits and reports); `optional`: the same for parameters a parameter file may add
+      (the effect's own default when absent);
     - the hooks it uses (`uses_rotor`, `uses_scale`, `uses_wrench`, or `delay`) and overrides them;
       the base does nothing at every hook.
 
@@ -96,6 +98,7 @@ class Effect:
     """
     cause = "none"
     required: dict[str, Parameter] = {}
+    optional: dict[str, Parameter] = {}
     n_states = 0
     offset = 0
     delay = 0.0

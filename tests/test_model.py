@@ -462,6 +462,31 @@ def test_effect_motor_dynamics_thrust_torque_and_momentum_follow_the_lagged_spee
     assert xd[11] == pytest.approx((tq[0] - tq[1] + tq[2] - tq[3] - JP * spin_up) / JZZ, rel=1e-12)
 
 
+def test_effect_motor_dynamics_slows_down_with_tau_down():
+    """An ESC that does not brake: rotors below their command speed up with tau, rotors above it
+    slow down with tau_down; without tau_down both ways take tau. The speeds in the plant decay as
+    exp(-t / tau_down) after a step down."""
+    W = math.sqrt(FH / C1)
+    u = hover_u()
+    m = Model(Airframe(), (fx.make("motor_dynamics", tau=0.03, tau_down=0.2),))
+    speeds = [W - 20.0, W + 20.0, W - 20.0, W + 20.0]
+    xd = m.f(0.0, state(z=3.0) + speeds, u)
+    assert xd[12:16] == pytest.approx([20.0 / 0.03, -20.0 / 0.2, 20.0 / 0.03, -20.0 / 0.2], rel=1e-12)
+    sym = Model(Airframe(), (fx.make("motor_dynamics", tau=0.03),))
+    assert sym.f(0.0, state(z=3.0) + speeds, u)[12:16] == pytest.approx([20.0 / 0.03, -20.0 / 0.03] * 2, rel=1e-12)
+    plant = Plant(Model(Airframe(), (fx.make("motor_dynamics", tau=0.03, tau_down=0.2),)), 1 / 450)
+    plant.command(*hover_u((10.0,) * 4))
+    for _ in range(450):
+        plant.advance(1 / 450)
+    high = plant.x[12]
+    plant.command(*u)
+    for _ in range(90):             # 0.2 s = tau_down after the step down
+        plant.advance(1 / 450)
+    assert (plant.x[12] - W) / (high - W) == pytest.approx(math.exp(-1.0), rel=1e-3)
+    with pytest.raises(InputError, match="tau_down=9 is out of range"):
+        fx.make("motor_dynamics", tau=0.03, tau_down=9.0)
+
+
 def test_parse_effect():
     e = fx.parse("motor_lag:tau=0.05")
     assert e.cause == "motor_lag" and e.parameters == {"tau": 0.05}

@@ -51,13 +51,15 @@ def make(cause: str, **parameters: float) -> Effect:
     if cause not in CAUSES:
         raise InputError(f"unknown effect {cause!r} (known: {', '.join(CAUSES)})")
     spec = CAUSES[cause].parameters
+    optional = CAUSES[cause].effect.optional
     missing = set(spec) - set(parameters)
-    unknown = set(parameters) - set(spec)
+    unknown = set(parameters) - set(spec) - set(optional)
     if missing or unknown:
         raise InputError(f"{cause}: takes {', '.join(spec)}"
+                         + (f" (and optionally {', '.join(optional)})" if optional else "")
                          + (f"; missing {', '.join(sorted(missing))}" if missing else "")
                          + (f"; unknown {', '.join(sorted(unknown))}" if unknown else ""))
-    for name, p in spec.items():
+    for name, p in {**spec, **{k: v for k, v in optional.items() if k in parameters}}.items():
         v = parameters[name]
         if not (math.isfinite(v) and p.lo <= v <= p.hi):
             raise InputError(f"{cause}: {name}={v:g} is out of range [{p.lo:g}, {p.hi:g}]")

@@ -37,9 +37,15 @@ class MotorDynamics(Effect):
     """Each rotor's speed follows its command through a first-order lag; the body takes its reaction.
 
     d Omega_i / dt = (Omega_cmd,i - Omega_i) / tau; thrust c1 Omega_i^2 (eq. 27), torque (eq. 28) and
-    the momentum of eq. 9 follow Omega_i; the extra yaw torque is -Jp sum s_i d Omega_i / dt."""
+    the momentum of eq. 9 follow Omega_i; the extra yaw torque is -Jp sum s_i d Omega_i / dt.
+
+    `tau_down` (optional, default tau): the time constant while the rotor slows down. An ESC that
+    brakes (active freewheeling, "damped light") drives the speed down as it drives it up; one that
+    does not lets the rotor coast on its aerodynamic drag alone, J / (2 Q / Omega), several times
+    slower (scripts/as_flown.py). Diagnose fits the symmetric lag (`tau` only)."""
     cause, n_states, uses_rotor, uses_wrench = "motor_dynamics", 4, True, True
     required = {"tau": Parameter("s", 1e-4, 5.0)}
+    optional = {"tau_down": Parameter("s", 1e-4, 5.0)}
     _spin_up = 0.0   # sum s_i dOmega_i/dt of the last `rotor` call, for `wrench` (rad/s^2)
 
     def initial_states(self, f_cmd):
@@ -51,11 +57,13 @@ class MotorDynamics(Effect):
 
     def rotor(self, t, x, f_cmd, xdot):
         o, tau, c1, w_cmd = self.offset, self.parameters["tau"], self.a.c1, self._w_cmd
+        down = self.parameters.get("tau_down", tau)
+        span = tau - down
         f = [0.0, 0.0, 0.0, 0.0]
         spin_up = 0.0
         for i in range(4):
             w = x[o + i]
-            dw = (w_cmd[i] - w) / tau
+            dw = (w_cmd[i] - w) / (down + span * (w_cmd[i] >= w))   # tau up, tau_down down (floats or arrays)
             if xdot is not None:
                 xdot[o + i] = dw
             spin_up += SPIN[i] * dw
