@@ -19,7 +19,11 @@ CHORD_75 = 0.024            # m, chord at 0.75 R of a 12-inch two-blade multirot
 LIFT_SLOPE = 5.7            # 1/rad, 2-D thin-aerofoil 2 pi less the usual 3-D/low-Reynolds loss
 KV = 920.0                  # RPM/V: a ~900 KV 12-inch-class motor on 4S (hover near 40 % throttle)
 R_PHASE = 0.10              # ohm, winding plus ESC of that motor class
-J_BLADE_MODEL = 1.0e-4      # kg m^2, 13 g blade as a tapered rod (m r^2 / 3) plus the bell
+J_BLADE_MODEL = 1.0e-4      # kg m^2, a 13 g two-blade 12-inch propeller as a rod (m R^2 / 3) plus the bell
+J_RANGE = (1.0e-4, 2.66838e-4)   # kg m^2: the blade model (a tapered blade and the bell: 0.8-1.3e-4) to
+#                                  Table 2's disk model, the upper end
+ESC_HZ = 449.0              # the ESC's input frame rate (paper, sec. 4.4.1): a command waits 0 to 1/449 s
+N_BLADES = 2
 TAU_MOTOR = 0.035           # s, the as-flown choice: where the paper's real-flight facts hold (docs/as-flown.md)
 TAU_RANGE = (0.020, None)   # s: fast ESCs and small rotors (INDIflight's 20 ms bench); the top is derived below
 K_OVER_M = (0.3, 0.6)       # 1/s: rotor drag over mass measured on quadrotors (issue 17's review, docs/as-flown.md)
@@ -47,9 +51,15 @@ def derive(params: Params = Params()) -> dict:
     ke = 60.0 / (2 * math.pi * KV)
     q_h = a.g1 * B + a.g2                           # eq. 28 at hover
     damping = ke * ke / R_PHASE + 2 * q_h / omega_h
+    # a rigid rotor's hub moment from a body rate p: blade elements at (r, psi) meet the air p r sin psi
+    # faster, lift -rho a c Omega r^2 p sin psi / 2 dr, arm r sin psi; averaged over psi, N_b blades:
+    # -N_b rho a c Omega R^4 p / 16 per rotor (sim/causes/rotor_inflow.py)
+    hub = 4 * N_BLADES * RHO * LIFT_SLOPE * CHORD_75 * omega_h * a.rotor_radius ** 4 / 16
     return {"M": a.M, "B": B, "v_h": v_h, "omega_h": omega_h, "lambda_h": lam_h, "sigma": sigma,
             "k_inflow": k_inflow, "k_inflow_max": k_inflow_max, "k_drag": k_drag, "M_over_k": a.M / k_drag,
-            "tau_open_table2_Jp": a.Jp / damping, "tau_open_blade_J": J_BLADE_MODEL / damping}
+            "tau_open_table2_Jp": a.Jp / damping, "tau_open_blade_J": J_BLADE_MODEL / damping,
+            "tau_coast_blade_J": J_BLADE_MODEL / (2 * q_h / omega_h), "tau_coast_table2_Jp": a.Jp / (2 * q_h / omega_h),
+            "hub": hub}
 
 
 def as_flown(d: dict) -> Params:
@@ -67,14 +77,38 @@ def as_flown(d: dict) -> Params:
               f"an upper estimate; measured quadrotors give k/M = {K_OVER_M[0]:g}-{K_OVER_M[1]:g} 1/s "
               f"({K_OVER_M[0] * d['M']:.2f}-{K_OVER_M[1] * d['M']:.2f} N s/m here): the range runs from there "
               f"to the momentum value")
+    src_md += (f"; tau_down (the rotor slowing down): the same as tau for an ESC that brakes (the E600's "
+               f"sine-wave drive is taken to: not measured); one that does not lets it coast on its drag, "
+               f"Jp/(2Q/W) = {d['tau_coast_blade_J']:.2f}-{d['tau_coast_table2_Jp']:.2f} s, outside the range drawn")
+    src_dr += "; it acts at the rotors, so it damps yaw too (-k l^2 r)"
+    src_in += (f"; hub: a rigid rotor's hub moment N_b rho a c Omega R^4 / 16 per rotor, {d['hub']:.4f} N m s/rad "
+               f"for four (an upper estimate: flapping relieves it; range down to 0)")
+    period = 1.0 / ESC_HZ
+    src_delay = (f"theory: the ESC samples its input at {ESC_HZ:g} Hz, unsynchronised with the 450 Hz loop, so a "
+                 f"command waits 0 to {period * 1e3:.2f} ms for the next frame, {0.5 * period * 1e3:.2f} ms on "
+                 f"average; range: none to two frames (the wait plus up to a frame of the ESC's own processing, "
+                 f"not measured). The gyro's and accelerometer's DLPF delays (2.9 and 1.9 ms) are the simulated "
+                 f"chip's (sim/devices.py)")
     filters = dataclasses.replace(Filters(), tau_tilt_air=TAU_TILT_AIR)
-    k_in, k_dr = round(d["k_inflow"], 4), round(d["k_drag"], 3)
-    return Params(filters=filters, effects=(
-        EffectSpec("rotor_inflow", (("k", k_in),), src_in,
-                   (("k", round(0.7 * k_in, 4), round(d["k_inflow_max"], 4)),)),
-        EffectSpec("motor_dynamics", (("tau", TAU_MOTOR),), src_md,
-                   (("tau", TAU_RANGE[0], round(d["tau_open_table2_Jp"], 3)),)),
-        EffectSpec("rotor_drag", (("k", k_dr),), src_dr, (("k", round(K_OVER_M[0] * d['M'], 3), k_dr),))))
+    k_in, k_dr, hub = round(d["k_inflow"], 4), round(d["k_drag"], 3), round(d["hub"], 4)
+    tau_hi = round(d["tau_open_table2_Jp"], 3)
+    return Params(airframe=dataclasses.replace(Params().airframe, Jp=J_BLADE_MODEL), filters=filters, effects=(
+        EffectSpec("rotor_inflow", (("k", k_in), ("hub", hub)), src_in,
+                   (("k", round(0.7 * k_in, 4), round(d["k_inflow_max"], 4)), ("hub", 0.0, hub))),
+        EffectSpec("motor_dynamics", (("tau", TAU_MOTOR), ("tau_down", TAU_MOTOR)), src_md,
+                   (("tau", TAU_RANGE[0], tau_hi), ("tau_down", TAU_RANGE[0], tau_hi))),
+        EffectSpec("rotor_drag", (("k", k_dr),), src_dr, (("k", round(K_OVER_M[0] * d['M'], 3), k_dr),)),
+        EffectSpec("actuation_delay", (("delay", round(0.5 * period, 6)),), src_delay,
+                   (("delay", 0.0, round(2 * period, 6)),))))
+
+
+def sources(d: dict) -> dict[str, str]:
+    """The airframe values the as-flown file changes, with their provenance."""
+    return {"Jp": (f"one rotor inertia for tau, the reaction torque and eq. 7-9: a 13 g 12-inch propeller as a "
+                   f"rod (m R^2 / 3) plus the bell, {J_BLADE_MODEL:.1e}; range {J_RANGE[0]:.1e} (a tapered blade: "
+                   f"0.8-1.3e-4) to Table 2's disk model {J_RANGE[1]:.3e}, which gives the open-loop tau of "
+                   f"{d['tau_open_table2_Jp']:.3f} s at the top of tau's range ({d['tau_open_blade_J']:.3f} s with "
+                   f"this Jp)")}
 
 
 def main() -> None:
@@ -91,7 +125,7 @@ def main() -> None:
     path = Path(args.out)
     text = ("# The paper's vehicle as flown: the reference airframe (conventions.md) plus the terms its\n"
             "# model lacks, each with its provenance. Written by scripts/as_flown.py; do not edit by hand.\n"
-            + dumps(as_flown(d), tables=("filters",)))
+            + dumps(as_flown(d), sources(d), tables=("filters",)))
     path.write_text(text)
     print(f"-> {Path(path).relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path}")
 

@@ -12,6 +12,7 @@ per second of wall time where the full onboard path flies one.
   IMU samples, echoes and setpoints give the same PWM counts, within one count of rounding.
   What it leaves out: the magnetometer (yaw from the gyro alone), the landing and the vertical
   estimate that stands in for a lost echo (a lost echo holds the last altitude).
+- The actuation delay (one per vehicle) is realised as the single plant realises it.
 - The sensors are ideal: the IMU reads the true body rates and specific force, the sonar the true
   range along -z_b at `sonar_hz`. No floor: the vehicles start hovering; one that tilts past
   CRASH_TILT or sinks below the floor is frozen there and counted as crashed (flightctl/safety.py).
@@ -20,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Callable, Sequence
@@ -33,6 +33,7 @@ from flightctl.params import Airframe, Gains, Params
 from flightctl.plan import Plan
 from flightctl.safety import CRASH_TILT
 from flightctl.sim.model import N_RIGID, PHI, THETA, Z, Effect, Model, P, Q, R
+from flightctl.sim.plant import delayed
 
 TWO_PI = 2.0 * math.pi
 GAINS = ("z", "phi", "theta", "psi")
@@ -177,8 +178,6 @@ class BatchPlant:
 
     def __init__(self, airframe: Airframe, effects: tuple[Effect, ...], n: int, substeps: int = 1,
                  battery_v: float | None = None):
-        if any(e.delay for e in effects):
-            raise ValueError("the batched plant has no actuation delay (its queue is the single plant's)")
         self.model = Model(airframe, effects, vector=True)
         self.a, self.n = airframe, n
         self.dt = airframe.dt
@@ -189,6 +188,14 @@ class BatchPlant:
         self.t = 0.0
         self.crashed = np.zeros(n, dtype=bool)
         self.crash_t = np.full(n, np.nan)
+        # the actuation delay, per vehicle, as the single plant realises it (sim/plant.py `delayed`): a
+        # ring of the last whole + 2 inputs, the delayed one and the one before it averaged over the period
+        periods = np.broadcast_to(np.asarray(self.model.delay, dtype=float), (n,)) / self.dt
+        self._whole = np.floor(periods + 1e-9).astype(int)
+        self._frac = np.where(periods - self._whole > 1e-9, periods - self._whole, 0.0)
+        self._ring = np.zeros((int(self._whole.max()) + 2, 5, n))
+        self._head = 0
+        self._cols = np.arange(n)
 
     def hover(self, z: float) -> None:
         """Every vehicle level at altitude z, at rest, its rotors at the hover command."""
@@ -202,6 +209,8 @@ class BatchPlant:
             if e.n_states:
                 x[e.offset:e.offset + e.n_states] = e.initial_states(f_cmd)
         self.x = x
+        self._ring[:] = np.array(u)
+        self.u = u
 
     def input(self, P: np.ndarray) -> tuple:
         """The model's input u from command values P (4, N): a new tuple (a new input)."""
@@ -225,6 +234,15 @@ class BatchPlant:
     def advance(self, counts: np.ndarray) -> None:
         """One loop period with the PWM counts (4, N) held."""
         u = self.input(counts * (1.0 / SCALE))
+        if self._ring.shape[0] > 2 or self._frac.any():
+            ring = self._ring
+            self._head = head = (self._head + 1) % ring.shape[0]
+            ring[head] = u
+            cols = self._cols
+            before = ring[(head - self._whole - 1) % ring.shape[0], :, cols].T
+            now = ring[(head - self._whole) % ring.shape[0], :, cols].T
+            u = delayed(before, now, self._frac)
+        self.u = u
         with np.errstate(all="ignore"):
             x = self.x
             for j in range(self.substeps):
@@ -261,7 +279,6 @@ def fly(plant: BatchPlant, controller: BatchController, setpoints: Callable[[flo
     every = max(1, round(a.loop_hz / a.sonar_hz))
     steps = int(round(duration / dt))
     ts, states = [], []
-    u = plant.input(np.full((4, plant.n), a.h2 + math.sqrt(a.B / a.h1)))   # the hover command of `hover`
     model = plant.model
     controller.alt = controller.alt_prev = plant.x[Z].copy()   # in the air: no derivative kick at the first echo
     for k in range(steps):
@@ -269,11 +286,10 @@ def fly(plant: BatchPlant, controller: BatchController, setpoints: Callable[[flo
         x = plant.x
         if k % every == 0:
             controller.on_range(x[Z] / (np.cos(x[PHI]) * np.cos(x[THETA])), t)
-        fx, fy, fz = model.specific_force(t, x, u)
+        fx, fy, fz = model.specific_force(t, x, plant.u)
         roll_sp, pitch_sp, yaw_sp, alt_sp = setpoints(t)
         counts = controller.step(x[P], x[Q], x[R], fx, fy, fz, dt, roll_sp, pitch_sp, yaw_sp, alt_sp)
         plant.advance(counts)
-        u = plant.input(counts * (1.0 / SCALE))
         if k % record_every == 0:
             ts.append(t)
             states.append(x[:N_RIGID].copy())

@@ -159,7 +159,11 @@ class SimMpu9250:
     through the configured DLPF; a zero-rate offset that wanders (random walk) and follows the die
     temperature, which warms after power-on and is in the burst's temperature word; the accelerometer's
     offset that follows the temperature too; and the rotors' 1/rev vibration in the specific force, seen
-    through the DLPF and the output sample rate (SMPLRT_DIV), so that it aliases as on the chip."""
+    through the DLPF and the output sample rate (SMPLRT_DIV), so that it aliases as on the chip.
+    The DLPF delays the rigid-body signals too, by the register map's delay of the configured filter
+    (2.9 ms for the gyro at DLPF_CFG = 1, 184 Hz; 1.88 ms for the accelerometer at 218 Hz): the values
+    read are the true rates and specific force of that long ago, interpolated between the truths at
+    the last reads (the loop reads every 2.2 ms)."""
     _HEAD = struct.Struct(">7h")
     _MAG = struct.Struct("<3hB")
     MAG_EVERY = 4   # burst reads per magnetometer sample: 450 Hz / 4, near the AK8963's 100 Hz
@@ -181,6 +185,7 @@ class SimMpu9250:
         self.accel_temp_coeff = (g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff))
         self.gyro_walk = [0.0, 0.0, 0.0]   # rad/s, the random-walk part of the zero-rate offset
         self._t_on = self._t_last = world.t
+        self._truths: list[tuple] = []    # (t, fx, fy, fz, p, q, r) at the last reads, oldest first
         self._phase = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # each rotor's angle
         z = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # phase of each arm's z bending
         self._z_cos, self._z_sin = [math.cos(a) for a in z], [math.sin(a) for a in z]
@@ -219,6 +224,7 @@ class SimMpu9250:
         self._g_sigma = n.gyro_density * math.sqrt(0.5 * math.pi * g_bw)
         self._a_sigma = n.accel_density * math.sqrt(0.5 * math.pi * a_bw)
         self._a_tc = 1.0 / (_TAU * a_bw)   # time constant of the accelerometer's DLPF as a first-order lag
+        self._g_delay = GYRO_DLPF[cfg][1]
         # SAMPLE_RATE = 1 kHz / (1 + SMPLRT_DIV) when 0 < DLPF_CFG < 7, else the gyro's 8 kHz (RM, register 25)
         self._period = (1 + rg[reg.SMPLRT_DIV]) / 1000.0 if 0 < cfg < 7 else 1.0 / 8000.0
 
@@ -261,6 +267,12 @@ class SimMpu9250:
         t = w.t
         fx, fy, fz = w.plant.specific_force()
         p, q, r = w.plant.rates
+        truths = self._truths
+        truths.append((t, fx, fy, fz, p, q, r))
+        if len(truths) > 4:
+            del truths[0]
+        fx, fy, fz = self._delayed(t - self._a_delay, 1)   # the DLPF's delay on the rigid-body signals
+        p, q, r = self._delayed(t - self._g_delay, 4)
         dt, self._t_last = t - self._t_last, t
         e = w.normal.take(9)
         walk = self.gyro_walk
@@ -294,6 +306,20 @@ class SimMpu9250:
             self._MAG.pack_into(self.ak, reg.AK_HXL, _i16((by + sm * e[0]) * lsb),
                                 _i16((bx + sm * e[1]) * lsb), _i16(-(bz + sm * e[2]) * lsb), 0x10)
             self._copy_ext()
+
+    def _delayed(self, t: float, i: int) -> tuple[float, float, float]:
+        """Columns i..i+2 of the recorded truths at time t, linearly interpolated (the oldest before
+        the first read)."""
+        truths = self._truths
+        for k in range(len(truths) - 1, 0, -1):
+            new, old = truths[k], truths[k - 1]
+            if old[0] <= t:
+                span = new[0] - old[0]
+                w = (t - old[0]) / span if span > 0.0 else 1.0
+                return (old[i] + w * (new[i] - old[i]), old[i + 1] + w * (new[i + 1] - old[i + 1]),
+                        old[i + 2] + w * (new[i + 2] - old[i + 2]))
+        first = truths[0]
+        return first[i], first[i + 1], first[i + 2]
 
     def _vibration(self, t: float, dt: float) -> tuple[float, float, float]:
         """The rotors' 1/rev specific force in the accelerometer's output register: each rotor's speed from

@@ -150,7 +150,9 @@ def summary(result: dict) -> str:
 def plot(result: dict, path: str | Path) -> None:
     """The outcome of each draw over the first two ranged parameters, one panel per gain set."""
     from flightctl.sim.plots import figure, legend, save
-    keys = sorted(result["draws"][0]["draw"], key=lambda k: not k.endswith(".tau")) if result["draws"] else []
+    # the motor time constant against the delay where both are drawn, else against the next ranged term
+    keys = sorted(result["draws"][0]["draw"], key=lambda k: (not k.endswith(".tau"), not k.endswith(".delay"))) \
+        if result["draws"] else []
     fig, ax = figure(1, len(GAINS), size=(12.0, 5.0))
     for j, g in enumerate(GAINS):
         a = ax[0, j]

@@ -116,26 +116,31 @@ def test_vector_model_is_the_scalar_model(cause):
 
 
 def test_batch_plant_is_the_single_plant_with_a_parameter_per_vehicle():
-    """The batched plant with one motor time constant per vehicle (an array in the effect's
-    parameters) follows the single plant flown with each value, command for command."""
+    """The batched plant with one motor time constant and one actuation delay per vehicle (arrays in
+    the effects' parameters) follows the single plant flown with each value, command for command."""
+    from flightctl.sim.batch import with_draws
     params = load("paper-as-flown")
     a = params.airframe
     taus = np.array([0.02, 0.035, 0.08, 0.15])
+    delays = np.array([0.0, 0.0011, 0.0044, 0.0071])      # none, a fraction, whole periods and a fraction
     n = taus.size
-    effects = causes.combined(params, ())
-    batch = BatchPlant(a, effects, n, substeps=2)
-    next(e for e in batch.model.effects if e.cause == "motor_dynamics").parameters["tau"] = taus
+    batch = BatchPlant(a, with_draws(params, {("motor_dynamics", "tau"): taus, ("actuation_delay", "delay"): delays}),
+                       n, substeps=2)
     batch.hover(3.0)
     singles = []
-    for tau in taus:
-        plant = Plant(Model(a, causes.combined(params, (causes.make("motor_dynamics", tau=float(tau)),))), a.dt, 2,
-                      a.battery_nominal_v)
-        plant.x = batch.x[:, len(singles)].tolist()
+    for i, (tau, delay) in enumerate(zip(taus, delays)):
+        drawn = (causes.make("motor_dynamics", tau=float(tau), tau_down=0.035),
+                 causes.make("actuation_delay", delay=float(delay)))
+        plant = Plant(Model(a, causes.combined(params, drawn)), a.dt, 2, a.battery_nominal_v)
+        hover = tuple(float(v[i]) for v in batch.u)
+        plant._queue.extend([hover] * len(plant._queue))   # hovering: the hover input held before
+        plant.x = batch.x[:, i].tolist()
         plant.on_ground = False
         singles.append(plant)
     rng = np.random.default_rng(5)
     for k in range(400):
-        counts = np.round(rng.uniform(26300, 27700, (4, n))).astype(int) if k % 20 == 0 else counts
+        if k % 20 == 0:
+            counts = np.round(rng.uniform(26300, 27700, (4, n))).astype(int)
         batch.advance(counts)
         for i, plant in enumerate(singles):
             plant.command(*(counts[:, i] * 255.0 / 40000.0).tolist(), a.battery_nominal_v)

@@ -316,8 +316,25 @@ def test_effect_rotor_drag():
     assert xd[4] == pytest.approx(0.0, abs=1e-12)
     assert xd[5] == pytest.approx(-G, rel=1e-12)
     assert m.specific_force(0.0, x, u) == pytest.approx((0.0, 0.3 * 2.0 / M, 0.0), abs=1e-12)
-    # no torque from it
+    # no torque from it without a yaw rate
     assert xd[9:12] == pytest.approx([0.0, 0.0, 0.0], abs=1e-12)
+    # a yaw rate moves each rotor sideways at r l: the four drags damp it, -k l^2 r, and nothing else
+    xr = m.f(0.0, state(z=3.0, r=2.0), u)
+    free = Model(Airframe()).f(0.0, state(z=3.0, r=2.0), u)
+    assert xr[11] - free[11] == pytest.approx(-0.3 * L * L * 2.0 / JZZ, rel=1e-12)
+    assert xr[3:5] == pytest.approx([0.0, 0.0], abs=1e-12) and xr[9:11] == pytest.approx(free[9:11], abs=1e-12)
+
+
+def test_effect_rotor_inflow_hub_damping():
+    """The optional hub moment: -hub (p, q) on roll and pitch, on top of the inflow's -2 k l^2 p."""
+    k, hub = 0.3, 0.024
+    with_hub = Model(Airframe(), (fx.make("rotor_inflow", k=k, hub=hub),))
+    without = Model(Airframe(), (fx.make("rotor_inflow", k=k),))
+    x = state(z=3.0, p=1.5, q=-0.5)
+    a, b = with_hub.f(0.0, x, hover_u()), without.f(0.0, x, hover_u())
+    assert a[9] - b[9] == pytest.approx(-hub * 1.5 / JXX, rel=1e-9)
+    assert a[10] - b[10] == pytest.approx(hub * 0.5 / JYY, rel=1e-9)
+    assert a[11] == pytest.approx(b[11], abs=1e-12) and a[5] == pytest.approx(b[5], abs=1e-12)
 
 
 def test_effect_com_offset():

@@ -15,9 +15,9 @@ class ActuationDelay(Effect):
     cause = "actuation_delay"
     required = {"delay": Parameter("s", 0.0, 1.0)}
 
-    def __init__(self, **parameters):
-        super().__init__(**parameters)
-        self.delay = self.parameters["delay"]
+    @property
+    def delay(self):
+        return self.parameters["delay"]   # (an array, one per vehicle, in the batched simulator)
 
 
 def shift(F, s: float):

@@ -26,6 +26,15 @@ i, the body-z velocity plus the rotation: V_i = w_b + p y_i - q x_i for the roto
 rising rotor 2 and gains it on the falling rotor 4, a damping moment -2 k l^2 p (0.04 N m s/rad).
 Only the thrust changes (the contract's term); the rotor torque of eq. 28 and the speed of eq. 9
 follow the commanded thrust.
+
+`hub` (optional, N m s/rad, the four rotors together; default 0): the same blade elements seen from
+inside the disc. A body roll rate p moves a blade element at radius r and azimuth psi up at p r
+sin(psi): its angle of attack changes by p sin(psi) / Omega and its lift by -rho a c Omega r^2 p
+sin(psi) / 2 dr. Times the arm r sin(psi), averaged over the azimuth and summed over N_b blades,
+that is a hub moment -N_b rho a c Omega R^4 p / 16 per rotor if the blades do not flap (a rigid
+rotor): 0.0059 N m s/rad per rotor, 0.024 for four (scripts/as_flown.py), on roll and pitch. A
+flapping blade relieves it (an articulated rotor passes none to the hub): 0 is the lower end.
+Diagnose fits `k` only.
 """
 from __future__ import annotations
 
@@ -47,6 +56,7 @@ class RotorInflow(Effect):
     """Each rotor's thrust falls with its axial speed: f_i - k sqrt(f_i / B) (w_b + p y_i - q x_i)."""
     cause, uses_wrench = "rotor_inflow", True
     required = {"k": Parameter("N s/m", 0.0, 5.0)}
+    optional = {"hub": Parameter("N m s/rad", 0.0, 1.0)}
 
     def attach(self, airframe, offset):
         super().attach(airframe, offset)
@@ -56,9 +66,10 @@ class RotorInflow(Effect):
         l = self.a.l
         d1, d2, d3, d4 = thrust_change(f[0], f[1], f[2], f[3], self.parameters["k"], self._B, l, vb[2], x[P], x[Q])
         t_phi, t_theta, _ = body_torques(d1, d2, d3, d4, 0.0, 0.0, 0.0, 0.0, l)
+        hub = self.parameters.get("hub", 0.0)
         force[2] += d1 + d2 + d3 + d4
-        torque[0] += t_phi
-        torque[1] += t_theta
+        torque[0] += t_phi - hub * x[P]
+        torque[1] += t_theta - hub * x[Q]
 
 
 def climb_speed(ds) -> list[np.ndarray]:
