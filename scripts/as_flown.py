@@ -80,7 +80,9 @@ def as_flown(d: dict) -> Params:
     src_md += (f"; tau_down (the rotor slowing down): the same as tau for an ESC that brakes (the E600's "
                f"sine-wave drive is taken to: not measured); one that does not lets it coast on its drag, "
                f"Jp/(2Q/W) = {d['tau_coast_blade_J']:.2f}-{d['tau_coast_table2_Jp']:.2f} s, outside the range drawn")
-    src_dr += "; it acts at the rotors, so it damps yaw too (-k l^2 r)"
+    src_dr += ("; yaw: it acts at the rotors, so it damps yaw, k l^2 r for four; the paper's yaw-drag rig spun "
+               "the vehicle on rotors 1 and 3 with 2 and 4 off, so eq. 6's gamma1 holds the running pair's share: "
+               "the file adds the other pair's, (k / 2) l^2, range 0 to k l^2 at the largest k")
     src_in += (f"; hub: a rigid rotor's hub moment N_b rho a c Omega R^4 / 16 per rotor, {d['hub']:.4f} N m s/rad "
                f"for four (an upper estimate: flapping relieves it; range down to 0)")
     period = 1.0 / ESC_HZ
@@ -92,12 +94,14 @@ def as_flown(d: dict) -> Params:
     filters = dataclasses.replace(Filters(), tau_tilt_air=TAU_TILT_AIR)
     k_in, k_dr, hub = round(d["k_inflow"], 4), round(d["k_drag"], 3), round(d["hub"], 4)
     tau_hi = round(d["tau_open_table2_Jp"], 3)
+    l2 = Params().airframe.l ** 2
     return Params(airframe=dataclasses.replace(Params().airframe, Jp=J_BLADE_MODEL), filters=filters, effects=(
         EffectSpec("rotor_inflow", (("k", k_in), ("hub", hub)), src_in,
                    (("k", round(0.7 * k_in, 4), round(d["k_inflow_max"], 4)), ("hub", 0.0, hub))),
         EffectSpec("motor_dynamics", (("tau", TAU_MOTOR), ("tau_down", TAU_MOTOR)), src_md,
                    (("tau", TAU_RANGE[0], tau_hi), ("tau_down", TAU_RANGE[0], tau_hi))),
-        EffectSpec("rotor_drag", (("k", k_dr),), src_dr, (("k", round(K_OVER_M[0] * d['M'], 3), k_dr),)),
+        EffectSpec("rotor_drag", (("k", k_dr), ("yaw", round(0.5 * k_dr * l2, 5))), src_dr,
+                   (("k", round(K_OVER_M[0] * d['M'], 3), k_dr), ("yaw", 0.0, round(k_dr * l2, 5)))),
         EffectSpec("actuation_delay", (("delay", round(0.5 * period, 6)),), src_delay,
                    (("delay", 0.0, round(2 * period, 6)),))))
 

@@ -142,12 +142,7 @@ class World:
                 Rm[2] * bn + Rm[5] * bw + Rm[8] * bu)
 
 
-# The DLPF by DLPF_CFG (register 26, gyro) and A_DLPF_CFG (register 29, accelerometer), FCHOICE_B = 0:
-# (3-dB bandwidth Hz, delay s), from those registers' tables in the Register Map (RM-MPU-9250A-00 rev 1.6).
-GYRO_DLPF = ((250.0, 0.97e-3), (184.0, 2.9e-3), (92.0, 3.9e-3), (41.0, 5.9e-3), (20.0, 9.9e-3),
-             (10.0, 17.85e-3), (5.0, 33.48e-3), (3600.0, 0.17e-3))
-ACCEL_DLPF = ((218.1, 1.88e-3), (218.1, 1.88e-3), (99.0, 2.88e-3), (44.8, 4.88e-3), (21.2, 8.87e-3),
-              (10.2, 16.83e-3), (5.05, 32.48e-3), (420.0, 1.38e-3))
+GYRO_DLPF, ACCEL_DLPF = reg.GYRO_DLPF, reg.ACCEL_DLPF   # (3-dB bandwidth Hz, delay s) by configuration
 _CONFIG_REGS = frozenset((reg.SMPLRT_DIV, reg.CONFIG, reg.GYRO_CONFIG, reg.ACCEL_CONFIG, reg.ACCEL_CONFIG2))
 _TAU = 2.0 * math.pi
 
@@ -160,10 +155,10 @@ class SimMpu9250:
     temperature, which warms after power-on and is in the burst's temperature word; the accelerometer's
     offset that follows the temperature too; and the rotors' 1/rev vibration in the specific force, seen
     through the DLPF and the output sample rate (SMPLRT_DIV), so that it aliases as on the chip.
-    The DLPF delays the rigid-body signals too, by the register map's delay of the configured filter
-    (2.9 ms for the gyro at DLPF_CFG = 1, 184 Hz; 1.88 ms for the accelerometer at 218 Hz): the values
-    read are the true rates and specific force of that long ago, interpolated between the truths at
-    the last reads (the loop reads every 2.2 ms)."""
+    The DLPF delays the rigid-body signals too: they pass a first-order low-pass whose time constant
+    is the register map's delay of the configured filter (2.9 ms for the gyro at DLPF_CFG = 1, 1.88 ms
+    for the accelerometer at A_DLPF_CFG = 1), updated at each read; the driver declares the same
+    stages in the flight log (`Mpu9250.filters`), so that diagnose models what the chip did."""
     _HEAD = struct.Struct(">7h")
     _MAG = struct.Struct("<3hB")
     MAG_EVERY = 4   # burst reads per magnetometer sample: 450 Hz / 4, near the AK8963's 100 Hz
@@ -185,7 +180,7 @@ class SimMpu9250:
         self.accel_temp_coeff = (g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff))
         self.gyro_walk = [0.0, 0.0, 0.0]   # rad/s, the random-walk part of the zero-rate offset
         self._t_on = self._t_last = world.t
-        self._truths: list[tuple] = []    # (t, fx, fy, fz, p, q, r) at the last reads, oldest first
+        self._lowpassed: list[float] | None = None   # fx, fy, fz, p, q, r through the DLPF, at the last read
         self._phase = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # each rotor's angle
         z = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # phase of each arm's z bending
         self._z_cos, self._z_sin = [math.cos(a) for a in z], [math.sin(a) for a in z]
@@ -267,13 +262,19 @@ class SimMpu9250:
         t = w.t
         fx, fy, fz = w.plant.specific_force()
         p, q, r = w.plant.rates
-        truths = self._truths
-        truths.append((t, fx, fy, fz, p, q, r))
-        if len(truths) > 4:
-            del truths[0]
-        fx, fy, fz = self._delayed(t - self._a_delay, 1)   # the DLPF's delay on the rigid-body signals
-        p, q, r = self._delayed(t - self._g_delay, 4)
         dt, self._t_last = t - self._t_last, t
+        lp = self._lowpassed
+        if lp is None:
+            self._lowpassed = lp = [fx, fy, fz, p, q, r]
+        elif dt > 0.0:    # the DLPF's first-order stage on the rigid-body signals
+            ka, kg = 1.0 - math.exp(-dt / self._a_delay), 1.0 - math.exp(-dt / self._g_delay)
+            lp[0] += ka * (fx - lp[0])
+            lp[1] += ka * (fy - lp[1])
+            lp[2] += ka * (fz - lp[2])
+            lp[3] += kg * (p - lp[3])
+            lp[4] += kg * (q - lp[4])
+            lp[5] += kg * (r - lp[5])
+        fx, fy, fz, p, q, r = lp
         e = w.normal.take(9)
         walk = self.gyro_walk
         if n.gyro_bias_walk and dt > 0.0:   # a random walk: variance K^2 dt over the time since the last sample
@@ -306,20 +307,6 @@ class SimMpu9250:
             self._MAG.pack_into(self.ak, reg.AK_HXL, _i16((by + sm * e[0]) * lsb),
                                 _i16((bx + sm * e[1]) * lsb), _i16(-(bz + sm * e[2]) * lsb), 0x10)
             self._copy_ext()
-
-    def _delayed(self, t: float, i: int) -> tuple[float, float, float]:
-        """Columns i..i+2 of the recorded truths at time t, linearly interpolated (the oldest before
-        the first read)."""
-        truths = self._truths
-        for k in range(len(truths) - 1, 0, -1):
-            new, old = truths[k], truths[k - 1]
-            if old[0] <= t:
-                span = new[0] - old[0]
-                w = (t - old[0]) / span if span > 0.0 else 1.0
-                return (old[i] + w * (new[i] - old[i]), old[i + 1] + w * (new[i + 1] - old[i + 1]),
-                        old[i + 2] + w * (new[i + 2] - old[i + 2]))
-        first = truths[0]
-        return first[i], first[i + 1], first[i + 2]
 
     def _vibration(self, t: float, dt: float) -> tuple[float, float, float]:
         """The rotors' 1/rev specific force in the accelerometer's output register: each rotor's speed from

@@ -36,7 +36,7 @@ def as_flown_log(tmp_path_factory):
 
 def test_base_model_with_the_files_effects_holds_the_plant(as_flown_log, tmp_path):
     carried = {e.cause: dict(e.parameters) for e in paramfile.load(AS_FLOWN).effects}
-    assert set(carried) == {"rotor_inflow", "motor_dynamics", "rotor_drag"}
+    assert set(carried) == {"rotor_inflow", "motor_dynamics", "rotor_drag", "actuation_delay"}
     bare = _diagnose(as_flown_log, tmp_path / "bare.json")
     full = _diagnose(as_flown_log, tmp_path / "full.json", "--params", AS_FLOWN)
     # without the effects the paper's model misses what the plant has; with them nothing is missing

@@ -318,9 +318,12 @@ def test_effect_rotor_drag():
     assert m.specific_force(0.0, x, u) == pytest.approx((0.0, 0.3 * 2.0 / M, 0.0), abs=1e-12)
     # no torque from it without a yaw rate
     assert xd[9:12] == pytest.approx([0.0, 0.0, 0.0], abs=1e-12)
-    # a yaw rate moves each rotor sideways at r l: the four drags damp it, -k l^2 r, and nothing else
-    xr = m.f(0.0, state(z=3.0, r=2.0), u)
+    # a yaw rate moves each rotor sideways at r l: the optional yaw term damps it, -yaw r, and nothing
+    # else changes; without it (a yaw drag identified with the rotors running holds it) none
     free = Model(Airframe()).f(0.0, state(z=3.0, r=2.0), u)
+    assert m.f(0.0, state(z=3.0, r=2.0), u)[11] == pytest.approx(free[11], rel=1e-12)
+    yawing = Model(Airframe(), (fx.make("rotor_drag", k=0.3, yaw=0.3 * L * L),))
+    xr = yawing.f(0.0, state(z=3.0, r=2.0), u)
     assert xr[11] - free[11] == pytest.approx(-0.3 * L * L * 2.0 / JZZ, rel=1e-12)
     assert xr[3:5] == pytest.approx([0.0, 0.0], abs=1e-12) and xr[9:11] == pytest.approx(free[9:11], abs=1e-12)
 

@@ -20,7 +20,7 @@ from flightctl.loop import FlightLoop
 from flightctl.params import load
 from flightctl.plans import PLANS
 from flightctl.safety import CRASH_TOUCHDOWN_SPEED
-from flightctl.sim import faults
+from flightctl.sim import causes, faults
 from flightctl.sim.board import SIM_CALIBRATE_S, sim_board
 
 RNG = random.Random(18)
@@ -48,11 +48,13 @@ def test_each_lost_motor_is_named_and_the_vehicle_lands_upright(tmp_path, plan, 
 
 
 def _fly_with_drag(k: float, motor: int = 2, at: float = 8.0):
-    """The loop given the as-flown file; the plant's gamma1 k times it. (events, the largest true
-    spin rate, touchdown speeds)."""
+    """The loop given the as-flown file; the plant's gamma1 k times it, and its yaw drag eq. 6's
+    alone (the rotors' edgewise drag about z, rotor_drag's `yaw`, taken out: the spin balance the
+    spin controller predicts). (events, the largest true spin rate, touchdown speeds)."""
     told = load("paper-as-flown")
     true = dataclasses.replace(told, airframe=dataclasses.replace(told.airframe, gamma1=told.airframe.gamma1 * k))
-    hal, world = sim_board(true, seed=3)
+    drag = next(e for e in told.effects if e.cause == "rotor_drag")
+    hal, world = sim_board(true, (causes.make("rotor_drag", k=dict(drag.parameters)["k"]),), seed=3)
     faults.parse(f"motor_stop:motor={motor},at={SIM_CALIBRATE_S + at}").apply(hal, world)   # world time
     plan = PLANS["hover"]()
     spin = [0.0]
