@@ -331,7 +331,7 @@ def main(argv: list[str] | None = None) -> int:
         plot(params, gains, args.plot)
         print(f"  plot -> {args.plot}")
         if args.robust:
-            grid = Path(args.plot).with_name(Path(args.plot).stem + "-robust.png")
+            grid = Path(args.plot).with_name(Path(args.plot).stem + "-grid.png")
             robust_plot(found["robust"], grid)
             print(f"  plot -> {grid}")
     return 0

@@ -95,5 +95,5 @@ def test_robust_cli_writes_the_gains_their_provenance_and_both_plots(tmp_path, m
     g = load(out).gains
     assert g.kp_phi == pytest.approx(found["kp_factor"] * found["procedure_gains"]["kp_phi"])
     assert "flightctl tune --robust 2" in out.read_text()
-    assert png.stat().st_size > 10000 and (tmp_path / "t-robust.png").stat().st_size > 10000
+    assert png.stat().st_size > 10000 and (tmp_path / "t-grid.png").stat().st_size > 10000
     assert 0.0 <= found["table4"]["settles"] <= 1.0 and 0.0 <= found["table6"]["settles"] <= 1.0
