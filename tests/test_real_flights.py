@@ -134,6 +134,7 @@ def test_the_docs_table_is_what_the_script_computes_quick(tmp_path, name):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(900)   # nine real logs diagnosed in turn: 2 min on a fast day, over 4 on a slow one
 def test_every_shipped_log_is_diagnosed_or_refused_as_the_docs_table_says(tmp_path):
     rf, doc = _script()
     for name in rf.LOGS:
