@@ -45,6 +45,7 @@ from flightctl import __version__
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, opener, stop_motors
 from flightctl.clock import freeze_gc
 from flightctl.control.controller import FlightController
+from flightctl.control.spin import SpinController
 from flightctl.errors import InputError
 from flightctl.hal import ArmingRefused, Hal, ImuSample
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter
@@ -148,6 +149,9 @@ class Service:
             raise ArmingRefused("; ".join(reasons))
 
     def run(self, plan: Plan | None) -> None:
+        # The motor-loss gain schedule (control/spin.py: 200 LQR solves, 0.3 s here, seconds on a Pi)
+        # is solved now, before READY, and never between a plan's arrival and its take-off.
+        SpinController(self.params)
         self.check()
         self.notifier.ready(f"disarmed, {self.board.name} board, pre-arm checks passed")
         log.info("ready: disarmed, ESCs at the stop pulse")
@@ -214,6 +218,7 @@ class Service:
                  result.iterations, result.overruns)
         summary = {"plan": plan.name, "log": path.name, "reason": result.reason, "events": result.events,
                    "iterations": result.iterations, "overruns": result.overruns,
+                   "skipped_periods": getattr(getattr(hal.clock, "wall", hal.clock), "skipped", 0),
                    "max_late_s": getattr(getattr(hal.clock, "wall", hal.clock), "max_late_s", None)}
         summary["log_dropped_rows"], summary["log_error"] = flight_log.dropped, flight_log.error
         if flight_log.dropped:
