@@ -56,6 +56,7 @@ class BoardOptions:
     effects: tuple = ()             # sim: extensions of the plant (flightctl.sim.causes)
     noise: object = None            # sim: a SensorNoise; None: the default noise
     substeps: int | None = None     # sim: plant integration steps per loop period (None: the plant's SUBSTEPS)
+    airframe: object = None         # sim: the plant's airframe where it is not the parameter file's
     devices: dict = field(default_factory=dict)   # pi: devices to use instead of opening them (pi, spi, smbus)
     link: str | None = None         # hil: serial:PATH[,BAUD] or tcp:[HOST:]PORT (flightctl.link)
 

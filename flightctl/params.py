@@ -1,6 +1,7 @@
 """Parameters as a schema: default, range, unit and source for each, loaded from TOML.
 
-A parameter file is flat TOML for the airframe (the names of ``conventions.md``) with two optional
+A parameter file is flat TOML for the airframe (the names of ``conventions.md``), each value
+optionally with its plausible range (``range.NAME = [lo, hi]``, drawn by the Monte Carlo), two optional
 tables, ``[gains]`` and ``[filters]``, and any number of ``[[effect]]`` tables: model extensions
 (measured-data.md) that the simulator and diagnose carry into the base model. ``--params NAME``
 also takes the name of a shipped vehicle file (``flightctl/vehicles/NAME.toml``). Anything unknown, mistyped or out of range is refused with
@@ -125,6 +126,7 @@ class Params:
     gains: Gains = TABLE6
     filters: Filters = Filters()
     effects: tuple[EffectSpec, ...] = ()
+    ranges: tuple[tuple[str, float, float], ...] = ()   # airframe (value, lo, hi): `range.NAME = [lo, hi]`
 
 
 VEHICLES = Path(__file__).parent / "vehicles"   # shipped parameter files, by name (`--params NAME`)
@@ -177,9 +179,29 @@ def from_dict(data: dict, gains: Gains | None = None) -> Params:
             base = GAIN_SETS[preset]
         built[name] = _build(cls, table, f"{name}.", base)
     effects = _effects(data.pop("effect", []))
+    ranges = data.pop("range", {})
     airframe = _build(Airframe, data, "")
     airframe.check()
-    return Params(airframe=airframe, effects=effects, **built)
+    return Params(airframe=airframe, effects=effects, ranges=_spans(ranges, dataclasses.asdict(airframe), "", Airframe),
+                  **built)
+
+
+def _spans(ranges, values: dict, where: str, cls=None) -> tuple[tuple[str, float, float], ...]:
+    """`range.NAME = [lo, hi]` entries: each around the value of NAME (in `values`), and for an
+    airframe value (`cls`) within its schema's limits."""
+    if not isinstance(ranges, dict):
+        raise InputError(f"{where}range: expected range.NAME = [lo, hi]")
+    limits = {f.name: f.metadata for f in dataclasses.fields(cls)} if cls is not None else {}
+    spans = []
+    for key, span in ranges.items():
+        ok = isinstance(span, list) and len(span) == 2 and all(number(v) is not None for v in span)
+        if cls is not None and key not in limits:
+            raise InputError(f"{where}range.{key}: unknown parameter (known: {', '.join(sorted(limits))})")
+        if not ok or key not in values or not float(span[0]) <= float(values[key]) <= float(span[1]) or (
+                key in limits and not (limits[key]["lo"] <= float(span[0]) and float(span[1]) <= limits[key]["hi"])):
+            raise InputError(f"{where}range.{key}: expected [lo, hi] around the value of {key}, got {_short(span)}")
+        spans.append((key, float(span[0]), float(span[1])))
+    return tuple(spans)
 
 
 def _effects(items) -> tuple[EffectSpec, ...]:
@@ -201,16 +223,8 @@ def _effects(items) -> tuple[EffectSpec, ...]:
         for key, value in item.items():
             if number(value) is None:
                 raise InputError(f"{where} ({cause}): {key}: expected a finite number, got {_short(value)}")
-        if not isinstance(ranges, dict):
-            raise InputError(f"{where} ({cause}): range: expected range.NAME = [lo, hi]")
-        spans = []
-        for key, span in ranges.items():
-            ok = isinstance(span, list) and len(span) == 2 and all(number(v) is not None for v in span)
-            if not ok or key not in item or not float(span[0]) <= float(item[key]) <= float(span[1]):
-                raise InputError(f"{where} ({cause}): range.{key}: expected [lo, hi] around the value of {key}, "
-                                 f"got {_short(span)}")
-            spans.append((key, float(span[0]), float(span[1])))
-        specs.append(EffectSpec(cause, tuple((key, float(v)) for key, v in item.items()), source, tuple(spans)))
+        spans = _spans(ranges, item, f"{where} ({cause}): ")
+        specs.append(EffectSpec(cause, tuple((key, float(v)) for key, v in item.items()), source, spans))
     return tuple(specs)
 
 
@@ -249,6 +263,7 @@ def dumps(params: Params, sources: dict[str, str] | None = None, tables=("gains"
             lines.append(f"{f.name} = {getattr(obj, f.name)!r}  # {f.metadata['unit']}; {source}")
 
     emit(params.airframe)
+    lines += [f"range.{k} = [{lo!r}, {hi!r}]" for k, lo, hi in params.ranges]
     for name in tables:
         lines.append(f"\n[{name}]")
         emit(getattr(params, name))

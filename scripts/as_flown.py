@@ -20,7 +20,7 @@ LIFT_SLOPE = 5.7            # 1/rad, 2-D thin-aerofoil 2 pi less the usual 3-D/l
 KV = 920.0                  # RPM/V: a ~900 KV 12-inch-class motor on 4S (hover near 40 % throttle)
 R_PHASE = 0.10              # ohm, winding plus ESC of that motor class
 J_BLADE_MODEL = 1.0e-4      # kg m^2, a 13 g two-blade 12-inch propeller as a rod (m R^2 / 3) plus the bell
-J_RANGE = (1.0e-4, 2.66838e-4)   # kg m^2: the blade model (a tapered blade and the bell: 0.8-1.3e-4) to
+J_RANGE = (0.8e-4, 2.66838e-4)   # kg m^2: a tapered blade and the bell (0.8-1.3e-4, the blade model 1.0e-4) to
 #                                  Table 2's disk model, the upper end
 ESC_HZ = 449.0              # the ESC's input frame rate (paper, sec. 4.4.1): a command waits 0 to 1/449 s
 N_BLADES = 2
@@ -72,7 +72,8 @@ def as_flown(d: dict) -> Params:
               f"{TAU_RANGE[0] * 1e3:.0f} ms (fast ESCs; INDIflight's 5-inch rotors: 20 ms bench, 26 ms in "
               f"flight) to the open-loop estimate Jp/(Kt Ke/R + 2Q/W) of {d['tau_open_table2_Jp']:.3f} s with "
               f"Table 2's Jp ({d['tau_open_blade_J']:.3f} s with a blade-model Jp; 170 ms measured for a "
-              f"9.4-inch propeller); measure it with the bench step profile")
+              f"9.4-inch propeller); measure it with the bench step profile. The Monte Carlo moves the "
+              f"top with the drawn Jp (at a given motor torque the time constant is proportional to Jp)")
     src_dr = (f"theory: momentum (ram) drag 4 rho A v_h = {d['k_drag']:.2f} N s/m (M/k = {d['M_over_k']:.2f} s), "
               f"an upper estimate; measured quadrotors give k/M = {K_OVER_M[0]:g}-{K_OVER_M[1]:g} 1/s "
               f"({K_OVER_M[0] * d['M']:.2f}-{K_OVER_M[1] * d['M']:.2f} N s/m here): the range runs from there "
@@ -95,7 +96,8 @@ def as_flown(d: dict) -> Params:
     k_in, k_dr, hub = round(d["k_inflow"], 4), round(d["k_drag"], 3), round(d["hub"], 4)
     tau_hi = round(d["tau_open_table2_Jp"], 3)
     l2 = Params().airframe.l ** 2
-    return Params(airframe=dataclasses.replace(Params().airframe, Jp=J_BLADE_MODEL), filters=filters, effects=(
+    return Params(airframe=dataclasses.replace(Params().airframe, Jp=J_BLADE_MODEL), filters=filters,
+                  ranges=(("Jp", *J_RANGE),), effects=(
         EffectSpec("rotor_inflow", (("k", k_in), ("hub", hub)), src_in,
                    (("k", round(0.7 * k_in, 4), round(d["k_inflow_max"], 4)), ("hub", 0.0, hub))),
         EffectSpec("motor_dynamics", (("tau", TAU_MOTOR), ("tau_down", TAU_MOTOR)), src_md,
@@ -109,10 +111,10 @@ def as_flown(d: dict) -> Params:
 def sources(d: dict) -> dict[str, str]:
     """The airframe values the as-flown file changes, with their provenance."""
     return {"Jp": (f"one rotor inertia for tau, the reaction torque and eq. 7-9: a 13 g 12-inch propeller as a "
-                   f"rod (m R^2 / 3) plus the bell, {J_BLADE_MODEL:.1e}; range {J_RANGE[0]:.1e} (a tapered blade: "
-                   f"0.8-1.3e-4) to Table 2's disk model {J_RANGE[1]:.3e}, which gives the open-loop tau of "
-                   f"{d['tau_open_table2_Jp']:.3f} s at the top of tau's range ({d['tau_open_blade_J']:.3f} s with "
-                   f"this Jp)")}
+                   f"rod (m R^2 / 3) plus the bell, {J_BLADE_MODEL:.1e}; range (range.Jp, drawn) {J_RANGE[0]:.1e} "
+                   f"(a tapered blade: 0.8-1.3e-4 with the bell) to Table 2's disk model {J_RANGE[1]:.3e}, which gives the "
+                   f"open-loop tau of {d['tau_open_table2_Jp']:.3f} s at the top of tau's range "
+                   f"({d['tau_open_blade_J']:.3f} s with this Jp: a draw's tau is at most 0.192 s x Jp / 2.668e-4)")}
 
 
 def main() -> None:

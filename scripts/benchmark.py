@@ -75,14 +75,11 @@ def iteration_us(n: int = 20000) -> float:
 
 def batch_rate(n: int = 10000, seconds: float = 1.0, workers: int = 1) -> float:
     """Vehicle-steps per second of `sim.batch.simulate` (process start-up included)."""
-    import numpy as np
-
     from flightctl.sim.batch import simulate
-    from flightctl.sim.montecarlo import ranged
+    from flightctl.sim.montecarlo import draw
     from flightctl.sim.scenarios import SCENARIOS
     params = load("paper-as-flown")
-    rng = np.random.default_rng(0)
-    draws = {(c, name): rng.uniform(lo, hi, n) for c, name, lo, hi in ranged(params)}
+    draws = draw(params, n, 0)
     plan = SCENARIOS["paper"]().plan
     start = time.perf_counter()
     flight = simulate(params, plan, 8.0, 8.0 + seconds, n, draws, workers=workers)

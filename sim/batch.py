@@ -301,8 +301,11 @@ def with_draws(params: Params, draws: dict[tuple[str, str], np.ndarray] | None =
     """The parameter file's effects with some parameters drawn per vehicle: draws maps (cause,
     parameter) to an (N,) array, which the effect then holds in place of its value."""
     from flightctl.sim import causes
+    from flightctl.sim.montecarlo import AIRFRAME
     effects = causes.combined(params, ())
     for (cause, name), values in (draws or {}).items():
+        if cause == AIRFRAME:          # the plant's airframe (`drawn_airframe`)
+            continue
         effect = next((e for e in effects if e.cause == cause), None)
         if effect is None or name not in effect.parameters:
             raise ValueError(f"no parameter {cause}.{name} in the parameter file's effects")
@@ -313,7 +316,8 @@ def with_draws(params: Params, draws: dict[tuple[str, str], np.ndarray] | None =
 def _chunk(job) -> BatchFlight:
     """One worker's share of `simulate`."""
     params, n, draws, gains, plan, start, end, record_every = job
-    plant = BatchPlant(params.airframe, with_draws(params, draws), n)
+    from flightctl.sim.montecarlo import drawn_airframe
+    plant = BatchPlant(drawn_airframe(params.airframe, draws), with_draws(params, draws), n)
     plan.restart()
     plant.hover(plan.at(start)[3])
     ctl = BatchController(params if gains is None else [dataclasses.replace(params, gains=g) for g in gains], n)

@@ -29,11 +29,12 @@ SIM_CALIBRATE_S = 2.0   # s; the paper sat still for 60 s. 900 reads of the simu
 SONAR_TRIGGER_PIN, SONAR_ECHO_PIN = 23, 24   # pins of the simulated GPIO
 
 
-def sim_board(params: Params, effects=(), noise=None, seed: int = 0, substeps: int | None = None) -> tuple[Hal, World]:
+def sim_board(params: Params, effects=(), noise=None, seed: int = 0, substeps: int | None = None,
+              airframe=None) -> tuple[Hal, World]:
     """The Hal of the simulated quadcopter, and the simulated world (for its true values). The plant
     carries the parameter file's effects (measured-data.md), then `effects` (`causes.combined`: an
     effect of a cause the file carries replaces it)."""
-    world = World(params.airframe, causes.combined(params, effects), noise if noise is not None else SensorNoise(), seed, substeps)
+    world = World(airframe or params.airframe, causes.combined(params, effects), noise if noise is not None else SensorNoise(), seed, substeps)
     n = world.noise   # an ideal chip (no white noise) repeats its frames: no frozen-frame check
     imu = Mpu9250(SimMpu9250(world), sleep=lambda s: None,
                   frozen_frames=0 if n.gyro_density == 0.0 and n.accel_density == 0.0 else FROZEN_FRAMES)
@@ -57,7 +58,7 @@ def truth_row(world: World):
 
 
 def open_board(params: Params, options: BoardOptions) -> Board:
-    hal, world = sim_board(params, options.effects, options.noise, options.seed, options.substeps)
+    hal, world = sim_board(params, options.effects, options.noise, options.seed, options.substeps, options.airframe)
     meta = {"seed": str(options.seed)}
     if options.realtime:
         hal.clock = PacedClock(hal.clock)

@@ -77,7 +77,8 @@ class Effect:
 
     - `cause`: its name in measured-data.md; `required`: {parameter name: Parameter(unit, lo, hi)}
       (what diagnose fits and reports); `optional`: the same for parameters a parameter file may add
-      (the effect's own default when absent);
+      (the effect's own default when absent); `range_scales`: a parameter whose plausible range
+      ends where an airframe value's does (a time constant proportional to an inertia);
     - the hooks it uses (`uses_rotor`, `uses_scale`, `uses_wrench`, or `delay`) and overrides them;
       the base does nothing at every hook.
 
@@ -99,6 +100,9 @@ class Effect:
     cause = "none"
     required: dict[str, Parameter] = {}
     optional: dict[str, Parameter] = {}
+    # parameter -> airframe value whose draw moves the top of its range in proportion (the Monte
+    # Carlo, sim/montecarlo.py: `draw`); the file's range top belongs to the top of that value's range
+    range_scales: dict[str, str] = {}
     n_states = 0
     offset = 0
     delay = 0.0

@@ -1,9 +1,11 @@
 """`flightctl sim SCENARIO --monte-carlo N [--params P] [--seed S] [--json MC.json] [--plot MC.png]`:
 the flight over the parameter file's plausible ranges instead of at its nominal point.
 
-Each of the N draws takes every ranged parameter of the file's `[[effect]]` tables (`range.NAME =
-[lo, hi]`, flightctl/vehicles/paper-as-flown.toml: the motor time constant, the rotor drag, the
-inflow damping) uniformly from its range (a seeded generator), and flies the scenario with both gain
+Each of the N draws takes every ranged parameter of the file (`range.NAME = [lo, hi]`: of the airframe,
+at the file's top, and of its `[[effect]]` tables; flightctl/vehicles/paper-as-flown.toml: the rotor
+inertia, the motor time constants, the rotor drag, the inflow and hub damping, the ESC delay)
+uniformly from its range (`draw`: a seeded generator; a motor time constant's top follows the drawn
+rotor inertia), and flies the scenario with both gain
 sets on that same plant (a paired comparison), through the full onboard path with sensor noise. Per
 gain set it reports the share that flies (leaves the ground and does not crash), lands upright, and
 settles (every bank within 1 degree and turn within 3 degrees of its command from 3 s after the step
@@ -22,7 +24,6 @@ from __future__ import annotations
 
 import json
 import os
-import random
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -32,9 +33,42 @@ from flightctl.params import GAIN_SETS
 GAINS = ("table4", "table6")
 
 
+AIRFRAME = "airframe"   # the "cause" of a ranged airframe value (`range.Jp = [lo, hi]` at the file's top)
+
+
 def ranged(params) -> list[tuple[str, str, float, float]]:
-    """(cause, parameter, lo, hi) of every range the parameter file carries, in its order."""
-    return [(e.cause, name, lo, hi) for e in params.effects for name, lo, hi in e.ranges]
+    """(cause, parameter, lo, hi) of every range the parameter file carries, its airframe's first."""
+    return [(AIRFRAME, name, lo, hi) for name, lo, hi in params.ranges] + \
+        [(e.cause, name, lo, hi) for e in params.effects for name, lo, hi in e.ranges]
+
+
+def draw(params, n: int, seed: int = 0) -> dict:
+    """n draws of every ranged parameter, (cause, parameter) -> (n,) array, each uniform in its range,
+    except where an effect's range follows a drawn airframe value (`Effect.range_scales`: the motor
+    time constants' slowest plausible value is proportional to the rotor inertia Jp): its top is then
+    hi * value / (the value's own top), never below its bottom. Seeded: the same draws every time."""
+    import numpy as np
+
+    from flightctl.sim import causes
+    rng = np.random.default_rng(seed)
+    spans = ranged(params)
+    u = {(c, name): rng.uniform(0.0, 1.0, n) for c, name, _, _ in spans}
+    out = {(c, name): lo + u[(c, name)] * (hi - lo) for c, name, lo, hi in spans if c == AIRFRAME}
+    tops = {name: hi for c, name, _, hi in spans if c == AIRFRAME}
+    for c, name, lo, hi in spans:
+        if c != AIRFRAME:
+            scale = causes.CAUSES[c].effect.range_scales.get(name)
+            if scale in tops:
+                hi = np.maximum(lo, hi * out[(AIRFRAME, scale)] / tops[scale])
+            out[(c, name)] = lo + u[(c, name)] * (hi - lo)
+    return out
+
+
+def drawn_airframe(airframe, draws: dict, k=None):
+    """The airframe with its drawn values: draw k of each (a float), or all (arrays, the batch)."""
+    import dataclasses
+    values = {name: (v if k is None else float(v[k])) for (c, name), v in draws.items() if c == AIRFRAME}
+    return dataclasses.replace(airframe, **values) if values else airframe
 
 
 def _fly(job: tuple) -> dict:
@@ -43,14 +77,15 @@ def _fly(job: tuple) -> dict:
     from flightctl.sim.metrics import settles
     from flightctl.sim.run import fly
     from flightctl.sim.scenarios import SCENARIOS
-    spec, scenario, gains, draw, seed = job
+    spec, scenario, gains, drawn, seed = job
     params = causes.load_vehicle(spec, GAIN_SETS[gains])
     effects = []
     for e in params.effects:
-        values = {**dict(e.parameters), **{n: v for (c, n), v in draw.items() if c == e.cause}}
+        values = {**dict(e.parameters), **{n: v for (c, n), v in drawn.items() if c == e.cause}}
         effects.append(causes.make(e.cause, **values))
     sc = SCENARIOS[scenario]()
-    flight = fly(sc, params, os.devnull, tuple(effects), seed=seed)
+    # the plant flies the drawn airframe; the controller knows the file's nominal one
+    flight = fly(sc, params, os.devnull, tuple(effects), seed=seed, plant_airframe=drawn_airframe(params.airframe, drawn))
     settled = flight.flew and not flight.crashed and settles(flight.log, sc.steps, flight.t_arm)
     return {"gains": gains, "flies": bool(flight.flew and not flight.crashed),
             "lands": flight.outcome == "landed upright", "settles": bool(settled), "outcome": flight.outcome}
@@ -63,8 +98,8 @@ def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, j
     if not spans:
         raise InputError(f"--monte-carlo: {spec or 'the reference airframe'} carries no ranges "
                          "(range.NAME = [lo, hi] in its [[effect]] tables; --params paper-as-flown has them)")
-    rng = random.Random(seed)
-    draws = [{(c, name): rng.uniform(lo, hi) for c, name, lo, hi in spans} for _ in range(n)]
+    drawn = draw(params, n, seed)
+    draws = [{k: float(v[i]) for k, v in drawn.items()} for i in range(n)]
     jobs_list = [(spec, scenario, g, d, seed + k) for k, d in enumerate(draws) for g in GAINS]
     results = []
     with ProcessPoolExecutor(max_workers=jobs or os.cpu_count() or 1) as pool:
@@ -109,8 +144,7 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
         raise InputError(f"--monte-carlo: {spec or 'the reference airframe'} carries no ranges")
     sc = SCENARIOS[scenario]()
     start, end, steps = _batch_window(sc)
-    rng = np.random.default_rng(seed)
-    draws = {(c, name): rng.uniform(lo, hi, n) for c, name, lo, hi in spans}
+    draws = draw(params, n, seed)
     out = {}
     for g in GAINS:
         flight = simulate(causes.load_vehicle(spec, GAIN_SETS[g]), sc.plan, start, end, n, draws,

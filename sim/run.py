@@ -75,17 +75,18 @@ def unstable_axis(params: Params) -> str:
 
 def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), noise: bool = True,
         seed: int = 0, truth: bool = False, substeps: int | None = None, calibrate_s: float = SIM_CALIBRATE_S,
-        estimator: str = "flight", telemetry=None, faults=()) -> Flight:
+        estimator: str = "flight", telemetry=None, faults=(), plant_airframe=None) -> Flight:
     """`truth=True` is perfect state feedback: the controller sees the true attitude and altitude at
     every loop (the paper's own simulation); otherwise the full onboard path. `telemetry`: a ground
     station link (flightctl/mavlink.py) the loop streams to and takes commands from. `faults`:
     `flightctl.sim.faults.Fault`s, applied to the board's devices and the log; their `at` counts
-    from arming, as the log's time does."""
+    from arming, as the log's time does. `plant_airframe`: the simulated vehicle's airframe where
+    it is not the one the controller is given (a Monte Carlo draw)."""
     # With a ground station the simulated world runs in real time, as SITL does: the station's
     # clock (heartbeats, commands) and the flight's then agree.
     board = open_board(params, BoardOptions(seed=seed, effects=tuple(effects), substeps=substeps,
                                             noise=SensorNoise() if noise else SensorNoise.off(),
-                                            realtime=telemetry is not None))
+                                            realtime=telemetry is not None, airframe=plant_airframe))
     hal, world = board.hal, board.world
     truth_est = None
     if truth:

@@ -153,7 +153,7 @@ def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str
     from flightctl.sim.batch import simulate
     from flightctl.sim.metrics import settles
     from flightctl.sim.model import PHI, PSI, THETA
-    from flightctl.sim.montecarlo import _batch_window, ranged
+    from flightctl.sim.montecarlo import _batch_window, draw, ranged
     from flightctl.sim.scenarios import SCENARIOS
     spans = ranged(params)
     if not spans:
@@ -161,8 +161,7 @@ def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str
                          "--params paper-as-flown has them)")
     sc = SCENARIOS[scenario]()
     start, end, steps = _batch_window(sc)
-    rng = np.random.default_rng(seed)
-    draws = {(c, name): rng.uniform(lo, hi, n) for c, name, lo, hi in spans}
+    draws = draw(params, n, seed)
     per = max(1, 400 // n)             # candidates per batch: at least 400 vehicles at once
     out = []
     for i in range(0, len(candidates), per):

@@ -116,22 +116,25 @@ def test_vector_model_is_the_scalar_model(cause):
 
 
 def test_batch_plant_is_the_single_plant_with_a_parameter_per_vehicle():
-    """The batched plant with one motor time constant and one actuation delay per vehicle (arrays in
-    the effects' parameters) follows the single plant flown with each value, command for command."""
+    """The batched plant with one motor time constant, one actuation delay and one rotor inertia per
+    vehicle (arrays in the effects' parameters and in the airframe) follows the single plant flown
+    with each value, command for command."""
     from flightctl.sim.batch import with_draws
+    from flightctl.sim.montecarlo import drawn_airframe
     params = load("paper-as-flown")
     a = params.airframe
     taus = np.array([0.02, 0.035, 0.08, 0.15])
     delays = np.array([0.0, 0.0011, 0.0044, 0.0071])      # none, a fraction, whole periods and a fraction
+    jps = np.array([0.8e-4, 1.0e-4, 2.0e-4, 2.67e-4])
     n = taus.size
-    batch = BatchPlant(a, with_draws(params, {("motor_dynamics", "tau"): taus, ("actuation_delay", "delay"): delays}),
-                       n, substeps=2)
+    draws = {("motor_dynamics", "tau"): taus, ("actuation_delay", "delay"): delays, ("airframe", "Jp"): jps}
+    batch = BatchPlant(drawn_airframe(a, draws), with_draws(params, draws), n, substeps=2)
     batch.hover(3.0)
     singles = []
     for i, (tau, delay) in enumerate(zip(taus, delays)):
         drawn = (causes.make("motor_dynamics", tau=float(tau), tau_down=0.035),
                  causes.make("actuation_delay", delay=float(delay)))
-        plant = Plant(Model(a, causes.combined(params, drawn)), a.dt, 2, a.battery_nominal_v)
+        plant = Plant(Model(drawn_airframe(a, draws, i), causes.combined(params, drawn)), a.dt, 2, a.battery_nominal_v)
         hover = tuple(float(v[i]) for v in batch.u)
         plant._queue.extend([hover] * len(plant._queue))   # hovering: the hover input held before
         plant.x = batch.x[:, i].tolist()

@@ -36,11 +36,14 @@ def test_draws_stay_in_their_ranges_and_the_shares_count_them(tmp_path):
     r = json.loads(out.read_text())
     assert rc == 0 and r["n"] == 3 and len(r["draws"]) == 3
     spans = {f"{s['cause']}.{s['parameter']}": (s["lo"], s["hi"]) for s in r["ranges"]}
-    assert set(spans) == {"rotor_inflow.k", "rotor_inflow.hub", "motor_dynamics.tau", "motor_dynamics.tau_down",
-                          "rotor_drag.k", "rotor_drag.yaw", "actuation_delay.delay"}
+    assert set(spans) == {"airframe.Jp", "rotor_inflow.k", "rotor_inflow.hub", "motor_dynamics.tau",
+                          "motor_dynamics.tau_down", "rotor_drag.k", "rotor_drag.yaw", "actuation_delay.delay"}
     for d in r["draws"]:
         for key, v in d["draw"].items():
             assert spans[key][0] <= v <= spans[key][1]
+        for key in ("motor_dynamics.tau", "motor_dynamics.tau_down"):   # their top follows the drawn Jp
+            lo, hi = spans[key]
+            assert d["draw"][key] <= max(lo, hi * d["draw"]["airframe.Jp"] / spans["airframe.Jp"][1]) + 1e-12
     assert len({d["draw"]["motor_dynamics.tau"] for d in r["draws"]}) == 3     # drawn, not the nominal
     for g in ("table4", "table6"):
         for what in ("flies", "lands", "settles"):

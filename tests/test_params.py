@@ -194,6 +194,8 @@ def test_every_as_flown_term_carries_a_range_and_its_provenance():
             assert lo <= value <= hi and lo < hi
         assert "range" in e.source or "Range" in e.source
     assert from_dict(tomllib.loads(dumps(p))).effects == p.effects
+    assert [name for name, _, _ in p.ranges] == ["Jp"]           # the one rotor inertia, drawn too
+    assert from_dict(tomllib.loads(dumps(p))).ranges == p.ranges
 
 
 @pytest.mark.parametrize("span,needle", [("[0.05, 0.1]", "around the value of tau"), ("0.02", "expected [lo, hi]"),
@@ -203,6 +205,21 @@ def test_an_effect_range_must_hold_its_value(tmp_path, span, needle):
     f.write_text(f'[[effect]]\ncause = "motor_dynamics"\ntau = 0.035\nrange.tau = {span}\n')
     if needle is None:
         assert load(f).effects[0].ranges == (("tau", 0.01, 0.2),)
+    else:
+        with pytest.raises(InputError) as e:
+            load(f)
+        assert needle in str(e.value) and str(f) in str(e.value)
+
+
+@pytest.mark.parametrize("line,needle", [("range.Jp = [2e-4, 3e-4]", "around the value of Jp"),
+                                         ("range.Jp = [0.0, 0.5]", "around the value of Jp"),   # past the schema's 0.1
+                                         ("range.Jq = [0.0, 1e-3]", "unknown parameter"),
+                                         ("range.Jp = [5e-5, 3e-4]", None)])
+def test_an_airframe_range_must_hold_its_value_within_the_schema(tmp_path, line, needle):
+    f = tmp_path / "p.toml"
+    f.write_text(f"Jp = 1e-4\n{line}\n")
+    if needle is None:
+        assert load(f).ranges == (("Jp", 5e-5, 3e-4),)
     else:
         with pytest.raises(InputError) as e:
             load(f)

@@ -64,16 +64,20 @@ def motor_time_constant(params: Params) -> float:
 class MotorLossDetector:
     """`update` every loop in flight, before the controller mixes anew; it returns the lost motor
     (1..4) the loop it is sure, else 0."""
-    __slots__ = ("a", "km", "kf", "kb", "kc", "fl", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
-                 "p", "q", "half")
+    __slots__ = ("km", "kf", "kb", "kc", "fl", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
+                 "p", "q", "half", "ic1", "Jxx", "Jyy", "Jp", "jx", "jy", "l", "iM", "M", "il")
 
     def __init__(self, params: Params, tau_motor: float | None = None):
-        a = self.a = params.airframe
+        a = params.airframe
         dt = a.dt
         tau = motor_time_constant(params) if tau_motor is None else tau_motor
         self.km = dt / (tau + dt)
         self.kf, self.kb, self.kc = dt / (FILTER_S + dt), dt / (BIAS_S + dt), dt / (CALM_S + dt)
         self.half = 0.5 * a.B              # a commanded thrust counts as at least this (near-idle rotors)
+        # the airframe's constants of eq. 7, 9 and 27, bound once (the loop reads them every period)
+        self.ic1, self.Jxx, self.Jyy, self.Jp = 1.0 / a.c1, a.Jxx, a.Jyy, a.Jp
+        self.jx, self.jy = a.Jzz - a.Jyy, a.Jxx - a.Jzz
+        self.l, self.il, self.M, self.iM = a.l, 1.0 / a.l, a.M, 1.0 / a.M
         self.fl = [0.0, 0.0, 0.0, 0.0]
         self.count = [0, 0, 0, 0]
         self.reset(a.B)
@@ -88,50 +92,57 @@ class MotorLossDetector:
         self.p = self.q = None
 
     def update(self, s: ImuSample, f: list[float], alt: float, dt: float) -> int:
-        a, fl = self.a, self.fl
-        km = self.km
-        for i in range(4):
-            fl[i] += km * (f[i] - fl[i])          # the thrusts now, from the commands (one loop late)
+        fl, km = self.fl, self.km
+        f0 = fl[0] = fl[0] + km * (f[0] - fl[0])    # the thrusts now, from the commands (one loop late)
+        f1 = fl[1] = fl[1] + km * (f[1] - fl[1])
+        f2 = fl[2] = fl[2] + km * (f[2] - fl[2])
+        f3 = fl[3] = fl[3] + km * (f[3] - fl[3])
         p, q, r = s.gx, s.gy, s.gz
         if self.p is None:
             self.p, self.q = p, q
             return 0
-        c1 = a.c1
-        Om = -sqrt(fl[0] / c1) + sqrt(fl[1] / c1) - sqrt(fl[2] / c1) + sqrt(fl[3] / c1)   # eq. 9
+        ic1, l = self.ic1, self.l
+        Om = -sqrt(f0 * ic1) + sqrt(f1 * ic1) - sqrt(f2 * ic1) + sqrt(f3 * ic1)   # eq. 9 with eq. 27
+        JpOm = self.Jp * Om
         # eq. 7 turned around: the torque the body felt, less the one the commanded thrusts give
-        tx = a.Jxx * (p - self.p) / dt + q * r * (a.Jzz - a.Jyy) + q * a.Jp * Om - a.l * (fl[1] - fl[3])
-        ty = a.Jyy * (q - self.q) / dt + p * r * (a.Jxx - a.Jzz) - p * a.Jp * Om - a.l * (fl[2] - fl[0])
-        tz = s.az - (fl[0] + fl[1] + fl[2] + fl[3]) / a.M
+        tx = self.Jxx * (p - self.p) / dt + q * r * self.jx + q * JpOm - l * (f1 - f3)
+        ty = self.Jyy * (q - self.q) / dt + p * r * self.jy - p * JpOm - l * (f2 - f0)
+        tz = s.az - (f0 + f1 + f2 + f3) * self.iM
         self.p, self.q = p, q
         kf = self.kf
-        self.rx += kf * (tx - self.rx)
-        self.ry += kf * (ty - self.ry)
-        self.rz += kf * (tz - self.rz)
+        rx = self.rx = self.rx + kf * (tx - self.rx)
+        ry = self.ry = self.ry + kf * (ty - self.ry)
+        rz = self.rz = self.rz + kf * (tz - self.rz)
         self.calm += self.kc * ((p if p > 0 else -p) + (q if q > 0 else -q) - self.calm)
-        ex, ey, ez = self.rx - self.bx, self.ry - self.by, self.rz - self.bz
-        lost, count, half = 0, self.count, self.half
-        suspected = False
-        for i in range(4):
-            fi = fl[i] if fl[i] > half else half
+        count = self.count
+        if alt <= MIN_ALT:                         # below MIN_ALT a residual is the floor's
+            count[0] = count[1] = count[2] = count[3] = 0
+        else:
+            ex, ey, ez = rx - self.bx, ry - self.by, rz - self.bz
+            lost, half, calm = 0, self.half, self.calm < CALM
+            fall = -ez * self.M
+            il = self.il
             # the missing torque of motor i lies along its arm: +y for 1, -x for 2, -y for 3, +x for 4
-            along = ey if i == 0 else -ex if i == 1 else -ey if i == 2 else ex
-            share = along / (a.l * fi)
-            fall = -ez * a.M / fi
-            if fall < share:
-                share = fall
-            if THRESHOLD < share < HIGH and alt > MIN_ALT and (count[i] > 0 or self.calm < CALM):
-                count[i] += 1
-                suspected = True
-                if count[i] >= LOOPS:
-                    lost = i + 1
-            else:
-                count[i] = 0
-        if not suspected:
-            kb = self.kb
-            self.bx += kb * (self.rx - self.bx)
-            self.by += kb * (self.ry - self.by)
-            self.bz += kb * (self.rz - self.bz)
-        return lost
+            for i, along, fi in ((0, ey, f0), (1, -ex, f1), (2, -ey, f2), (3, ex, f3)):
+                if fi < half:
+                    fi = half
+                share = along * il / fi
+                drop = fall / fi
+                if drop < share:
+                    share = drop
+                if THRESHOLD < share < HIGH and (calm or count[i] > 0):
+                    count[i] += 1
+                    if count[i] >= LOOPS:
+                        lost = i + 1
+                else:
+                    count[i] = 0
+            if count[0] or count[1] or count[2] or count[3]:
+                return lost
+        kb = self.kb                               # nothing suspected: the residuals' slow part
+        self.bx += kb * (rx - self.bx)
+        self.by += kb * (ry - self.by)
+        self.bz += kb * (rz - self.bz)
+        return 0
 
 
 def _pair_model(a, pair: tuple[int, int], r: float, Om: float, tau_m: float):

@@ -46,6 +46,9 @@ class MotorDynamics(Effect):
     cause, n_states, uses_rotor, uses_wrench = "motor_dynamics", 4, True, True
     required = {"tau": Parameter("s", 1e-4, 5.0)}
     optional = {"tau_down": Parameter("s", 1e-4, 5.0)}
+    # the rotor's speed changes at J dOmega/dt = the motor's torque less the drag's: at a given torque
+    # both time constants are proportional to the rotor inertia, so their slowest plausible value is
+    range_scales = {"tau": "Jp", "tau_down": "Jp"}
     _spin_up = 0.0   # sum s_i dOmega_i/dt of the last `rotor` call, for `wrench` (rad/s^2)
 
     def initial_states(self, f_cmd):
