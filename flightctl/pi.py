@@ -236,7 +236,7 @@ def open_pi_board(params: Params, config_path: str | Path | None = None, *, pi=N
         raise
     hal = Hal(imu=imu, motors=motors, rangefinder=sonar, power=power, clock=WallClock(a.dt))
     return Board(hal, "pi", config.checks.min_battery_v, PI_CALIBRATE_S, close,
-                 meta={"board_file": config.path, "esc_pins": str(list(config.esc.pins))})
+                 meta={"board_file": config.path, "esc_pins": str(list(config.esc.pins)), **imu.filters()})
 
 
 def _open_spi(c: ImuConfig):

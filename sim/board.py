@@ -59,7 +59,7 @@ def truth_row(world: World):
 
 def open_board(params: Params, options: BoardOptions) -> Board:
     hal, world = sim_board(params, options.effects, options.noise, options.seed, options.substeps, options.airframe)
-    meta = {"seed": str(options.seed)}
+    meta = {"seed": str(options.seed), **hal.imu.filters()}
     if options.realtime:
         hal.clock = PacedClock(hal.clock)
         meta["clock"] = "simulator paced by the wall clock (real time)"

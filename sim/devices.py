@@ -142,12 +142,7 @@ class World:
                 Rm[2] * bn + Rm[5] * bw + Rm[8] * bu)
 
 
-# The DLPF by DLPF_CFG (register 26, gyro) and A_DLPF_CFG (register 29, accelerometer), FCHOICE_B = 0:
-# (3-dB bandwidth Hz, delay s), from those registers' tables in the Register Map (RM-MPU-9250A-00 rev 1.6).
-GYRO_DLPF = ((250.0, 0.97e-3), (184.0, 2.9e-3), (92.0, 3.9e-3), (41.0, 5.9e-3), (20.0, 9.9e-3),
-             (10.0, 17.85e-3), (5.0, 33.48e-3), (3600.0, 0.17e-3))
-ACCEL_DLPF = ((218.1, 1.88e-3), (218.1, 1.88e-3), (99.0, 2.88e-3), (44.8, 4.88e-3), (21.2, 8.87e-3),
-              (10.2, 16.83e-3), (5.05, 32.48e-3), (420.0, 1.38e-3))
+GYRO_DLPF, ACCEL_DLPF = reg.GYRO_DLPF, reg.ACCEL_DLPF   # (3-dB bandwidth Hz, delay s) by configuration
 _CONFIG_REGS = frozenset((reg.SMPLRT_DIV, reg.CONFIG, reg.GYRO_CONFIG, reg.ACCEL_CONFIG, reg.ACCEL_CONFIG2))
 _TAU = 2.0 * math.pi
 
@@ -159,7 +154,11 @@ class SimMpu9250:
     through the configured DLPF; a zero-rate offset that wanders (random walk) and follows the die
     temperature, which warms after power-on and is in the burst's temperature word; the accelerometer's
     offset that follows the temperature too; and the rotors' 1/rev vibration in the specific force, seen
-    through the DLPF and the output sample rate (SMPLRT_DIV), so that it aliases as on the chip."""
+    through the DLPF and the output sample rate (SMPLRT_DIV), so that it aliases as on the chip.
+    The DLPF delays the rigid-body signals too: they pass a first-order low-pass whose time constant
+    is the register map's delay of the configured filter (2.9 ms for the gyro at DLPF_CFG = 1, 1.88 ms
+    for the accelerometer at A_DLPF_CFG = 1), updated at each read; the driver declares the same
+    stages in the flight log (`Mpu9250.filters`), so that diagnose models what the chip did."""
     _HEAD = struct.Struct(">7h")
     _MAG = struct.Struct("<3hB")
     MAG_EVERY = 4   # burst reads per magnetometer sample: 450 Hz / 4, near the AK8963's 100 Hz
@@ -181,6 +180,7 @@ class SimMpu9250:
         self.accel_temp_coeff = (g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff))
         self.gyro_walk = [0.0, 0.0, 0.0]   # rad/s, the random-walk part of the zero-rate offset
         self._t_on = self._t_last = world.t
+        self._lowpassed: list[float] | None = None   # fx, fy, fz, p, q, r through the DLPF, at the last read
         self._phase = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # each rotor's angle
         z = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # phase of each arm's z bending
         self._z_cos, self._z_sin = [math.cos(a) for a in z], [math.sin(a) for a in z]
@@ -219,6 +219,7 @@ class SimMpu9250:
         self._g_sigma = n.gyro_density * math.sqrt(0.5 * math.pi * g_bw)
         self._a_sigma = n.accel_density * math.sqrt(0.5 * math.pi * a_bw)
         self._a_tc = 1.0 / (_TAU * a_bw)   # time constant of the accelerometer's DLPF as a first-order lag
+        self._g_delay = GYRO_DLPF[cfg][1]
         # SAMPLE_RATE = 1 kHz / (1 + SMPLRT_DIV) when 0 < DLPF_CFG < 7, else the gyro's 8 kHz (RM, register 25)
         self._period = (1 + rg[reg.SMPLRT_DIV]) / 1000.0 if 0 < cfg < 7 else 1.0 / 8000.0
 
@@ -262,6 +263,18 @@ class SimMpu9250:
         fx, fy, fz = w.plant.specific_force()
         p, q, r = w.plant.rates
         dt, self._t_last = t - self._t_last, t
+        lp = self._lowpassed
+        if lp is None:
+            self._lowpassed = lp = [fx, fy, fz, p, q, r]
+        elif dt > 0.0:    # the DLPF's first-order stage on the rigid-body signals
+            ka, kg = 1.0 - math.exp(-dt / self._a_delay), 1.0 - math.exp(-dt / self._g_delay)
+            lp[0] += ka * (fx - lp[0])
+            lp[1] += ka * (fy - lp[1])
+            lp[2] += ka * (fz - lp[2])
+            lp[3] += kg * (p - lp[3])
+            lp[4] += kg * (q - lp[4])
+            lp[5] += kg * (r - lp[5])
+        fx, fy, fz, p, q, r = lp
         e = w.normal.take(9)
         walk = self.gyro_walk
         if n.gyro_bias_walk and dt > 0.0:   # a random walk: variance K^2 dt over the time since the last sample

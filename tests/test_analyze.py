@@ -13,7 +13,11 @@ on the log's 450 Hz grid; what the linearisation leaves out at these step sizes:
   the sonar's echo delay, which follows the altitude (1 to 6 loop periods over the climb against
   the 5 taken at 1.5 m; one period is 0.3 deg of phase at Table 6's 2.4 rad/s crossover, about
   0.7 points of overshoot on its zeta of 0.04).
-Hence 1.5 percentage points on overshoot. Rise times: each crossing is found on the same grid in
+Hence 1.5 percentage points on overshoot; 3.5 through the full path, where the gyro's DLPF stage
+(2.9 ms, sim/devices.py) leaves the bank estimate integrated from lagged rates 0.1-0.2 degrees off
+the truth several seconds after the step (the Euler-rate kinematics of rates 2.9 ms late): a slow
+drift within the step's 8 s window that the linear loop, about hover, does not have, and that the
+metric counts as overshoot (3.3 % at Table 4, the step's transient itself peaking at 0.1 %). Rise times: each crossing is found on the same grid in
 both (one period either end) and the effects above move them by under 1 %: two periods plus 2 %.
 """
 from __future__ import annotations
@@ -31,6 +35,7 @@ from flightctl.physics import command_from_thrust
 from flightctl.plan import Move, Plan
 from flightctl.plans import TAKEOFF
 from flightctl.sim import causes
+from flightctl.sim.analysis.loops import imu_delays
 from flightctl.sim.analysis.linear import SIGNALS, impulse_responses, linearise, realise, sampled
 from flightctl.sim.analyze import DEFAULT_ESTIMATOR, TRUTH, analyse
 from flightctl.sim.metrics import step_metrics
@@ -40,7 +45,7 @@ from flightctl.sim.scenarios import SCENARIOS, scenario
 
 A = load(None).airframe
 DT = A.dt
-OVERSHOOT_TOLERANCE = 0.015
+OVERSHOOT_TOLERANCE = {True: 0.015, False: 0.035}   # perfect state feedback, the full path
 RISE_TOLERANCE = lambda rise: 2 * DT + 0.02 * rise  # noqa: E731
 GAINS = [("table4", TABLE4), ("table6", TABLE6)]
 
@@ -145,37 +150,43 @@ def test_estimator_realisation_finds_its_filters():
 
 def sampled_roll_margin(gains, ema: bool) -> float:
     """The closed form of the sampled roll loop, broken at u_phi: the plant (2 l / Jxx) / s^2 under the
-    450 Hz hold gives the gyro p(z) = b dt / (z - 1) u; perfect state feedback reads the held
-    angle b dt^2 (z + 1) / (2 (z - 1)^2) and p; `EmaRate` reads dt z / (z - 1) p and the EMA
-    alpha z / (z - 1 + alpha) p. PID: kp + ki dt z / (z - 1) on the angle, kd on the rate."""
+    450 Hz hold gives the rate p(z) = b dt / (z - 1) u; perfect state feedback reads the held
+    angle b dt^2 (z + 1) / (2 (z - 1)^2) and p; `EmaRate` reads the gyro, p delayed by the chip's
+    DLPF, through dt z / (z - 1) and the EMA alpha z / (z - 1 + alpha). PID: kp + ki dt z / (z - 1)
+    on the angle, kd on the rate."""
     b, dt, alpha = 2 * A.l / A.Jxx, DT, load(None).filters.alpha_ema
     kp, ki, kd = gains.kp_phi, gains.ki_phi, gains.kd_phi
+    # the gyro reads the rate through its DLPF's stage (sim/devices.py): (1 - c) z / (z - c) p,
+    # c = exp(-dt / tau)
+    c = math.exp(-dt / imu_delays()["gx"])
 
     def L(w):
         z = np.exp(1j * w * dt)
         pid = kp + ki * dt * z / (z - 1)
         p = b * dt / (z - 1)
         if ema:
+            p = p * (1 - c) * z / (z - c)
             return p * (pid * dt * z / (z - 1) + kd * alpha * z / (z - 1 + alpha))
         return pid * b * dt * dt * (z + 1) / (2 * (z - 1) ** 2) + kd * p
 
     wc = brentq(lambda w: abs(L(w)) - 1.0, 1.0, 200.0)
-    return 180.0 + math.degrees(np.angle(L(wc)))
+    return (360.0 + math.degrees(np.angle(L(wc)))) % 360.0 - 180.0   # within (-180, 180]: below 0, unstable
 
 
 @pytest.mark.parametrize("name,gains", GAINS)
 def test_roll_phase_margin_with_and_without_the_ema_in_the_d_path(name, gains):
     """The outside claim: "roll phase margin falls from 74.6 to 1.5 deg (Table 4) and from 34.3 to 2.1
-    deg (Table 6) once the EMA is in the D path". Found: 71.6 -> 1.5 and 33.5 -> 2.1. The claim's
-    values without the EMA are those of the continuous loop; the 450 Hz hold costs w_c dt / 2 (3.0
-    and 0.9 deg); with the EMA the estimate's integration of the current gyro sample leads by half a
-    period and gives it back. The analysis must equal the closed form of the sampled loop."""
+    deg (Table 6) once the EMA is in the D path". Found without the gyro's DLPF delay: 71.6 -> 1.5
+    and 33.5 -> 2.1. The claim's values without the EMA are those of the continuous loop; the 450 Hz
+    hold costs w_c dt / 2 (3.0 and 0.9 deg); with the EMA the estimate's integration of the current
+    gyro sample leads by half a period and gives it back. With the chip's 2.9 ms the EMA loop loses
+    its last degrees (below 0: unstable). The analysis must equal the closed form of the sampled loop."""
     an = analyse(load(None, gains), (), (TRUTH, EmaRate), channels=("roll",))
     truth, ema = an.loops[TRUTH]["roll"].figures, an.loops["EmaRate"]["roll"].figures
     assert truth["phase_margin_deg"] == pytest.approx(sampled_roll_margin(gains, False), abs=0.05)
     assert ema["phase_margin_deg"] == pytest.approx(sampled_roll_margin(gains, True), abs=0.05)
     assert ema["phase_margin_deg"] < 3.0 < 30.0 < truth["phase_margin_deg"]
-    assert ema["stable"] and ema["damping"] < 0.02 < 0.3 < truth["damping"]
+    assert ema["damping"] < 0.02 < 0.3 < truth["damping"]
 
 
 @pytest.fixture(scope="module")
@@ -213,7 +224,7 @@ def test_step_prediction_matches_the_nonlinear_simulation(tmp_path, predictions,
     m = step_metrics(flight.log, step, flight.t_arm)
     f = predictions[name].loops[TRUTH if truth else DEFAULT_ESTIMATOR][step.channel].figures
     assert f["stable"]
-    assert m.overshoot == pytest.approx(f["overshoot"], abs=OVERSHOOT_TOLERANCE)
+    assert m.overshoot == pytest.approx(f["overshoot"], abs=OVERSHOOT_TOLERANCE[truth])
     assert m.rise_s == pytest.approx(f["rise_s"], abs=RISE_TOLERANCE(f["rise_s"]))
 
 

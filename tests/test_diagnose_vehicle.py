@@ -52,9 +52,11 @@ def airborne_s(log: Path) -> float:
 
 
 def rewrite(src: Path, dst: Path, meta: list[str], columns=None) -> Path:
-    """The log with metadata lines added before the header and `columns(name, values) -> values`
-    applied to each column."""
-    text = src.read_text().splitlines()
+    """The log with metadata lines added before the header (each replacing a line of its key) and
+    `columns(name, values) -> values` applied to each column."""
+    keys = {f"# {m.split(':')[0]}:" for m in meta}
+    text = [line for line in src.read_text().splitlines() if not line.startswith(tuple(keys))] if keys \
+        else src.read_text().splitlines()
     head = next(i for i, line in enumerate(text) if not line.startswith("#"))
     names = text[head].split(",")
     rows = [line.split(",") for line in text[head + 1:]]
@@ -104,7 +106,8 @@ def test_a_declared_gyro_filter_is_modelled_and_not_named_as_actuation_delay(tmp
     silent = diagnose(rewrite(log, tmp_path / "undeclared.csv", [], filtered))
     timing = {"motor_lag", "actuation_delay", "motor_dynamics"}
     assert silent["cause"] in timing                 # the filter's lag, taken for the actuation's
-    declared = diagnose(rewrite(log, tmp_path / "declared.csv", [f"gyro_filter: pt1 {hz:g}"], filtered))
+    chip = next(line.split(": ", 1)[1] for line in log.read_text().splitlines() if line.startswith("# gyro_filter:"))
+    declared = diagnose(rewrite(log, tmp_path / "declared.csv", [f"gyro_filter: {chip}; pt1 {hz:g}"], filtered))
     assert declared["causes"] == []
 
 

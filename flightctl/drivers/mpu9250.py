@@ -97,6 +97,13 @@ class Mpu9250:
         return self.read_reg(reg.EXT_SENS_DATA_00)
 
     # --- lifecycle ---------------------------------------------------------------------------
+    def filters(self) -> dict[str, str]:
+        """The chip's own low-pass filters as a flight log declares them (`# gyro_filter:`,
+        `# acc_filter:`, read by `flightctl diagnose`): each configured DLPF as the first-order stage
+        of the register map's delay, 1 / (2 pi delay) Hz (2.9 ms for the gyro at DLPF_CFG = 1)."""
+        return {"gyro_filter": "pt1 %.4g" % (1.0 / (2.0 * math.pi * reg.GYRO_DLPF[self.dlpf][1])),
+                "acc_filter": "pt1 %.4g" % (1.0 / (2.0 * math.pi * reg.ACCEL_DLPF[self.dlpf][1]))}
+
     def start(self) -> None:
         self.spi.max_speed_hz = reg.SETUP_SPI_HZ
         self.write(reg.PWR_MGMT_1, reg.H_RESET)

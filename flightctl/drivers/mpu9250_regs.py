@@ -48,3 +48,10 @@ AK_ST2_HOFL = 0x08
 AK_TESLA_PER_LSB = 0.15e-6  # 16-bit output
 MAG_READ_LEN = 7            # HXL..HZH and ST2 (reading ST2 ends the sample)
 BURST_LEN = 14 + MAG_READ_LEN
+
+# The DLPF by DLPF_CFG (register 26, gyro) and A_DLPF_CFG (register 29, accelerometer), FCHOICE_B = 0:
+# (3-dB bandwidth Hz, delay s), from those registers' tables in the Register Map (RM-MPU-9250A-00 rev 1.6).
+GYRO_DLPF = ((250.0, 0.97e-3), (184.0, 2.9e-3), (92.0, 3.9e-3), (41.0, 5.9e-3), (20.0, 9.9e-3),
+             (10.0, 17.85e-3), (5.0, 33.48e-3), (3600.0, 0.17e-3))
+ACCEL_DLPF = ((218.1, 1.88e-3), (218.1, 1.88e-3), (99.0, 2.88e-3), (44.8, 4.88e-3), (21.2, 8.87e-3),
+              (10.2, 16.83e-3), (5.05, 32.48e-3), (420.0, 1.38e-3))

@@ -7,7 +7,9 @@ A loop (roll, pitch, yaw, altitude) is, in the order a command travels:
 - the plant of `linear.linearise` under the loop's sample-and-hold: the command computed at a
   sample is held until the next and first shows in the sensors one loop period later (450 Hz);
 - the measurement the PID reads: the onboard estimator linearised as it runs
-  (`linear.impulse_responses`, `linear.realise`), or the true state for perfect state feedback
+  (`linear.impulse_responses`, `linear.realise`) on the IMU's signals as the chip delivers them,
+  each through its DLPF's first-order stage as the simulated chip filters it (`measured`), or the
+  true state for perfect state feedback
   (`truth`, the paper's simulation). The altitude task
   runs on sonar echoes (`FlightController.on_range`): at 45 Hz, each range taken at its trigger and
   used when its echo ends (4-5 loop periods later at hover), its derivative the difference quotient
@@ -29,6 +31,8 @@ from flightctl.drivers.hcsr04 import US_PER_M
 from flightctl.errors import InputError
 from flightctl.params import Params
 from flightctl.sim.analysis.linear import IMU, LinearPlant, discrete, impulse_responses, realise, sampled
+from flightctl.drivers.mpu9250 import Mpu9250
+from flightctl.drivers.mpu9250_regs import ACCEL_DLPF, GYRO_DLPF
 from flightctl.sim.devices import SimGpio
 
 CHANNELS = ("roll", "pitch", "yaw", "alt")
@@ -88,6 +92,28 @@ def to_control(sys, T: float) -> control.StateSpace:
     return control.ss(*discrete(A, B, T), C, D, T)
 
 
+def imu_delays() -> dict[str, float]:
+    """s, per IMU field: the time constant of the chip's DLPF stage, the register map's delay of the
+    filter the onboard driver configures (the simulated chip's, sim/devices.py); the magnetometer
+    has none."""
+    import inspect
+    dlpf = inspect.signature(Mpu9250).parameters["dlpf"].default
+    g, a = GYRO_DLPF[dlpf][1], ACCEL_DLPF[dlpf][1]
+    return {"gx": g, "gy": g, "gz": g, "ax": a, "ay": a, "az": a, "mx": 0.0, "my": 0.0, "mz": 0.0}
+
+
+def measured(plant: LinearPlant, period: float, first):
+    """The IMU rows of the sampled plant `first` as the chip delivers them: each through its DLPF's
+    first-order stage y_k = a y_(k-1) + (1 - a) x_k, a = exp(-T / tc), updated at each read. (A, B,
+    C, D) with `first`'s states first (delta form: a stage's state is its last output)."""
+    Ad, Bd, Cd, Dd = first
+    tcs = imu_delays()
+    a = np.array([math.exp(-period / tcs[f]) if tcs[f] > 0.0 else 0.0 for f in IMU])
+    n = len(IMU)
+    filt = (np.diag((a - 1.0) / period), np.diag((1.0 - a) / period), np.diag(a), np.diag(1.0 - a))
+    return series((Ad, Bd, Cd[plant.rows(IMU)], Dd[:n]), filt)
+
+
 def echo_ticks(alt: float, dt: float) -> int:
     """Loop periods from a sonar trigger to the loop that reads its echo (the end of the echo: the
     pulse, the module's delay and the flight there and back, as the simulated HC-SR04 makes them)."""
@@ -119,7 +145,7 @@ def build(params: Params, plant: LinearPlant, structure, channel: str, responses
         meas = (Ad, Bd, Cd[plant.rows([channel, "d" + channel])], Dd[:2])
     else:
         Y = responses if responses is not None else hover_responses(params, plant, structure)
-        meas = series((Ad, Bd, Cd[plant.rows(IMU)], Dd[:len(IMU)]), realise(Y, [channel, "d" + channel], dt))
+        meas = series(measured(plant, period, (Ad, Bd, Cd, Dd)), realise(Y, [channel, "d" + channel], dt))
     # the plant side: u -> [true output, y, dy]
     A, Bg = meas[0], meas[1]
     C = np.vstack([np.hstack([Cd[plant.rows([channel])], np.zeros((1, A.shape[0] - Ad.shape[0]))]), meas[2]])

@@ -74,10 +74,14 @@ class RotorInflow(Effect):
 
 def climb_speed(ds) -> list[np.ndarray]:
     """Per file, the body-z velocity w_b on the airborne rows (0 elsewhere), reconstructed from the
-    log: the vertical acceleration R (a_x, a_y, a_z) - g (integrated gyro attitude, accelerometer)
-    integrated twice over each airborne stretch, plus z0 + c0 t + c1 t^2 / 2 fitted by least squares
-    to the levelled range (the initial height and speed, and the accelerometer bias); then w_b =
-    v_z cos(phi) cos(theta) (the horizontal velocity is not known; its part along z_b is left out)."""
+    log: the inertial acceleration R (a_x, a_y, a_z) - g z (integrated gyro attitude, accelerometer)
+    integrated over each airborne stretch from rest at its start (the take-off); the vertical
+    speed corrected by z0 + c0 t + c1 t^2 / 2 fitted by least squares to the levelled range (the
+    initial height and speed, and the accelerometer bias); then w_b = z_b . v, horizontal part
+    included: a vehicle that drifts at a few m/s with a tilt of tens of degrees has most of its w_b
+    from there (tests/test_diagnose_chain.py's offset centre of mass; the vertical part alone sized
+    the inflow 30 % low on acc_z there). The horizontal speed has no measurement to correct it: an
+    accelerometer bias b drifts it by b t."""
     g = ds.a.g
     out = [np.zeros(f.t.size) for f in ds.files]
     for i, s0, s1 in ds.stretches:
@@ -85,15 +89,18 @@ def climb_speed(ds) -> list[np.ndarray]:
         sl = slice(s0, s1 + 1)                 # the input rows and the row after the last
         t = f.t[sl] - f.t[s0]
         Rm, acc = f.Rm[:, sl], f.acc[:, sl]
-        av = Rm[6] * acc[0] + Rm[7] * acc[1] + Rm[8] * acc[2] - g
         dt = np.diff(t)
-        v = np.concatenate([[0.0], np.cumsum(0.5 * (av[1:] + av[:-1]) * dt)])
-        z = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+
+        def integral(x):                       # trapezoidal, from 0 at the stretch's start
+            return np.concatenate([[0.0], np.cumsum(0.5 * (x[1:] + x[:-1]) * dt)])
+        vx, vy, v = (integral(Rm[3 * k] * acc[0] + Rm[3 * k + 1] * acc[1] + Rm[3 * k + 2] * acc[2] - (g if k == 2 else 0.0))
+                     for k in range(3))
+        z = integral(v)
         ok = np.isfinite(f.z[sl])
         A = np.vstack([np.ones_like(t), t, 0.5 * t * t]).T
         c = np.linalg.lstsq(A[ok], f.z[sl][ok] - z[ok], rcond=None)[0]
         vz = v + c[1] + c[2] * t
-        w = vz * Rm[8]
+        w = Rm[2] * vx + Rm[5] * vy + Rm[8] * vz    # z_b . v: R's third column
         out[i][s0:s1] = 0.5 * (w[:-1] + w[1:])  # over the period from row k to k + 1
     return out
 
