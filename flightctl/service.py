@@ -216,10 +216,10 @@ class Service:
             log.info("  %8.3f s  %s", t, what)
         log.info("flight %s ended: %s (%d iterations, %d overruns)", plan.name, result.reason,
                  result.iterations, result.overruns)
+        wall = getattr(hal.clock, "wall", hal.clock)     # the wall clock, or the one that paces the simulator
         summary = {"plan": plan.name, "log": path.name, "reason": result.reason, "events": result.events,
                    "iterations": result.iterations, "overruns": result.overruns,
-                   "skipped_periods": getattr(getattr(hal.clock, "wall", hal.clock), "skipped", 0),
-                   "max_late_s": getattr(getattr(hal.clock, "wall", hal.clock), "max_late_s", None)}
+                   "skipped_periods": getattr(wall, "skipped", 0), "max_late_s": getattr(wall, "max_late_s", None)}
         summary["log_dropped_rows"], summary["log_error"] = flight_log.dropped, flight_log.error
         if flight_log.dropped:
             log.error("flight log %s: %d rows dropped (%s)", path, flight_log.dropped, flight_log.error)

@@ -220,6 +220,7 @@ class SimMpu9250:
         self._a_sigma = n.accel_density * math.sqrt(0.5 * math.pi * a_bw)
         self._a_tc = 1.0 / (_TAU * a_bw)   # time constant of the accelerometer's DLPF as a first-order lag
         self._g_delay = GYRO_DLPF[cfg][1]
+        self._k_dt, self._k = None, (1.0, 1.0)   # the DLPF stage's gains and the read interval they are for
         # SAMPLE_RATE = 1 kHz / (1 + SMPLRT_DIV) when 0 < DLPF_CFG < 7, else the gyro's 8 kHz (RM, register 25)
         self._period = (1 + rg[reg.SMPLRT_DIV]) / 1000.0 if 0 < cfg < 7 else 1.0 / 8000.0
 
@@ -267,7 +268,9 @@ class SimMpu9250:
         if lp is None:
             self._lowpassed = lp = [fx, fy, fz, p, q, r]
         elif dt > 0.0:    # the DLPF's first-order stage on the rigid-body signals
-            ka, kg = 1.0 - math.exp(-dt / self._a_delay), 1.0 - math.exp(-dt / self._g_delay)
+            if dt != self._k_dt:      # the gains for this read interval (the loop period: computed once)
+                self._k_dt, self._k = dt, (1.0 - math.exp(-dt / self._a_delay), 1.0 - math.exp(-dt / self._g_delay))
+            ka, kg = self._k
             lp[0] += ka * (fx - lp[0])
             lp[1] += ka * (fy - lp[1])
             lp[2] += ka * (fz - lp[2])

@@ -22,6 +22,7 @@ reports no landing.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from concurrent.futures import ProcessPoolExecutor
@@ -66,7 +67,6 @@ def draw(params, n: int, seed: int = 0) -> dict:
 
 def drawn_airframe(airframe, draws: dict, k=None):
     """The airframe with its drawn values: draw k of each (a float), or all (arrays, the batch)."""
-    import dataclasses
     values = {name: (v if k is None else float(v[k])) for (c, name), v in draws.items() if c == AIRFRAME}
     return dataclasses.replace(airframe, **values) if values else airframe
 

@@ -123,9 +123,11 @@ class MotorLossDetector:
             fall = -ez * self.M
             il = self.il
             # the missing torque of motor i lies along its arm: +y for 1, -x for 2, -y for 3, +x for 4
-            for i, along, fi in ((0, ey, f0), (1, -ex, f1), (2, -ey, f2), (3, ex, f3)):
+            for i in range(4):
+                fi = fl[i]
                 if fi < half:
                     fi = half
+                along = ey if i == 0 else -ex if i == 1 else -ey if i == 2 else ex
                 share = along * il / fi
                 drop = fall / fi
                 if drop < share:

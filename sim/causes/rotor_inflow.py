@@ -93,8 +93,8 @@ def climb_speed(ds) -> list[np.ndarray]:
 
         def integral(x):                       # trapezoidal, from 0 at the stretch's start
             return np.concatenate([[0.0], np.cumsum(0.5 * (x[1:] + x[:-1]) * dt)])
-        vx, vy, v = (integral(Rm[3 * k] * acc[0] + Rm[3 * k + 1] * acc[1] + Rm[3 * k + 2] * acc[2] - (g if k == 2 else 0.0))
-                     for k in range(3))
+        ax, ay, az = (Rm[3 * k] * acc[0] + Rm[3 * k + 1] * acc[1] + Rm[3 * k + 2] * acc[2] for k in range(3))  # R a
+        vx, vy, v = integral(ax), integral(ay), integral(az - g)
         z = integral(v)
         ok = np.isfinite(f.z[sl])
         A = np.vstack([np.ones_like(t), t, 0.5 * t * t]).T
