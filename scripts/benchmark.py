@@ -5,7 +5,7 @@ state-dependent), and what one control-loop iteration costs, decode to PWM count
 
     python scripts/benchmark.py [--repeat N]
 
-The iteration is timed on the onboard code only: `Mpu9250.read` decoding a 22-byte burst (from a
+The iteration is timed on the onboard code only (the fastest of many short runs): `Mpu9250.read` decoding a 22-byte burst (from a
 fixed frame, so the simulated chip's cost is not counted), the calibration, the motor-loss check, the
 estimator, the four PIDs, the mixer and eq. 26 inverted to counts. Targets: >= 30x real time, < 3 % of the period.
 
@@ -47,7 +47,9 @@ class FrozenSpi:
         return self.frame
 
 
-def iteration_us(n: int = 20000) -> float:
+def iteration_us(n: int = 1000, batches: int = 100) -> float:
+    """us per control iteration: the fastest of `batches` runs of `n` iterations (this machine's
+    neighbours slow some runs by up to 2x; the fastest is the code's own cost)."""
     params = load(None)
     chip = SimMpu9250(World(params.airframe, noise=SensorNoise()))
     imu = Mpu9250(chip, sleep=lambda s: None)
@@ -64,13 +66,16 @@ def iteration_us(n: int = 20000) -> float:
     dt = params.airframe.dt
     read, correct, step = imu.read, cal.correct, ctl.step
     watch, f = MotorLossDetector(params).update, ctl.mixer.f
-    start = time.perf_counter()
-    for _ in range(n):
-        read(sample)
-        correct(sample)
-        watch(sample, f, 1.5, dt)      # the motor-loss check, on the thrusts of the loop before
-        step(sample, dt, 0.01, -0.02, 0.1, 1.5)
-    return (time.perf_counter() - start) / n * 1e6
+    best = float("inf")
+    for _ in range(batches):
+        start = time.perf_counter()
+        for _ in range(n):
+            read(sample)
+            correct(sample)
+            watch(sample, f, 1.5, dt)      # the motor-loss check, on the thrusts of the loop before
+            step(sample, dt, 0.01, -0.02, 0.1, 1.5)
+        best = min(best, time.perf_counter() - start)
+    return best / n * 1e6
 
 
 def batch_rate(n: int = 10000, seconds: float = 1.0, workers: int = 1) -> float:
@@ -145,8 +150,13 @@ def main() -> None:
     args = ap.parse_args()
     params = load(None)
     out = Path(tempfile.mkdtemp())
-    for label, name, kw in (("full onboard path", None, {}), ("perfect state feedback", None, {"truth": True}),
-                            ("full onboard path, --params paper-as-flown", "paper-as-flown", {})):
+    from flightctl.sim import compiled
+    print("plant of the base model: " + ("compiled by numba (sim/compiled.py)" if compiled.rk4_rigid() is not None
+                                         else "plain Python (numba absent or FLIGHTCTL_JIT=0: the `fast` extra)"))
+    for label, name, kw, target in (("full onboard path", None, {}, ">= 30x; issue 17: 100x"),
+                                    ("perfect state feedback", None, {"truth": True}, ">= 30x"),
+                                    ("full onboard path, --params paper-as-flown", "paper-as-flown", {},
+                                     ">= 30x; issue 17: 60x")):
         ratios = []
         for _ in range(args.repeat):
             start = time.perf_counter()
@@ -154,7 +164,7 @@ def main() -> None:
             wall = time.perf_counter() - start
             ratios.append(flight.log["t"][-1] / wall)
         print(f"flightctl sim paper, {label}: {statistics.median(ratios):.1f}x real time "
-              f"(median of {args.repeat}; {min(ratios):.1f}x to {max(ratios):.1f}x), target >= 30x")
+              f"(median of {args.repeat}; {min(ratios):.1f}x to {max(ratios):.1f}x), target {target}")
     period_us = 1e6 * params.airframe.dt
     for label, name in (("base model", None), ("paper-as-flown", "paper-as-flown")):
         world, onboard = min((split_us(name) for _ in range(args.repeat)), key=sum)
@@ -164,7 +174,8 @@ def main() -> None:
     costs = [iteration_us() for _ in range(args.repeat)]
     us = min(costs)
     print(f"control iteration (decode -> PWM counts): {us:.1f} us = {100 * us / period_us:.2f} % of the "
-          f"{period_us:.0f} us loop period (best of {args.repeat}), target < 3 %")
+          f"{period_us:.0f} us loop period (fastest of {100 * args.repeat} runs of 1000), targets < 3 % "
+          f"and < 8 us (issue 17)")
     import os
     for workers in sorted({1, os.cpu_count() or 1}):
         rate = max(batch_rate(workers=workers) for _ in range(args.repeat))

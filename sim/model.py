@@ -39,16 +39,59 @@ def body_torques(f1, f2, f3, f4, t1, t2, t3, t4, l: float):
     return l * (f2 - f4), l * (f3 - f1), t1 - t2 + t3 - t4
 
 
-def angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, a: Airframe):
+def angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, Jxx, Jyy, Jzz, Jp):
     """Eq. 7 (vector form): J dw/dt = tau - w x (J w + Jp Omega z_b) - tau_d z_b.
 
     Eq. 8 as printed has the q row wrong (sign and Jxx for Jyy); this is the correct expansion."""
-    Jxx, Jyy, Jzz, Jp = a.Jxx, a.Jyy, a.Jzz, a.Jp
     hz = Jzz * r + Jp * Omega
     dp = (tau_phi - (q * hz - r * Jyy * q)) / Jxx
     dq = (tau_theta - (r * Jxx * p - p * hz)) / Jyy
     dr = (tau_psi - (p * Jyy * q - q * Jxx * p) - tau_d) / Jzz
     return dp, dq, dr
+
+
+def rigid_derivative(vx, vy, vz, sf, cf, st, ct, sp, cp, p, q, r, fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega,
+                     Jxx, Jyy, Jzz, Jp, iM, g, gamma1, gamma2):
+    """The rigid body's twelve derivatives (the state's order, `Model`): M dv/dt = R (F_ext + sum f z_b)
+    - M g z, eq. 7 with eq. 6's yaw drag, and the Z-Y-X Euler-angle kinematics, from the velocity, the
+    attitude's sines and cosines (phi, theta, psi), the body rates, and the rotors' body force, torques
+    and Omega (eq. 9). Plain arithmetic on floats or arrays; `rk4_rigid` compiles it."""
+    # R = Rz(psi) Ry(theta) Rx(phi) applied to the body force (fx, fy, fz)
+    up = sf * fy + cf * fz
+    bx = ct * fx + st * up
+    by = cf * fy - sf * fz
+    w = q * sf + r * cf
+    tau_d = yaw_drag(r, gamma1, gamma2)  # eq. 6
+    dp, dq, dr = angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, Jxx, Jyy, Jzz, Jp)
+    return (vx, vy, vz,
+            (cp * bx - sp * by) * iM, (sp * bx + cp * by) * iM, (-st * fx + ct * up) * iM - g,
+            p + w * st / ct, q * cf - r * sf, w / ct,   # Z-Y-X Euler-angle kinematics
+            dp, dq, dr)
+
+
+def _rigid_array(x, agg, c):
+    """`rigid_derivative` of a state array, the rotors' aggregate `agg` (Model._aggregate) and the
+    constants `c` (Model.rigid_constants), as an array (the compiled RK4's stages)."""
+    phi, theta, psi = x[6], x[7], x[8]
+    d = rigid_derivative(x[3], x[4], x[5], sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi),
+                         x[9], x[10], x[11], agg[0], agg[1], agg[2], agg[3], agg[4], agg[5], agg[6],
+                         c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7])
+    out = np.empty(N_RIGID)
+    for i in range(N_RIGID):
+        out[i] = d[i]
+    return out
+
+
+def rk4_rigid(x, agg, h, c):
+    """One classical RK4 step of the rigid body (`Plant._rk4`'s scheme) with the rotors' aggregate
+    held: a model whose forces depend on the input only (`Model._cacheable`). Arrays in and out; the
+    simulator runs it compiled by numba where numba is installed (sim/compiled.py), else `Plant._rk4`."""
+    hh = 0.5 * h
+    k1 = _rigid_array(x, agg, c)
+    k2 = _rigid_array(x + hh * k1, agg, c)
+    k3 = _rigid_array(x + hh * k2, agg, c)
+    k4 = _rigid_array(x + h * k3, agg, c)
+    return x + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
 
 
 def rotation(phi, theta, psi):
@@ -168,6 +211,7 @@ class Model:
         # gamma2 is the friction of the yaw-drag test bearing: zero in free flight (eq. 6).
         self.gamma2 = airframe.gamma2 if bearing else 0.0
         self._iM = 1.0 / airframe.M
+        self._constants = self.rigid_constants
 
     def initial_state(self, u) -> list[float]:
         x = [0.0] * N_RIGID
@@ -242,12 +286,21 @@ class Model:
         return (force[0], force[1], force[2] + f1 + f2 + f3 + f4, l * (f2 - f4) + torque[0],
                 l * (f3 - f1) + torque[1], t1 - t2 + t3 - t4 + torque[2], -w1 + w2 - w3 + w4)
 
-    def f(self, t, x, u):
-        """xdot = f(t, x, u): M dv/dt = R (F_ext + sum f z_b) - M g z, and eq. 7. Scalar code (fast);
-        the functions above it take arrays too, for fitting."""
+    @property
+    def rigid_constants(self) -> tuple[float, ...]:
+        """The airframe's constants of `rigid_derivative`, in its order after Omega."""
         a = self.a
+        return (a.Jxx, a.Jyy, a.Jzz, a.Jp, self._iM, a.g, a.gamma1, self.gamma2)
+
+    def aggregate(self, t, x, u):
+        """The rotors' body force, torques and Omega (eq. 9) of a cacheable model (the input's)."""
+        return self._per_input(t, x, u)[1]
+
+    def f(self, t, x, u):
+        """xdot = f(t, x, u): `rigid_derivative` with the rotors' and the effects' forces. Scalar code
+        (fast); the functions above it take arrays too, for fitting and for the batched simulator."""
         xdot = [0.0] * self.n   # the rotor effects write their own states' derivatives (beyond N_RIGID)
-        phi, theta, psi, p, q, r = x[6:12]
+        phi, theta, psi = x[6], x[7], x[8]
         sin, cos = self._sin, self._cos
         sf, cf, st, ct, sp, cp = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
         if self._cacheable:
@@ -255,18 +308,8 @@ class Model:
         else:
             Rm = rotation_from_trig(sf, cf, st, ct, sp, cp) if self._wrench else None
             fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._aggregate(self._forces(t, x, u, xdot, Rm))
-        iM = self._iM
-        # R = Rz(psi) Ry(theta) Rx(phi) applied to the body force (fx, fy, fz)
-        up = sf * fy + cf * fz
-        bx = ct * fx + st * up
-        by = cf * fy - sf * fz
-        w = q * sf + r * cf
-        tau_d = yaw_drag(r, a.gamma1, self.gamma2)  # eq. 6
-        dp, dq, dr = angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, a)
-        xdot[:N_RIGID] = (x[3], x[4], x[5],
-                          (cp * bx - sp * by) * iM, (sp * bx + cp * by) * iM, (-st * fx + ct * up) * iM - a.g,
-                          p + w * st / ct, q * cf - r * sf, w / ct,   # Z-Y-X Euler-angle kinematics
-                          dp, dq, dr)
+        xdot[:N_RIGID] = rigid_derivative(x[3], x[4], x[5], sf, cf, st, ct, sp, cp, x[9], x[10], x[11],
+                                          fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega, *self._constants)
         return xdot
 
     def specific_force(self, t, x, u, forces: Forces | None = None):

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 from collections import deque
 
+import numpy as np
+
 CONTACT_S = 0.02   # s: the landing gear's stopping time at a touchdown
 # RK4 steps per loop period (per segment): one. The fastest poles of the models, 1/tau = 50 1/s for
 # 20 ms motors and the bank loops' 10-30 rad/s, are 0.11 and under 0.07 of dt = 2.2 ms, where RK4's
@@ -34,6 +36,7 @@ class Diverged(Exception):
         super().__init__(f"the plant's state is not finite at t = {t:.3f} s")
         self.t = t
 
+from flightctl.sim import compiled
 from flightctl.sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Forces, Model, P
 
 
@@ -63,6 +66,11 @@ class Plant:
         self._queue: deque = deque([self.u] * (self._whole + 2), maxlen=self._whole + 2)
         self._forces_at = None                            # (t, x, u) of `_forces`
         self._forces: Forces | None = None
+        # a model whose forces depend on the input only integrates compiled where numba is there
+        # (sim/compiled.py: `rk4_rigid`, the same equations and scheme as `_rk4`)
+        self._fast = compiled.rk4_rigid() if model._cacheable and model.n == N_RIGID else None
+        self._constants = np.array(model.rigid_constants)
+        self._agg = self._agg_array = None                # the input's aggregate, and as an array
 
     def command(self, P1: float, P2: float, P3: float, P4: float, battery_v: float) -> None:
         """The input from now on (after the actuation delay, if any)."""
@@ -89,7 +97,7 @@ class Plant:
                 continue
             self.on_ground = False
             try:
-                self.x = self._rk4(x, t, u, h)
+                self.x = self._rk4(x, t, u, h) if self._fast is None else self._rk4_fast(x, t, u, h)
             except (ValueError, OverflowError):          # math on an infinite angle
                 raise Diverged(t) from None
             s = sum(self.x)
@@ -109,6 +117,12 @@ class Plant:
         k4 = f(t + h, [a + h * b for a, b in zip(x, k3)], u)
         h6 = h / 6.0
         return [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
+
+    def _rk4_fast(self, x, t, u, h):
+        agg = self.model.aggregate(t, x, u)
+        if agg is not self._agg:
+            self._agg, self._agg_array = agg, np.array(agg)
+        return self._fast(np.array(x), self._agg_array, h, self._constants).tolist()
 
     def _lifts(self, x, u) -> bool:
         """On the floor the vehicle stays put until the vertical thrust exceeds its weight."""

@@ -87,7 +87,7 @@ def test_angular_acceleration_eq7_by_hand_with_errata():
     a = Airframe()
     p, q, r = 0.5, -0.7, 1.1
     tp, tt, ty, Om, td = 0.01, -0.02, 0.005, 30.0, 0.001
-    dp, dq, dr = angular_acceleration(p, q, r, tp, tt, ty, Om, td, a)
+    dp, dq, dr = angular_acceleration(p, q, r, tp, tt, ty, Om, td, a.Jxx, a.Jyy, a.Jzz, a.Jp)
     # eq. 8 rows, with the q row as corrected in conventions.md
     want_dp = tp / JXX - (JZZ - JYY) / JXX * q * r - JP / JXX * q * Om
     want_dq = tt / JYY - (JXX - JZZ) / JYY * p * r + JP / JYY * p * Om
@@ -112,7 +112,7 @@ def test_angular_acceleration_matches_vector_form_cross_product():
         # eq. 7: J dw/dt = tau - w x (J w + Jp Omega z_b) - tau_d z_b
         want = np.linalg.solve(J, tau - np.cross(w, J @ w + JP * Om * np.array([0, 0, 1.0]))
                                - td * np.array([0, 0, 1.0]))
-        got = angular_acceleration(*w, *tau, Om, td, a)
+        got = angular_acceleration(*w, *tau, Om, td, a.Jxx, a.Jyy, a.Jzz, a.Jp)
         np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
 
 
@@ -120,7 +120,7 @@ def test_angular_acceleration_on_arrays():
     a = Airframe()
     p = np.array([0.0, 1.0])
     z = np.zeros(2)
-    dp, dq, dr = angular_acceleration(p, z, z, z, z, z, np.array([10.0, 10.0]), z, a)
+    dp, dq, dr = angular_acceleration(p, z, z, z, z, z, np.array([10.0, 10.0]), z, a.Jxx, a.Jyy, a.Jzz, a.Jp)
     np.testing.assert_allclose(dq, [0.0, JP * 1.0 * 10.0 / JYY])
 
 

@@ -25,6 +25,7 @@ def heading_from_mag(mx: float, my: float, mz: float, roll: float, pitch: float)
 
 
 ESTIMATORS = ("flight", "paper")
+TWO_PI = 2.0 * pi
 
 
 class AttitudeEstimator:
@@ -49,7 +50,7 @@ class AttitudeEstimator:
     """
     __slots__ = ("a_ema", "a_rp", "a_yaw", "k_air", "ki_air", "paper", "in_flight", "p", "q", "r",
                  "roll", "pitch", "yaw", "droll", "dpitch", "dyaw", "bx", "by", "tilt_bias", "yaw_bias",
-                 "use_mag")
+                 "use_mag", "roll_bias", "pitch_bias")
 
     def __init__(self, filters: Filters, structure: str = "flight"):
         if structure not in ESTIMATORS:
@@ -64,6 +65,7 @@ class AttitudeEstimator:
     def set_reference(self, tilt_bias: tuple[float, float], yaw_bias: float, use_mag: bool) -> None:
         """The calibration's accelerometer-angle biases and magnetic heading reference; restarts."""
         self.tilt_bias, self.yaw_bias, self.use_mag = tilt_bias, yaw_bias, use_mag
+        self.roll_bias, self.pitch_bias = tilt_bias
         self.roll = self.pitch = self.yaw = 0.0
         self.p = self.q = self.r = 0.0
         self.droll = self.dpitch = self.dyaw = 0.0
@@ -87,11 +89,11 @@ class AttitudeEstimator:
         ax, ay, az = s.ax, s.ay, s.az
         if self.paper or not self.in_flight:        # eq. 30-31, 33-34 with Table 5's alpha
             a = self.a_rp
-            roll_g = a * roll_g + (1.0 - a) * (atan2(ay, az) - self.tilt_bias[0])
-            pitch_g = a * pitch_g + (1.0 - a) * (atan2(-ax, sqrt(ay * ay + az * az)) - self.tilt_bias[1])
+            roll_g = a * roll_g + (1.0 - a) * (atan2(ay, az) - self.roll_bias)
+            pitch_g = a * pitch_g + (1.0 - a) * (atan2(-ax, sqrt(ay * ay + az * az)) - self.pitch_bias)
         else:                                       # the in-flight PI correction
-            er = atan2(ay, az) - self.tilt_bias[0] - roll_g
-            ep = atan2(-ax, sqrt(ay * ay + az * az)) - self.tilt_bias[1] - pitch_g
+            er = atan2(ay, az) - self.roll_bias - roll_g
+            ep = atan2(-ax, sqrt(ay * ay + az * az)) - self.pitch_bias - pitch_g
             k = self.k_air * dt
             roll_g += k * er
             pitch_g += k * ep
@@ -101,13 +103,13 @@ class AttitudeEstimator:
         if self.use_mag and s.mag_fresh:         # eq. 35, the difference taken across +-pi
             # level the field with the chip's own tilt (estimate plus mounting bias), as the
             # calibration did when it took the heading reference
-            yaw_mag = heading_from_mag(s.mx, s.my, s.mz, roll_g + self.tilt_bias[0],
-                                       pitch_g + self.tilt_bias[1]) - self.yaw_bias
-            yaw_g += (1.0 - self.a_yaw) * ((yaw_mag - yaw_g + pi) % (2 * pi) - pi)
-        yaw_g = (yaw_g + pi) % (2 * pi) - pi
+            yaw_mag = heading_from_mag(s.mx, s.my, s.mz, roll_g + self.roll_bias,
+                                       pitch_g + self.pitch_bias) - self.yaw_bias
+            yaw_g += (1.0 - self.a_yaw) * ((yaw_mag - yaw_g + pi) % TWO_PI - pi)
+        yaw_g = (yaw_g + pi) % TWO_PI - pi
         if self.paper:   # eq. 24 literally: the difference quotient of the fused angles
             droll, dpitch = (roll_g - roll) / dt, (pitch_g - pitch) / dt
-            dyaw = ((yaw_g - yaw + pi) % (2 * pi) - pi) / dt
+            dyaw = ((yaw_g - yaw + pi) % TWO_PI - pi) / dt
         self.droll, self.dpitch, self.dyaw = droll, dpitch, dyaw
         self.roll, self.pitch, self.yaw = roll_g, pitch_g, yaw_g
 

@@ -33,14 +33,18 @@ class Mixer:
         each u already within [-B, B] (the PIDs' limit), each f clipped to [0, 2B]; written as counts."""
         c = cos(roll) * cos(pitch)
         base = self.B + uz / (c if c > MIN_TILT_COSINE else MIN_TILT_COSINE)
-        f = self.f
-        f[0] = base - utheta + upsi
-        f[1] = base + uphi - upsi
-        f[2] = base + utheta + upsi
-        f[3] = base - uphi - upsi
         fmax, h1, h2, count = self.fmax, self.h1, self.h2, count_from_thrust
-        for i in range(4):
-            fi = f[i]
-            fi = fmax if fi > fmax else fi if fi > 0.0 else 0.0   # NaN -> 0: never a NaN command
-            f[i] = fi
-            counts[i] = count(fi, h1, h2)
+        f = self.f
+        # each within [0, fmax]; NaN -> 0: never a NaN command (the four written out: the 450 Hz loop)
+        fi = base - utheta + upsi
+        f[0] = fi = fmax if fi > fmax else fi if fi > 0.0 else 0.0
+        counts[0] = count(fi, h1, h2)
+        fi = base + uphi - upsi
+        f[1] = fi = fmax if fi > fmax else fi if fi > 0.0 else 0.0
+        counts[1] = count(fi, h1, h2)
+        fi = base + utheta + upsi
+        f[2] = fi = fmax if fi > fmax else fi if fi > 0.0 else 0.0
+        counts[2] = count(fi, h1, h2)
+        fi = base - uphi - upsi
+        f[3] = fi = fmax if fi > fmax else fi if fi > 0.0 else 0.0
+        counts[3] = count(fi, h1, h2)

@@ -65,7 +65,7 @@ class MotorLossDetector:
     """`update` every loop in flight, before the controller mixes anew; it returns the lost motor
     (1..4) the loop it is sure, else 0."""
     __slots__ = ("km", "kf", "kb", "kc", "fl", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
-                 "p", "q", "half", "ic1", "Jxx", "Jyy", "Jp", "jx", "jy", "l", "iM", "M", "il")
+                 "p", "q", "half", "quiet", "ic1", "Jxx", "Jyy", "Jp", "jx", "jy", "l", "iM", "M", "il")
 
     def __init__(self, params: Params, tau_motor: float | None = None):
         a = params.airframe
@@ -74,6 +74,9 @@ class MotorLossDetector:
         self.km = dt / (tau + dt)
         self.kf, self.kb, self.kc = dt / (FILTER_S + dt), dt / (BIAS_S + dt), dt / (CALM_S + dt)
         self.half = 0.5 * a.B              # a commanded thrust counts as at least this (near-idle rotors)
+        # a collective drop (N) at most this cannot be THRESHOLD of any motor's thrust (each counts as
+        # at least `half`): no motor is suspected, and the loop need not look at each (most loops)
+        self.quiet = THRESHOLD * self.half
         # the airframe's constants of eq. 7, 9 and 27, bound once (the loop reads them every period)
         self.ic1, self.Jxx, self.Jyy, self.Jp = 1.0 / a.c1, a.Jxx, a.Jyy, a.Jp
         self.jx, self.jy = a.Jzz - a.Jyy, a.Jxx - a.Jzz
@@ -115,12 +118,12 @@ class MotorLossDetector:
         rz = self.rz = self.rz + kf * (tz - self.rz)
         self.calm += self.kc * ((p if p > 0 else -p) + (q if q > 0 else -q) - self.calm)
         count = self.count
-        if alt <= MIN_ALT:                         # below MIN_ALT a residual is the floor's
+        fall = (self.bz - rz) * self.M             # the collective thrust missing (N)
+        if alt <= MIN_ALT or fall <= self.quiet:   # below MIN_ALT a residual is the floor's
             count[0] = count[1] = count[2] = count[3] = 0
         else:
-            ex, ey, ez = rx - self.bx, ry - self.by, rz - self.bz
+            ex, ey = rx - self.bx, ry - self.by
             lost, half, calm = 0, self.half, self.calm < CALM
-            fall = -ez * self.M
             il = self.il
             # the missing torque of motor i lies along its arm: +y for 1, -x for 2, -y for 3, +x for 4
             for i in range(4):
