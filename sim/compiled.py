@@ -1,4 +1,4 @@
-"""The simulator's hot functions compiled by numba where it is installed (the `fast` extra), from
+"""The simulator's plant compiled by numba where it is installed (the `fast` extra), from
 their one plain-Python source: `compile(fn, name=dependency, ...)` compiles a copy of `fn` whose
 global names of other plain functions are bound to their compiled copies, so that the plain
 function stays plain (arrays in the batched simulator, and everywhere without numba). Nothing on
@@ -13,6 +13,15 @@ from __future__ import annotations
 import functools
 import os
 import types
+from math import cos, sin
+
+import numpy as np
+
+from flightctl.physics import rotor_speed, rotor_torque, thrust_from_speed
+from flightctl.sim.causes.motor_dynamics import SPIN, reaction_torque, speed_rate
+from flightctl.sim.causes.rotor_drag import drag_wrench
+from flightctl.sim.causes.rotor_inflow import inflow_wrench
+from flightctl.sim.model import N_RIGID, aggregate, body_velocity, rigid_derivative, rotation_from_trig
 
 
 @functools.cache
@@ -40,17 +49,150 @@ def compile(fn, **dependencies):
     return numba.njit(cache=True, nogil=True)(copy)
 
 
-@functools.cache
-def rk4_rigid():
-    """`flightctl.sim.model.rk4_rigid` compiled (with `rigid_derivative`, eq. 7's
-    `angular_acceleration` and eq. 6's `yaw_drag`), or None."""
-    if not enabled():
+# The effects the compiled plant carries, by their wrench hooks' codes (`layout`); a model with any other
+# effect integrates in plain Python (Plant._rk4).
+INFLOW, REACTION, DRAG = 1, 2, 3
+COMPILED_CAUSES = ("rotor_inflow", "motor_dynamics", "rotor_drag", "actuation_delay")
+# q: the parameters of `stage`, by index
+_C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _JP, _RIGID = range(13)
+
+
+def layout(model):
+    """(the wrench codes in the model's order, the parameters q) of a model whose effects the compiled
+    plant carries (COMPILED_CAUSES, each at most once), else None. A model whose forces depend on the
+    input only (the base model; `Model._cacheable`) stays plain: it computes them once per input, and
+    compiling it would gain about 10 us a period, less over a flight than numba's start-up (about
+    1 s a process: its import and the cache's load)."""
+    causes = [e.cause for e in model.effects]
+    if (model.vector or model._cacheable or len(set(causes)) < len(causes)
+            or not set(causes) <= set(COMPILED_CAUSES)):
         return None
+    a = model.a
+    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, a.M * a.g / 4.0, 0.0, 0.0, 0.0, a.Jp]
+    codes = []
+    for e in model.effects:
+        p = e.parameters
+        if e.cause == "rotor_inflow":
+            q[_K_IN], q[_HUB] = p["k"], p.get("hub", 0.0)
+            codes.append(INFLOW)
+        elif e.cause == "motor_dynamics":
+            if e.offset != N_RIGID:
+                return None
+            q[_TAU], q[_DOWN] = p["tau"], p.get("tau_down", p["tau"])
+            codes.append(REACTION)
+        elif e.cause == "rotor_drag":
+            q[_K_DRAG], q[_YAW] = p["k"], p.get("yaw", 0.0)
+            codes.append(DRAG)
+    return np.array(codes, dtype=np.int64), np.array(q + list(model.rigid_constants))
+
+
+def rotors(x, cmd, codes, q, Rm, xdot):
+    """`Model._forces` of a model laid out by `layout` (the same functions in the same order): the
+    rotors' thrusts f and torques tau, the effects' body force F and torque T, the rotors' speeds w (the
+    order of `Forces`), at the state x with the rotation Rm (`rotation_from_trig`), cmd the commanded
+    thrusts (eq. 26) and speeds (eq. 27); the rotor states' derivatives are written into xdot."""
+    c1 = q[_C1]
+    motor = q[_TAU] > 0.0
+    f = np.empty(4)
+    tau = np.empty(4)
+    w = np.empty(4)
+    spin_up = 0.0
+    for i in range(4):
+        if motor:              # motor_dynamics: the rotor's speed is a state
+            dw = speed_rate(cmd[4 + i], x[N_RIGID + i], q[_TAU], q[_DOWN])
+            xdot[N_RIGID + i] = dw
+            spin_up += SPIN[i] * dw
+            f[i] = thrust_from_speed(x[N_RIGID + i], c1)
+        else:
+            f[i] = cmd[i]
+    for i in range(4):
+        tau[i] = rotor_torque(f[i], q[_G1], q[_G2])
+    for i in range(4):
+        w[i] = rotor_speed(f[i], c1)
+    vb = body_velocity(Rm, x[3], x[4], x[5])
+    Fx = Fy = Fz = Tx = Ty = Tz = 0.0
+    for code in codes:
+        if code == INFLOW:
+            dz, dx, dy = inflow_wrench(f[0], f[1], f[2], f[3], q[_K_IN], q[_B], q[_L], q[_HUB], vb[2], x[9], x[10])
+            Fz += dz
+            Tx += dx
+            Ty += dy
+        elif code == REACTION:
+            Tz += reaction_torque(q[_JP], spin_up)
+        else:
+            dx, dy, dz = drag_wrench(q[_K_DRAG], q[_YAW], vb[0], vb[1], x[11])
+            Fx += dx
+            Fy += dy
+            Tz += dz
+    return f, tau, (Fx, Fy, Fz), (Tx, Ty, Tz), w
+
+
+def forces(x, cmd, codes, q):
+    """`rotors` at the state x (`Model.forces`)."""
+    Rm = rotation_from_trig(sin(x[6]), cos(x[6]), sin(x[7]), cos(x[7]), sin(x[8]), cos(x[8]))
+    return rotors(x, cmd, codes, q, Rm, np.zeros(x.shape[0]))
+
+
+def stage(x, cmd, codes, q):
+    """`Model.f` of a model laid out by `layout`: `rotors`, `aggregate` and `rigid_derivative`.
+    Arrays in and out."""
+    xdot = np.zeros(x.shape[0])
+    sf, cf, st, ct, sp, cp = sin(x[6]), cos(x[6]), sin(x[7]), cos(x[7]), sin(x[8]), cos(x[8])
+    f, tau, F, T, w = rotors(x, cmd, codes, q, rotation_from_trig(sf, cf, st, ct, sp, cp), xdot)
+    agg = aggregate(f[0], f[1], f[2], f[3], tau[0], tau[1], tau[2], tau[3], w[0], w[1], w[2], w[3],
+                    F[0], F[1], F[2], T[0], T[1], T[2], q[_L])
+    r = _RIGID
+    d = rigid_derivative(x[3], x[4], x[5], sf, cf, st, ct, sp, cp, x[9], x[10], x[11], agg[0], agg[1], agg[2],
+                         agg[3], agg[4], agg[5], agg[6], q[r], q[r + 1], q[r + 2], q[r + 3], q[r + 4], q[r + 5],
+                         q[r + 6], q[r + 7])
+    for i in range(N_RIGID):
+        xdot[i] = d[i]
+    return xdot
+
+
+def rk4(x, cmd, codes, q, h):
+    """One classical RK4 step of `stage` with the input held (`Plant._rk4`'s scheme)."""
+    hh = 0.5 * h
+    k1 = stage(x, cmd, codes, q)
+    k2 = stage(x + hh * k1, cmd, codes, q)
+    k3 = stage(x + hh * k2, cmd, codes, q)
+    k4 = stage(x + h * k3, cmd, codes, q)
+    return x + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
+
+
+@functools.cache
+def model_rk4():
+    """`rk4` compiled, with every function it calls (eq. 6-9 and 26-28 and the three effects'), or None."""
+    return _compiled()[0]
+
+
+@functools.cache
+def model_forces():
+    """`forces` compiled, or None."""
+    return _compiled()[1]
+
+
+@functools.cache
+def _compiled():
+    if not enabled():
+        return None, None
     from flightctl import physics
     from flightctl.sim import model
-    yaw_drag = compile(physics.yaw_drag)
-    angular = compile(model.angular_acceleration)
-    rigid = compile(model.rigid_derivative, yaw_drag=yaw_drag, angular_acceleration=angular)
-    stage = compile(model._rigid_array, rigid_derivative=rigid)
-    return compile(model.rk4_rigid, _rigid_array=stage)
-
+    from flightctl.sim.causes import motor_dynamics, rotor_drag, rotor_inflow
+    eq = {name: compile(getattr(physics, name)) for name in ("yaw_drag", "rotor_torque", "rotor_speed",
+                                                             "thrust_from_speed")}
+    m = {name: compile(getattr(model, name)) for name in ("rotation_from_trig", "body_velocity", "aggregate",
+                                                          "body_torques")}
+    m["angular_acceleration"] = compile(model.angular_acceleration)
+    rigid = compile(model.rigid_derivative, yaw_drag=eq["yaw_drag"], angular_acceleration=m["angular_acceleration"])
+    inflow = compile(rotor_inflow.inflow_wrench, body_torques=m["body_torques"],
+                     thrust_change=compile(rotor_inflow.thrust_change))
+    wrenches = compile(rotors, inflow_wrench=inflow, drag_wrench=compile(rotor_drag.drag_wrench),
+                       speed_rate=compile(motor_dynamics.speed_rate),
+                       reaction_torque=compile(motor_dynamics.reaction_torque), rotor_torque=eq["rotor_torque"],
+                       rotor_speed=eq["rotor_speed"], thrust_from_speed=eq["thrust_from_speed"],
+                       body_velocity=m["body_velocity"])
+    one = compile(stage, rotors=wrenches, rigid_derivative=rigid, rotation_from_trig=m["rotation_from_trig"],
+                  aggregate=m["aggregate"])
+    return (compile(rk4, stage=one),
+            compile(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"]))

@@ -55,7 +55,7 @@ def rigid_derivative(vx, vy, vz, sf, cf, st, ct, sp, cp, p, q, r, fx, fy, fz, ta
     """The rigid body's twelve derivatives (the state's order, `Model`): M dv/dt = R (F_ext + sum f z_b)
     - M g z, eq. 7 with eq. 6's yaw drag, and the Z-Y-X Euler-angle kinematics, from the velocity, the
     attitude's sines and cosines (phi, theta, psi), the body rates, and the rotors' body force, torques
-    and Omega (eq. 9). Plain arithmetic on floats or arrays; `rk4_rigid` compiles it."""
+    and Omega (eq. 9). Plain arithmetic on floats or arrays (sim/compiled.py compiles it)."""
     # R = Rz(psi) Ry(theta) Rx(phi) applied to the body force (fx, fy, fz)
     up = sf * fy + cf * fz
     bx = ct * fx + st * up
@@ -69,31 +69,6 @@ def rigid_derivative(vx, vy, vz, sf, cf, st, ct, sp, cp, p, q, r, fx, fy, fz, ta
             dp, dq, dr)
 
 
-def _rigid_array(x, agg, c):
-    """`rigid_derivative` of a state array, the rotors' aggregate `agg` (Model._aggregate) and the
-    constants `c` (Model.rigid_constants), as an array (the compiled RK4's stages)."""
-    phi, theta, psi = x[6], x[7], x[8]
-    d = rigid_derivative(x[3], x[4], x[5], sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi),
-                         x[9], x[10], x[11], agg[0], agg[1], agg[2], agg[3], agg[4], agg[5], agg[6],
-                         c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7])
-    out = np.empty(N_RIGID)
-    for i in range(N_RIGID):
-        out[i] = d[i]
-    return out
-
-
-def rk4_rigid(x, agg, h, c):
-    """One classical RK4 step of the rigid body (`Plant._rk4`'s scheme) with the rotors' aggregate
-    held: a model whose forces depend on the input only (`Model._cacheable`). Arrays in and out; the
-    simulator runs it compiled by numba where numba is installed (sim/compiled.py), else `Plant._rk4`."""
-    hh = 0.5 * h
-    k1 = _rigid_array(x, agg, c)
-    k2 = _rigid_array(x + hh * k1, agg, c)
-    k3 = _rigid_array(x + hh * k2, agg, c)
-    k4 = _rigid_array(x + h * k3, agg, c)
-    return x + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
-
-
 def rotation(phi, theta, psi):
     """R = Rz(psi) Ry(theta) Rx(phi), body to inertial, as nine entries row by row."""
     m = _trig(phi)
@@ -105,6 +80,20 @@ def rotation_from_trig(sf, cf, st, ct, sp, cp):
     return (cp * ct, cp * st * sf - sp * cf, cp * st * cf + sp * sf,
             sp * ct, sp * st * sf + cp * cf, sp * st * cf - cp * sf,
             -st, ct * sf, ct * cf)
+
+
+def body_velocity(Rm, vx, vy, vz):
+    """R^T v: the inertial velocity in the body frame, R = `rotation` as nine entries."""
+    return (Rm[0] * vx + Rm[3] * vy + Rm[6] * vz, Rm[1] * vx + Rm[4] * vy + Rm[7] * vz,
+            Rm[2] * vx + Rm[5] * vy + Rm[8] * vz)
+
+
+def aggregate(f1, f2, f3, f4, t1, t2, t3, t4, w1, w2, w3, w4, Fx, Fy, Fz, Tx, Ty, Tz, l):
+    """What the rigid body needs from the rotors: the body force (fx, fy, fz), the roll, pitch and yaw
+    torques ("+" layout, eq. 25, with the effects' extra force F and torque T) and eq. 9's Omega
+    = -w1 + w2 - w3 + w4 (motors 1 and 3 turn clockwise)."""
+    return (Fx, Fy, Fz + f1 + f2 + f3 + f4, l * (f2 - f4) + Tx, l * (f3 - f1) + Ty, t1 - t2 + t3 - t4 + Tz,
+            -w1 + w2 - w3 + w4)
 
 
 class Parameter(NamedTuple):
@@ -271,30 +260,21 @@ class Model:
         force, torque = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
         if Rm is None:
             Rm = rotation(x[PHI], x[THETA], x[PSI])
-        vx, vy, vz = x[VX], x[VY], x[VZ]
-        vb = (Rm[0] * vx + Rm[3] * vy + Rm[6] * vz, Rm[1] * vx + Rm[4] * vy + Rm[7] * vz,
-              Rm[2] * vx + Rm[5] * vy + Rm[8] * vz)   # R^T v
+        vb = body_velocity(Rm, x[VX], x[VY], x[VZ])
         for e in self._wrench:
             e.wrench(t, x, f, vb, force, torque)
         return Forces(f, tau, force, torque, w)
 
     def _aggregate(self, rotors: Forces):
-        """Body force and torques, eq. 9's Omega: what the rigid body needs from the rotors."""
-        (f1, f2, f3, f4), (t1, t2, t3, t4), force, torque, (w1, w2, w3, w4) = rotors
-        l = self.a.l
-        # eq. 9: Omega = -w1 + w2 - w3 + w4 (motors 1 and 3 turn clockwise)
-        return (force[0], force[1], force[2] + f1 + f2 + f3 + f4, l * (f2 - f4) + torque[0],
-                l * (f3 - f1) + torque[1], t1 - t2 + t3 - t4 + torque[2], -w1 + w2 - w3 + w4)
+        """`aggregate` of the rotors' forces."""
+        (f1, f2, f3, f4), (t1, t2, t3, t4), (Fx, Fy, Fz), (Tx, Ty, Tz), (w1, w2, w3, w4) = rotors
+        return aggregate(f1, f2, f3, f4, t1, t2, t3, t4, w1, w2, w3, w4, Fx, Fy, Fz, Tx, Ty, Tz, self.a.l)
 
     @property
     def rigid_constants(self) -> tuple[float, ...]:
         """The airframe's constants of `rigid_derivative`, in its order after Omega."""
         a = self.a
         return (a.Jxx, a.Jyy, a.Jzz, a.Jp, self._iM, a.g, a.gamma1, self.gamma2)
-
-    def aggregate(self, t, x, u):
-        """The rotors' body force, torques and Omega (eq. 9) of a cacheable model (the input's)."""
-        return self._per_input(t, x, u)[1]
 
     def f(self, t, x, u):
         """xdot = f(t, x, u): `rigid_derivative` with the rotors' and the effects' forces. Scalar code

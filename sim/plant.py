@@ -36,6 +36,7 @@ class Diverged(Exception):
         super().__init__(f"the plant's state is not finite at t = {t:.3f} s")
         self.t = t
 
+from flightctl.physics import rotor_speed
 from flightctl.sim import compiled
 from flightctl.sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Forces, Model, P
 
@@ -66,11 +67,13 @@ class Plant:
         self._queue: deque = deque([self.u] * (self._whole + 2), maxlen=self._whole + 2)
         self._forces_at = None                            # (t, x, u) of `_forces`
         self._forces: Forces | None = None
-        # a model whose forces depend on the input only integrates compiled where numba is there
-        # (sim/compiled.py: `rk4_rigid`, the same equations and scheme as `_rk4`)
-        self._fast = compiled.rk4_rigid() if model._cacheable and model.n == N_RIGID else None
-        self._constants = np.array(model.rigid_constants)
-        self._agg = self._agg_array = None                # the input's aggregate, and as an array
+        # the base model and the effects sim/compiled.py carries integrate compiled where numba is
+        # installed (`compiled.rk4`: the same functions and scheme as `_rk4`), others in plain Python
+        laid_out = compiled.layout(model)
+        self._fast = compiled.model_rk4() if laid_out is not None else None
+        self._fast_forces = compiled.model_forces() if laid_out is not None else None
+        self._codes, self._q = laid_out if laid_out is not None else (None, None)
+        self._cmd_u = self._cmd = None                    # the input and its commanded thrusts and speeds
 
     def command(self, P1: float, P2: float, P3: float, P4: float, battery_v: float) -> None:
         """The input from now on (after the actuation delay, if any)."""
@@ -92,7 +95,8 @@ class Plant:
             t_end = t0 + j * h
             if self.on_ground and not self._lifts(x, u):
                 if len(x) > N_RIGID:   # the extensions' own states (motor lag) run on the ground too
-                    self.x = x[:N_RIGID] + self._rk4(x, t, u, h)[N_RIGID:]
+                    step = self._rk4 if self._fast is None else self._rk4_fast
+                    self.x = x[:N_RIGID] + step(x, t, u, h)[N_RIGID:]
                 self.t = t_end
                 continue
             self.on_ground = False
@@ -118,11 +122,16 @@ class Plant:
         h6 = h / 6.0
         return [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
 
+    def _commanded(self, u):
+        """The compiled plant's input: the commanded thrusts (eq. 26) and speeds (eq. 27) of `u`."""
+        if u is not self._cmd_u or type(u) is not tuple:   # a new input (a new tuple): once
+            f = self.model._commanded(u)
+            c1 = self.model.a.c1
+            self._cmd_u, self._cmd = u, np.array(f + [rotor_speed(v, c1) for v in f])
+        return self._cmd
+
     def _rk4_fast(self, x, t, u, h):
-        agg = self.model.aggregate(t, x, u)
-        if agg is not self._agg:
-            self._agg, self._agg_array = agg, np.array(agg)
-        return self._fast(np.array(x), self._agg_array, h, self._constants).tolist()
+        return self._fast(np.array(x), self._commanded(u), self._codes, self._q, h).tolist()
 
     def _lifts(self, x, u) -> bool:
         """On the floor the vehicle stays put until the vertical thrust exceeds its weight."""
@@ -135,7 +144,12 @@ class Plant:
         Compared by value, so that a state or input changed in place is seen."""
         key = (self.t, tuple(self.x), tuple(self.u))
         if key != self._forces_at:
-            self._forces_at, self._forces = key, self.model.forces(self.t, self.x, self.u)
+            if self._fast_forces is None:
+                self._forces_at, self._forces = key, self.model.forces(self.t, self.x, self.u)
+            else:
+                f, tau, force, torque, w = self._fast_forces(np.array(self.x), self._commanded(self.u),
+                                                             self._codes, self._q)
+                self._forces_at, self._forces = key, Forces(f.tolist(), tau.tolist(), force, torque, w.tolist())
         return self._forces
 
     def _touch_down(self) -> None:

@@ -97,7 +97,10 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
             "calibrate_s": calibrate_s, **board.meta, "params": dumps(params)}
     if faults:
         meta["faults"] = ", ".join(f"{f.name} at {f.at:g} s after arming" for f in faults)
-    log = FlightLogWriter(log_path, meta, extra=MAG_COLUMNS + board.extra_columns, keep=True)
+    # the log formatted in a child process, off the loop's core (logfile.py), unless the flight runs in
+    # real time (a ground station) or a fault must reach the file's writes (log_full)
+    log = FlightLogWriter(log_path, meta, extra=MAG_COLUMNS + board.extra_columns, keep=True,
+                          process=telemetry is None and not any(f.name == "log_full" for f in faults))
     armed_at = hal.clock.now() + calibrate_s      # the simulated time the loop arms at (FlightLoop.run)
     for fault in faults:
         replace(fault, at=fault.at + armed_at).apply(hal, world, log)

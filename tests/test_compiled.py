@@ -1,52 +1,83 @@
 """The compiled plant (sim/compiled.py, numba, the `fast` extra) integrates what the plain one does:
-the same RK4 step on random states and inputs, and the same flight."""
+the same RK4 step and forces on random states and inputs for every ordered choice of the effects
+it carries, and the same flight; the base model and a model with another effect stay plain."""
+import itertools
+
 import numpy as np
 import pytest
 
 from flightctl.params import Airframe, load
-from flightctl.sim import compiled
-from flightctl.sim.model import Model, rk4_rigid
+from flightctl.physics import rotor_speed
+from flightctl.sim import causes, compiled
+from flightctl.sim.model import N_RIGID, Model
 from flightctl.sim.plant import Plant
 from flightctl.sim.run import fly
 from flightctl.sim.scenarios import SCENARIOS
 
 needs_numba = pytest.mark.skipif(not compiled.enabled(), reason="numba is not installed (the `fast` extra)")
 
+EFFECTS = {"rotor_inflow": {"k": 0.32, "hub": 0.02}, "motor_dynamics": {"tau": 0.05, "tau_down": 0.09},
+           "rotor_drag": {"k": 1.1, "yaw": 0.05}}
 
-def random_states(rng, n):
-    for _ in range(n):
-        x = np.concatenate([rng.uniform(-5, 5, 3), rng.uniform(-6, 6, 3), rng.uniform(-1.2, 1.2, 3),
-                            rng.uniform(-8, 8, 3)])
-        u = tuple(rng.uniform(0.0, 255.0, 4)) + (rng.uniform(14.0, 16.8),)
-        yield x, u
+
+def models():
+    """Every ordered choice of one to three compiled effects (the wrench order matters)."""
+    a = Airframe()
+    for n in range(1, len(EFFECTS) + 1):
+        for names in itertools.permutations(EFFECTS, n):
+            yield names, Model(a, tuple(causes.make(name, **EFFECTS[name]) for name in names))
+
+
+def random_state(rng, model):
+    x = np.concatenate([rng.uniform(-5, 5, 3), rng.uniform(-6, 6, 3), rng.uniform(-1.2, 1.2, 3),
+                        rng.uniform(-8, 8, 3), rng.uniform(200.0, 900.0, model.n - N_RIGID)])
+    u = tuple(rng.uniform(0.0, 255.0, 4)) + (rng.uniform(14.0, 16.8),)
+    return x, u
 
 
 @needs_numba
-def test_compiled_rk4_step_equals_the_plain_plant_step():
+def test_compiled_rk4_step_and_forces_equal_the_plain_ones():
     rng = np.random.default_rng(11)
+    fast = compiled.model_rk4()
+    h = Airframe().dt
+    seen = 0
+    for names, model in models():
+        codes, q = compiled.layout(model)
+        plain = Plant(model, h)
+        for _ in range(40):
+            x, u = random_state(rng, model)
+            want = plain._rk4(list(x), 0.0, u, h)
+            f = model._commanded(u)
+            cmd = np.array(f + [rotor_speed(v, model.a.c1) for v in f])
+            got = fast(x, cmd, codes, q, h)
+            np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12, err_msg=str(names))
+            np.testing.assert_allclose(compiled.rk4(x, cmd, codes, q, h), want, rtol=1e-12, atol=1e-12)
+            rotors = model.forces(0.0, list(x), u)             # what the battery and the chip ask for
+            for plain_part, fast_part in zip(rotors, compiled.model_forces()(x, cmd, codes, q)):
+                np.testing.assert_allclose(fast_part, plain_part, rtol=1e-12, atol=1e-12)
+            assert not np.allclose(got[:N_RIGID], x[:N_RIGID], rtol=0, atol=1e-9)
+            seen += 1
+    assert seen == 15 * 40
+
+
+def test_the_base_model_and_a_model_with_another_effect_stay_plain():
     a = Airframe()
-    model = Model(a)
-    plain = Plant(Model(a), a.dt)
-    plain._fast = None
-    fast = compiled.rk4_rigid()
-    c = np.array(model.rigid_constants)
-    h = a.dt
-    for x, u in random_states(rng, 200):
-        want = plain._rk4(list(x), 0.0, u, h)
-        agg = np.array(model.aggregate(0.0, list(x), u))
-        got = fast(x, agg, h, c)
-        np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-12)
-        np.testing.assert_allclose(rk4_rigid(x, agg, h, c), want, rtol=1e-13, atol=1e-12)   # the plain source
-        assert not np.array_equal(got, x)
+    assert compiled.layout(Model(a)) is None            # its forces are cached per input instead
+    assert compiled.layout(Model(a, (causes.make("actuation_delay", delay=0.002),))) is None
+    assert compiled.layout(Model(a, (causes.make("ground_effect", rotor_radius=0.15),))) is None
+    twice = (causes.make("rotor_drag", k=1.0), causes.make("rotor_drag", k=0.5))
+    assert compiled.layout(Model(a, twice)) is None
+    assert compiled.layout(Model(a, (), vector=True)) is None
+    assert Plant(Model(a, (causes.make("ground_effect", rotor_radius=0.15),)), a.dt)._fast is None
 
 
 @needs_numba
 def test_a_flight_is_the_same_compiled_or_plain(tmp_path, monkeypatch):
-    params = load(None)
+    params = load("paper-as-flown")
     flown = fly(SCENARIOS["step_roll"](), params, tmp_path / "fast.csv", seed=4)
-    monkeypatch.setattr(compiled, "rk4_rigid", lambda: None)
+    monkeypatch.setattr(compiled, "model_rk4", lambda: None)
     plain = fly(SCENARIOS["step_roll"](), params, tmp_path / "plain.csv", seed=4)
     assert flown.outcome == plain.outcome == "landed upright"
-    for column in ("true_z", "true_roll", "roll", "P1", "gyro_x"):
+    for column in ("true_z", "true_roll", "roll", "P1", "gyro_x", "acc_z"):
         np.testing.assert_allclose(flown.log[column], plain.log[column], rtol=0, atol=1e-9)
     assert float(np.ptp(flown.log["true_roll"])) > 0.05    # it did fly the step

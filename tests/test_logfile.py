@@ -203,3 +203,69 @@ def test_writer_kept_table_line_numbers_match_the_file(tmp_path):
     kept = w.table()
     read = read_flight_log(p)
     assert [kept.row_line(i) for i in range(3)] == [read.row_line(i) for i in range(3)] == [6, 7, 8]
+
+
+class FullAfter:
+    """A file that takes `room` characters, then fails every write with ENOSPC (a full card)."""
+
+    def __init__(self, path, room):
+        self.f, self.name, self.room = open(path, "w"), str(path), room
+
+    def write(self, s):
+        if len(s) > self.room:
+            raise OSError(28, "No space left on device")
+        self.room -= len(s)
+        return self.f.write(s)
+
+    def flush(self):
+        self.f.flush()
+
+    def fileno(self):
+        return self.f.fileno()
+
+    def close(self):
+        self.f.close()
+
+
+def many_rows(n):
+    return [flight_row(k / 450, 150.0 + k / 100, "%.4f" % (1 + k / 1000) if k % 10 == 0 else "") for k in range(n)]
+
+
+def test_the_child_process_writer_writes_the_same_file(tmp_path):
+    rows = many_rows(1000)
+    meta = {"params": "a = 1\nb = 2", "board": "sim"}
+    for name, process in (("in.csv", False), ("child.csv", True)):
+        with FlightLogWriter(tmp_path / name, meta, chunk=45, keep=True, process=process) as w:
+            for r in rows:
+                w.append(r)
+            if process:
+                assert w._child is not None and w._child.is_alive()   # formatting in another process
+        assert (w.count, w.dropped, w.failed) == (1000, 0, False)
+    assert (tmp_path / "child.csv").read_bytes() == (tmp_path / "in.csv").read_bytes()
+    assert len(read_flight_log(tmp_path / "child.csv")) == 1000
+
+
+def test_the_child_process_writer_reports_a_full_card_and_counts_what_it_dropped(tmp_path):
+    card = FullAfter(tmp_path / "f.csv", room=20000)
+    w = FlightLogWriter(card, {"k": "v"}, chunk=45, process=True)
+    rows = many_rows(900)
+    for r in rows:
+        w.append(r)
+    w.close()
+    card.close()
+    assert w.failed and "No space left" in w.error
+    assert 0 < w.count < 900 and w.count + w.dropped == 900
+    assert len(read_flight_log(tmp_path / "f.csv")) == w.count    # what was written is whole rows
+
+
+def test_a_killed_child_process_writer_is_a_failed_log_not_a_hang(tmp_path):
+    w = FlightLogWriter(tmp_path / "f.csv", {"k": "v"}, chunk=45, keep=True, process=True)
+    for r in many_rows(90):
+        w.append(r)
+    w._child.kill()
+    w._child.join(5)
+    for r in many_rows(90):
+        w.append(r)
+    w.close()
+    assert w.failed and "process" in w.error
+    assert w.count + w.dropped == 180 and w.dropped >= 90

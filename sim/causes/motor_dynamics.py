@@ -33,6 +33,17 @@ from flightctl.sim.model import Effect, Parameter
 SPIN = (-1.0, 1.0, -1.0, 1.0)   # s_i: +1 counter-clockwise seen from above (motors 2, 4), -1 clockwise
 
 
+def speed_rate(w_cmd, w, tau, tau_down):
+    """d Omega / dt of a rotor at speed w commanded to w_cmd: the lag tau while it speeds up, tau_down
+    while it slows down (floats or arrays)."""
+    return (w_cmd - w) / (tau_down + (tau - tau_down) * (w_cmd >= w))
+
+
+def reaction_torque(Jp, spin_up):
+    """The body's yaw torque from the rotors' spin-up sum s_i dOmega_i/dt: -Jp sum s_i dOmega_i/dt."""
+    return -Jp * spin_up
+
+
 class MotorDynamics(Effect):
     """Each rotor's speed follows its command through a first-order lag; the body takes its reaction.
 
@@ -61,12 +72,11 @@ class MotorDynamics(Effect):
     def rotor(self, t, x, f_cmd, xdot):
         o, tau, c1, w_cmd = self.offset, self.parameters["tau"], self.a.c1, self._w_cmd
         down = self.parameters.get("tau_down", tau)
-        span = tau - down
         f = [0.0, 0.0, 0.0, 0.0]
         spin_up = 0.0
         for i in range(4):
             w = x[o + i]
-            dw = (w_cmd[i] - w) / (down + span * (w_cmd[i] >= w))   # tau up, tau_down down (floats or arrays)
+            dw = speed_rate(w_cmd[i], w, tau, down)
             if xdot is not None:
                 xdot[o + i] = dw
             spin_up += SPIN[i] * dw
@@ -75,7 +85,7 @@ class MotorDynamics(Effect):
         return f
 
     def wrench(self, t, x, f, vb, force, torque):
-        torque[2] -= self.a.Jp * self._spin_up
+        torque[2] += reaction_torque(self.a.Jp, self._spin_up)
 
 
 class MotorDynamicsFit(GridCandidate):

@@ -22,6 +22,11 @@ from flightctl.sim.identify.diagnose.scoring import linear_stats, solve
 from flightctl.sim.model import R, Effect, Parameter
 
 
+def drag_wrench(k: float, yaw: float, u, v, r):
+    """The body-frame drag force -k (u, v) and the rotors' yaw damping -yaw r."""
+    return -k * u, -k * v, -yaw * r
+
+
 class RotorDrag(Effect):
     """Horizontal drag on the body, -k (u, v) in the body frame (blade flapping and induced drag).
 
@@ -31,10 +36,10 @@ class RotorDrag(Effect):
     optional = {"yaw": Parameter("N m s/rad", 0.0, 10.0)}
 
     def wrench(self, t, x, f, vb, force, torque):
-        k = self.parameters["k"]
-        force[0] -= k * vb[0]
-        force[1] -= k * vb[1]
-        torque[2] -= self.parameters.get("yaw", 0.0) * x[R]   # each rotor's drag at r l, arm l
+        fx, fy, tz = drag_wrench(self.parameters["k"], self.parameters.get("yaw", 0.0), vb[0], vb[1], x[R])
+        force[0] += fx
+        force[1] += fy
+        torque[2] += tz   # each rotor's drag at r l, arm l
 
 
 class RotorDragFit(GridCandidate):

@@ -52,6 +52,13 @@ def thrust_change(f1, f2, f3, f4, k: float, B: float, l: float, w, p, q):
             -k * (f3 / B) ** 0.5 * (w + q * l), -k * (f4 / B) ** 0.5 * (w - p * l))
 
 
+def inflow_wrench(f1, f2, f3, f4, k: float, B: float, l: float, hub: float, w, p, q):
+    """The thrust changes' force along z_b and their roll and pitch torques, with the hub's damping."""
+    d1, d2, d3, d4 = thrust_change(f1, f2, f3, f4, k, B, l, w, p, q)
+    t_phi, t_theta, _ = body_torques(d1, d2, d3, d4, 0.0, 0.0, 0.0, 0.0, l)
+    return d1 + d2 + d3 + d4, t_phi - hub * p, t_theta - hub * q
+
+
 class RotorInflow(Effect):
     """Each rotor's thrust falls with its axial speed: f_i - k sqrt(f_i / B) (w_b + p y_i - q x_i)."""
     cause, uses_wrench = "rotor_inflow", True
@@ -63,13 +70,11 @@ class RotorInflow(Effect):
         self._B = airframe.M * airframe.g / 4.0
 
     def wrench(self, t, x, f, vb, force, torque):
-        l = self.a.l
-        d1, d2, d3, d4 = thrust_change(f[0], f[1], f[2], f[3], self.parameters["k"], self._B, l, vb[2], x[P], x[Q])
-        t_phi, t_theta, _ = body_torques(d1, d2, d3, d4, 0.0, 0.0, 0.0, 0.0, l)
-        hub = self.parameters.get("hub", 0.0)
-        force[2] += d1 + d2 + d3 + d4
-        torque[0] += t_phi - hub * x[P]
-        torque[1] += t_theta - hub * x[Q]
+        fz, tx, ty = inflow_wrench(f[0], f[1], f[2], f[3], self.parameters["k"], self._B, self.a.l,
+                                   self.parameters.get("hub", 0.0), vb[2], x[P], x[Q])
+        force[2] += fz
+        torque[0] += tx
+        torque[1] += ty
 
 
 def climb_speed(ds) -> list[np.ndarray]:
