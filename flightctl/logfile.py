@@ -216,7 +216,8 @@ class FlightLogWriter:
         self._head = "".join(f"# {key}: {line}\n" for key, value in meta.items()
                              for line in str(value).splitlines() or [""]) + ",".join(self.columns) + "\n"
         process = (process and not background and (self._own or hasattr(out, "fileno"))
-                   and "fork" in multiprocessing.get_all_start_methods())
+                   and "fork" in multiprocessing.get_all_start_methods()
+                   and not multiprocessing.current_process().daemon)   # (a daemon may not have children)
         if not process:
             self._f.write(self._head)
         fmts = {"t": "%.6f", "range": "%s"}

@@ -37,6 +37,9 @@ class Flight:
 
 
 ON_GROUND = 0.05   # m, true altitude
+# s of plan: forking the log's writer costs about 20 ms (a large process: its page tables), which a
+# flight this long wins back by formatting its rows off the loop's core (about 10 % of the loop's time)
+LOG_CHILD_S = 10.0
 
 
 def judge(result: FlightResult, log: Table, touchdowns, g: float) -> tuple[str, bool, bool]:
@@ -97,10 +100,12 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
             "calibrate_s": calibrate_s, **board.meta, "params": dumps(params)}
     if faults:
         meta["faults"] = ", ".join(f"{f.name} at {f.at:g} s after arming" for f in faults)
-    # the log formatted in a child process, off the loop's core (logfile.py), unless the flight runs in
-    # real time (a ground station) or a fault must reach the file's writes (log_full)
+    # the log formatted in a child process, off the loop's core (logfile.py), for a plan of LOG_CHILD_S
+    # or more, unless the flight runs in real time (a ground station) or a fault must reach the file's
+    # writes (log_full)
     log = FlightLogWriter(log_path, meta, extra=MAG_COLUMNS + board.extra_columns, keep=True,
-                          process=telemetry is None and not any(f.name == "log_full" for f in faults))
+                          process=(scenario.plan.duration >= LOG_CHILD_S and telemetry is None
+                                   and not any(f.name == "log_full" for f in faults)))
     armed_at = hal.clock.now() + calibrate_s      # the simulated time the loop arms at (FlightLoop.run)
     for fault in faults:
         replace(fault, at=fault.at + armed_at).apply(hal, world, log)
