@@ -1,18 +1,24 @@
-"""The simulator's plant compiled by numba where it is installed (the `fast` extra), from
-their one plain-Python source: `compile(fn, name=dependency, ...)` compiles a copy of `fn` whose
-global names of other plain functions are bound to their compiled copies, so that the plain
+"""The simulator's plant compiled by numba where it is installed (the `fast` extra), each function
+from its one plain-Python source: `compiled_copy(fn, name=dependency, ...)` compiles a copy of `fn`
+whose global names of other plain functions are bound to their compiled copies, so that the plain
 function stays plain (arrays in the batched simulator, and everywhere without numba). Nothing on
 the vehicle imports this: the onboard code is plain Python.
 
 `FLIGHTCTL_JIT=0` in the environment turns compilation off (a comparison, or a machine where numba
-misbehaves); `ENABLED` says whether it is on. Compiled code is cached beside the source (numba's
-`cache=True`): the first flight of a fresh install compiles for a few seconds, later ones load it.
+misbehaves); `enabled()` says whether it is on. Compiled code is cached (numba's `cache=True`): the
+first flight of a fresh install compiles for a few seconds, later ones load it. numba's cache checks
+only each function's own file, not the files of the functions it calls: the cache's folder
+(sim/__pycache__/numba-<hash>, unless NUMBA_CACHE_DIR is set) is named by a hash of every compiled
+file, so that a change to any of them compiles afresh.
 """
 from __future__ import annotations
 
 import functools
+import hashlib
 import os
+import sys
 import types
+from pathlib import Path
 from math import cos, sin
 
 import numpy as np
@@ -26,9 +32,19 @@ from flightctl.sim.model import N_RIGID, aggregate, body_velocity, rigid_derivat
 
 @functools.cache
 def enabled() -> bool:
-    """numba is installed and not turned off."""
+    """numba is installed and not turned off (and its cache folder set, before its import)."""
     if os.environ.get("FLIGHTCTL_JIT", "1") == "0":
         return False
+    if "numba" not in sys.modules:
+        import flightctl.physics
+        import flightctl.sim.causes.motor_dynamics
+        import flightctl.sim.causes.rotor_drag
+        import flightctl.sim.causes.rotor_inflow
+        import flightctl.sim.model
+        modules = (flightctl.physics, flightctl.sim.model, sys.modules[__name__], flightctl.sim.causes.motor_dynamics,
+                   flightctl.sim.causes.rotor_drag, flightctl.sim.causes.rotor_inflow)
+        digest = hashlib.sha1(b"".join(Path(m.__file__).read_bytes() for m in modules)).hexdigest()[:12]
+        os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).parent / "__pycache__" / f"numba-{digest}"))
     try:
         import numba  # noqa: F401
     except ImportError:
@@ -36,7 +52,7 @@ def enabled() -> bool:
     return True
 
 
-def compile(fn, **dependencies):
+def compiled_copy(fn, **dependencies):
     """`fn` compiled in nopython mode, its globals named in `dependencies` replaced (the compiled
     copies of the plain functions it calls); None when compilation is off."""
     if not enabled():
@@ -174,25 +190,22 @@ def model_forces():
 
 @functools.cache
 def _compiled():
+    """(rk4, forces) compiled, each call bound to a compiled copy, or (None, None)."""
     if not enabled():
         return None, None
     from flightctl import physics
     from flightctl.sim import model
     from flightctl.sim.causes import motor_dynamics, rotor_drag, rotor_inflow
-    eq = {name: compile(getattr(physics, name)) for name in ("yaw_drag", "rotor_torque", "rotor_speed",
-                                                             "thrust_from_speed")}
-    m = {name: compile(getattr(model, name)) for name in ("rotation_from_trig", "body_velocity", "aggregate",
-                                                          "body_torques")}
-    m["angular_acceleration"] = compile(model.angular_acceleration)
-    rigid = compile(model.rigid_derivative, yaw_drag=eq["yaw_drag"], angular_acceleration=m["angular_acceleration"])
-    inflow = compile(rotor_inflow.inflow_wrench, body_torques=m["body_torques"],
-                     thrust_change=compile(rotor_inflow.thrust_change))
-    wrenches = compile(rotors, inflow_wrench=inflow, drag_wrench=compile(rotor_drag.drag_wrench),
-                       speed_rate=compile(motor_dynamics.speed_rate),
-                       reaction_torque=compile(motor_dynamics.reaction_torque), rotor_torque=eq["rotor_torque"],
-                       rotor_speed=eq["rotor_speed"], thrust_from_speed=eq["thrust_from_speed"],
-                       body_velocity=m["body_velocity"])
-    one = compile(stage, rotors=wrenches, rigid_derivative=rigid, rotation_from_trig=m["rotation_from_trig"],
-                  aggregate=m["aggregate"])
-    return (compile(rk4, stage=one),
-            compile(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"]))
+    c = compiled_copy
+    eq = {name: c(getattr(physics, name)) for name in ("yaw_drag", "rotor_torque", "rotor_speed", "thrust_from_speed")}
+    m = {name: c(getattr(model, name)) for name in ("rotation_from_trig", "body_velocity", "aggregate", "body_torques",
+                                                    "angular_acceleration")}
+    rigid = c(model.rigid_derivative, yaw_drag=eq["yaw_drag"], angular_acceleration=m["angular_acceleration"])
+    inflow = c(rotor_inflow.inflow_wrench, body_torques=m["body_torques"], thrust_change=c(rotor_inflow.thrust_change))
+    wrenches = c(rotors, inflow_wrench=inflow, drag_wrench=c(rotor_drag.drag_wrench),
+                 speed_rate=c(motor_dynamics.speed_rate), reaction_torque=c(motor_dynamics.reaction_torque),
+                 rotor_torque=eq["rotor_torque"], rotor_speed=eq["rotor_speed"],
+                 thrust_from_speed=eq["thrust_from_speed"], body_velocity=m["body_velocity"])
+    one = c(stage, rotors=wrenches, rigid_derivative=rigid, rotation_from_trig=m["rotation_from_trig"],
+            aggregate=m["aggregate"])
+    return c(rk4, stage=one), c(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"])
