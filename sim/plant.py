@@ -67,8 +67,9 @@ class Plant:
         self._queue: deque = deque([self.u] * (self._whole + 2), maxlen=self._whole + 2)
         self._forces_at = None                            # (t, x, u) of `_forces`
         self._forces: Forces | None = None
-        # the base model and the effects sim/compiled.py carries integrate compiled where numba is
-        # installed (`compiled.rk4`: the same functions and scheme as `_rk4`), others in plain Python
+        # a model with the effects sim/compiled.py carries (the as-flown file's) integrates compiled where
+        # numba is installed (`compiled.rk4`: the same functions and scheme as `_rk4`); the base model
+        # and the others in plain Python
         laid_out = compiled.layout(model)
         self._fast = compiled.model_rk4() if laid_out is not None else None
         self._fast_forces = compiled.model_forces() if laid_out is not None else None
