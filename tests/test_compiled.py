@@ -6,6 +6,9 @@ import itertools
 import numpy as np
 import pytest
 
+from without import run_without
+
+from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe, load
 from flightctl.physics import rotor_speed
 from flightctl.sim import causes, compiled
@@ -81,3 +84,12 @@ def test_a_flight_is_the_same_compiled_or_plain(tmp_path, monkeypatch):
     for column in ("true_z", "true_roll", "roll", "P1", "gyro_x", "acc_z"):
         np.testing.assert_allclose(flown.log[column], plain.log[column], rtol=0, atol=1e-9)
     assert float(np.ptp(flown.log["true_roll"])) > 0.05    # it did fly the step
+
+
+def test_the_as_flown_simulator_runs_without_numba(tmp_path):
+    """The base install has no numba: the same command flies in plain Python."""
+    r = run_without(("numba",), ["sim", "step_roll", "--params", "paper-as-flown", "--log", "f.csv", "--no-plot",
+                                 "--quiet"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    log = read_flight_log(tmp_path / "f.csv")
+    assert len(log) > 4000 and float(np.nanmax(log["alt"])) > 0.5     # it flew
