@@ -84,12 +84,12 @@ def layout(model):
             or not set(causes) <= set(COMPILED_CAUSES)):
         return None
     a = model.a
-    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, a.M * a.g / 4.0, 0.0, 0.0, 0.0, a.Jp]
+    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, a.Jp]
     codes = []
     for e in model.effects:
         p = e.parameters
         if e.cause == "rotor_inflow":
-            q[_K_IN], q[_HUB] = p["k"], p.get("hub", 0.0)
+            q[_K_IN], q[_HUB], q[_B] = p["k"], p.get("hub", 0.0), e._B
             codes.append(INFLOW)
         elif e.cause == "motor_dynamics":
             if e.offset != N_RIGID:

@@ -142,7 +142,6 @@ class World:
                 Rm[2] * bn + Rm[5] * bw + Rm[8] * bu)
 
 
-GYRO_DLPF, ACCEL_DLPF = reg.GYRO_DLPF, reg.ACCEL_DLPF   # (3-dB bandwidth Hz, delay s) by configuration
 _CONFIG_REGS = frozenset((reg.SMPLRT_DIV, reg.CONFIG, reg.GYRO_CONFIG, reg.ACCEL_CONFIG, reg.ACCEL_CONFIG2))
 _TAU = 2.0 * math.pi
 
@@ -211,15 +210,15 @@ class SimMpu9250:
         self._a_lsb = reg.ACCEL_LSB_PER_G[(rg[reg.ACCEL_CONFIG] >> 3) & 3] / G
         self._g_lsb = reg.GYRO_LSB_PER_DPS[(rg[reg.GYRO_CONFIG] >> 3) & 3] * (180.0 / math.pi)
         cfg = rg[reg.CONFIG] & 7
-        g_bw = GYRO_DLPF[cfg][0]
-        a_bw, self._a_delay = ACCEL_DLPF[rg[reg.ACCEL_CONFIG2] & 7]
+        g_bw = reg.GYRO_DLPF[cfg][0]
+        a_bw, self._a_delay = reg.ACCEL_DLPF[rg[reg.ACCEL_CONFIG2] & 7]
         # white noise of one-sided density d through a first-order low-pass of 3-dB bandwidth B: its
         # noise-equivalent bandwidth is pi/2 B, so sigma = d sqrt(pi/2 B) (at B = 92 Hz: 0.12 deg/s,
         # against the datasheet's 0.1 deg/s rms total noise there, PS 3.1)
         self._g_sigma = n.gyro_density * math.sqrt(0.5 * math.pi * g_bw)
         self._a_sigma = n.accel_density * math.sqrt(0.5 * math.pi * a_bw)
         self._a_tc = 1.0 / (_TAU * a_bw)   # time constant of the accelerometer's DLPF as a first-order lag
-        self._g_delay = GYRO_DLPF[cfg][1]
+        self._g_delay = reg.GYRO_DLPF[cfg][1]
         self._k_dt, self._k = None, (1.0, 1.0)   # the DLPF stage's gains and the read interval they are for
         # SAMPLE_RATE = 1 kHz / (1 + SMPLRT_DIV) when 0 < DLPF_CFG < 7, else the gyro's 8 kHz (RM, register 25)
         self._period = (1 + rg[reg.SMPLRT_DIV]) / 1000.0 if 0 < cfg < 7 else 1.0 / 8000.0

@@ -45,10 +45,18 @@ class ImuError(Exception):
     """The IMU is absent, the wrong chip, or not answering."""
 
 
+DLPF = 1   # DLPF_CFG and A_DLPF_CFG the driver configures by default: 184 Hz gyro, 218 Hz accelerometer
+
+
+def dlpf_delays(dlpf: int = DLPF) -> tuple[float, float]:
+    """s: the register map's delay of the gyro's and the accelerometer's DLPF at configuration `dlpf`."""
+    return reg.GYRO_DLPF[dlpf][1], reg.ACCEL_DLPF[dlpf][1]
+
+
 class Mpu9250:
     """`start()` configures the chip; `read(sample)` does one burst read and fills the sample in SI."""
 
-    def __init__(self, spi: SpiDevice, accel_fs: int = 2, gyro_fs: int = 3, dlpf: int = 1,
+    def __init__(self, spi: SpiDevice, accel_fs: int = 2, gyro_fs: int = 3, dlpf: int = DLPF,
                  sleep=time.sleep, frozen_frames: int = FROZEN_FRAMES):
         """`frozen_frames` = 0 switches the frozen check off: only for an ideal, noise-free simulated
         chip, whose frames do repeat."""
@@ -101,8 +109,9 @@ class Mpu9250:
         """The chip's own low-pass filters as a flight log declares them (`# gyro_filter:`,
         `# acc_filter:`, read by `flightctl diagnose`): each configured DLPF as the first-order stage
         of the register map's delay, 1 / (2 pi delay) Hz (2.9 ms for the gyro at DLPF_CFG = 1)."""
-        return {"gyro_filter": "pt1 %.4g" % (1.0 / (2.0 * math.pi * reg.GYRO_DLPF[self.dlpf][1])),
-                "acc_filter": "pt1 %.4g" % (1.0 / (2.0 * math.pi * reg.ACCEL_DLPF[self.dlpf][1]))}
+        gyro, acc = dlpf_delays(self.dlpf)
+        return {"gyro_filter": "pt1 %.4g" % (1.0 / (2.0 * math.pi * gyro)),
+                "acc_filter": "pt1 %.4g" % (1.0 / (2.0 * math.pi * acc))}
 
     def start(self) -> None:
         self.spi.max_speed_hz = reg.SETUP_SPI_HZ

@@ -31,8 +31,7 @@ from flightctl.drivers.hcsr04 import US_PER_M
 from flightctl.errors import InputError
 from flightctl.params import Params
 from flightctl.sim.analysis.linear import IMU, LinearPlant, discrete, impulse_responses, realise, sampled
-from flightctl.drivers.mpu9250 import Mpu9250
-from flightctl.drivers.mpu9250_regs import ACCEL_DLPF, GYRO_DLPF
+from flightctl.drivers.mpu9250 import dlpf_delays
 from flightctl.sim.devices import SimGpio
 
 CHANNELS = ("roll", "pitch", "yaw", "alt")
@@ -96,9 +95,7 @@ def imu_delays() -> dict[str, float]:
     """s, per IMU field: the time constant of the chip's DLPF stage, the register map's delay of the
     filter the onboard driver configures (the simulated chip's, sim/devices.py); the magnetometer
     has none."""
-    import inspect
-    dlpf = inspect.signature(Mpu9250).parameters["dlpf"].default
-    g, a = GYRO_DLPF[dlpf][1], ACCEL_DLPF[dlpf][1]
+    g, a = dlpf_delays()
     return {"gx": g, "gy": g, "gz": g, "ax": a, "ay": a, "az": a, "mx": 0.0, "my": 0.0, "mz": 0.0}
 
 
