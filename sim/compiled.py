@@ -1,5 +1,6 @@
-"""The simulator's plant compiled by numba where it is installed (the `fast` extra), each function
-from its one plain-Python source: `compiled_copy(fn, name=dependency, ...)` compiles a copy of `fn`
+"""The simulated world compiled by numba where it is installed (the `fast` extra): the plant's step
+and forces (here; `period` is the plant's one call a period) and the MPU-9250's burst registers
+(`sim.devices.chip_frame`), each function from its one plain-Python source: `compiled_copy(fn, name=dependency, ...)` compiles a copy of `fn`
 whose global names of other plain functions are bound to their compiled copies, so that the plain
 function stays plain (arrays in the batched simulator, and everywhere without numba). Nothing on
 the vehicle imports this: the onboard code is plain Python.
@@ -7,9 +8,9 @@ the vehicle imports this: the onboard code is plain Python.
 `FLIGHTCTL_JIT=0` in the environment turns compilation off (a comparison, or a machine where numba
 misbehaves); `enabled()` says whether it is on. Compiled code is cached (numba's `cache=True`): the
 first flight of a fresh install compiles for a few seconds, later ones load it. numba's cache checks
-only each function's own file, not the files of the functions it calls: the cache's folder
-(sim/__pycache__/numba-<hash>, unless NUMBA_CACHE_DIR is set) is named by a hash of every compiled
-file, so that a change to any of them compiles afresh.
+only each function's own file, not the files of the functions it calls or of the constants it reads:
+the cache's folder (sim/__pycache__/numba-<hash>, unless NUMBA_CACHE_DIR is set) is named by a hash
+of every such file, so that a change to any of them compiles afresh.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from math import cos, sin
 
 import numpy as np
 
-from flightctl.physics import rotor_speed, rotor_torque, thrust_from_speed
+from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, thrust_from_speed
 from flightctl.sim.causes.motor_dynamics import SPIN, reaction_torque, speed_rate
 from flightctl.sim.causes.rotor_drag import drag_wrench
 from flightctl.sim.causes.rotor_inflow import inflow_wrench
@@ -36,15 +37,14 @@ def enabled() -> bool:
     if os.environ.get("FLIGHTCTL_JIT", "1") == "0":
         return False
     if "numba" not in sys.modules:
+        import flightctl.drivers.mpu9250_regs
         import flightctl.physics
-        import flightctl.sim.causes.motor_dynamics
-        import flightctl.sim.causes.rotor_drag
-        import flightctl.sim.causes.rotor_inflow
-        import flightctl.sim.model
-        modules = (flightctl.physics, flightctl.sim.model, sys.modules[__name__], flightctl.sim.causes.motor_dynamics,
-                   flightctl.sim.causes.rotor_drag, flightctl.sim.causes.rotor_inflow)
-        digest = hashlib.sha1(b"".join(Path(m.__file__).read_bytes() for m in modules)).hexdigest()[:12]
-        os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).parent / "__pycache__" / f"numba-{digest}"))
+        here = Path(__file__).parent
+        compiled_files = [Path(flightctl.physics.__file__), Path(flightctl.drivers.mpu9250_regs.__file__)]
+        compiled_files += [here / name for name in ("model.py", "compiled.py", "devices.py")]
+        compiled_files += [here / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
+        digest = hashlib.sha1(b"".join(path.read_bytes() for path in compiled_files)).hexdigest()[:12]
+        os.environ.setdefault("NUMBA_CACHE_DIR", str(here / "__pycache__" / f"numba-{digest}"))
     try:
         import numba  # noqa: F401
     except ImportError:
@@ -70,7 +70,8 @@ def compiled_copy(fn, **dependencies):
 INFLOW, REACTION, DRAG = 1, 2, 3
 COMPILED_CAUSES = ("rotor_inflow", "motor_dynamics", "rotor_drag", "actuation_delay")
 # q: the parameters of `stage`, by index
-_C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _JP, _RIGID = range(13)
+_C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _H1, _H2, _JP, _RIGID = range(15)
+N_OUT = 18   # `period`'s output: the fields of `Forces` (f, tau, force, torque, w) one after another
 
 
 def layout(model):
@@ -80,11 +81,11 @@ def layout(model):
     compiling it would gain about 10 us a period, less over a flight than numba's start-up (about
     1 s a process: its import and the cache's load)."""
     causes = [e.cause for e in model.effects]
-    if (model.vector or model._cacheable or len(set(causes)) < len(causes)
+    if (model.vector or len(set(causes)) < len(causes)
             or not set(causes) <= set(COMPILED_CAUSES)):
         return None
     a = model.a
-    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, a.Jp]
+    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, a.h1, a.h2, a.Jp]
     codes = []
     for e in model.effects:
         p = e.parameters
@@ -176,6 +177,30 @@ def rk4(x, cmd, codes, q, h):
     return x + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
 
 
+def period(x, u, codes, q, h, ground, out):
+    """The plant's step (`Plant.advance`) in one call: the commanded thrusts (eq. 26) and speeds
+    (eq. 27) of the input u, one `rk4` step of h on x in place (on the floor, `ground`, the
+    extensions' states only), then the forces at the new state into out (`N_OUT`)."""
+    cmd = np.empty(8)
+    for i in range(4):
+        cmd[i] = thrust_from_command(u[i], q[_H1], q[_H2])
+        cmd[4 + i] = rotor_speed(cmd[i], q[_C1])
+    y = rk4(x, cmd, codes, q, h)
+    for i in range(N_RIGID if ground else 0, x.shape[0]):
+        x[i] = y[i]
+    f, tau, F, T, w = forces(x, cmd, codes, q)
+    for i in range(4):
+        out[i], out[4 + i], out[14 + i] = f[i], tau[i], w[i]
+    for i in range(3):
+        out[8 + i], out[11 + i] = F[i], T[i]
+
+
+@functools.cache
+def model_period():
+    """`period` compiled, or None."""
+    return _compiled()[2]
+
+
 @functools.cache
 def model_rk4():
     """`rk4` compiled, with every function it calls (eq. 6-9 and 26-28 and the three effects'), or None."""
@@ -190,9 +215,9 @@ def model_forces():
 
 @functools.cache
 def _compiled():
-    """(rk4, forces) compiled, each call bound to a compiled copy, or (None, None)."""
+    """(rk4, forces, period) compiled, each call bound to a compiled copy, or (None, None, None)."""
     if not enabled():
-        return None, None
+        return None, None, None
     from flightctl import physics
     from flightctl.sim import model
     from flightctl.sim.causes import motor_dynamics, rotor_drag, rotor_inflow
@@ -208,4 +233,13 @@ def _compiled():
                  thrust_from_speed=eq["thrust_from_speed"], body_velocity=m["body_velocity"])
     one = c(stage, rotors=wrenches, rigid_derivative=rigid, rotation_from_trig=m["rotation_from_trig"],
             aggregate=m["aggregate"])
-    return c(rk4, stage=one), c(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"])
+    step = c(rk4, stage=one)
+    at = c(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"])
+    once = c(period, rk4=step, forces=at, thrust_from_command=c(physics.thrust_from_command), rotor_speed=eq["rotor_speed"])
+    # compiled (or loaded from the cache) now, with the flight's argument types, not at a first step
+    # that a simulation paced by the wall clock (`run --board sim`, `hil serve`) would see as a stall
+    x, codes, q = np.zeros(N_RIGID + 4), np.array([INFLOW, REACTION, DRAG], dtype=np.int64), np.ones(_RIGID + 8)
+    once(x, np.zeros(5), codes, q, 1e-3, False, np.empty(N_OUT))
+    at(x, np.zeros(8), codes, q)
+    step(x, np.zeros(8), codes, q, 1e-3)
+    return step, at, once

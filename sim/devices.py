@@ -14,6 +14,7 @@ Noise and bias can be switched off (`SensorNoise.off()`); true values stay on `W
 """
 from __future__ import annotations
 
+import functools
 import heapq
 import math
 import random
@@ -95,15 +96,21 @@ class NoisePool:
         self._refill()
 
     def _refill(self) -> None:
-        self._values = self._gen.standard_normal(self._block).tolist()
+        self.array = self._gen.standard_normal(self._block)
+        self._values = self.array.tolist()
         self._i = 0
 
     def take(self, n: int) -> list[float]:
+        i = self.index(n)
+        return self._values[i:i + n]
+
+    def index(self, n: int) -> int:
+        """Where the next n numbers start in the block (`array`, the list `values`), taken."""
         if self._i + n > self._block:
             self._refill()
         i = self._i
         self._i = i + n
-        return self._values[i:i + n]
+        return i
 
 
 class World:
@@ -142,6 +149,8 @@ class World:
                 Rm[2] * bn + Rm[5] * bw + Rm[8] * bu)
 
 
+AMBIENT_C = 25.0   # degC: the room at power-on; the datasheet's typical values are at 25 degC (PS 3.1)
+SPIN = (-1.0, 1.0, -1.0, 1.0)   # rotors 1 and 3 turn clockwise seen from above (eq. 9)
 _CONFIG_REGS = frozenset((reg.SMPLRT_DIV, reg.CONFIG, reg.GYRO_CONFIG, reg.ACCEL_CONFIG, reg.ACCEL_CONFIG2))
 _TAU = 2.0 * math.pi
 
@@ -161,8 +170,7 @@ class SimMpu9250:
     _HEAD = struct.Struct(">7h")
     _MAG = struct.Struct("<3hB")
     MAG_EVERY = 4   # burst reads per magnetometer sample: 450 Hz / 4, near the AK8963's 100 Hz
-    AMBIENT_C = 25.0   # the room at power-on; the datasheet's typical values are at 25 degC (PS 3.1)
-    SPIN = (-1.0, 1.0, -1.0, 1.0)   # rotors 1 and 3 turn clockwise seen from above (eq. 9)
+    AMBIENT_C = AMBIENT_C
 
     def __init__(self, world: World, who_am_i: int = reg.WHO_AM_I_MPU9250, has_mag: bool = True):
         self.world = world
@@ -177,14 +185,24 @@ class SimMpu9250:
         # the physical state of the die, which a register reset leaves alone
         self.gyro_temp_coeff = (g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff))
         self.accel_temp_coeff = (g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff))
-        self.gyro_walk = [0.0, 0.0, 0.0]   # rad/s, the random-walk part of the zero-rate offset
         self._t_on = self._t_last = world.t
-        self._lowpassed: list[float] | None = None   # fx, fy, fz, p, q, r through the DLPF, at the last read
-        self._phase = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # each rotor's angle
+        self._started = False             # the DLPF stage has its first read
+        # `chip_frame`'s state: the DLPF stage's outputs, the random-walk part of the zero-rate offset
+        # (rad/s), each rotor's angle
+        self._s = [0.0] * N_CHIP_STATE
+        self._s[_S_PHASE:] = [world.rng.uniform(0.0, _TAU) for _ in range(4)]
         z = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # phase of each arm's z bending
-        self._z_cos, self._z_sin = [math.cos(a) for a in z], [math.sin(a) for a in z]
         a = world.a
-        self._vib_per_n = n.vibration / (a.M * a.g / 4.0)   # m/s^2 per newton of the rotor's thrust
+        self._c = [0.0] * N_CHIP_CONST    # its constants (`_configure` sets those of the registers)
+        c = self._c
+        c[_C_A0:_C_A0 + 3], c[_C_AC:_C_AC + 3] = self.accel_bias, self.accel_temp_coeff
+        c[_C_G0:_C_G0 + 3], c[_C_GC:_C_GC + 3] = self.gyro_bias, self.gyro_temp_coeff
+        c[_C_ZC:_C_ZC + 4], c[_C_ZS:_C_ZS + 4] = [math.cos(v) for v in z], [math.sin(v) for v in z]
+        c[_C_WALK] = n.gyro_bias_walk
+        c[_C_KV] = n.vibration / (a.M * a.g / 4.0)   # m/s^2 per newton of the rotor's thrust
+        self._frame = chip_frame_compiled()
+        if self._frame is not None:                  # numba's arrays, shared with the plain lists' values
+            self._s, self._c = np.array(self._s), np.array(self._c)
         self._reset()
 
     def die_temperature(self, t: float) -> float:
@@ -196,6 +214,7 @@ class SimMpu9250:
 
     def _reset(self) -> None:
         self.regs = bytearray(128)
+        self._regs = np.frombuffer(self.regs, dtype=np.uint8) if self._frame is not None else self.regs
         self.regs[reg.WHO_AM_I] = self.who_am_i
         self.regs[reg.PWR_MGMT_1] = 0x01
         self.ak = bytearray(0x13)
@@ -215,13 +234,15 @@ class SimMpu9250:
         # white noise of one-sided density d through a first-order low-pass of 3-dB bandwidth B: its
         # noise-equivalent bandwidth is pi/2 B, so sigma = d sqrt(pi/2 B) (at B = 92 Hz: 0.12 deg/s,
         # against the datasheet's 0.1 deg/s rms total noise there, PS 3.1)
-        self._g_sigma = n.gyro_density * math.sqrt(0.5 * math.pi * g_bw)
-        self._a_sigma = n.accel_density * math.sqrt(0.5 * math.pi * a_bw)
-        self._a_tc = 1.0 / (_TAU * a_bw)   # time constant of the accelerometer's DLPF as a first-order lag
+        c = self._c
+        c[_C_SG] = n.gyro_density * math.sqrt(0.5 * math.pi * g_bw)
+        c[_C_SA] = n.accel_density * math.sqrt(0.5 * math.pi * a_bw)
+        a_tc = 1.0 / (_TAU * a_bw)   # time constant of the accelerometer's DLPF as a first-order lag
+        c[_C_A_LSB], c[_C_G_LSB], c[_C_TC2], c[_C_A_DELAY] = self._a_lsb, self._g_lsb, a_tc * a_tc, self._a_delay
         self._g_delay = reg.GYRO_DLPF[cfg][1]
-        self._k_dt, self._k = None, (1.0, 1.0)   # the DLPF stage's gains and the read interval they are for
+        self._k_dt = None   # the read interval of the DLPF stage's gains (c[_C_KA], c[_C_KG])
         # SAMPLE_RATE = 1 kHz / (1 + SMPLRT_DIV) when 0 < DLPF_CFG < 7, else the gyro's 8 kHz (RM, register 25)
-        self._period = (1 + rg[reg.SMPLRT_DIV]) / 1000.0 if 0 < cfg < 7 else 1.0 / 8000.0
+        c[_C_PERIOD] = (1 + rg[reg.SMPLRT_DIV]) / 1000.0 if 0 < cfg < 7 else 1.0 / 8000.0
 
     def xfer2(self, data: list[int]) -> list[int]:
         r = data[0] & 0x7F
@@ -257,85 +278,141 @@ class SimMpu9250:
         self.regs[reg.EXT_SENS_DATA_00:reg.EXT_SENS_DATA_00 + n] = self.ak[start:start + n]
 
     def _sample(self) -> None:
+        """The burst's registers now (`chip_frame`), and the magnetometer's at its own rate."""
         w = self.world
-        n = w.noise
         t = w.t
-        fx, fy, fz = w.plant.specific_force()
-        p, q, r = w.plant.rates
+        plant = w.plant
+        fx, fy, fz = plant.specific_force()
+        p, q, r = plant.rates
         dt, self._t_last = t - self._t_last, t
-        lp = self._lowpassed
-        if lp is None:
-            self._lowpassed = lp = [fx, fy, fz, p, q, r]
-        elif dt > 0.0:    # the DLPF's first-order stage on the rigid-body signals
-            if dt != self._k_dt:      # the gains for this read interval (the loop period: computed once)
-                self._k_dt, self._k = dt, (1.0 - math.exp(-dt / self._a_delay), 1.0 - math.exp(-dt / self._g_delay))
-            ka, kg = self._k
-            lp[0] += ka * (fx - lp[0])
-            lp[1] += ka * (fy - lp[1])
-            lp[2] += ka * (fz - lp[2])
-            lp[3] += kg * (p - lp[3])
-            lp[4] += kg * (q - lp[4])
-            lp[5] += kg * (r - lp[5])
-        fx, fy, fz, p, q, r = lp
-        e = w.normal.take(9)
-        walk = self.gyro_walk
-        if n.gyro_bias_walk and dt > 0.0:   # a random walk: variance K^2 dt over the time since the last sample
-            k = n.gyro_bias_walk * math.sqrt(dt)
-            walk[0] += k * e[6]
-            walk[1] += k * e[7]
-            walk[2] += k * e[8]
-        temp = self.die_temperature(t)
-        d = temp - self.AMBIENT_C
-        g0, gc, a0, ac = self.gyro_bias, self.gyro_temp_coeff, self.accel_bias, self.accel_temp_coeff
-        if n.vibration:
-            vx, vy, vz = self._vibration(t, dt)
-            fx, fy, fz = fx + vx, fy + vy, fz + vz
-        a_lsb, g_lsb, sa, sg = self._a_lsb, self._g_lsb, self._a_sigma, self._g_sigma
-        self._HEAD.pack_into(self.regs, reg.ACCEL_XOUT_H,
-                             _i16((fx + a0[0] + ac[0] * d + sa * e[0]) * a_lsb),
-                             _i16((fy + a0[1] + ac[1] * d + sa * e[1]) * a_lsb),
-                             _i16((fz + a0[2] + ac[2] * d + sa * e[2]) * a_lsb),
-                             _i16((temp - reg.TEMP_OFFSET_C) * reg.TEMP_LSB_PER_C),
-                             _i16((p + g0[0] + walk[0] + gc[0] * d + sg * e[3]) * g_lsb),
-                             _i16((q + g0[1] + walk[1] + gc[1] * d + sg * e[4]) * g_lsb),
-                             _i16((r + g0[2] + walk[2] + gc[2] * d + sg * e[5]) * g_lsb))
+        if dt > 0.0 and dt != self._k_dt:   # the DLPF stage's gains for this read interval (the loop period)
+            self._k_dt = dt
+            self._c[_C_KA], self._c[_C_KG] = 1.0 - math.exp(-dt / self._a_delay), 1.0 - math.exp(-dt / self._g_delay)
+        (f1, f2, f3, f4), (w1, w2, w3, w4) = (rotors := plant.forces()).f, rotors.w
+        normal = w.normal
+        i = normal.index(9)
+        frame = self._frame or chip_frame
+        frame(self._regs, self._s, self._c, normal.array if self._frame is not None else normal._values, i,
+              fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t, dt, self.die_temperature(t), self._started)
+        self._started = True
         self._mag_count += 1
         if self._slv0_read and self.ak[reg.AK_CNTL1] and self._mag_count >= self.MAG_EVERY:
             self._mag_count = 0   # the AK8963 measures at 100 Hz (continuous mode 2)
             bx, by, bz = w.magnetic_field_body()
-            sm, lsb = n.mag_sigma, 1.0 / reg.AK_TESLA_PER_LSB
-            e = w.normal.take(3)
+            sm, lsb = w.noise.mag_sigma, 1.0 / reg.AK_TESLA_PER_LSB
+            e = normal.take(3)
             # body (x fwd, y left, z up) -> AK8963 axes (x_ak = y_mpu, y_ak = x_mpu, z_ak = -z_mpu)
             self._MAG.pack_into(self.ak, reg.AK_HXL, _i16((by + sm * e[0]) * lsb),
                                 _i16((bx + sm * e[1]) * lsb), _i16(-(bz + sm * e[2]) * lsb), 0x10)
             self._copy_ext()
 
-    def _vibration(self, t: float, dt: float) -> tuple[float, float, float]:
-        """The rotors' 1/rev specific force in the accelerometer's output register: each rotor's speed from
-        its thrust (eq. 27, so a rotor lag is followed), the amplitude in proportion to the thrust, taken
-        at the chip's last output sample (SMPLRT_DIV) and through the DLPF as a first-order low-pass with
-        the register map's bandwidth and delay."""
-        rotors = self.world.plant.forces()
-        kv, tc2 = self._vib_per_n, self._a_tc * self._a_tc
-        back = t % self._period + self._a_delay   # how long ago the vibration entered the register
-        phase = self._phase
-        cos, sin, sqrt = math.cos, math.sin, math.sqrt
-        vx = vy = vz = 0.0
-        for i, fi, om, spin, zc, zs in zip(range(4), rotors.f, rotors.w, self.SPIN, self._z_cos, self._z_sin):
-            if fi > 0.0:
-                th = phase[i] = (phase[i] + om * dt) % _TAU
-                a = kv * fi / sqrt(1.0 + om * om * tc2)   # first-order DLPF gain at w
-                th -= om * back
-                c, s = a * cos(th), a * sin(th)
-                vx += c
-                vy += spin * s
-                vz += c * zc - s * zs
-        return vx, vy, vz
+
+# `chip_frame`'s state s, by index: the DLPF stage's outputs fx, fy, fz, p, q, r (0-5), the gyro's
+# random walk (_S_WALK, 3), each rotor's angle (_S_PHASE, 4)
+_S_WALK, _S_PHASE, N_CHIP_STATE = 6, 9, 13
+# its constants c, by index: the DLPF stage's gains for the read interval, the LSBs per unit, the white
+# noise per sample, the bias walk K, the vibration per newton, the accelerometer DLPF's time constant
+# squared, the output sample period, the accelerometer's DLPF delay; then per axis the zero-g offset and
+# its temperature slope, the zero-rate offset and its slope; per arm the cosine and sine of its z bending
+(_C_KA, _C_KG, _C_A_LSB, _C_G_LSB, _C_SA, _C_SG, _C_WALK, _C_KV, _C_TC2, _C_PERIOD, _C_A_DELAY,
+ _C_A0, _C_AC, _C_G0, _C_GC, _C_ZC, _C_ZS, N_CHIP_CONST) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14, 17, 20, 23, 27, 31)
+_BURST = reg.ACCEL_XOUT_H
+
+
+def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t, dt, temp, started):
+    """The MPU-9250's burst registers (ACCEL_XOUT_H on, big-endian int16) for the true specific force
+    (fx, fy, fz) and rates (p, q, r) at time t, dt after the last read, the rotors' thrusts f and speeds
+    w, the die at temp (degC), with the chip's state s and constants c (`SimMpu9250`; `started`: not
+    the first read) and nine standard normal numbers e[i:i + 9]:
+
+    - the DLPF's first-order stage on the rigid-body signals (gains c[_C_KA], c[_C_KG] for dt);
+    - the zero-rate offset's random walk, variance K^2 dt over the time since the last sample;
+    - the offsets and their temperature slopes, white noise per sample, the rotors' vibration.
+
+    Plain arithmetic on indexable values: lists in plain Python, arrays compiled (`chip_frame_compiled`)."""
+    if not started:
+        s[0], s[1], s[2], s[3], s[4], s[5] = fx, fy, fz, p, q, r
+    elif dt > 0.0:
+        ka, kg = c[_C_KA], c[_C_KG]
+        s[0] += ka * (fx - s[0])
+        s[1] += ka * (fy - s[1])
+        s[2] += ka * (fz - s[2])
+        s[3] += kg * (p - s[3])
+        s[4] += kg * (q - s[4])
+        s[5] += kg * (r - s[5])
+    fx, fy, fz, p, q, r = s[0], s[1], s[2], s[3], s[4], s[5]
+    if c[_C_WALK] != 0.0 and dt > 0.0:
+        k = c[_C_WALK] * math.sqrt(dt)
+        s[_S_WALK] += k * e[i + 6]
+        s[_S_WALK + 1] += k * e[i + 7]
+        s[_S_WALK + 2] += k * e[i + 8]
+    d = temp - AMBIENT_C
+    if c[_C_KV] != 0.0:
+        vx, vy, vz = vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, t, dt)
+        fx, fy, fz = fx + vx, fy + vy, fz + vz
+    a_lsb, g_lsb, sa, sg = c[_C_A_LSB], c[_C_G_LSB], c[_C_SA], c[_C_SG]
+    put16(regs, _BURST, (fx + c[_C_A0] + c[_C_AC] * d + sa * e[i]) * a_lsb)
+    put16(regs, _BURST + 2, (fy + c[_C_A0 + 1] + c[_C_AC + 1] * d + sa * e[i + 1]) * a_lsb)
+    put16(regs, _BURST + 4, (fz + c[_C_A0 + 2] + c[_C_AC + 2] * d + sa * e[i + 2]) * a_lsb)
+    put16(regs, _BURST + 6, (temp - reg.TEMP_OFFSET_C) * reg.TEMP_LSB_PER_C)
+    put16(regs, _BURST + 8, (p + c[_C_G0] + s[_S_WALK] + c[_C_GC] * d + sg * e[i + 3]) * g_lsb)
+    put16(regs, _BURST + 10, (q + c[_C_G0 + 1] + s[_S_WALK + 1] + c[_C_GC + 1] * d + sg * e[i + 4]) * g_lsb)
+    put16(regs, _BURST + 12, (r + c[_C_G0 + 2] + s[_S_WALK + 2] + c[_C_GC + 2] * d + sg * e[i + 5]) * g_lsb)
+
+
+def vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, t, dt):
+    """The rotors' 1/rev specific force in the accelerometer's output register: each rotor's speed from
+    its thrust (eq. 27, so a rotor lag is followed), the amplitude in proportion to the thrust, taken
+    at the chip's last output sample (SMPLRT_DIV) and through the DLPF as a first-order low-pass with
+    the register map's bandwidth and delay; each rotor's angle advances in s."""
+    kv, tc2 = c[_C_KV], c[_C_TC2]
+    back = t % c[_C_PERIOD] + c[_C_A_DELAY]   # how long ago the vibration entered the register
+    vx = vy = vz = 0.0
+    for j in range(4):
+        fi, om = (f1, f2, f3, f4)[j], (w1, w2, w3, w4)[j]
+        if fi > 0.0:
+            th = s[_S_PHASE + j] = (s[_S_PHASE + j] + om * dt) % _TAU
+            a = kv * fi / math.sqrt(1.0 + om * om * tc2)   # first-order DLPF gain at w
+            th -= om * back
+            cs, sn = a * math.cos(th), a * math.sin(th)
+            vx += cs
+            vy += SPIN[j] * sn
+            vz += cs * c[_C_ZC + j] - sn * c[_C_ZS + j]
+    return vx, vy, vz
+
+
+def put16(regs, at: int, v: float) -> None:
+    """v rounded to a big-endian int16 (`_i16`) at regs[at], regs[at + 1]."""
+    v = _i16(v) & 0xFFFF
+    regs[at] = v >> 8
+    regs[at + 1] = v & 0xFF
+
+
+@functools.cache
+def chip_frame_compiled():
+    """`chip_frame` compiled (sim/compiled.py), or None."""
+    from flightctl.sim import compiled
+    if not compiled.enabled():
+        return None
+    c = compiled.compiled_copy
+    frame = c(chip_frame, vibration=c(vibration), put16=c(put16, _i16=c(_i16)))
+    # compiled (or loaded from the cache) now, not at a first read that a simulation paced by the wall
+    # clock would see as a stall
+    zeros = np.zeros(N_CHIP_CONST)
+    frame(np.frombuffer(bytearray(128), dtype=np.uint8), zeros.copy(), zeros, zeros, 0, *[0.0] * 17, True)
+    return frame
 
 
 def _i16(v: float) -> int:
-    v = int(v + 0.5) if v >= 0.0 else -int(0.5 - v)
-    return 32767 if v > 32767 else -32768 if v < -32768 else v
+    """v rounded half away from zero to an int16, clipped at its ends as the chip's registers saturate
+    (before the rounding: compiled, a float beyond the int64 range has no integer)."""
+    if v >= 32767.0:
+        return 32767
+    if v <= -32768.0:
+        return -32768
+    if v != v:
+        raise ValueError("a NaN register value")
+    return int(v + 0.5) if v >= 0.0 else -int(0.5 - v)
 
 
 class _Callback:

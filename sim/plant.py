@@ -67,13 +67,14 @@ class Plant:
         self._queue: deque = deque([self.u] * (self._whole + 2), maxlen=self._whole + 2)
         self._forces_at = None                            # (t, x, u) of `_forces`
         self._forces: Forces | None = None
-        # a model with the effects sim/compiled.py carries (the as-flown file's) integrates compiled where
-        # numba is installed (`compiled.rk4`: the same functions and scheme as `_rk4`); the base model
-        # and the others in plain Python
+        # a model with the effects sim/compiled.py carries (the base model's and the as-flown file's)
+        # integrates compiled where numba is installed (`compiled.period`: the same functions and scheme
+        # as `_rk4`, and the forces at the new state in the same call); the others in plain Python
         laid_out = compiled.layout(model)
-        self._fast = compiled.model_rk4() if laid_out is not None else None
+        self._period = compiled.model_period() if laid_out is not None else None
         self._fast_forces = compiled.model_forces() if laid_out is not None else None
         self._codes, self._q = laid_out if laid_out is not None else (None, None)
+        self._out = np.empty(compiled.N_OUT)
         self._cmd_u = self._cmd = None                    # the input and its commanded thrusts and speeds
 
     def command(self, P1: float, P2: float, P3: float, P4: float, battery_v: float) -> None:
@@ -91,28 +92,64 @@ class Plant:
             self.u = u = self._next
         n = self.substeps
         h = self.dt / n
+        if self._period is not None:
+            self._advance_compiled(t0, u, n, h)
+            return
         for j in range(1, n + 1):
             x, t = self.x, self.t
             t_end = t0 + j * h
             if self.on_ground and not self._lifts(x, u):
                 if len(x) > N_RIGID:   # the extensions' own states (motor lag) run on the ground too
-                    step = self._rk4 if self._fast is None else self._rk4_fast
-                    self.x = x[:N_RIGID] + step(x, t, u, h)[N_RIGID:]
+                    self.x = x[:N_RIGID] + self._rk4(x, t, u, h)[N_RIGID:]
                 self.t = t_end
                 continue
             self.on_ground = False
             try:
-                self.x = self._rk4(x, t, u, h) if self._fast is None else self._rk4_fast(x, t, u, h)
+                self.x = self._rk4(x, t, u, h)
             except (ValueError, OverflowError):          # math on an infinite angle
                 raise Diverged(t) from None
-            s = sum(self.x)
-            if s - s != 0.0:                              # a NaN or an infinity anywhere in the state
-                raise Diverged(t_end)
-            self.t = t_end
-            if self.x[Z] < 0.0:
-                self._touch_down()
+            self._check(t_end)
         self.periods += 1
         self.t = self.periods * self.dt
+
+    def _check(self, t_end: float) -> None:
+        """After a step in the air: a state that is not finite has diverged; below the floor, a touchdown."""
+        s = sum(self.x)
+        if s - s != 0.0:                                  # a NaN or an infinity anywhere in the state
+            raise Diverged(t_end)
+        self.t = t_end
+        if self.x[Z] < 0.0:
+            self._touch_down()
+
+    def _advance_compiled(self, t0: float, u, n: int, h: float) -> None:
+        """`advance`'s loop with `compiled.period`, which leaves the forces at the new state in `_out`:
+        they prime `forces()`'s cache when the step ends in the air."""
+        step, codes, q, out = self._period, self._codes, self._q, self._out
+        ua = np.array(u)
+        fresh = False
+        for j in range(1, n + 1):
+            t_end = t0 + j * h
+            xa = np.array(self.x)
+            ground = self.on_ground and not self._lifts(self.x, u)
+            if ground and len(self.x) == N_RIGID:
+                self.t = t_end
+                fresh = False
+                continue
+            step(xa, ua, codes, q, h, ground, out)
+            self.x = xa.tolist()
+            if ground:
+                self.t = t_end
+                fresh = True
+            else:
+                self.on_ground = False
+                self._check(t_end)
+                fresh = not self.on_ground            # a touchdown changed the state in place
+        self.periods += 1
+        self.t = self.periods * self.dt
+        if fresh:
+            o = out.tolist()
+            self._forces_at = (self.t, tuple(self.x), tuple(u))
+            self._forces = Forces(o[0:4], o[4:8], o[8:11], o[11:14], o[14:18])
 
     def _rk4(self, x, t, u, h):
         f, hh = self.model.f, 0.5 * h
@@ -130,9 +167,6 @@ class Plant:
             c1 = self.model.a.c1
             self._cmd_u, self._cmd = u, np.array(f + [rotor_speed(v, c1) for v in f])
         return self._cmd
-
-    def _rk4_fast(self, x, t, u, h):
-        return self._fast(np.array(x), self._commanded(u), self._codes, self._q, h).tolist()
 
     def _lifts(self, x, u) -> bool:
         """On the floor the vehicle stays put until the vertical thrust exceeds its weight."""

@@ -32,7 +32,7 @@ class SimBattery:
     def advance(self, dt: float) -> None:
         rotors = self.world.plant.forces()
         tau, w = rotors.tau, rotors.w
-        power = sum(tau[i] * w[i] for i in range(4)) / self.EFFICIENCY
+        power = (tau[0] * w[0] + tau[1] * w[1] + tau[2] * w[2] + tau[3] * w[3]) / self.EFFICIENCY
         self.current = power / self.voltage
         self.soc -= self.current * dt / self.CAPACITY_C
         self.voltage = self._ocv() - self.R_INT * self.current

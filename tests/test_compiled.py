@@ -1,6 +1,6 @@
 """The compiled plant (sim/compiled.py, numba, the `fast` extra) integrates what the plain one does:
-the same RK4 step and forces on random states and inputs for every ordered choice of the effects
-it carries, and the same flight; the base model and a model with another effect stay plain."""
+the same RK4 step and forces on random states and inputs for the base model and every ordered
+choice of the effects it carries, and the same flight; a model with another effect stays plain."""
 import itertools
 
 import numpy as np
@@ -24,9 +24,9 @@ EFFECTS = {"rotor_inflow": {"k": 0.32, "hub": 0.02}, "motor_dynamics": {"tau": 0
 
 
 def models():
-    """Every ordered choice of one to three compiled effects (the wrench order matters)."""
+    """The base model and every ordered choice of one to three compiled effects (the wrench order matters)."""
     a = Airframe()
-    for n in range(1, len(EFFECTS) + 1):
+    for n in range(len(EFFECTS) + 1):
         for names in itertools.permutations(EFFECTS, n):
             yield names, Model(a, tuple(causes.make(name, **EFFECTS[name]) for name in names))
 
@@ -58,27 +58,38 @@ def test_compiled_rk4_step_and_forces_equal_the_plain_ones():
             rotors = model.forces(0.0, list(x), u)             # what the battery and the chip ask for
             for plain_part, fast_part in zip(rotors, compiled.model_forces()(x, cmd, codes, q)):
                 np.testing.assert_allclose(fast_part, plain_part, rtol=1e-12, atol=1e-12)
+            # the plant's one call a period: the step in place, then the forces at the new state
+            for ground in (False, True):
+                stepped, out = x.copy(), np.empty(compiled.N_OUT)
+                compiled.model_period()(stepped, np.array(u), codes, q, h, ground, out)
+                kept = N_RIGID if ground else 0
+                np.testing.assert_allclose(stepped[kept:], want[kept:], rtol=1e-12, atol=1e-12)
+                assert (stepped[:kept] == x[:kept]).all()      # on the floor the rigid body stays put
+                at = model.forces(0.0, stepped.tolist(), u)
+                np.testing.assert_allclose(out, np.concatenate([np.ravel(part) for part in at]), rtol=1e-12,
+                                           atol=1e-12)
             assert not np.allclose(got[:N_RIGID], x[:N_RIGID], rtol=0, atol=1e-9)
             seen += 1
-    assert seen == 15 * 40
+    assert seen == 16 * 40
 
 
-def test_the_base_model_and_a_model_with_another_effect_stay_plain():
+def test_a_model_with_another_effect_stays_plain():
     a = Airframe()
-    assert compiled.layout(Model(a)) is None            # its forces are cached per input instead
-    assert compiled.layout(Model(a, (causes.make("actuation_delay", delay=0.002),))) is None
+    assert compiled.layout(Model(a, (causes.make("actuation_delay", delay=0.002),))) is not None   # the plant's
     assert compiled.layout(Model(a, (causes.make("ground_effect", rotor_radius=0.15),))) is None
     twice = (causes.make("rotor_drag", k=1.0), causes.make("rotor_drag", k=0.5))
     assert compiled.layout(Model(a, twice)) is None
     assert compiled.layout(Model(a, (), vector=True)) is None
-    assert Plant(Model(a, (causes.make("ground_effect", rotor_radius=0.15),)), a.dt)._fast is None
+    assert Plant(Model(a, (causes.make("ground_effect", rotor_radius=0.15),)), a.dt)._period is None
 
 
 @needs_numba
-def test_a_flight_is_the_same_compiled_or_plain(tmp_path, monkeypatch):
-    params = load("paper-as-flown")
+@pytest.mark.parametrize("name", ["paper-as-flown", None])
+def test_a_flight_is_the_same_compiled_or_plain(tmp_path, monkeypatch, name):
+    params = load(name)
     flown = fly(SCENARIOS["step_roll"](), params, tmp_path / "fast.csv", seed=4)
-    monkeypatch.setattr(compiled, "model_rk4", lambda: None)
+    for attr in ("model_period", "model_forces"):
+        monkeypatch.setattr(compiled, attr, lambda: None)
     plain = fly(SCENARIOS["step_roll"](), params, tmp_path / "plain.csv", seed=4)
     assert flown.outcome == plain.outcome == "landed upright"
     for column in ("true_z", "true_roll", "roll", "P1", "gyro_x", "acc_z"):

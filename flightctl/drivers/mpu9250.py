@@ -184,10 +184,9 @@ class Mpu9250:
 
     def _jumps(self, a: tuple, b: tuple) -> bool:
         """True if any word moves more than its limit between frames `a` and `b`."""
-        for x, y, lim in zip(a, b, self._jump):
-            if x - y > lim or y - x > lim:
-                return True
-        return False
+        m = self._jump
+        return (abs(a[0] - b[0]) > m[0] or abs(a[1] - b[1]) > m[1] or abs(a[2] - b[2]) > m[2] or abs(a[3] - b[3]) > m[3]
+                or abs(a[4] - b[4]) > m[4] or abs(a[5] - b[5]) > m[5] or abs(a[6] - b[6]) > m[6])
 
     def _refuse(self, why: str) -> bool:
         self.why = why
