@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from math import cos, pi
+from math import cos, inf, pi
 from pathlib import Path
 
 from flightctl.errors import InputError, number, read_toml
@@ -58,10 +58,14 @@ class Plan:
         self._start = [0.0, 0.0, 0.0, 0.0]
         self._active: list[Move | None] = [None, None, None, None]
         self.sp = [0.0, 0.0, 0.0, 0.0]
+        self._steady_until = -inf   # before this time no move starts and none ramps: `sp` stands
 
     def at(self, t: float) -> list[float]:
         """The setpoints at time t (non-decreasing between calls); the list is reused."""
         sp = self.sp
+        if t < self._steady_until:
+            return sp
+        steady = inf
         for c in range(4):
             moves, k = self._by_channel[c], self._next[c]
             while k < len(moves) and moves[k].t <= t:
@@ -70,6 +74,12 @@ class Plan:
                 k += 1
             self._next[c] = k
             sp[c] = self._value(c, t)
+            if k < len(moves) and moves[k].t < steady:
+                steady = moves[k].t
+            m = self._active[c]
+            if m is not None and m.ramp > 0.0 and t < m.t + m.ramp:
+                steady = -inf            # ramping
+        self._steady_until = steady
         return sp
 
     def _value(self, c: int, t: float) -> float:

@@ -151,9 +151,10 @@ def main() -> None:
     params = load(None)
     out = Path(tempfile.mkdtemp())
     from flightctl.sim import compiled
-    print("the as-flown plant: " + ("compiled by numba (sim/compiled.py)" if compiled.model_rk4() is not None
-                                    else "plain Python (numba absent or FLIGHTCTL_JIT=0: the `fast` extra)")
-          + "; the base model's: plain Python; the flight log: formatted in a child process")
+    print("the simulated world (the plant's step, the IMU chip's registers): "
+          + ("compiled by numba (sim/compiled.py)" if compiled.model_period() is not None
+             else "plain Python (numba absent or FLIGHTCTL_JIT=0: the `fast` extra)")
+          + "; the onboard code: plain Python; the flight log: formatted in a child process")
     for label, name, kw, target in (("full onboard path", None, {}, ">= 30x; issue 17: 100x"),
                                     ("perfect state feedback", None, {"truth": True}, ">= 30x"),
                                     ("full onboard path, --params paper-as-flown", "paper-as-flown", {},

@@ -97,12 +97,12 @@ class NoisePool:
 
     def _refill(self) -> None:
         self.array = self._gen.standard_normal(self._block)
-        self._values = self.array.tolist()
+        self.values = self.array.tolist()
         self._i = 0
 
     def take(self, n: int) -> list[float]:
         i = self.index(n)
-        return self._values[i:i + n]
+        return self.values[i:i + n]
 
     def index(self, n: int) -> int:
         """Where the next n numbers start in the block (`array`, the list `values`), taken."""
@@ -200,8 +200,9 @@ class SimMpu9250:
         c[_C_ZC:_C_ZC + 4], c[_C_ZS:_C_ZS + 4] = [math.cos(v) for v in z], [math.sin(v) for v in z]
         c[_C_WALK] = n.gyro_bias_walk
         c[_C_KV] = n.vibration / (a.M * a.g / 4.0)   # m/s^2 per newton of the rotor's thrust
-        self._frame = chip_frame_compiled()
-        if self._frame is not None:                  # numba's arrays, shared with the plain lists' values
+        compiled = chip_frame_compiled()
+        self._frame, self._arrays = compiled or chip_frame, compiled is not None
+        if self._arrays:                             # compiled, it takes arrays (the same values)
             self._s, self._c = np.array(self._s), np.array(self._c)
         self._reset()
 
@@ -214,7 +215,7 @@ class SimMpu9250:
 
     def _reset(self) -> None:
         self.regs = bytearray(128)
-        self._regs = np.frombuffer(self.regs, dtype=np.uint8) if self._frame is not None else self.regs
+        self._regs = np.frombuffer(self.regs, dtype=np.uint8) if self._arrays else self.regs
         self.regs[reg.WHO_AM_I] = self.who_am_i
         self.regs[reg.PWR_MGMT_1] = 0x01
         self.ak = bytearray(0x13)
@@ -291,8 +292,7 @@ class SimMpu9250:
         (f1, f2, f3, f4), (w1, w2, w3, w4) = (rotors := plant.forces()).f, rotors.w
         normal = w.normal
         i = normal.index(9)
-        frame = self._frame or chip_frame
-        frame(self._regs, self._s, self._c, normal.array if self._frame is not None else normal._values, i,
+        self._frame(self._regs, self._s, self._c, normal.array if self._arrays else normal.values, i,
               fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t, dt, self.die_temperature(t), self._started)
         self._started = True
         self._mag_count += 1
@@ -368,8 +368,9 @@ def vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, t, dt):
     kv, tc2 = c[_C_KV], c[_C_TC2]
     back = t % c[_C_PERIOD] + c[_C_A_DELAY]   # how long ago the vibration entered the register
     vx = vy = vz = 0.0
+    thrusts, speeds = (f1, f2, f3, f4), (w1, w2, w3, w4)
     for j in range(4):
-        fi, om = (f1, f2, f3, f4)[j], (w1, w2, w3, w4)[j]
+        fi, om = thrusts[j], speeds[j]
         if fi > 0.0:
             th = s[_S_PHASE + j] = (s[_S_PHASE + j] + om * dt) % _TAU
             a = kv * fi / math.sqrt(1.0 + om * om * tc2)   # first-order DLPF gain at w

@@ -123,18 +123,18 @@ class Plant:
 
     def _advance_compiled(self, t0: float, u, n: int, h: float) -> None:
         """`advance`'s loop with `compiled.period`, which leaves the forces at the new state in `_out`:
-        they prime `forces()`'s cache when the step ends in the air."""
+        they prime `forces()`'s cache, unless a touchdown has changed the state since."""
         step, codes, q, out = self._period, self._codes, self._q, self._out
         ua = np.array(u)
         fresh = False
         for j in range(1, n + 1):
             t_end = t0 + j * h
-            xa = np.array(self.x)
             ground = self.on_ground and not self._lifts(self.x, u)
-            if ground and len(self.x) == N_RIGID:
+            if ground and len(self.x) == N_RIGID:        # nothing moves
                 self.t = t_end
                 fresh = False
                 continue
+            xa = np.array(self.x)
             step(xa, ua, codes, q, h, ground, out)
             self.x = xa.tolist()
             if ground:
