@@ -177,13 +177,14 @@ def rk4(x, cmd, codes, q, h):
     return x + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
 
 
-def period(x, u, codes, q, h, ground, out):
+def period(x, P1, P2, P3, P4, codes, q, h, ground, out):
     """The plant's step (`Plant.advance`) in one call: the commanded thrusts (eq. 26) and speeds
-    (eq. 27) of the input u, one `rk4` step of h on x in place (on the floor, `ground`, the
-    extensions' states only), then the forces at the new state into out (`N_OUT`)."""
+    (eq. 27) of the command values P1..P4, one `rk4` step of h on x in place (on the floor, `ground`,
+    the extensions' states only), then the forces at the new state into out (`N_OUT`)."""
     cmd = np.empty(8)
+    P = (P1, P2, P3, P4)
     for i in range(4):
-        cmd[i] = thrust_from_command(u[i], q[_H1], q[_H2])
+        cmd[i] = thrust_from_command(P[i], q[_H1], q[_H2])
         cmd[4 + i] = rotor_speed(cmd[i], q[_C1])
     y = rk4(x, cmd, codes, q, h)
     for i in range(N_RIGID if ground else 0, x.shape[0]):
@@ -239,7 +240,7 @@ def _compiled():
     # compiled (or loaded from the cache) now, with the flight's argument types, not at a first step
     # that a simulation paced by the wall clock (`run --board sim`, `hil serve`) would see as a stall
     x, codes, q = np.zeros(N_RIGID + 4), np.array([INFLOW, REACTION, DRAG], dtype=np.int64), np.ones(_RIGID + 8)
-    once(x, np.zeros(5), codes, q, 1e-3, False, np.empty(N_OUT))
+    once(x, 0.0, 0.0, 0.0, 0.0, codes, q, 1e-3, False, np.empty(N_OUT))
     at(x, np.zeros(8), codes, q)
     step(x, np.zeros(8), codes, q, 1e-3)
     return step, at, once

@@ -125,7 +125,7 @@ class Plant:
         """`advance`'s loop with `compiled.period`, which leaves the forces at the new state in `_out`:
         they prime `forces()`'s cache, unless a touchdown has changed the state since."""
         step, codes, q, out = self._period, self._codes, self._q, self._out
-        ua = np.array(u)
+        P1, P2, P3, P4 = u[0], u[1], u[2], u[3]
         fresh = False
         for j in range(1, n + 1):
             t_end = t0 + j * h
@@ -135,7 +135,7 @@ class Plant:
                 fresh = False
                 continue
             xa = np.array(self.x)
-            step(xa, ua, codes, q, h, ground, out)
+            step(xa, P1, P2, P3, P4, codes, q, h, ground, out)
             self.x = xa.tolist()
             if ground:
                 self.t = t_end

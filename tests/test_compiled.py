@@ -11,7 +11,7 @@ from without import run_without
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe, load
 from flightctl.physics import rotor_speed
-from flightctl.sim import causes, compiled
+from flightctl.sim import causes, compiled, devices
 from flightctl.sim.model import N_RIGID, Model
 from flightctl.sim.plant import Plant
 from flightctl.sim.run import fly
@@ -61,7 +61,7 @@ def test_compiled_rk4_step_and_forces_equal_the_plain_ones():
             # the plant's one call a period: the step in place, then the forces at the new state
             for ground in (False, True):
                 stepped, out = x.copy(), np.empty(compiled.N_OUT)
-                compiled.model_period()(stepped, np.array(u), codes, q, h, ground, out)
+                compiled.model_period()(stepped, *u[:4], codes, q, h, ground, out)
                 kept = N_RIGID if ground else 0
                 np.testing.assert_allclose(stepped[kept:], want[kept:], rtol=1e-12, atol=1e-12)
                 assert (stepped[:kept] == x[:kept]).all()      # on the floor the rigid body stays put
@@ -71,6 +71,38 @@ def test_compiled_rk4_step_and_forces_equal_the_plain_ones():
             assert not np.allclose(got[:N_RIGID], x[:N_RIGID], rtol=0, atol=1e-9)
             seen += 1
     assert seen == 16 * 40
+
+
+@needs_numba
+def test_the_compiled_chip_writes_the_plain_ones_registers():
+    """`devices.chip_frame` compiled and plain, from the same state, constants and noise: the same
+    register bytes and the same state after, over random truths, rotors and read intervals, with a
+    value beyond the int16 range (and beyond int64: clipped, never wrapped) now and then."""
+    rng = np.random.default_rng(5)
+    fast = devices.chip_frame_compiled()
+    noise = rng.standard_normal(64)
+    for k in range(300):
+        s = rng.uniform(-3.0, 3.0, devices.N_CHIP_STATE)
+        c = rng.uniform(-0.5, 0.5, devices.N_CHIP_CONST)
+        c[[devices._C_A_LSB, devices._C_G_LSB]] = rng.uniform(1e3, 2e4, 2)
+        c[[devices._C_KA, devices._C_KG]] = rng.uniform(0.0, 1.0, 2)
+        c[[devices._C_TC2, devices._C_PERIOD, devices._C_A_DELAY]] = rng.uniform(1e-6, 5e-3, 3)
+        c[devices._C_KV] = rng.choice([0.0, rng.uniform(0.0, 0.01)])
+        truth = list(rng.uniform(-20.0, 20.0, 6))
+        if k % 10 == 0:
+            truth[k % 6] = rng.choice([1e5, -1e5, 1e30, -1e30, np.inf])
+        rotors = list(rng.uniform(-1.0, 8.0, 4)) + list(rng.uniform(0.0, 900.0, 4))
+        rest = [float(rng.uniform(0.0, 100.0)), float(rng.choice([0.0, 1 / 450])), float(rng.uniform(20.0, 40.0)),
+                bool(k % 7)]
+        regs_plain, regs_fast = bytearray(128), np.zeros(128, dtype=np.uint8)
+        s_plain = s.tolist()
+        devices.chip_frame(regs_plain, s_plain, c.tolist(), noise.tolist(), 3, *truth, *rotors, *rest)
+        fast(regs_fast, s, c, noise, 3, *truth, *rotors, *rest)
+        assert bytes(regs_fast) == bytes(regs_plain), k
+        np.testing.assert_allclose(s, s_plain, rtol=1e-13, atol=1e-13)
+    assert devices._i16(1e30) == 32767 and devices._i16(-np.inf) == -32768 and devices._i16(-2.5) == -3
+    with pytest.raises(ValueError):
+        devices._i16(float("nan"))
 
 
 def test_a_model_with_another_effect_stays_plain():
@@ -90,6 +122,7 @@ def test_a_flight_is_the_same_compiled_or_plain(tmp_path, monkeypatch, name):
     flown = fly(SCENARIOS["step_roll"](), params, tmp_path / "fast.csv", seed=4)
     for attr in ("model_period", "model_forces"):
         monkeypatch.setattr(compiled, attr, lambda: None)
+    monkeypatch.setattr(devices, "chip_frame_compiled", lambda: None)
     plain = fly(SCENARIOS["step_roll"](), params, tmp_path / "plain.csv", seed=4)
     assert flown.outcome == plain.outcome == "landed upright"
     for column in ("true_z", "true_roll", "roll", "P1", "gyro_x", "acc_z"):
