@@ -225,8 +225,9 @@ def _compiled():
     c = compiled_copy
     eq = {name: c(getattr(physics, name)) for name in ("yaw_drag", "rotor_torque", "rotor_speed", "thrust_from_speed")}
     m = {name: c(getattr(model, name)) for name in ("rotation_from_trig", "body_velocity", "aggregate", "body_torques",
-                                                    "angular_acceleration")}
-    rigid = c(model.rigid_derivative, yaw_drag=eq["yaw_drag"], angular_acceleration=m["angular_acceleration"])
+                                                    "angular_acceleration", "euler_rates")}
+    rigid = c(model.rigid_derivative, yaw_drag=eq["yaw_drag"], angular_acceleration=m["angular_acceleration"],
+              euler_rates=m["euler_rates"])
     inflow = c(rotor_inflow.inflow_wrench, body_torques=m["body_torques"], thrust_change=c(rotor_inflow.thrust_change))
     wrenches = c(rotors, inflow_wrench=inflow, drag_wrench=c(rotor_drag.drag_wrench),
                  speed_rate=c(motor_dynamics.speed_rate), reaction_torque=c(motor_dynamics.reaction_torque),

@@ -28,7 +28,7 @@ from flightctl.drivers.hcsr04 import US_PER_M
 from flightctl.hal import LEVEL_TIMEOUT, PWM_RANGE
 from flightctl.params import Airframe
 from flightctl.physics import G
-from flightctl.sim.model import Effect, Model, rotation
+from flightctl.sim.model import Effect, Model, euler_rates, rotation
 from flightctl.sim.plant import SUBSTEPS, Plant
 from flightctl.sim.power import SimBattery
 
@@ -556,10 +556,10 @@ class TruthEstimator:
 
     def update(self, s, dt: float) -> None:
         x = self.plant.x
-        self.roll, self.pitch = x[6], x[7]
+        self.roll, self.pitch = phi, theta = x[6], x[7]
         self.yaw = (x[8] + math.pi) % (2 * math.pi) - math.pi
-        xdot = self.plant.model.f(self.plant.t, x, self.plant.u)
-        self.droll, self.dpitch, self.dyaw = xdot[6], xdot[7], xdot[8]
+        self.droll, self.dpitch, self.dyaw = euler_rates(math.sin(phi), math.cos(phi), math.sin(theta), math.cos(theta),
+                                                         x[9], x[10], x[11])
 
 
 class TruthRangefinder:

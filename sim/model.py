@@ -60,13 +60,19 @@ def rigid_derivative(vx, vy, vz, sf, cf, st, ct, sp, cp, p, q, r, fx, fy, fz, ta
     up = sf * fy + cf * fz
     bx = ct * fx + st * up
     by = cf * fy - sf * fz
-    w = q * sf + r * cf
+    dphi, dtheta, dpsi = euler_rates(sf, cf, st, ct, p, q, r)
     tau_d = yaw_drag(r, gamma1, gamma2)  # eq. 6
     dp, dq, dr = angular_acceleration(p, q, r, tau_phi, tau_theta, tau_psi, Omega, tau_d, Jxx, Jyy, Jzz, Jp)
     return (vx, vy, vz,
             (cp * bx - sp * by) * iM, (sp * bx + cp * by) * iM, (-st * fx + ct * up) * iM - g,
-            p + w * st / ct, q * cf - r * sf, w / ct,   # Z-Y-X Euler-angle kinematics
-            dp, dq, dr)
+            dphi, dtheta, dpsi, dp, dq, dr)
+
+
+def euler_rates(sf, cf, st, ct, p, q, r):
+    """The Z-Y-X Euler angles' rates (phi, theta, psi) of the body rates p, q, r, from the sines and
+    cosines of phi and theta."""
+    w = q * sf + r * cf
+    return p + w * st / ct, q * cf - r * sf, w / ct
 
 
 def rotation(phi, theta, psi):
