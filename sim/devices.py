@@ -441,6 +441,7 @@ class SimGpio:
         self.stuck_high = False
         self._events: list[tuple[float, int, int]] = []
         self._echo_pin = None
+        self._quiet_until = -math.inf   # before this time no edge is due and no watchdog can time out
 
     def tick(self, t: float) -> int:
         return (self.tick0 + int(round(t * 1e6))) & 0xFFFFFFFF
@@ -463,6 +464,7 @@ class SimGpio:
             self.last_edge[user_gpio] = self.world.t
         else:
             self.watchdogs.pop(user_gpio, None)
+        self._quiet_until = -math.inf
         return 0
 
     def gpio_trigger(self, user_gpio: int, pulse_len: int = 10, level: int = 1) -> int:
@@ -478,6 +480,7 @@ class SimGpio:
             width = max(d * US_PER_M + w.rng.gauss(0.0, n.sonar_sigma_us), 0.0) * 1e-6
         heapq.heappush(self._events, (t, pin, 1))
         heapq.heappush(self._events, (t + width, pin, 0))
+        self._quiet_until = -math.inf
         return 0
 
     def stick_echo_high(self) -> None:
@@ -485,17 +488,23 @@ class SimGpio:
         self._events.clear()
         self._fire(self._echo_pin, 1, self.world.t)
         self.stuck_high = True
+        self._quiet_until = -math.inf
 
     def advance_to(self, t: float) -> None:
+        if t < self._quiet_until:       # (most loop periods)
+            return
         events = self._events
         while events and events[0][0] <= t:
             te, pin, level = heapq.heappop(events)
             self._fire(pin, level, te)
+        quiet = events[0][0] if events else math.inf
         for pin, timeout in self.watchdogs.items():
             last = self.last_edge.get(pin, 0.0)
             while t - last >= timeout:   # pigpio repeats the timeout report while no edge comes
                 last += timeout
                 self._fire(pin, LEVEL_TIMEOUT, last)
+            quiet = min(quiet, self.last_edge.get(pin, 0.0) + timeout - 1e-9)   # (short of the rounding)
+        self._quiet_until = quiet
 
     def _fire(self, pin: int, level: int, t: float) -> None:
         self.last_edge[pin] = t
