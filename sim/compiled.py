@@ -1,9 +1,9 @@
 """The simulated world compiled by numba where it is installed (the `fast` extra): the plant's step
 and forces (here; `period` is the plant's one call a period) and the MPU-9250's burst registers
-(`sim.devices.chip_frame`), each function from its one plain-Python source: `compiled_copy(fn, name=dependency, ...)` compiles a copy of `fn`
-whose global names of other plain functions are bound to their compiled copies, so that the plain
-function stays plain (arrays in the batched simulator, and everywhere without numba). Nothing on
-the vehicle imports this: the onboard code is plain Python.
+(`sim.devices.chip_frame`), each function from its one plain-Python source: `compiled_copy(fn,
+name=dependency, ...)` compiles a copy of `fn` whose global names of other plain functions are bound
+to their compiled copies, so that the plain function stays plain (arrays in the batched simulator,
+and everywhere without numba). Nothing on the vehicle imports this: the onboard code is plain Python.
 
 `FLIGHTCTL_JIT=0` in the environment turns compilation off (a comparison, or a machine where numba
 misbehaves); `enabled()` says whether it is on. Compiled code is cached (numba's `cache=True`): the
@@ -76,10 +76,7 @@ N_OUT = 18   # `period`'s output: the fields of `Forces` (f, tau, force, torque,
 
 def layout(model):
     """(the wrench codes in the model's order, the parameters q) of a model whose effects the compiled
-    plant carries (COMPILED_CAUSES, each at most once), else None. A model whose forces depend on the
-    input only (the base model; `Model._cacheable`) stays plain: it computes them once per input, and
-    compiling it would gain about 10 us a period, less over a flight than numba's start-up (about
-    1 s a process: its import and the cache's load)."""
+    plant carries (COMPILED_CAUSES, each at most once; the base model has none), else None."""
     causes = [e.cause for e in model.effects]
     if (model.vector or len(set(causes)) < len(causes)
             or not set(causes) <= set(COMPILED_CAUSES)):
@@ -198,14 +195,8 @@ def period(x, P1, P2, P3, P4, codes, q, h, ground, out):
 
 @functools.cache
 def model_period():
-    """`period` compiled, or None."""
+    """`period` compiled, with every function it calls (eq. 6-9 and 26-28 and the three effects'), or None."""
     return _compiled()[2]
-
-
-@functools.cache
-def model_rk4():
-    """`rk4` compiled, with every function it calls (eq. 6-9 and 26-28 and the three effects'), or None."""
-    return _compiled()[0]
 
 
 @functools.cache

@@ -293,7 +293,7 @@ class SimMpu9250:
         normal = w.normal
         i = normal.index(9)
         self._frame(self._regs, self._s, self._c, normal.array if self._arrays else normal.values, i,
-              fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t, dt, self.die_temperature(t), self._started)
+                    fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t, dt, self.die_temperature(t), self._started)
         self._started = True
         self._mag_count += 1
         if self._slv0_read and self.ak[reg.AK_CNTL1] and self._mag_count >= self.MAG_EVERY:
