@@ -141,10 +141,20 @@ def rotors(x, cmd, codes, q, Rm, xdot):
     return f, tau, (Fx, Fy, Fz), (Tx, Ty, Tz), w
 
 
-def forces(x, cmd, codes, q):
-    """`rotors` at the state x (`Model.forces`)."""
+def commanded(P1, P2, P3, P4, q):
+    """The commanded thrusts (eq. 26) and speeds (eq. 27) of the command values P1..P4: `rotors`' cmd."""
+    cmd = np.empty(8)
+    P = (P1, P2, P3, P4)
+    for i in range(4):
+        cmd[i] = thrust_from_command(P[i], q[_H1], q[_H2])
+        cmd[4 + i] = rotor_speed(cmd[i], q[_C1])
+    return cmd
+
+
+def forces(x, P1, P2, P3, P4, codes, q):
+    """`rotors` at the state x for the command values P1..P4 (`Model.forces`)."""
     Rm = rotation_from_trig(sin(x[6]), cos(x[6]), sin(x[7]), cos(x[7]), sin(x[8]), cos(x[8]))
-    return rotors(x, cmd, codes, q, Rm, np.zeros(x.shape[0]))
+    return rotors(x, commanded(P1, P2, P3, P4, q), codes, q, Rm, np.zeros(x.shape[0]))
 
 
 def stage(x, cmd, codes, q):
@@ -178,15 +188,10 @@ def period(x, P1, P2, P3, P4, codes, q, h, ground, out):
     """The plant's step (`Plant.advance`) in one call: the commanded thrusts (eq. 26) and speeds
     (eq. 27) of the command values P1..P4, one `rk4` step of h on x in place (on the floor, `ground`,
     the extensions' states only), then the forces at the new state into out (`N_OUT`)."""
-    cmd = np.empty(8)
-    P = (P1, P2, P3, P4)
-    for i in range(4):
-        cmd[i] = thrust_from_command(P[i], q[_H1], q[_H2])
-        cmd[4 + i] = rotor_speed(cmd[i], q[_C1])
-    y = rk4(x, cmd, codes, q, h)
+    y = rk4(x, commanded(P1, P2, P3, P4, q), codes, q, h)
     for i in range(N_RIGID if ground else 0, x.shape[0]):
         x[i] = y[i]
-    f, tau, F, T, w = forces(x, cmd, codes, q)
+    f, tau, F, T, w = forces(x, P1, P2, P3, P4, codes, q)
     for i in range(4):
         out[i], out[4 + i], out[14 + i] = f[i], tau[i], w[i]
     for i in range(3):
@@ -227,12 +232,13 @@ def _compiled():
     one = c(stage, rotors=wrenches, rigid_derivative=rigid, rotation_from_trig=m["rotation_from_trig"],
             aggregate=m["aggregate"])
     step = c(rk4, stage=one)
-    at = c(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"])
-    once = c(period, rk4=step, forces=at, thrust_from_command=c(physics.thrust_from_command), rotor_speed=eq["rotor_speed"])
+    command = c(commanded, thrust_from_command=c(physics.thrust_from_command), rotor_speed=eq["rotor_speed"])
+    at = c(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"], commanded=command)
+    once = c(period, rk4=step, forces=at, commanded=command)
     # compiled (or loaded from the cache) now, with the flight's argument types, not at a first step
     # that a simulation paced by the wall clock (`run --board sim`, `hil serve`) would see as a stall
     x, codes, q = np.zeros(N_RIGID + 4), np.array([INFLOW, REACTION, DRAG], dtype=np.int64), np.ones(_RIGID + 8)
     once(x, 0.0, 0.0, 0.0, 0.0, codes, q, 1e-3, False, np.empty(N_OUT))
-    at(x, np.zeros(8), codes, q)
+    at(x, 0.0, 0.0, 0.0, 0.0, codes, q)
     step(x, np.zeros(8), codes, q, 1e-3)
     return step, at, once

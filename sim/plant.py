@@ -36,7 +36,6 @@ class Diverged(Exception):
         super().__init__(f"the plant's state is not finite at t = {t:.3f} s")
         self.t = t
 
-from flightctl.physics import rotor_speed
 from flightctl.sim import compiled
 from flightctl.sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Forces, Model, P
 
@@ -75,7 +74,6 @@ class Plant:
         self._fast_forces = compiled.model_forces() if laid_out is not None else None
         self._codes, self._q = laid_out if laid_out is not None else (None, None)
         self._out = np.empty(compiled.N_OUT)
-        self._cmd_u = self._cmd = None                    # the input and its commanded thrusts and speeds
 
     def command(self, P1: float, P2: float, P3: float, P4: float, battery_v: float) -> None:
         """The input from now on (after the actuation delay, if any)."""
@@ -92,64 +90,44 @@ class Plant:
             self.u = u = self._next
         n = self.substeps
         h = self.dt / n
-        if self._period is not None:
-            self._advance_compiled(t0, u, n, h)
-            return
+        fresh = False                                     # `_out` holds the forces at the state now
         for j in range(1, n + 1):
             x, t = self.x, self.t
             t_end = t0 + j * h
-            if self.on_ground and not self._lifts(x, u):
-                if len(x) > N_RIGID:   # the extensions' own states (motor lag) run on the ground too
-                    self.x = x[:N_RIGID] + self._rk4(x, t, u, h)[N_RIGID:]
-                self.t = t_end
-                continue
-            self.on_ground = False
-            try:
-                self.x = self._rk4(x, t, u, h)
-            except (ValueError, OverflowError):          # math on an infinite angle
-                raise Diverged(t) from None
-            self._check(t_end)
-        self.periods += 1
-        self.t = self.periods * self.dt
-
-    def _check(self, t_end: float) -> None:
-        """After a step in the air: a state that is not finite has diverged; below the floor, a touchdown."""
-        s = sum(self.x)
-        if s - s != 0.0:                                  # a NaN or an infinity anywhere in the state
-            raise Diverged(t_end)
-        self.t = t_end
-        if self.x[Z] < 0.0:
-            self._touch_down()
-
-    def _advance_compiled(self, t0: float, u, n: int, h: float) -> None:
-        """`advance`'s loop with `compiled.period`, which leaves the forces at the new state in `_out`:
-        they prime `forces()`'s cache, unless a touchdown has changed the state since."""
-        step, codes, q, out = self._period, self._codes, self._q, self._out
-        P1, P2, P3, P4 = u[0], u[1], u[2], u[3]
-        fresh = False
-        for j in range(1, n + 1):
-            t_end = t0 + j * h
-            ground = self.on_ground and not self._lifts(self.x, u)
-            if ground and len(self.x) == N_RIGID:        # nothing moves
+            ground = self.on_ground and not self._lifts(x, u)
+            if ground and len(x) == N_RIGID:              # nothing moves
                 self.t = t_end
                 fresh = False
                 continue
-            xa = np.array(self.x)
-            step(xa, P1, P2, P3, P4, codes, q, h, ground, out)
-            self.x = xa.tolist()
-            if ground:
-                self.t = t_end
-                fresh = True
-            else:
+            try:
+                self.x = self._step(x, t, u, h, ground)   # on the floor, the extensions' states (motor lag)
+            except (ValueError, OverflowError):          # math on an infinite angle
+                raise Diverged(t) from None
+            if not ground:
                 self.on_ground = False
-                self._check(t_end)
-                fresh = not self.on_ground            # a touchdown changed the state in place
+                s = sum(self.x)
+                if s - s != 0.0:                          # a NaN or an infinity anywhere in the state
+                    raise Diverged(t_end)
+            self.t = t_end
+            if not ground and self.x[Z] < 0.0:
+                self._touch_down()
+            fresh = ground or not self.on_ground          # (a touchdown changes the state in place)
         self.periods += 1
         self.t = self.periods * self.dt
-        if fresh:
-            o = out.tolist()
+        if fresh and self._period is not None:            # the compiled step's forces prime `forces()`
+            o = self._out.tolist()
             self._forces_at = (self.t, tuple(self.x), tuple(u))
             self._forces = Forces(o[0:4], o[4:8], o[8:11], o[11:14], o[14:18])
+
+    def _step(self, x, t, u, h, ground: bool) -> list[float]:
+        """x after one RK4 step of h (on the floor, `ground`, the rigid body's states kept): compiled
+        (`compiled.period`, which leaves the forces at the new state in `_out`) or plain (`_rk4`)."""
+        if self._period is None:
+            y = self._rk4(x, t, u, h)
+            return x[:N_RIGID] + y[N_RIGID:] if ground else y
+        xa = np.array(x)
+        self._period(xa, u[0], u[1], u[2], u[3], self._codes, self._q, h, ground, self._out)
+        return xa.tolist()
 
     def _rk4(self, x, t, u, h):
         f, hh = self.model.f, 0.5 * h
@@ -159,14 +137,6 @@ class Plant:
         k4 = f(t + h, [a + h * b for a, b in zip(x, k3)], u)
         h6 = h / 6.0
         return [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
-
-    def _commanded(self, u):
-        """The compiled plant's input: the commanded thrusts (eq. 26) and speeds (eq. 27) of `u`."""
-        if u is not self._cmd_u or type(u) is not tuple:   # a new input (a new tuple): once
-            f = self.model._commanded(u)
-            c1 = self.model.a.c1
-            self._cmd_u, self._cmd = u, np.array(f + [rotor_speed(v, c1) for v in f])
-        return self._cmd
 
     def _lifts(self, x, u) -> bool:
         """On the floor the vehicle stays put until the vertical thrust exceeds its weight."""
@@ -182,7 +152,8 @@ class Plant:
             if self._fast_forces is None:
                 self._forces_at, self._forces = key, self.model.forces(self.t, self.x, self.u)
             else:
-                f, tau, force, torque, w = self._fast_forces(np.array(self.x), self._commanded(self.u),
+                u = self.u
+                f, tau, force, torque, w = self._fast_forces(np.array(self.x), u[0], u[1], u[2], u[3],
                                                              self._codes, self._q)
                 self._forces_at, self._forces = key, Forces(f.tolist(), tau.tolist(), force, torque, w.tolist())
         return self._forces
