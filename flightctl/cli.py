@@ -13,10 +13,10 @@ COMMANDS = {
     "run": ("flightctl.service", "the onboard service: fly on the quadcopter (or --board sim)"),
     "bench": ("flightctl.hil.bench", "spin one motor at a time for identification"),
     "hil": ("flightctl.hil.cli", "hardware-in-the-loop: the PC side (serve), or both ends on one machine (demo)"),
-    "analyze": ("flightctl.sim.analyze", "linear analysis of each loop about hover: margins, damping, steps"),
-    "tune": ("flightctl.sim.tune", "the paper's PID tuning procedure (sec. 3.3), automated on the model"),
+    "analyze": ("flightctl.sim.analysis.cli", "linear analysis of each loop about hover: margins, damping, steps"),
+    "tune": ("flightctl.sim.sweeps.tune", "the paper's PID tuning procedure (sec. 3.3), automated on the model"),
     "params": ("flightctl.sim.paramscli", "parameter files: params show [NAME|FILE], params diff A B"),
-    "log": ("flightctl.sim.logexport", "flight log tools: log export F.csv F.ulg (PX4's ULog)"),
+    "log": ("flightctl.sim.logs.export", "flight log tools: log export F.csv F.ulg (PX4's ULog)"),
 }
 
 

@@ -28,7 +28,7 @@ from flightctl.control.spin import MotorLossDetector, SpinController
 from flightctl.hal import PWM_RANGE, Hal, ImuSample
 from flightctl.logfile import FlightLogWriter
 from flightctl.params import Params
-from flightctl.plan import Move, Plan
+from flightctl.plans.plan import Move, Plan
 from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
 
 MAX_BAD_IMU_FRAMES = 10         # consecutive refused IMU frames flown on the last good sample (22 ms),
@@ -66,7 +66,7 @@ class FlightLoop:
         self.stop = stop if stop is not None else threading.Event()
         self.on_tick = on_tick          # e.g. the systemd watchdog ping; False: the ping failed
         self.extra_row = extra_row      # extra log columns (the simulator's truth)
-        self.telemetry = telemetry      # a ground station link (flightctl/mavlink.py): start, poll, may_arm, tick
+        self.telemetry = telemetry      # a ground station link (flightctl/comms/mavlink.py): start, poll, may_arm, tick
         self.result = FlightResult()
         self.t_arm = 0.0                # clock time of arming (event times are since then)
         self._why = ""                  # why the loop began a landing the plan did not ask for

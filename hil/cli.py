@@ -24,13 +24,13 @@ import tempfile
 import threading
 from pathlib import Path
 
-from flightctl import link as lk
+from flightctl.comms import link as lk
 from flightctl.boards import BoardOptions, BoardUnavailable, open_board
 from flightctl.errors import InputError
 from flightctl.hal import ArmingRefused
 from flightctl.loop import FlightLoop
 from flightctl.params import load
-from flightctl.plan import Move, Plan
+from flightctl.plans.plan import Move, Plan
 from flightctl.plans import TAKEOFF
 from flightctl.service import prearm
 from flightctl.hil.serve import Cut, HilPlant, serve

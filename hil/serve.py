@@ -1,7 +1,7 @@
 """The PC side of hardware-in-the-loop: the simulated plant and its sensors answering the flight side
-over the link (flightctl/link.py, docs/hil.md).
+over the link (flightctl/comms/link.py, docs/hil.md).
 
-The sensors are the simulator's register-level devices (`flightctl.sim.devices`): every loop the
+The sensors are the simulator's register-level devices (`flightctl.sim.world.devices`): every loop the
 simulated MPU-9250 is burst-read from ACCEL_XOUT_H and its 21 raw bytes go out, with the simulated
 INA219's two voltage registers and the simulated HC-SR04's echo edges (level and microsecond tick).
 The flight side's start-up transfers (REQUEST frames) are done on the same simulated chips.
@@ -17,15 +17,15 @@ import struct
 import time
 from dataclasses import dataclass, field
 
-from flightctl import link as lk
+from flightctl.comms import link as lk
 from flightctl.drivers import ina219_regs as ina
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.hal import PWM_RANGE
-from flightctl.hil_board import SONAR_TRIGGER_PIN
+from flightctl.boards.hil import SONAR_TRIGGER_PIN
 from flightctl.params import Params
 from flightctl.sim import causes
-from flightctl.sim.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, World
-from flightctl.sim.power import SimIna219, SimSMBus
+from flightctl.sim.world.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, World
+from flightctl.sim.world.power import SimIna219, SimSMBus
 
 IDLE_S = 3.0            # no frame for this long once flying: the flight side is gone
 CRASH_TILT = math.radians(60)

@@ -91,7 +91,7 @@ def as_flown(d: dict) -> Params:
                  f"command waits 0 to {period * 1e3:.2f} ms for the next frame, {0.5 * period * 1e3:.2f} ms on "
                  f"average; range: none to two frames (the wait plus up to a frame of the ESC's own processing, "
                  f"not measured). The gyro's and accelerometer's DLPF delays (2.9 and 1.9 ms) are the simulated "
-                 f"chip's (sim/devices.py), declared in its logs for diagnose")
+                 f"chip's (sim/world/devices.py), declared in its logs for diagnose")
     filters = dataclasses.replace(Filters(), tau_tilt_air=TAU_TILT_AIR)
     k_in, k_dr, hub = round(d["k_inflow"], 4), round(d["k_drag"], 3), round(d["hub"], 4)
     tau_hi = round(d["tau_open_table2_Jp"], 3)

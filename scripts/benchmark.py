@@ -9,7 +9,7 @@ The iteration is timed on the onboard code only (the fastest of many short runs)
 fixed frame, so the simulated chip's cost is not counted), the calibration, the motor-loss check, the
 estimator, the four PIDs, the mixer and eq. 26 inverted to counts. Targets: >= 30x real time, < 3 % of the period.
 
-The batched simulator (sim/batch.py): vehicle-steps per second (one loop period of one vehicle:
+The batched simulator (sim/sweeps/batch.py): vehicle-steps per second (one loop period of one vehicle:
 the vectorised controller and the plant) for N = 10,000 vehicles of the as-flown model, each with its
 own draw of the file's ranges, on one core and on every core. Target: 1,000,000 at N = 10,000.
 
@@ -31,9 +31,9 @@ from flightctl.control.spin import MotorLossDetector
 from flightctl.drivers.mpu9250 import Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.params import load
-from flightctl.sim.devices import SensorNoise, SimMpu9250, World
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import SCENARIOS
+from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import SCENARIOS
 
 
 class FrozenSpi:
@@ -80,9 +80,9 @@ def iteration_us(n: int = 1000, batches: int = 100) -> float:
 
 def batch_rate(n: int = 10000, seconds: float = 1.0, workers: int = 1) -> float:
     """Vehicle-steps per second of `sim.batch.simulate` (process start-up included)."""
-    from flightctl.sim.batch import simulate
-    from flightctl.sim.montecarlo import draw
-    from flightctl.sim.scenarios import SCENARIOS
+    from flightctl.sim.sweeps.batch import simulate
+    from flightctl.sim.sweeps.montecarlo import draw
+    from flightctl.sim.flights.scenarios import SCENARIOS
     params = load("paper-as-flown")
     draws = draw(params, n, 0)
     plan = SCENARIOS["paper"]().plan
@@ -95,7 +95,7 @@ def split_us(name: str | None) -> tuple[float, float]:
     """Per loop period of `sim paper` (full onboard path): (us in the simulated world: the plant, the
     chip's SPI answers, the sonar's edges, the battery; us in the onboard loop and the log). The second
     bounds the simulator's speed whatever the plant costs: at most period / it times real time."""
-    from flightctl.sim import devices
+    from flightctl.sim.world import devices
     spent = [0.0]
 
     def timed(cls, name):
@@ -150,9 +150,9 @@ def main() -> None:
     args = ap.parse_args()
     params = load(None)
     out = Path(tempfile.mkdtemp())
-    from flightctl.sim import compiled
+    from flightctl.sim.world import compiled
     print("the simulated world (the plant's step, the IMU chip's registers): "
-          + ("compiled by numba (sim/compiled.py)" if compiled.model_period() is not None
+          + ("compiled by numba (sim/world/compiled.py)" if compiled.model_period() is not None
              else "plain Python (numba absent or FLIGHTCTL_JIT=0: the `fast` extra)")
           + "; the onboard code: plain Python; the flight log: formatted in a child process")
     for label, name, kw, target in (("full onboard path", None, {}, ">= 30x; issue 17: 100x"),

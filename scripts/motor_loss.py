@@ -18,10 +18,10 @@ import numpy as np
 
 from flightctl.control.spin import SpinController
 from flightctl.params import load
-from flightctl.sim import faults
+from flightctl.sim.world import faults
 from flightctl.sim.plots import figure, legend, save
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import SCENARIOS
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import SCENARIOS
 
 
 def main(argv=None) -> int:

@@ -26,8 +26,8 @@ import numpy as np
 from flightctl.params import TABLE4, EffectSpec, load
 from flightctl.sim import causes
 from flightctl.sim.progress import Progress
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import SCENARIOS
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import SCENARIOS
 
 CRASH_DEG = 60.0
 SIZES_MS = {"actuation_delay": [0, 1, 2, 3, 4, 5, 6, 7.5, 10, 15, 20, 30, 35, 40, 45, 50],

@@ -15,10 +15,10 @@ import tempfile
 from pathlib import Path
 
 from flightctl.params import GAIN_SETS, load
-from flightctl.sim.metrics import step_metrics
+from flightctl.sim.flights.metrics import step_metrics
 from flightctl.sim.progress import Progress
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import SCENARIOS
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import SCENARIOS
 
 MODELS = {"base": None, "as-flown": "paper-as-flown"}
 GAINS = ("table4", "table6")

@@ -5,7 +5,7 @@ quadcopter, write the contract flight log, a PNG of the responses, and print the
 takes) in simulated time, the same way.
 
 `flightctl sim SCENARIO --fault NAME[:k=v,...]` (repeatable) injects a fault at the simulated devices
-(flightctl/sim/faults.py); `flightctl sim faults --json M.json` flies every fault and writes the
+(flightctl/sim/world/faults.py); `flightctl sim faults --json M.json` flies every fault and writes the
 matrix (docs/safety.md)."""
 from __future__ import annotations
 
@@ -19,10 +19,11 @@ from pathlib import Path
 from flightctl.control.estimator import ESTIMATORS
 from flightctl.errors import InputError, output_file
 from flightctl.params import GAIN_SETS
-from flightctl.sim import causes, faults
-from flightctl.sim.metrics import LEGEND, hold_metrics, step_metrics
+from flightctl.sim import causes
+from flightctl.sim.world import faults
+from flightctl.sim.flights.metrics import LEGEND, hold_metrics, step_metrics
 from flightctl.plans import load_plan
-from flightctl.sim.scenarios import SCENARIOS, scenario
+from flightctl.sim.flights.scenarios import SCENARIOS, scenario
 
 
 def parser() -> argparse.ArgumentParser:
@@ -45,7 +46,7 @@ def parser() -> argparse.ArgumentParser:
                    help="onboard estimator structure (docs/estimator.md); default: flight")
     p.add_argument("--no-noise", action="store_true", help="switch sensor noise and bias off")
     p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
-    p.add_argument("--substeps", type=int, help="plant RK4 steps per loop period (default: sim/plant.py SUBSTEPS, 1)")
+    p.add_argument("--substeps", type=int, help="plant RK4 steps per loop period (default: sim/world/plant.py SUBSTEPS, 1)")
     p.add_argument("--plot", help="PNG of the responses (default: beside the log, .png)")
     p.add_argument("--no-plot", action="store_true", help="write no PNG")
     p.add_argument("--quiet", action="store_true",
@@ -57,9 +58,9 @@ def parser() -> argparse.ArgumentParser:
                    help="write the outcome and the metrics as JSON (SI units: s, m, rad)")
     p.add_argument("--monte-carlo", type=int, metavar="N",
                    help="fly N draws of the parameter file's plausible ranges with both gain sets, in parallel; "
-                        "report the shares that fly, land and settle (--json, --plot: a map); sim/montecarlo.py")
+                        "report the shares that fly, land and settle (--json, --plot: a map); sim/sweeps/montecarlo.py")
     p.add_argument("--batch", action="store_true",
-                   help="with --monte-carlo: fly the draws on the batched simulator (sim/batch.py: ideal sensors, "
+                   help="with --monte-carlo: fly the draws on the batched simulator (sim/sweeps/batch.py: ideal sensors, "
                         "in the air from after the take-off; thousands of draws in minutes)")
     return p
 
@@ -90,7 +91,7 @@ def metrics_json(flown, flight, wall_s: float) -> dict:
 
 
 def main(argv: list[str]) -> int:
-    from flightctl.sim.run import fly
+    from flightctl.sim.flights.run import fly
 
     if argv[:1] == ["faults"]:
         return faults_main(argv[1:])
@@ -126,7 +127,7 @@ def main(argv: list[str]) -> int:
     start = time.perf_counter()
     link = None
     if args.mavlink:
-        from flightctl.mavlink import open_link
+        from flightctl.comms.mavlink import open_link
         link = open_link(args.mavlink, params)
     if link is not None:
         link.ready(flown.name)
@@ -168,8 +169,8 @@ def main(argv: list[str]) -> int:
 
 
 def monte_carlo_main(args) -> int:
-    """`--monte-carlo N`: sim/montecarlo.py."""
-    from flightctl.sim import montecarlo
+    """`--monte-carlo N`: sim/sweeps/montecarlo.py."""
+    from flightctl.sim.sweeps import montecarlo
     from flightctl.sim.progress import Progress
     if args.scenario is None:
         raise InputError("--monte-carlo flies a named scenario (e.g. paper), not a plan file")
@@ -195,7 +196,7 @@ def monte_carlo_main(args) -> int:
 
 def faults_main(argv: list[str]) -> int:
     """`flightctl sim faults --json M.json [--doc docs/safety.md]`: the fault-injection matrix."""
-    from flightctl.sim import faultmatrix
+    from flightctl.sim.flights import faultmatrix
 
     p = argparse.ArgumentParser(prog="flightctl sim faults", description=faultmatrix.__doc__)
     p.add_argument("--json", required=True, metavar="M.json", help="the matrix, one object per fault")

@@ -14,7 +14,7 @@ on the log's 450 Hz grid; what the linearisation leaves out at these step sizes:
   the 5 taken at 1.5 m; one period is 0.3 deg of phase at Table 6's 2.4 rad/s crossover, about
   0.7 points of overshoot on its zeta of 0.04).
 Hence 1.5 percentage points on overshoot; 3.5 through the full path, where the gyro's DLPF stage
-(2.9 ms, sim/devices.py) leaves the bank estimate integrated from lagged rates 0.1-0.2 degrees off
+(2.9 ms, sim/world/devices.py) leaves the bank estimate integrated from lagged rates 0.1-0.2 degrees off
 the truth several seconds after the step (the Euler-rate kinematics of rates 2.9 ms late): a slow
 drift within the step's 8 s window that the linear loop, about hover, does not have, and that the
 metric counts as overshoot (3.3 % at Table 4, the step's transient itself peaking at 0.1 %). Rise times: each crossing is found on the same grid in
@@ -32,16 +32,16 @@ from scipy.optimize import brentq
 from flightctl.cli import main as cli
 from flightctl.params import TABLE4, TABLE6, load
 from flightctl.physics import command_from_thrust
-from flightctl.plan import Move, Plan
+from flightctl.plans.plan import Move, Plan
 from flightctl.plans import TAKEOFF
 from flightctl.sim import causes
 from flightctl.sim.analysis.loops import imu_delays
 from flightctl.sim.analysis.linear import SIGNALS, impulse_responses, linearise, realise, sampled
-from flightctl.sim.analyze import DEFAULT_ESTIMATOR, TRUTH, analyse
-from flightctl.sim.metrics import step_metrics
-from flightctl.sim.model import N_RIGID, PHI, P, Q, R, THETA, VX, VY, VZ, Model
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import SCENARIOS, scenario
+from flightctl.sim.analysis.cli import DEFAULT_ESTIMATOR, TRUTH, analyse
+from flightctl.sim.flights.metrics import step_metrics
+from flightctl.sim.world.model import N_RIGID, PHI, P, Q, R, THETA, VX, VY, VZ, Model
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import SCENARIOS, scenario
 
 A = load(None).airframe
 DT = A.dt
@@ -156,7 +156,7 @@ def sampled_roll_margin(gains, ema: bool) -> float:
     on the angle, kd on the rate."""
     b, dt, alpha = 2 * A.l / A.Jxx, DT, load(None).filters.alpha_ema
     kp, ki, kd = gains.kp_phi, gains.ki_phi, gains.kd_phi
-    # the gyro reads the rate through its DLPF's stage (sim/devices.py): (1 - c) z / (z - c) p,
+    # the gyro reads the rate through its DLPF's stage (sim/world/devices.py): (1 - c) z / (z - c) p,
     # c = exp(-dt / tau)
     c = math.exp(-dt / imu_delays()["gx"])
 

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from flightctl.params import GAIN_SETS, EffectSpec, load
-from flightctl.plan import Move, Plan
-from flightctl.sim import metrics
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import SCENARIOS, Scenario
+from flightctl.plans.plan import Move, Plan
+from flightctl.sim.flights import metrics
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import SCENARIOS, Scenario
 
 TAUS = (0.02, 0.04)   # s: the motor time constants over which the claims hold (docs/as-flown.md: from
 #                        about 45 ms Table 6's pitch, its weakest loop (kd 0.13), no longer settles within 1 deg)

@@ -1,4 +1,4 @@
-"""The batched simulator (sim/batch.py) against the single one: the vectorised controller gives the
+"""The batched simulator (sim/sweeps/batch.py) against the single one: the vectorised controller gives the
 onboard controller's PWM counts step for step, the vector model the scalar model's derivatives, the
 batched plant the single plant's states."""
 from __future__ import annotations
@@ -13,9 +13,9 @@ from flightctl.control.controller import FlightController
 from flightctl.hal import ImuSample
 from flightctl.params import Filters, Gains, Params, load
 from flightctl.sim import causes
-from flightctl.sim.batch import BatchController, BatchPlant, fly
-from flightctl.sim.model import N_RIGID, PHI, Z, Model, P
-from flightctl.sim.plant import Plant
+from flightctl.sim.sweeps.batch import BatchController, BatchPlant, fly
+from flightctl.sim.world.model import N_RIGID, PHI, Z, Model, P
+from flightctl.sim.world.plant import Plant
 
 
 def _random_params(rng, n: int) -> list[Params]:
@@ -63,7 +63,7 @@ def test_batch_controller_gives_the_onboard_counts(structure):
                            rng.uniform(0.5, 2.0, n)])
         if k % 10 == 0:
             d = rng.uniform(0.2, 2.5, n)   # (a lost echo in the air: the batch holds the altitude, onboard
-            #                                 the vertical estimate stands in; sim/batch.py)
+            #                                 the vertical estimate stands in; sim/sweeps/batch.py)
             batch.on_range(d, t)
             for i, c in enumerate(onboard):
                 c.on_range(float(d[i]), t)
@@ -119,8 +119,8 @@ def test_batch_plant_is_the_single_plant_with_a_parameter_per_vehicle():
     """The batched plant with one motor time constant, one actuation delay and one rotor inertia per
     vehicle (arrays in the effects' parameters and in the airframe) follows the single plant flown
     with each value, command for command."""
-    from flightctl.sim.batch import with_draws
-    from flightctl.sim.montecarlo import drawn_airframe
+    from flightctl.sim.sweeps.batch import with_draws
+    from flightctl.sim.sweeps.montecarlo import drawn_airframe
     params = load("paper-as-flown")
     a = params.airframe
     taus = np.array([0.02, 0.035, 0.08, 0.15])

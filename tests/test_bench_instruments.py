@@ -21,9 +21,9 @@ from flightctl.errors import InputError
 from flightctl.hil import bench
 from flightctl.hil import instruments as ins
 from flightctl.params import load
-from flightctl.pi import open_pi_board
-from flightctl.sim.devices import SensorNoise, SimMpu9250, World
-from flightctl.sim.power import SimIna219, SimSMBus
+from flightctl.boards.pi import open_pi_board
+from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.power import SimIna219, SimSMBus
 
 RCB_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / "rcbenchmark"
 

@@ -1,4 +1,4 @@
-"""The board registry (flightctl/boards.py): boards opened by name, one `Board` for every command,
+"""The board registry (flightctl/boards/__init__.py): boards opened by name, one `Board` for every command,
 the simulated board lock-step or paced by the wall clock, and a new board added with one line."""
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from flightctl.clock import PacedClock
 from flightctl.errors import InputError
 from flightctl.hal import Hal
 from flightctl.params import load
-from flightctl.sim.board import SIM_CALIBRATE_S, TRUTH_COLUMNS
-from flightctl.sim.devices import SensorNoise, SimClock
+from flightctl.sim.world.board import SIM_CALIBRATE_S, TRUTH_COLUMNS
+from flightctl.sim.world.devices import SensorNoise, SimClock
 
 opened = []
 

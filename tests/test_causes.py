@@ -10,7 +10,7 @@ import pytest
 
 from flightctl.sim import causes
 from flightctl.sim.identify.diagnose.candidate import Candidate
-from flightctl.sim.model import Effect
+from flightctl.sim.world.model import Effect
 from real import need
 
 SPEC = Path(__file__).resolve().parents[2] / "shared" / "spec" / "measured-data.md"

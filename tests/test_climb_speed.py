@@ -10,12 +10,12 @@ import numpy as np
 from flightctl.cli import main
 from flightctl.logfile import MAG_COLUMNS, read_flight_log
 from flightctl.params import load
-from flightctl.sim.board import TRUTH_COLUMNS
+from flightctl.sim.world.board import TRUTH_COLUMNS
 from flightctl.sim.causes.rotor_inflow import climb_speed
 from flightctl.sim.identify.diagnose.cli import FOREIGN_COLUMNS
 from flightctl.sim.identify.diagnose.data import load_file
 from flightctl.sim.identify.diagnose.dataset import DataSet, Vehicle
-from flightctl.sim.model import rotation
+from flightctl.sim.world.model import rotation
 from test_diagnose_cases import quick_plan
 
 

@@ -1,4 +1,4 @@
-"""The compiled plant (sim/compiled.py, numba, the `fast` extra) integrates what the plain one does:
+"""The compiled plant (sim/world/compiled.py, numba, the `fast` extra) integrates what the plain one does:
 the same RK4 step and forces on random states and inputs for the base model and every ordered
 choice of the effects it carries, and the same flight; a model with another effect stays plain."""
 import itertools
@@ -11,11 +11,12 @@ from without import run_without
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe, load
 from flightctl.physics import rotor_speed
-from flightctl.sim import causes, compiled, devices
-from flightctl.sim.model import N_RIGID, Model
-from flightctl.sim.plant import Plant
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import SCENARIOS
+from flightctl.sim import causes
+from flightctl.sim.world import compiled, devices
+from flightctl.sim.world.model import N_RIGID, Model
+from flightctl.sim.world.plant import Plant
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import SCENARIOS
 
 needs_numba = pytest.mark.skipif(not compiled.enabled(), reason="numba is not installed (the `fast` extra)")
 

@@ -11,7 +11,7 @@ from flightctl.control.mixer import Mixer
 from flightctl.control.pid import Pid, wrap
 from flightctl.hal import PWM_RANGE, ImuSample
 from flightctl.params import Airframe, Filters, Params
-from flightctl.sim.model import Model
+from flightctl.sim.world.model import Model
 from hand import R_hand
 
 M, G, L = 1.645, 9.80665, 0.2475

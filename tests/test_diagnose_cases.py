@@ -97,7 +97,7 @@ QUICK_S = 21.0
 
 
 def quick_plan(tmp: Path) -> Path:
-    """QUICK_MOVES as a plan file (flightctl/plan.py), for `flightctl sim --plan`."""
+    """QUICK_MOVES as a plan file (flightctl/plans/plan.py), for `flightctl sim --plan`."""
     lines = ['name = "quick_excite"', f"duration = {QUICK_S}"]
     for t, channel, value, ramp in QUICK_MOVES:
         key = "value" if channel == "alt" else "value_deg"

@@ -1,5 +1,5 @@
 """Issue 10, defect 4: the IMU check caught only all-0x00 or all-0xFF frames. Each fault is injected
-at the simulated chip's SPI boundary (flightctl/sim/faults.py) in a hover at 1 m; the real driver and
+at the simulated chip's SPI boundary (flightctl/sim/world/faults.py) in a hover at 1 m; the real driver and
 the onboard loop must name it within a stated number of loops."""
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ from flightctl.hal import ImuSample
 from flightctl.loop import MAX_BAD_IMU_FRAMES, FlightLoop
 from flightctl.params import load
 from flightctl.physics import G
-from flightctl.plan import Move, Plan
-from flightctl.sim import faults
-from flightctl.sim.board import SIM_CALIBRATE_S, sim_board
+from flightctl.plans.plan import Move, Plan
+from flightctl.sim.world import faults
+from flightctl.sim.world.board import SIM_CALIBRATE_S, sim_board
 
 PARAMS = load(None)
 AT = SIM_CALIBRATE_S + 4.0          # 4 s after arming, in the air at 1 m

@@ -1,5 +1,5 @@
-"""Issue 10's fault-injection matrix, short: every fault of flightctl/sim/faults.py flown once in a
-hover at 1 m (flightctl/sim/faultmatrix.py, what `flightctl sim faults` writes). Every fault must be
+"""Issue 10's fault-injection matrix, short: every fault of flightctl/sim/world/faults.py flown once in a
+hover at 1 m (flightctl/sim/flights/faultmatrix.py, what `flightctl sim faults` writes). Every fault must be
 named by the loop; the motors may stop in the air only where the loop's action is to stop."""
 from __future__ import annotations
 
@@ -9,8 +9,9 @@ import pytest
 
 from flightctl.cli import main as cli_main
 from flightctl.params import load
-from flightctl.sim import faultmatrix, faults
-from flightctl.sim.run import ON_GROUND
+from flightctl.sim.flights import faultmatrix
+from flightctl.sim.world import faults
+from flightctl.sim.flights.run import ON_GROUND
 
 PARAMS = load(None)
 

@@ -1,4 +1,4 @@
-"""The HIL frame codec (flightctl/link.py): frames survive the byte stream intact, and random, mutated,
+"""The HIL frame codec (flightctl/comms/link.py): frames survive the byte stream intact, and random, mutated,
 truncated or out-of-order bytes are counted and dropped, never raised."""
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from flightctl import link as lk
+from flightctl.comms import link as lk
 
 payloads = st.lists(st.binary(min_size=0, max_size=60), min_size=1, max_size=8)
 
@@ -135,7 +135,7 @@ def test_a_pc_side_on_this_machine_is_recognised():
     """A pty or a loopback address: the PC side runs on this machine, and the hil board's clock sleeps
     to each deadline instead of busy-waiting its last 0.2 ms (which takes the CPU the PC side needs for
     the answer: docs/hil.md); a real UART keeps the busy-wait."""
-    from flightctl.hil_board import HilClock, peer_is_local
+    from flightctl.boards.hil import HilClock, peer_is_local
 
     master, slave = os.openpty()
     srv = socket.create_server(("127.0.0.1", 0))
@@ -158,7 +158,7 @@ def test_a_pc_side_on_this_machine_is_recognised():
 def test_every_answered_command_counts_once_in_the_latency_however_late():
     """The latency is the time from a command to the first sensor frame acknowledging it: an answer
     arriving 300 commands later (a stalled PC side) is counted, a second frame with the same ack is not."""
-    from flightctl.hil_board import HilLink
+    from flightctl.boards.hil import HilLink
 
     a, b = socket.socketpair()
     try:

@@ -11,11 +11,11 @@ import pytest
 from flightctl.control.landing import LANDED_S, Landing, Vertical
 from flightctl.params import load
 from flightctl.physics import G
-from flightctl.plan import Move, Plan
+from flightctl.plans.plan import Move, Plan
 from flightctl.safety import CRASH_TOUCHDOWN_SPEED
-from flightctl.sim import faults
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import scenario
+from flightctl.sim.world import faults
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import scenario
 
 DT = 1.0 / 450
 

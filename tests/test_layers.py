@@ -58,13 +58,13 @@ def test_the_onboard_package_imports_nothing_above_it():
 
 
 def test_the_import_check_sees_lazy_relative_and_aliased_imports():
-    text = ("def f():\n    from flightctl.sim.run import fly\n"
+    text = ("def f():\n    from flightctl.sim.flights.run import fly\n"
             "def g():\n    try:\n        import hil.bench as b\n    except ImportError:\n        pass\n"
             "from .. import sim\n"
             "from flightctl import boards, simulate\n")
     found = imported_modules(ROOT / "flightctl" / "control" / "probe.py", text)     # a file that is not there
     assert sorted((line, m) for line, m in found if upward(m)) == [
-        (2, "flightctl.sim.run"), (2, "flightctl.sim.run.fly"), (5, "hil.bench"), (8, "flightctl.sim")]
+        (2, "flightctl.sim.flights.run"), (2, "flightctl.sim.flights.run.fly"), (5, "hil.bench"), (8, "flightctl.sim")]
     assert (9, "flightctl.boards") in found and not upward("flightctl.simulate")
 
 
@@ -109,8 +109,8 @@ def test_the_wheel_installs_only_the_flightctl_name(wheel):
     names = zipfile.ZipFile(wheel).namelist()
     top = {n.split("/")[0] for n in names}
     assert {t for t in top if not t.endswith(".dist-info")} == {"flightctl"}     # no top-level sim/ or hil/
-    for module in ("flightctl/sim/run.py", "flightctl/sim/board.py", "flightctl/hil/bench.py",
-                   "flightctl/board_pi.toml", "flightctl/plans.py"):
+    for module in ("flightctl/sim/flights/run.py", "flightctl/sim/world/board.py", "flightctl/hil/bench.py",
+                   "flightctl/boards/pi.toml", "flightctl/plans/__init__.py"):
         assert module in names
     (info,) = [n for n in names if n.endswith(".dist-info/top_level.txt")] or [None]
     if info:

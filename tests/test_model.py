@@ -11,8 +11,8 @@ from scipy.integrate import solve_ivp
 from flightctl.errors import InputError
 from flightctl.params import Airframe
 from flightctl.sim import causes as fx
-from flightctl.sim.model import Model, angular_acceleration, body_torques, rotation
-from flightctl.sim.plant import Plant
+from flightctl.sim.world.model import Model, angular_acceleration, body_torques, rotation
+from flightctl.sim.world.plant import Plant
 
 # conventions.md, reference airframe (Table 2 and the plausible propeller defaults)
 M, L, G = 1.645, 0.2475, 9.80665

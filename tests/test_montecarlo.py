@@ -1,4 +1,4 @@
-"""`flightctl sim SCENARIO --monte-carlo N` (issue 17; sim/montecarlo.py): the flight over the parameter
+"""`flightctl sim SCENARIO --monte-carlo N` (issue 17; sim/sweeps/montecarlo.py): the flight over the parameter
 file's plausible ranges. Short flights (step_roll, 18 s) keep it quick; the paper flight is the same code."""
 from __future__ import annotations
 
@@ -58,7 +58,7 @@ def test_a_file_without_ranges_is_one_line(tmp_path, capsys):
 
 
 def test_batched_monte_carlo_flies_the_narrow_ranges_and_fails_the_slow_motors(tmp_path):
-    """`--batch` (sim/batch.py): within 15 % of the as-flown values (tau 30-40 ms) every draw flies and
+    """`--batch` (sim/sweeps/batch.py): within 15 % of the as-flown values (tau 30-40 ms) every draw flies and
     settles with Table 6, as on the full onboard path above; with the motors' time constant moved to
     150-192 ms (the slow end of its range), Table 4's bank loops ring or crash in most draws."""
     narrow = _narrow(tmp_path)

@@ -20,8 +20,9 @@ from flightctl.loop import FlightLoop
 from flightctl.params import load
 from flightctl.plans import PLANS
 from flightctl.safety import CRASH_TOUCHDOWN_SPEED
-from flightctl.sim import causes, faults
-from flightctl.sim.board import SIM_CALIBRATE_S, sim_board
+from flightctl.sim import causes
+from flightctl.sim.world import faults
+from flightctl.sim.world.board import SIM_CALIBRATE_S, sim_board
 
 RNG = random.Random(18)
 # (plan, motor, time after arming): the hover holds 1.5 m from 4 s to 24 s; the paper flight climbs

@@ -17,9 +17,9 @@ from flightctl.drivers.mpu9250 import ImuError, Mpu9250
 from flightctl.errors import InputError
 from flightctl.hal import ImuSample
 from flightctl.params import load
-from flightctl.pi import SECTIONS, load_board, open_pi_board
-from flightctl.sim.devices import SensorNoise, SimMpu9250, World
-from flightctl.sim.power import SimIna219, SimSMBus
+from flightctl.boards.pi import SECTIONS, load_board, open_pi_board
+from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.power import SimIna219, SimSMBus
 
 
 def test_the_shipped_board_file_is_the_quadcopters_wiring():

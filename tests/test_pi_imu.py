@@ -6,13 +6,13 @@ import math
 
 import pytest
 
-from flightctl.sim.board import sim_board
+from flightctl.sim.world.board import sim_board
 from flightctl.drivers.mpu9250 import ImuError, Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.loop import MAX_BAD_IMU_FRAMES, FlightLoop
 from flightctl.params import load
-from flightctl.sim.devices import SensorNoise, SimMpu9250, World
-from flightctl.sim.scenarios import SCENARIOS
+from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.flights.scenarios import SCENARIOS
 
 
 @pytest.fixture

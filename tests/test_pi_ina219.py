@@ -1,4 +1,4 @@
-"""The INA219 driver against the simulated chip (flightctl.sim.power: the registers of TI SBOS448 behind
+"""The INA219 driver against the simulated chip (flightctl.sim.world.power: the registers of TI SBOS448 behind
 the smbus2.SMBus calls), with the battery's true voltage and current set by hand and the noise off.
 Register values are worked out here from the datasheet's encodings."""
 from __future__ import annotations
@@ -11,8 +11,8 @@ from flightctl.drivers import ina219_regs as reg
 from flightctl.drivers.ina219 import HOLD_READS, Ina219, PowerMonitorError
 from flightctl.hal import PowerMonitor
 from flightctl.params import Airframe
-from flightctl.sim.devices import SensorNoise, World
-from flightctl.sim.power import SimIna219, SimSMBus
+from flightctl.sim.world.devices import SensorNoise, World
+from flightctl.sim.world.power import SimIna219, SimSMBus
 
 SHUNT = 0.002      # ohm
 CAL = 11184        # trunc(0.04096 / ((60 A / 32768) * 2 mOhm)): the driver's calibration for 60 A

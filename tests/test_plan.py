@@ -1,4 +1,4 @@
-"""flightctl.plan: steps, raised-cosine ramps, landing plans; plan files and their limits; the named
+"""flightctl.plans.plan: steps, raised-cosine ramps, landing plans; plan files and their limits; the named
 plans of flightctl.plans; the steps the simulator measures; `flightctl sim --plan FILE`."""
 import math
 
@@ -8,10 +8,10 @@ import pytest
 from flightctl.cli import main as cli
 from flightctl.errors import InputError
 from flightctl.logfile import MAG_COLUMNS, read_flight_log
-from flightctl.plan import MAX_PLAN_ALT_M, Move, Plan, check_plan, read_plan_file
+from flightctl.plans.plan import MAX_PLAN_ALT_M, Move, Plan, check_plan, read_plan_file
 from flightctl.plans import PLANS, load_plan
-from flightctl.sim.board import TRUTH_COLUMNS
-from flightctl.sim.scenarios import SCENARIOS, measured_steps
+from flightctl.sim.world.board import TRUTH_COLUMNS
+from flightctl.sim.flights.scenarios import SCENARIOS, measured_steps
 
 ROLL, PITCH, YAW, ALT = range(4)
 

@@ -12,8 +12,8 @@ import pytest
 from flightctl.cli import main
 from flightctl.errors import InputError, read_text
 from flightctl.logfile import read_flight_log
-from flightctl.pi import load_board
-from flightctl.plan import read_plan_file
+from flightctl.boards.pi import load_board
+from flightctl.plans.plan import read_plan_file
 from flightctl import params as paramfile
 from test_identify_errors import HEADER, PENDULUM, bench_rows, yaw_rows
 

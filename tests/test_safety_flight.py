@@ -19,13 +19,13 @@ import pytest
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter, read_flight_log
 from flightctl.loop import FlightLoop
 from flightctl.params import load
-from flightctl.plan import Move, Plan
+from flightctl.plans.plan import Move, Plan
 from flightctl.safety import CRASH_TILT, CRASH_TOUCHDOWN_SPEED, crash_reason
-from flightctl.sdnotify import Notifier
-from flightctl.sim.board import SIM_CALIBRATE_S, TRUTH_COLUMNS, sim_board, truth_row
+from flightctl.service.sdnotify import Notifier
+from flightctl.sim.world.board import SIM_CALIBRATE_S, TRUTH_COLUMNS, sim_board, truth_row
 from flightctl.sim.cli import main as sim_main
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import scenario
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import scenario
 
 PARAMS = load(None)
 

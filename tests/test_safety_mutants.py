@@ -13,14 +13,14 @@ from fakes.pigpiod import running
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter
 from flightctl.loop import FlightLoop
 from flightctl.params import load
-from flightctl.pi import open_pi_board
-from flightctl.plan import Move, Plan
-from flightctl.sdnotify import Notifier
+from flightctl.boards.pi import open_pi_board
+from flightctl.plans.plan import Move, Plan
+from flightctl.service.sdnotify import Notifier
 from flightctl.service import Service
-from flightctl.sim.board import SIM_CALIBRATE_S, TRUTH_COLUMNS, open_board, sim_board, truth_row
+from flightctl.sim.world.board import SIM_CALIBRATE_S, TRUTH_COLUMNS, open_board, sim_board, truth_row
 from flightctl.boards import BoardOptions
-from flightctl.sim.devices import SensorNoise, SimMpu9250, World
-from flightctl.sim.power import SimIna219, SimSMBus
+from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.power import SimIna219, SimSMBus
 
 PARAMS = load(None)
 

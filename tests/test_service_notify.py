@@ -6,7 +6,7 @@ import socket
 
 import pytest
 
-from flightctl.sdnotify import DEFAULT_PING_S, Notifier
+from flightctl.service.sdnotify import DEFAULT_PING_S, Notifier
 
 
 @pytest.fixture

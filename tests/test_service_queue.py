@@ -1,4 +1,4 @@
-"""The plan queue (flightctl/planqueue.py, issue 10 defects 2 and 5): every plan is validated before it
+"""The plan queue (flightctl/service/queue.py, issue 10 defects 2 and 5): every plan is validated before it
 is claimed, a bad or stale one is moved aside with a one-line reason and the service keeps running,
 nothing can hang it, and what cannot be done is said in the journal."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from flightctl.planqueue import PlanQueue
+from flightctl.service.queue import PlanQueue
 
 GOOD = 'name = "hop"\nduration = 1.5\n[[move]]\nt = 0.0\nchannel = "alt"\nvalue = 0.3\nramp = 0.5\n'
 BAD = {

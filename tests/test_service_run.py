@@ -22,7 +22,7 @@ from flightctl.errors import InputError
 from flightctl.logfile import MAG_COLUMNS, read_flight_log
 from flightctl.plans import load_plan
 from flightctl.service import TeardownLog, main
-from flightctl.sim.board import TRUTH_COLUMNS
+from flightctl.sim.world.board import TRUTH_COLUMNS
 from without import PI_LIBRARIES, run_without
 
 # Real time on a shared machine: a test that measures wall-clock timing (frame rates, durations, pacing)

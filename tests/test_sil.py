@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from flightctl.params import TABLE4, TABLE6, load
-from flightctl.sim.metrics import hold_metrics, step_metrics
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import SCENARIOS
+from flightctl.sim.flights.metrics import hold_metrics, step_metrics
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import SCENARIOS
 
 
 def second_order(wn2: float, two_zeta_wn: float):
@@ -121,7 +121,7 @@ def test_every_shipped_plan_flies_and_lands_on_the_base_model(tmp_path, name):
     """Issue 19: `sim step_alt` crashed with the defaults (a step to the floor is a fall: it now lands
     on a ramp, figure 13's "controlled landing"). Every named plan, the default gains (Table 6), the
     full onboard path with noise: no crash, touchdowns below 1 m/s, the motors stopped. `excite` is
-    the stated exception (its description, flightctl/plans.py): its fast descent, kept for diagnose,
+    the stated exception (its description, flightctl/plans/__init__.py): its fast descent, kept for diagnose,
     touches down hard on the base model with Table 6; it lands with Table 4 and on the as-flown model."""
     sc = SCENARIOS[name]()
     runs = [load(None)] if name != "excite" else [load(None, TABLE4), load("paper-as-flown")]

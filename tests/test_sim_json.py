@@ -8,8 +8,8 @@ import pytest
 
 from flightctl.cli import main as cli
 from flightctl.logfile import read_flight_log
-from flightctl.sim.metrics import step_metrics
-from flightctl.sim.scenarios import Step
+from flightctl.sim.flights.metrics import step_metrics
+from flightctl.sim.flights.scenarios import Step
 
 PLAN = """name = "json-roll"
 duration = 7.0

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from flightctl.params import load
-from flightctl.plan import Move, Plan
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import scenario
+from flightctl.plans.plan import Move, Plan
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import scenario
 
 SP = ("roll_sp", "pitch_sp", "yaw_sp", "alt_sp")
 

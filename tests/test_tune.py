@@ -1,4 +1,4 @@
-"""`flightctl tune` (issue 17; sim/tune.py): the paper's section 3.3 procedure automated. The criteria on
+"""`flightctl tune` (issue 17; sim/sweeps/tune.py): the paper's section 3.3 procedure automated. The criteria on
 known responses, then the whole procedure on the base model against Table 4."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 from flightctl.cli import main
 from flightctl.params import TABLE4, load
-from flightctl.sim import tune
+from flightctl.sim.sweeps import tune
 
 
 @pytest.mark.parametrize("f", [0.5, 1.0, 3.7])
@@ -58,7 +58,7 @@ def test_the_strict_reading_gives_table4s_damping(tmp_path):
 
 def _slow_motors(lo: float, hi: float):
     """paper-as-flown with the motor time constant's range narrowed to [lo, hi], the rotor inertia at its
-    nominal value (a drawn Jp would move the range's top: sim/montecarlo.py `draw`)."""
+    nominal value (a drawn Jp would move the range's top: sim/sweeps/montecarlo.py `draw`)."""
     import dataclasses
     from flightctl.sim import causes
     p = causes.load_vehicle("paper-as-flown")

@@ -11,9 +11,9 @@ from flightctl import __version__
 from flightctl.cli import main as cli
 from flightctl.logfile import read_flight_log
 from flightctl.params import load
-from flightctl.plan import Move, Plan
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import scenario
+from flightctl.plans.plan import Move, Plan
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import scenario
 
 pyulog = pytest.importorskip("pyulog")
 

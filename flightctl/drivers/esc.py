@@ -65,7 +65,7 @@ import pigpio
 from flightctl.hal import PWM_RANGE, ArmingRefused
 from flightctl.params import Airframe
 
-# The defaults of the driver, and of the board file's [esc] keys (flightctl/pi.py): one copy.
+# The defaults of the driver, and of the board file's [esc] keys (flightctl/boards/pi.py): one copy.
 FREQUENCY_HZ = Airframe.esc_pwm_hz  # the parameter's default: paper, section 4.4.1 (E600 ESCs: 30..450 Hz)
 STOP_US = 1000              # the ESC stop / arming pulse (zero thrust)
 MAX_US = 2100               # no ESC reads more; well inside the 2227 us period

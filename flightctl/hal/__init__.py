@@ -1,8 +1,8 @@
 """The hardware abstraction layer: one narrow Protocol per device kind.
 
 Backends are siblings: the Pi drivers in `flightctl.drivers` and the simulated devices in
-`flightctl.sim.devices`, wired into a `Hal` only by the boards of the registry `flightctl.boards`
-(`flightctl/pi.py`, `sim/board.py`). The simulated backends sit at the
+`flightctl.sim.world.devices`, wired into a `Hal` only by the boards of the registry `flightctl.boards`
+(`flightctl/boards/pi.py`, `sim/world/board.py`). The simulated backends sit at the
 lowest boundary that can be emulated (SPI register reads, GPIO edges with microsecond ticks, PWM
 counts), so the real drivers' decode and timing code runs in every simulation.
 """

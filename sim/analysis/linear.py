@@ -29,8 +29,8 @@ from flightctl.errors import InputError
 from flightctl.hal import ImuSample
 from flightctl.params import Params
 from flightctl.physics import command_from_thrust
-from flightctl.sim.devices import EARTH_FIELD_T
-from flightctl.sim.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VZ, Z, Model, rotation
+from flightctl.sim.world.devices import EARTH_FIELD_T
+from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VZ, Z, Model, rotation
 
 IMU = ("gx", "gy", "gz", "ax", "ay", "az", "mx", "my", "mz")   # the fields of an ImuSample (SI)
 TRUTH = ("roll", "pitch", "yaw", "alt", "droll", "dpitch", "dyaw")   # what perfect state feedback reads

@@ -32,12 +32,12 @@ from flightctl.errors import InputError
 from flightctl.params import Params
 from flightctl.sim.analysis.linear import IMU, LinearPlant, discrete, impulse_responses, realise, sampled
 from flightctl.drivers.mpu9250 import dlpf_delays
-from flightctl.sim.devices import SimGpio
+from flightctl.sim.world.devices import SimGpio
 
 CHANNELS = ("roll", "pitch", "yaw", "alt")
 MIX = {"alt": (1, 1, 1, 1), "roll": (0, 1, 0, -1), "pitch": (-1, 0, 1, 0), "yaw": (1, -1, 1, -1)}  # eq. 25
 GAIN = {"roll": "phi", "pitch": "theta", "yaw": "psi", "alt": "z"}   # eq. 24 gain names: kp_phi, ...
-SETTLING_BAND = 0.05        # as the simulator's step metrics (flightctl.sim.metrics)
+SETTLING_BAND = 0.05        # as the simulator's step metrics (flightctl.sim.flights.metrics)
 TRIGGER_S = 10e-6           # the HC-SR04 trigger pulse (flightctl.drivers.hcsr04)
 MIN_HORIZON, MAX_HORIZON = 20.0, 120.0   # s, of the step responses
 DRIFT_RATE = 1e-4           # 1/s: a closed-loop mode slower than this (a time constant beyond 2.8 h)
@@ -93,7 +93,7 @@ def to_control(sys, T: float) -> control.StateSpace:
 
 def imu_delays() -> dict[str, float]:
     """s, per IMU field: the time constant of the chip's DLPF stage, the register map's delay of the
-    filter the onboard driver configures (the simulated chip's, sim/devices.py); the magnetometer
+    filter the onboard driver configures (the simulated chip's, sim/world/devices.py); the magnetometer
     has none."""
     g, a = dlpf_delays()
     return {"gx": g, "gy": g, "gz": g, "ax": a, "ay": a, "az": a, "mx": 0.0, "my": 0.0, "mz": 0.0}

@@ -1,5 +1,5 @@
 """The causes: every candidate extension of measured-data.md, one module each, holding side by side
-its plant effect (an `Effect` on the seam of `flightctl.sim.model`) and its diagnose fit (a
+its plant effect (an `Effect` on the seam of `flightctl.sim.world.model`) and its diagnose fit (a
 `Candidate` of `flightctl.sim.identify.diagnose.candidate`).
 
 `CAUSES` maps each name to its `Cause`: the effect class, the candidate class, the parameters with
@@ -20,7 +20,7 @@ from flightctl.errors import InputError
 from flightctl.sim.causes import (actuation_delay, battery_sag, com_offset, ground_effect, linear_yaw_drag,
                                   motor_dynamics, motor_lag, motor_weak, rotor_drag, rotor_inflow)
 from flightctl.sim.identify.diagnose.candidate import Candidate
-from flightctl.sim.model import Effect, Parameter
+from flightctl.sim.world.model import Effect, Parameter
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ import numpy as np
 
 from flightctl.sim.causes.motor_lag import MotorLagFit
 from flightctl.sim.identify.diagnose.candidate import GridCandidate, too_short_to_time
-from flightctl.sim.model import Effect, Parameter
+from flightctl.sim.world.model import Effect, Parameter
 
 
 class ActuationDelay(Effect):

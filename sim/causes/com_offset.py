@@ -8,7 +8,7 @@ import numpy as np
 from flightctl.sim.identify.diagnose.candidate import AffineCandidate
 from flightctl.sim.identify.diagnose.data import Layout
 from flightctl.sim.identify.diagnose.dataset import C
-from flightctl.sim.model import Effect, Parameter
+from flightctl.sim.world.model import Effect, Parameter
 
 
 class ComOffset(Effect):

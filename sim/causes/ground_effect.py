@@ -5,7 +5,7 @@ import numpy as np
 
 from flightctl.sim.identify.diagnose.candidate import GridCandidate
 from flightctl.sim.identify.diagnose.dataset import C
-from flightctl.sim.model import Z, Effect, Parameter
+from flightctl.sim.world.model import Z, Effect, Parameter
 
 GE_MAX_Z = 0.6           # m: ground effect is judged only with airborne time below this
 GE_MIN_S = 1.0           # s of it

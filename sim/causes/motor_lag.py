@@ -6,7 +6,7 @@ import math
 import numpy as np
 
 from flightctl.sim.identify.diagnose.candidate import GridCandidate, too_short_to_time
-from flightctl.sim.model import Effect, Parameter
+from flightctl.sim.world.model import Effect, Parameter
 
 
 class MotorLag(Effect):

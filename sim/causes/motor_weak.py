@@ -7,7 +7,7 @@ from flightctl.errors import InputError
 from flightctl.sim.identify.diagnose.candidate import AffineCandidate, Result, columns_of
 from flightctl.sim.identify.diagnose.dataset import N_BLOCKS, Change
 from flightctl.sim.identify.diagnose.scoring import fitted, heldout, linear_stats, solve
-from flightctl.sim.model import Effect, Parameter
+from flightctl.sim.world.model import Effect, Parameter
 
 
 class MotorWeak(Effect):

@@ -19,7 +19,7 @@ from flightctl.sim.identify.diagnose.candidate import GridCandidate, Result
 from flightctl.sim.identify.diagnose.data import stretches
 from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, Change
 from flightctl.sim.identify.diagnose.scoring import linear_stats, solve
-from flightctl.sim.model import R, Effect, Parameter
+from flightctl.sim.world.model import R, Effect, Parameter
 
 
 def drag_wrench(k: float, yaw: float, u, v, r):

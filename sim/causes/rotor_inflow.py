@@ -42,7 +42,7 @@ import numpy as np
 
 from flightctl.sim.identify.diagnose.candidate import AffineCandidate
 from flightctl.sim.identify.diagnose.dataset import C
-from flightctl.sim.model import P, Q, Effect, Parameter, body_torques
+from flightctl.sim.world.model import P, Q, Effect, Parameter, body_torques
 
 
 def thrust_change(f1, f2, f3, f4, k: float, B: float, l: float, w, p, q):

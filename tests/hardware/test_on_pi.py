@@ -1,7 +1,7 @@
 """On the quadcopter itself: `python -m pytest -m hardware tests/hardware -v` on the Pi, pigpiod running,
 PROPELLERS OFF. Deselected by default (pyproject: -m 'not hardware'); skips itself without
 /dev/spidev0.0 or a reachable pigpiod. Set FLIGHTCTL_BOARD_FILE to use another wiring than the
-shipped flightctl/board_pi.toml.
+shipped flightctl/boards/pi.toml.
 
 No test here spins a motor: the ESC outputs carry the stop pulse or pulses below eq. 26's dead zone
 (h2 = 120, 1048 us). What they check is what the fakes cannot: the real 449 Hz on the pins, pigpiod
@@ -38,14 +38,14 @@ pytestmark = [
 
 @pytest.fixture(scope="module")
 def config():
-    from flightctl.pi import load_board
+    from flightctl.boards.pi import load_board
 
     return load_board(BOARD_FILE)
 
 
 @pytest.fixture
 def pi(config):
-    from flightctl.pi import connect_pigpio
+    from flightctl.boards.pi import connect_pigpio
 
     p = connect_pigpio(config)
     yield p

@@ -12,7 +12,7 @@ import numpy as np
 from flightctl.sim.identify.diagnose.dataset import N_BLOCKS, Change, DataSet
 from flightctl.sim.identify.diagnose.scoring import (Score, Significance, fitted, heldout, heldout_linear,
                                                      linear_stats, solve)
-from flightctl.sim.model import Effect
+from flightctl.sim.world.model import Effect
 
 MIN_TIMING_PERIODS = 1.5  # lag or delay shorter than this many loop periods is not named
 

@@ -356,7 +356,7 @@ def validate(d: Diagnosis, tables: list[Table], a: Airframe, progress=say) -> di
 def _folded(ds: DataSet, causes) -> DataSet:
     """A copy of the data set with `causes` ((cause, parameters)) folded into its base model: those
     that change the rotors' thrusts first, in their order, then those that add to the prediction
-    (computed on the final thrusts), as the plant composes them (`flightctl.sim.model.Effect`)."""
+    (computed on the final thrusts), as the plant composes them (`flightctl.sim.world.model.Effect`)."""
     causes = sorted(causes, key=lambda c: not CAUSES[c[0]].candidate.changes_thrust)
     for cause, parameters in causes:
         ds = copy.copy(ds)

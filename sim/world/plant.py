@@ -4,7 +4,7 @@ The controller holds its commands for one loop period (zero-order hold), so the 
 each period in `substeps` RK4 steps (SUBSTEPS by default) with the input constant across a step. An
 actuation delay d holds the command of d earlier: it changes once per period, d mod dt into it. The
 plant applies, over the period, the two commands' average weighted by the time each holds
-(`delayed`, shared with sim/batch.py): the same impulse, correct to second order in dt at any d
+(`delayed`, shared with sim/sweeps/batch.py): the same impulse, correct to second order in dt at any d
 (exact for a whole number of periods), at the cost of one RK4 step where splitting the period
 would take two. Time is counted
 in integers, loop periods, and computed from them (`t = n dt` plus the offset within one), never
@@ -36,8 +36,8 @@ class Diverged(Exception):
         super().__init__(f"the plant's state is not finite at t = {t:.3f} s")
         self.t = t
 
-from flightctl.sim import compiled
-from flightctl.sim.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Forces, Model, P
+from flightctl.sim.world import compiled
+from flightctl.sim.world.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Forces, Model, P
 
 
 def delayed(before, now, frac: float):
@@ -66,7 +66,7 @@ class Plant:
         self._queue: deque = deque([self.u] * (self._whole + 2), maxlen=self._whole + 2)
         self._forces_at = None                            # (t, x, u) of `_forces`
         self._forces: Forces | None = None
-        # a model with the effects sim/compiled.py carries (the base model's and the as-flown file's)
+        # a model with the effects sim/world/compiled.py carries (the base model's and the as-flown file's)
         # integrates compiled where numba is installed (`compiled.period`: the same functions and scheme
         # as `_rk4`, and the forces at the new state in the same call); the others in plain Python
         laid_out = compiled.layout(model)

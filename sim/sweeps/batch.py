@@ -1,4 +1,4 @@
-"""N vehicles at once: the model of sim/model.py integrated on arrays, flown by a vectorised copy of
+"""N vehicles at once: the model of sim/world/model.py integrated on arrays, flown by a vectorised copy of
 the onboard controller (estimator, the four PIDs of eq. 24, the mixer of eq. 25, eq. 26 inverted to
 PWM counts). For Monte Carlo over the model's ranges and for robust tuning: thousands of vehicles
 per second of wall time where the full onboard path flies one.
@@ -30,10 +30,10 @@ import numpy as np
 from flightctl.control.estimator import ESTIMATORS
 from flightctl.control.mixer import MIN_TILT_COSINE, SCALE
 from flightctl.params import Airframe, Gains, Params
-from flightctl.plan import Plan
+from flightctl.plans.plan import Plan
 from flightctl.safety import CRASH_TILT
-from flightctl.sim.model import N_RIGID, PHI, THETA, Z, Effect, Model, P, Q, R
-from flightctl.sim.plant import delayed
+from flightctl.sim.world.model import N_RIGID, PHI, THETA, Z, Effect, Model, P, Q, R
+from flightctl.sim.world.plant import delayed
 
 TWO_PI = 2.0 * math.pi
 GAINS = ("z", "phi", "theta", "psi")
@@ -172,7 +172,7 @@ class BatchController:
 
 
 class BatchPlant:
-    """`Plant` (sim/plant.py) for N vehicles in the air: fixed-step RK4, `substeps` per loop period,
+    """`Plant` (sim/world/plant.py) for N vehicles in the air: fixed-step RK4, `substeps` per loop period,
     the input held over the period. Vehicles that crash (tilt past CRASH_TILT, below the floor, or a
     state no longer finite) are frozen and marked in `crashed`."""
 
@@ -188,7 +188,7 @@ class BatchPlant:
         self.t = 0.0
         self.crashed = np.zeros(n, dtype=bool)
         self.crash_t = np.full(n, np.nan)
-        # the actuation delay, per vehicle, as the single plant realises it (sim/plant.py `delayed`): a
+        # the actuation delay, per vehicle, as the single plant realises it (sim/world/plant.py `delayed`): a
         # ring of the last whole + 2 inputs, the delayed one and the one before it averaged over the period
         periods = np.broadcast_to(np.asarray(self.model.delay, dtype=float), (n,)) / self.dt
         self._whole = np.floor(periods + 1e-9).astype(int)
@@ -301,7 +301,7 @@ def with_draws(params: Params, draws: dict[tuple[str, str], np.ndarray] | None =
     """The parameter file's effects with some parameters drawn per vehicle: draws maps (cause,
     parameter) to an (N,) array, which the effect then holds in place of its value."""
     from flightctl.sim import causes
-    from flightctl.sim.montecarlo import AIRFRAME
+    from flightctl.sim.sweeps.montecarlo import AIRFRAME
     effects = causes.combined(params, ())
     for (cause, name), values in (draws or {}).items():
         if cause == AIRFRAME:          # the plant's airframe (`drawn_airframe`)
@@ -316,7 +316,7 @@ def with_draws(params: Params, draws: dict[tuple[str, str], np.ndarray] | None =
 def _chunk(job) -> BatchFlight:
     """One worker's share of `simulate`."""
     params, n, draws, gains, plan, start, end, record_every = job
-    from flightctl.sim.montecarlo import drawn_airframe
+    from flightctl.sim.sweeps.montecarlo import drawn_airframe
     plant = BatchPlant(drawn_airframe(params.airframe, draws), with_draws(params, draws), n)
     plan.restart()
     plant.hover(plan.at(start)[3])

@@ -3,7 +3,7 @@ the simulator), `flightctl sim NAME` and the excitation flights of `flightctl di
 
 Take-offs and ordinary altitude changes follow smooth ramps, as a pilot would fly them; the steps of
 figures 13-16 are true steps, as the paper commanded them. The simulator measures the response to
-every step of a plan (`flightctl.sim.scenarios`). Adding a plan: a function returning a `Plan` and
+every step of a plan (`flightctl.sim.flights.scenarios`). Adding a plan: a function returning a `Plan` and
 one line in `PLANS`; tests/test_plan.py holds every named plan to the plan-file limits.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Callable
 
 from flightctl.errors import InputError
-from flightctl.plan import Move, Plan, check_plan, read_plan_file
+from flightctl.plans.plan import Move, Plan, check_plan, read_plan_file
 
 HOVER_ALT = 1.5                              # m
 TAKEOFF = Move(0.0, "alt", HOVER_ALT, 4.0)   # a 4 s raised-cosine ramp
@@ -99,7 +99,7 @@ PLANS: dict[str, Callable[[], Plan]] = {
 
 
 def load_plan(spec: str) -> Plan:
-    """A plan file (`*.toml`, or any existing file; flightctl/plan.py) or the name of a plan above."""
+    """A plan file (`*.toml`, or any existing file; flightctl/plans/plan.py) or the name of a plan above."""
     path = Path(spec)
     if path.suffix == ".toml" or path.exists():
         return read_plan_file(path)

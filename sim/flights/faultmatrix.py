@@ -1,8 +1,8 @@
-"""`flightctl sim faults --json M.json`: fly every fault of flightctl/sim/faults.py in a
+"""`flightctl sim faults --json M.json`: fly every fault of flightctl/sim/world/faults.py in a
 short hover and report, per fault, whether the onboard loop named it (`detected`, `detect_ms` from the
 injection to the loop's first event naming it), what it did (`action`: hold, land or stop, from its
 events), the outcome on the true state (flightctl/safety.py's crash definition, through
-`flightctl.sim.run.judge`) and whether the log reads back whole (`log_intact`).
+`flightctl.sim.flights.run.judge`) and whether the log reads back whole (`log_intact`).
 """
 from __future__ import annotations
 
@@ -14,11 +14,11 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.logfile import read_flight_log
 from flightctl.params import Params
-from flightctl.plan import Move, Plan
+from flightctl.plans.plan import Move, Plan
 from flightctl.sim.progress import Progress
-from flightctl.sim import faults
-from flightctl.sim.run import fly
-from flightctl.sim.scenarios import scenario
+from flightctl.sim.world import faults
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import scenario
 
 FAULT_AFTER_S = 6.0   # s after arming: in a steady hover at 1 m
 

@@ -28,7 +28,7 @@ from flightctl.drivers import mpu9250_regs as reg
 from flightctl.errors import InputError
 
 _GYRO_X = 1 + 8   # byte offset of GYRO_XOUT_H in the burst's reply (after the address byte)
-CELLS = 4         # the simulated 4S pack (sim/power.py)
+CELLS = 4         # the simulated 4S pack (sim/world/power.py)
 
 
 @dataclass

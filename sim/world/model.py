@@ -10,7 +10,7 @@ One signature for the base model and every extension: `Model.f(t, x, u) -> xdot`
 input is `u = (P1, P2, P3, P4, battery_v)`: the command values of eq. 26 and the battery voltage.
 `Model.f` is scalar code (the simulator's inner loop); the functions before it take numpy arrays
 too, so that fits evaluate the same equations on many samples at once. `Model(..., vector=True)`
-evaluates the same `f` on many vehicles at once (sim/batch.py): each entry of `x` and `u` is then an
+evaluates the same `f` on many vehicles at once (sim/sweeps/batch.py): each entry of `x` and `u` is then an
 array over the vehicles, and the effects' hooks, plain arithmetic on their elements, run unchanged. The propeller and yaw-drag
 equations (eq. 6, 26-28) live in `flightctl.physics`, shared with the onboard mixer and the fits.
 """
@@ -55,7 +55,7 @@ def rigid_derivative(vx, vy, vz, sf, cf, st, ct, sp, cp, p, q, r, fx, fy, fz, ta
     """The rigid body's twelve derivatives (the state's order, `Model`): M dv/dt = R (F_ext + sum f z_b)
     - M g z, eq. 7 with eq. 6's yaw drag, and the Z-Y-X Euler-angle kinematics, from the velocity, the
     attitude's sines and cosines (phi, theta, psi), the body rates, and the rotors' body force, torques
-    and Omega (eq. 9). Plain arithmetic on floats or arrays (sim/compiled.py compiles it)."""
+    and Omega (eq. 9). Plain arithmetic on floats or arrays (sim/world/compiled.py compiles it)."""
     # R = Rz(psi) Ry(theta) Rx(phi) applied to the body force (fx, fy, fz)
     up = sf * fy + cf * fz
     bx = ct * fx + st * up
@@ -139,7 +139,7 @@ class Effect:
     required: dict[str, Parameter] = {}
     optional: dict[str, Parameter] = {}
     # parameter -> airframe value whose draw moves the top of its range in proportion (the Monte
-    # Carlo, sim/montecarlo.py: `draw`); the file's range top belongs to the top of that value's range
+    # Carlo, sim/sweeps/montecarlo.py: `draw`); the file's range top belongs to the top of that value's range
     range_scales: dict[str, str] = {}
     n_states = 0
     offset = 0

@@ -28,7 +28,7 @@ from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, th
 from flightctl.sim.causes.motor_dynamics import SPIN, reaction_torque, speed_rate
 from flightctl.sim.causes.rotor_drag import drag_wrench
 from flightctl.sim.causes.rotor_inflow import inflow_wrench
-from flightctl.sim.model import N_RIGID, aggregate, body_velocity, rigid_derivative, rotation_from_trig
+from flightctl.sim.world.model import N_RIGID, aggregate, body_velocity, rigid_derivative, rotation_from_trig
 
 
 @functools.cache
@@ -42,7 +42,7 @@ def enabled() -> bool:
         here = Path(__file__).parent
         compiled_files = [Path(flightctl.physics.__file__), Path(flightctl.drivers.mpu9250_regs.__file__)]
         compiled_files += [here / name for name in ("model.py", "compiled.py", "devices.py")]
-        compiled_files += [here / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
+        compiled_files += [here.parent / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
         digest = hashlib.sha1(b"".join(path.read_bytes() for path in compiled_files)).hexdigest()[:12]
         os.environ.setdefault("NUMBA_CACHE_DIR", str(here / "__pycache__" / f"numba-{digest}"))
     try:
@@ -216,7 +216,7 @@ def _compiled():
     if not enabled():
         return None, None, None
     from flightctl import physics
-    from flightctl.sim import model
+    from flightctl.sim.world import model
     from flightctl.sim.causes import motor_dynamics, rotor_drag, rotor_inflow
     c = compiled_copy
     eq = {name: c(getattr(physics, name)) for name in ("yaw_drag", "rotor_torque", "rotor_speed", "thrust_from_speed")}

@@ -1,4 +1,4 @@
-"""Fly a scenario: the onboard loop against the simulated board (sim/board.py), lock-step,
+"""Fly a scenario: the onboard loop against the simulated board (sim/world/board.py), lock-step,
 writing the contract flight log plus the simulator's true state in `true_*` columns (which diagnose
 never reads), and judge the outcome on the true state with the one definition of a crash
 (flightctl/safety.py)."""
@@ -17,10 +17,10 @@ from flightctl.logfile import MAG_COLUMNS, FlightLogWriter, Table
 from flightctl.loop import FlightLoop, FlightResult
 from flightctl.params import Params, dumps
 from flightctl.safety import LEFT_GROUND_ALT, crash_reason
-from flightctl.sim.board import SIM_CALIBRATE_S, open_board
-from flightctl.sim.devices import SensorNoise, TruthEstimator, TruthRangefinder
-from flightctl.sim.plant import Diverged
-from flightctl.sim.scenarios import Scenario
+from flightctl.sim.world.board import SIM_CALIBRATE_S, open_board
+from flightctl.sim.world.devices import SensorNoise, TruthEstimator, TruthRangefinder
+from flightctl.sim.world.plant import Diverged
+from flightctl.sim.flights.scenarios import Scenario
 
 
 @dataclass
@@ -81,8 +81,8 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
         estimator: str = "flight", telemetry=None, faults=(), plant_airframe=None) -> Flight:
     """`truth=True` is perfect state feedback: the controller sees the true attitude and altitude at
     every loop (the paper's own simulation); otherwise the full onboard path. `telemetry`: a ground
-    station link (flightctl/mavlink.py) the loop streams to and takes commands from. `faults`:
-    `flightctl.sim.faults.Fault`s, applied to the board's devices and the log; their `at` counts
+    station link (flightctl/comms/mavlink.py) the loop streams to and takes commands from. `faults`:
+    `flightctl.sim.world.faults.Fault`s, applied to the board's devices and the log; their `at` counts
     from arming, as the log's time does. `plant_airframe`: the simulated vehicle's airframe where
     it is not the one the controller is given (a Monte Carlo draw)."""
     # With a ground station the simulated world runs in real time, as SITL does: the station's

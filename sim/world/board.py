@@ -19,8 +19,8 @@ from flightctl.drivers.mpu9250 import FROZEN_FRAMES, Mpu9250
 from flightctl.hal import Hal
 from flightctl.params import Params
 from flightctl.sim import causes
-from flightctl.sim.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, World
-from flightctl.sim.power import SimIna219, SimSMBus
+from flightctl.sim.world.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, World
+from flightctl.sim.world.power import SimIna219, SimSMBus
 
 TRUTH_COLUMNS = ("true_x", "true_y", "true_z", "true_roll", "true_pitch", "true_yaw")
 SIM_CALIBRATE_S = 2.0   # s; the paper sat still for 60 s. 900 reads of the simulated gyro's white noise

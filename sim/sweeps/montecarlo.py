@@ -9,12 +9,12 @@ rotor inertia), and flies the scenario with both gain
 sets on that same plant (a paired comparison), through the full onboard path with sensor noise. Per
 gain set it reports the share that flies (leaves the ground and does not crash), lands upright, and
 settles (every bank within 1 degree and turn within 3 degrees of its command from 3 s after the step
-to the next: `flightctl.sim.metrics.settles`, the tests' reading of the paper's facts), the paired count
+to the next: `flightctl.sim.flights.metrics.settles`, the tests' reading of the paper's facts), the paired count
 where one table settles and the other does not, and a map of the outcomes over the first two ranged
 parameters. The paper's facts (both tables fly; Table 6, retuned on the vehicle, settles) become
 probabilities over the plausible model. Flights run in parallel processes, one per core.
 
-`--batch` flies the draws on the batched simulator instead (sim/batch.py: thousands of vehicles at
+`--batch` flies the draws on the batched simulator instead (sim/sweeps/batch.py: thousands of vehicles at
 once, the vectorised copy of the controller, ideal sensors, no floor): from a hover after the
 take-off to the end of the scenario's last attitude step, the same settle criterion; it answers
 whether the control law holds over the ranges, without the estimator's and the sensors' share, and
@@ -74,9 +74,9 @@ def drawn_airframe(airframe, draws: dict, k=None):
 def _fly(job: tuple) -> dict:
     """One flight (in a worker process): job = (params spec, scenario, gain set, draw, seed)."""
     from flightctl.sim import causes
-    from flightctl.sim.metrics import settles
-    from flightctl.sim.run import fly
-    from flightctl.sim.scenarios import SCENARIOS
+    from flightctl.sim.flights.metrics import settles
+    from flightctl.sim.flights.run import fly
+    from flightctl.sim.flights.scenarios import SCENARIOS
     spec, scenario, gains, drawn, seed = job
     params = causes.load_vehicle(spec, GAIN_SETS[gains])
     effects = []
@@ -134,10 +134,10 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
     import numpy as np
 
     from flightctl.sim import causes
-    from flightctl.sim.batch import simulate
-    from flightctl.sim.metrics import settles
-    from flightctl.sim.model import PHI, PSI, THETA
-    from flightctl.sim.scenarios import SCENARIOS
+    from flightctl.sim.sweeps.batch import simulate
+    from flightctl.sim.flights.metrics import settles
+    from flightctl.sim.world.model import PHI, PSI, THETA
+    from flightctl.sim.flights.scenarios import SCENARIOS
     params = causes.load_vehicle(spec)
     spans = ranged(params)
     if not spans:
@@ -164,7 +164,7 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
     paired = {"table6 settles, table4 not": sum(r["table6"]["settles"] and not r["table4"]["settles"] for r in rows),
               "table4 settles, table6 not": sum(r["table4"]["settles"] and not r["table6"]["settles"] for r in rows)}
     return {"scenario": scenario, "params": spec or "reference airframe", "n": n, "seed": seed,
-            "simulator": f"batched simulator (sim/batch.py): ideal sensors, from {start:g} s to {end:g} s after arming",
+            "simulator": f"batched simulator (sim/sweeps/batch.py): ideal sensors, from {start:g} s to {end:g} s after arming",
             "ranges": [{"cause": c, "parameter": name, "lo": lo, "hi": hi} for c, name, lo, hi in spans],
             "share": share, "paired": paired, "draws": rows}
 

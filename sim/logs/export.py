@@ -4,7 +4,7 @@ Flight Review (the format: https://docs.px4.io/main/en/dev_log/ulog_file_format.
 The file: the 16-byte header, the flag bits, then the definitions (formats, information messages
 with the software version, every parameter, subscriptions) and the data messages in time order.
 Topics take PX4's names and fields, so the tools that know PX4 plot them, and PX4's frames:
-body FRD, inertial NED, converted once here (flightctl/frames.py). Timestamps are microseconds since
+body FRD, inertial NED, converted once here (flightctl/comms/frames.py). Timestamps are microseconds since
 the loop started (the log's time plus its calibration time).
 
 | topic | fields | from the CSV |
@@ -33,7 +33,7 @@ import numpy as np
 
 from flightctl import __version__
 from flightctl.errors import InputError, output_file
-from flightctl.frames import euler_ned, pulse_us, quaternion, vector_ned
+from flightctl.comms.frames import euler_ned, pulse_us, quaternion, vector_ned
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe, from_dict
 

@@ -1,14 +1,14 @@
 """The quadcopter's board ("pi" in `flightctl.boards`): the drivers wired from a TOML board file
 (pins, SPI, I2C), behind the HAL.
 
-    board = open_pi_board(params)                    # the shipped flightctl/board_pi.toml
+    board = open_pi_board(params)                    # the shipped flightctl/boards/pi.toml
     board = open_pi_board(params, "my_board.toml")   # its keys replace the shipped file's
 
 The board file has a schema, like the parameters: every key has a type, a unit, a range and a
-description (the dataclasses below). The shipped flightctl/board_pi.toml holds the wiring of the
+description (the dataclasses below). The shipped flightctl/boards/pi.toml holds the wiring of the
 reference quadcopter; a board file given with --board-file replaces the keys it names; a key that
 neither gives takes the schema's default (the ESC timings are the ESC driver's own, drivers/esc.py;
-the battery threshold is every board's, flightctl/boards.py). Every problem is one line naming the key.
+the battery threshold is every board's, flightctl/boards/__init__.py). Every problem is one line naming the key.
 
 The ESC output is started first, so the ESCs see the stop pulse as early as possible; then the IMU
 (wrong chip -> `ImuError`), the sonar and the power monitor. If a device fails, what was opened is
@@ -33,7 +33,7 @@ from flightctl.errors import InputError, number, read_toml
 from flightctl.hal import Hal
 from flightctl.params import Params
 
-DEFAULT_BOARD_FILE = "board_pi.toml"
+DEFAULT_BOARD_FILE = "pi.toml"
 PI_CALIBRATE_S = 60.0          # s sitting still before arming: the paper's 60 s
 RESERVED_PINS = {2: "I2C SDA", 3: "I2C SCL", 7: "SPI CE1", 8: "SPI CE0", 9: "SPI MISO", 10: "SPI MOSI",
                  11: "SPI SCLK", 14: "UART TX", 15: "UART RX"}
@@ -147,8 +147,8 @@ def _read(name: str, data: dict) -> dict[str, dict]:
 
 
 def load_board(path: str | Path | None = None) -> BoardConfig:
-    """Read and check a board file over the shipped flightctl/board_pi.toml (None: the shipped one)."""
-    text = resources.files("flightctl").joinpath(DEFAULT_BOARD_FILE).read_text()
+    """Read and check a board file over the shipped flightctl/boards/pi.toml (None: the shipped one)."""
+    text = resources.files("flightctl.boards").joinpath(DEFAULT_BOARD_FILE).read_text()
     values = _read(DEFAULT_BOARD_FILE, read_toml(DEFAULT_BOARD_FILE, text))
     name = DEFAULT_BOARD_FILE
     if path is not None:

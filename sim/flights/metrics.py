@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flightctl.logfile import Table
-from flightctl.sim.scenarios import Step
+from flightctl.sim.flights.scenarios import Step
 
 TRUE = {"roll": "true_roll", "pitch": "true_pitch", "yaw": "true_yaw", "alt": "true_z"}
 ANGLES = ("roll", "pitch", "yaw")
@@ -107,7 +107,7 @@ def settled_errors(log: Table, steps, t_arm: float) -> list[tuple[str, float]]:
     """Per attitude step: the largest true error (deg) from SETTLE_AFTER_S after the step to the next
     step: the paper's real-flight facts as the tests and the Monte Carlo read them (a step not flown
     that long counts as never settled, inf). The true columns may be (rows, N), N vehicles of the
-    batched simulator (sim/batch.py): each error is then an (N,) array."""
+    batched simulator (sim/sweeps/batch.py): each error is then an (N,) array."""
     t = log["t"] - t_arm
     out = []
     for s in steps:

@@ -4,8 +4,8 @@
     flightctl run --board pi|sim --plan PLAN.toml|NAME [--params P.toml] --log DIR [--calibrate S]
     flightctl run --board pi --stop-motors        (the unit's ExecStopPost)
 
-The board is opened by name through the registry (flightctl/boards.py); a plan is a plan file or a
-named plan (flightctl/plans.py).
+The board is opened by name through the registry (flightctl/boards/__init__.py); a plan is a plan file or a
+named plan (flightctl/plans/__init__.py).
 
 Lifecycle: the board comes up with the ESCs at the stop pulse (disarmed). Pre-arm checks follow,
 each with a named reason: IMU frames good and the vehicle at rest (|a| near g), battery above the
@@ -15,7 +15,7 @@ Then READY=1 to systemd, and the service waits, disarmed, for a plan:
 - `--plan-queue DIR` validates each queued plan, refuses (moved aside with a one-line reason) a bad
   one and a stale one (written before the service started, or older than --plan-max-age), claims the
   oldest good one by renaming it into the log directory (atomic: a plan is flown at most once), flies
-  it, and waits for the next one (flightctl/planqueue.py). A restarted service flies nothing queued
+  it, and waits for the next one (flightctl/service/queue.py). A restarted service flies nothing queued
   before it started: a restart can never re-arm.
 - neither: stays disarmed (stop pulse) until stopped.
 A flight is `FlightLoop`: calibrate sitting still, arm, fly, land, at 450 Hz on the deadline-keeping
@@ -51,10 +51,10 @@ from flightctl.hal import ArmingRefused, Hal, ImuSample
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter
 from flightctl.loop import FlightLoop, FlightResult
 from flightctl.params import Params, dumps, load
-from flightctl.plan import Plan
-from flightctl.planqueue import PLAN_MAX_AGE_S, PlanQueue, check_name, new_path
+from flightctl.plans.plan import Plan
+from flightctl.service.queue import PLAN_MAX_AGE_S, PlanQueue, check_name, new_path
 from flightctl.plans import load_plan
-from flightctl.sdnotify import Notifier
+from flightctl.service.sdnotify import Notifier
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_REFUSED = 0, 1, 2, 3
 PLAN_POLL_S = 0.5
@@ -119,7 +119,7 @@ class Service:
         self.calibrate_s = args.calibrate if args.calibrate is not None else board.calibrate_s
         self.min_battery_v = args.min_battery_v if args.min_battery_v is not None else board.min_battery_v
         self.flights: list[FlightResult] = []
-        self.link = None            # the ground station (flightctl/mavlink.py), with --mavlink
+        self.link = None            # the ground station (flightctl/comms/mavlink.py), with --mavlink
         self.started = time.time()  # plans queued before this are never flown (planqueue.py)
         self.tampered: str | None = None   # what another process did to the ESC output: never arm again
         self._next_output_check = 0.0
@@ -253,7 +253,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="flightctl run", description=__doc__.split("\n\n")[0])
     p.add_argument("--board", default="pi", help=f"the board to fly (default pi): {described()}")
     p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
-    p.add_argument("--board-file", help="pi board wiring (TOML); default: the shipped flightctl/board_pi.toml")
+    p.add_argument("--board-file", help="pi board wiring (TOML); default: the shipped flightctl/boards/pi.toml")
     p.add_argument("--plan", help="a plan TOML file, or a named plan (hover, paper, ...)")
     p.add_argument("--plan-queue", metavar="DIR", help="fly each plan file put into DIR, once, in turn")
     p.add_argument("--log", default=".", metavar="DIR", help="directory for flight logs (default: .)")
@@ -303,7 +303,7 @@ def main(argv: list[str] | None = None) -> int:
     board = link = None
     try:
         if args.mavlink:                        # imported only when asked for (pymavlink is an extra)
-            from flightctl.mavlink import open_link
+            from flightctl.comms.mavlink import open_link
             link = open_link(args.mavlink, params, arm_required=True)
         try:
             board = open_board(params, _options(args))

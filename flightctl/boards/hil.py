@@ -1,5 +1,5 @@
 """The "hil" board: the flight code on the Pi (its real loop, scheduling and wall-clock timing) flying a
-plant simulated on a PC, over the framed link of `flightctl.link` (docs/hil.md).
+plant simulated on a PC, over the framed link of `flightctl.comms.link` (docs/hil.md).
 
     flightctl run --board hil --link serial:/dev/serial0,921600 --plan hover     (on the Pi)
     flightctl hil serve --link serial:/dev/ttyUSB0,921600                        (on the PC)
@@ -29,7 +29,7 @@ import sys
 import threading
 import time
 
-from flightctl import link as lk
+from flightctl.comms import link as lk
 from flightctl.boards import MIN_BATTERY_V, Board, BoardOptions, BoardUnavailable
 from flightctl.clock import SPIN_S, WallClock
 from flightctl.drivers import ina219_regs as ina

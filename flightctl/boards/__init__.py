@@ -34,11 +34,11 @@ class Entry(NamedTuple):
 
 
 BOARDS = {
-    "pi": Entry("flightctl.pi:open_board", "the quadcopter: the drivers wired from the board file",
-                "flightctl.pi:stop_motors", "install the Pi libraries with pip install '.[pi]' in the flightctl checkout"),
-    "sim": Entry("flightctl.sim.board:open_board",
+    "pi": Entry("flightctl.boards.pi:open_board", "the quadcopter: the drivers wired from the board file",
+                "flightctl.boards.pi:stop_motors", "install the Pi libraries with pip install '.[pi]' in the flightctl checkout"),
+    "sim": Entry("flightctl.sim.world.board:open_board",
                  "the simulated quadcopter behind the real IMU and sonar drivers"),
-    "hil": Entry("flightctl.hil_board:open_board", "the flight code flying a plant on a PC over --link (flightctl hil serve)"),
+    "hil": Entry("flightctl.boards.hil:open_board", "the flight code flying a plant on a PC over --link (flightctl hil serve)"),
 }
 
 
@@ -50,7 +50,7 @@ class BoardUnavailable(Exception):
 @dataclass(frozen=True)
 class BoardOptions:
     """What a command may ask of a board; each board uses the fields that concern it."""
-    board_file: str | None = None   # pi: the wiring file (default: the shipped flightctl/board_pi.toml)
+    board_file: str | None = None   # pi: the wiring file (default: the shipped flightctl/boards/pi.toml)
     seed: int = 0                   # sim: the sensor-noise seed
     realtime: bool = False          # sim: pace the world by the wall clock (flightctl run) instead of lock-step
     effects: tuple = ()             # sim: extensions of the plant (flightctl.sim.causes)
@@ -58,7 +58,7 @@ class BoardOptions:
     substeps: int | None = None     # sim: plant integration steps per loop period (None: the plant's SUBSTEPS)
     airframe: object = None         # sim: the plant's airframe where it is not the parameter file's
     devices: dict = field(default_factory=dict)   # pi: devices to use instead of opening them (pi, spi, smbus)
-    link: str | None = None         # hil: serial:PATH[,BAUD] or tcp:[HOST:]PORT (flightctl.link)
+    link: str | None = None         # hil: serial:PATH[,BAUD] or tcp:[HOST:]PORT (flightctl.comms.link)
 
 
 @dataclass

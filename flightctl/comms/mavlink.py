@@ -13,7 +13,7 @@ here touches the network in the loop's thread: `tick` keeps a snapshot every STR
 a bounded queue; one I/O thread sends the stream and answers the commands. A lost link therefore
 never slows or stops the loop: the plan goes on (and a send that fails is counted, not raised).
 
-Stream (frames converted here only, flightctl/frames.py: ours NWU/FLU, MAVLink NED/FRD):
+Stream (frames converted here only, flightctl/comms/frames.py: ours NWU/FLU, MAVLink NED/FRD):
 HEARTBEAT (quadrotor, armed flag, custom_mode = MODES) and SYS_STATUS and BATTERY_STATUS at 1 Hz;
 ATTITUDE, LOCAL_POSITION_NED (z only: x, y and the speeds are NaN, not estimated), SERVO_OUTPUT_RAW
 (ESC pulse, us) at loop_hz / STREAM_EVERY = 50 Hz; DISTANCE_SENSOR on each new sonar echo (at most
@@ -38,7 +38,7 @@ import threading
 import time
 
 from flightctl.errors import InputError
-from flightctl.frames import euler_ned, pulse_us, vector_ned
+from flightctl.comms.frames import euler_ned, pulse_us, vector_ned
 from flightctl.hal import PWM_RANGE
 from flightctl.params import Params
 

@@ -27,7 +27,7 @@ from flightctl.plans import HOVER_ALT
 from flightctl.sim import causes
 from flightctl.sim.analysis.linear import LinearPlant, linearise
 from flightctl.sim.analysis.loops import CHANNELS, Loop, build, hover_responses
-from flightctl.sim.model import Model
+from flightctl.sim.world.model import Model
 
 DEFAULT_ESTIMATOR = inspect.signature(FlightController).parameters["structure"].default   # what flies
 TRUTH = "truth"
@@ -45,7 +45,7 @@ def analyse(params: Params, effects=(), estimators=(TRUTH, DEFAULT_ESTIMATOR), a
             horizon: float | None = None, channels=CHANNELS) -> Analysis:
     """Every loop for each estimator: 'truth' (perfect state feedback), a name of ESTIMATORS, or a
     function making an estimator from the parameters. The model carries the parameter file's
-    effects and then `effects`, as the simulated board builds it (`flightctl.sim.board`), so that
+    effects and then `effects`, as the simulated board builds it (`flightctl.sim.world.board`), so that
     their terms and states are in the linearisation."""
     a = params.airframe
     effects = causes.combined(params, effects)

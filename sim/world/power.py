@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from flightctl.drivers import ina219_regs as ina
 
 if TYPE_CHECKING:
-    from flightctl.sim.devices import World
+    from flightctl.sim.world.devices import World
 
 
 class SimBattery:

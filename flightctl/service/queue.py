@@ -3,7 +3,7 @@
 A plan file dropped into the queue is looked at only once it is PLAN_SETTLE_S old (a copy in
 progress is not read half-written). Then, in order of age, each plan is:
 - checked before anything else: a regular file (a named pipe, a device or a link is never opened,
-  so nothing can hang the service), read and validated by the plan reader (flightctl/plan.py), its
+  so nothing can hang the service), read and validated by the plan reader (flightctl/plans/plan.py), its
   name usable as part of a log file name; any failure of the reader, whatever it raises, is one line;
 - refused when stale: written before this service started (queued while it was down: "a restart can
   never re-arm" holds for any queue), or older than `max_age_s` (a plan that could not be claimed in
@@ -24,7 +24,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from flightctl.errors import InputError
-from flightctl.plan import Plan, read_plan_file
+from flightctl.plans.plan import Plan, read_plan_file
 
 PLAN_SETTLE_S = 0.5          # a plan file must be this old before it is looked at (a copy in progress)
 PLAN_MAX_AGE_S = 60.0        # default: a plan not claimed within this time of being written is refused

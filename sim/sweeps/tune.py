@@ -23,9 +23,9 @@ the paper's own simulation setting; the tuned gains are then flown through the n
 `--robust N`: the procedure's gains are a point answer on one model; the parameter file's ranges
 (`range.NAME = [lo, hi]`, `--params paper-as-flown`) say the model is not known that well. The robust
 mode takes N draws of those ranges and flies the scenario's attitude steps on the batched simulator
-(sim/batch.py, the Monte Carlo's `--batch` setting) with the roll and pitch gains scaled, kp and kd
+(sim/sweeps/batch.py, the Monte Carlo's `--batch` setting) with the roll and pitch gains scaled, kp and kd
 each by a factor on a grid, every candidate on the same draws; the candidate that flies and settles
-(`flightctl.sim.metrics.settles`) in the largest share of the draws wins, a second, finer grid around
+(`flightctl.sim.flights.metrics.settles`) in the largest share of the draws wins, a second, finer grid around
 it refines it, and the altitude and yaw gains stay the procedure's. Among candidates that tie, the
 least change from the procedure's gains wins (the factors nearest 1). Table 4 and Table 6 are flown on
 the same draws beside them.
@@ -57,7 +57,7 @@ ITERATIONS = 30                 # bisection steps: 100 / 2^30, far below the gai
 
 def _response(params, gains: Gains, channel: str):
     """(t, y): the unit step response of `channel` with perfect state feedback over SETTLE_S."""
-    from flightctl.sim.analyze import TRUTH, analyse
+    from flightctl.sim.analysis.cli import TRUTH, analyse
     with np.errstate(over="ignore", invalid="ignore"):      # a loop with kd = 0 may grow without bound
         an = analyse(dataclasses.replace(params, gains=gains), (), estimators=(TRUTH,), channels=(channel,),
                      horizon=SETTLE_S)
@@ -150,11 +150,11 @@ def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str
     batched simulator (every candidate on the same draws)."""
     import os
 
-    from flightctl.sim.batch import simulate
-    from flightctl.sim.metrics import settles
-    from flightctl.sim.model import PHI, PSI, THETA
-    from flightctl.sim.montecarlo import _batch_window, draw, ranged
-    from flightctl.sim.scenarios import SCENARIOS
+    from flightctl.sim.sweeps.batch import simulate
+    from flightctl.sim.flights.metrics import settles
+    from flightctl.sim.world.model import PHI, PSI, THETA
+    from flightctl.sim.sweeps.montecarlo import _batch_window, draw, ranged
+    from flightctl.sim.flights.scenarios import SCENARIOS
     spans = ranged(params)
     if not spans:
         raise InputError("--robust: the parameter file carries no ranges (range.NAME = [lo, hi]; "
@@ -231,10 +231,10 @@ def plot(params, gains: Gains, path) -> None:
     the step of each channel (figures 13-16)."""
     import tempfile
 
-    from flightctl.sim.metrics import TRUE
+    from flightctl.sim.flights.metrics import TRUE
     from flightctl.sim.plots import figure, legend, save
-    from flightctl.sim.run import fly
-    from flightctl.sim.scenarios import SCENARIOS
+    from flightctl.sim.flights.run import fly
+    from flightctl.sim.flights.scenarios import SCENARIOS
     fig, ax = figure(2, 2, size=(11.0, 7.5))
     with tempfile.TemporaryDirectory() as tmp:
         for a, ch, sc_name in zip(ax.ravel(), ORDER, ("step_alt", "step_roll", "step_pitch", "step_yaw")):
@@ -257,7 +257,7 @@ def plot(params, gains: Gains, path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     from flightctl.sim import causes
-    from flightctl.sim.montecarlo import ranged
+    from flightctl.sim.sweeps.montecarlo import ranged
     p = argparse.ArgumentParser(prog="flightctl tune", description=__doc__.split("\n\n")[0].replace("\n", " "))
     p.add_argument("--params", help="parameter file or shipped vehicle (default: the reference airframe)")
     p.add_argument("--out", required=True, metavar="GAINS.toml", help="the parameter file to write, with the tuned [gains]")
@@ -273,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.robust is not None and not 1 <= args.robust <= 10000:
         raise InputError(f"--robust {args.robust}: between 1 and 10000 draws")
-    from flightctl.sim.scenarios import SCENARIOS
+    from flightctl.sim.flights.scenarios import SCENARIOS
     if args.scenario not in SCENARIOS:
         raise InputError(f"--scenario {args.scenario}: not a named scenario ({', '.join(sorted(SCENARIOS))})")
     out = output_file(args.out, "--out", ".toml")

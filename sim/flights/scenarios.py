@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from flightctl.plan import Plan
+from flightctl.plans.plan import Plan
 from flightctl.plans import PLANS
 
 

@@ -6,7 +6,7 @@
 - `SimGpio`: the pigpio calls the HC-SR04 driver makes, producing echo edges with 32-bit microsecond
   ticks (which wrap) and watchdog timeouts;
 - `SimMotors`: takes PWM counts on the 0..40000 range;
-- `SimBattery`, `SimIna219` on a `SimSMBus` (in `flightctl.sim.power`): a discharging 4S LiPo and the
+- `SimBattery`, `SimIna219` on a `SimSMBus` (in `flightctl.sim.world.power`): a discharging 4S LiPo and the
   power monitor's registers behind the smbus2 calls of the INA219 driver;
 - `SimClock`: lock-step: waiting for the next tick advances the world by one loop period.
 
@@ -28,9 +28,9 @@ from flightctl.drivers.hcsr04 import US_PER_M
 from flightctl.hal import LEVEL_TIMEOUT, PWM_RANGE
 from flightctl.params import Airframe
 from flightctl.physics import G
-from flightctl.sim.model import Effect, Model, euler_rates, rotation
-from flightctl.sim.plant import SUBSTEPS, Plant
-from flightctl.sim.power import SimBattery
+from flightctl.sim.world.model import Effect, Model, euler_rates, rotation
+from flightctl.sim.world.plant import SUBSTEPS, Plant
+from flightctl.sim.world.power import SimBattery
 
 EARTH_FIELD_T = (20e-6, 0.0, -40e-6)  # North, West, Up: a mid-latitude field, dipping down
 
@@ -391,8 +391,8 @@ def put16(regs, at: int, v: float) -> None:
 
 @functools.cache
 def chip_frame_compiled():
-    """`chip_frame` compiled (sim/compiled.py), or None."""
-    from flightctl.sim import compiled
+    """`chip_frame` compiled (sim/world/compiled.py), or None."""
+    from flightctl.sim.world import compiled
     if not compiled.enabled():
         return None
     c = compiled.compiled_copy
