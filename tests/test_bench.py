@@ -177,7 +177,7 @@ def test_a_step_that_does_not_settle_in_time_stops(monkeypatch, tmp_path, capsys
 
 def test_an_unknown_board_or_a_pi_board_that_is_not_there_is_one_line(tmp_path, capsys):
     assert cli(["bench", "--board", "bench9", "--motor", "1", "--steps", "150"]) == 2
-    assert capsys.readouterr().err.strip() == "flightctl bench: error: unknown board 'bench9' (known: pi, sim, hil)"
+    assert capsys.readouterr().err.strip() == "flightctl bench: error: unknown board 'bench9' (known: pi, pi5, auto, sim, hil)"
     board = tmp_path / "board.toml"
     board.write_text("[pigpio]\nport = 1\n")              # nothing listens on port 1
     out = tmp_path / "b.csv"

@@ -48,7 +48,7 @@ def test_a_board_is_one_module_and_one_registry_line(monkeypatch):
 
 
 def test_unknown_boards_and_missing_libraries_are_one_line(monkeypatch):
-    with pytest.raises(InputError, match=r"^unknown board 'toy2' \(known: pi, sim, hil\)$"):
+    with pytest.raises(InputError, match=r"^unknown board 'toy2' \(known: pi, pi5, auto, sim, hil\)$"):
         open_board("toy2", load(None))
     monkeypatch.setitem(BOARDS, "toy3", Entry("toy3_driver_library:open", "needs a library", None, "pip install toy3"))
     with pytest.raises(BoardUnavailable, match=r"needs the Python module 'toy3_driver_library', which is not "

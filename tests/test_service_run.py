@@ -223,7 +223,7 @@ def test_the_pi_board_without_pigpiod_exits_3_with_one_line(tmp_path, caplog):
 def test_an_unknown_board_or_a_bad_board_file_is_one_line(tmp_path, capsys):
     assert cli(["run", "--board", "hil9", "--plan", "hover"]) == 2
     assert capsys.readouterr().err.strip().splitlines() == [
-        "flightctl run: error: unknown board 'hil9' (known: pi, sim, hil)"]
+        "flightctl run: error: unknown board 'hil9' (known: pi, pi5, auto, sim, hil)"]
     board = tmp_path / "board.toml"
     board.write_text("[esc]\ndeadman_ms = 5000\n")
     assert cli(["run", "--board", "pi", "--board-file", str(board), "--plan", "hover", "--log", str(tmp_path)]) == 2

@@ -34,8 +34,12 @@ class Entry(NamedTuple):
 
 
 BOARDS = {
-    "pi": Entry("flightctl.boards.pi:open_board", "the quadcopter: the drivers wired from the board file",
-                "flightctl.boards.pi:stop_motors", "install the Pi libraries with pip install '.[pi]' in the flightctl checkout"),
+    "pi": Entry("flightctl.boards.detect:open_pi", "the quadcopter on a Raspberry Pi 3/4 (pigpio): the drivers wired from the board file",
+                "flightctl.boards.detect:stop_pi", "install the Pi libraries with pip install '.[pi]' in the flightctl checkout"),
+    "pi5": Entry("flightctl.boards.pi5:open_board", "the quadcopter on a Raspberry Pi 5 (the kernel's PWM and GPIO)",
+                 "flightctl.boards.pi5:stop_motors", "install the Pi 5 libraries with pip install '.[pi5]' in the flightctl checkout"),
+    "auto": Entry("flightctl.boards.detect:open_auto", "pi5 on a Raspberry Pi 5, pi on any other (/proc/device-tree/model)",
+                  "flightctl.boards.detect:stop_auto"),
     "sim": Entry("flightctl.sim.world.board:open_board",
                  "the simulated quadcopter behind the real IMU and sonar drivers"),
     "hil": Entry("flightctl.boards.hil:open_board", "the flight code flying a plant on a PC over --link (flightctl hil serve)"),
@@ -50,14 +54,14 @@ class BoardUnavailable(Exception):
 @dataclass(frozen=True)
 class BoardOptions:
     """What a command may ask of a board; each board uses the fields that concern it."""
-    board_file: str | None = None   # pi: the wiring file (default: the shipped flightctl/boards/pi.toml)
+    board_file: str | None = None   # pi, pi5: the wiring file (default: the shipped flightctl/boards/pi.toml, pi5.toml)
     seed: int = 0                   # sim: the sensor-noise seed
     realtime: bool = False          # sim: pace the world by the wall clock (flightctl run) instead of lock-step
     effects: tuple = ()             # sim: extensions of the plant (flightctl.sim.causes)
     noise: object = None            # sim: a SensorNoise; None: the default noise
     substeps: int | None = None     # sim: plant integration steps per loop period (None: the plant's SUBSTEPS)
     airframe: object = None         # sim: the plant's airframe where it is not the parameter file's
-    devices: dict = field(default_factory=dict)   # pi: devices to use instead of opening them (pi, spi, smbus)
+    devices: dict = field(default_factory=dict)   # pi, pi5: devices to use instead of opening them (the tests' fakes)
     link: str | None = None         # hil: serial:PATH[,BAUD] or tcp:[HOST:]PORT (flightctl.comms.link)
 
 

@@ -62,28 +62,20 @@ from typing import Callable, Sequence
 
 import pigpio
 
+from flightctl.drivers.pulses import (DEADMAN_MS, FREQUENCY_HZ, MAX_US, OUTPUT_CHECK_S, REFRESH_S, STOP_US,  # noqa: F401
+                                      EscError, on_time_us)
 from flightctl.hal import PWM_RANGE, ArmingRefused
-from flightctl.params import Airframe
 
-# The defaults of the driver, and of the board file's [esc] keys (flightctl/boards/pi.py): one copy.
-FREQUENCY_HZ = Airframe.esc_pwm_hz  # the parameter's default: paper, section 4.4.1 (E600 ESCs: 30..450 Hz)
-STOP_US = 1000              # the ESC stop / arming pulse (zero thrust)
-MAX_US = 2100               # no ESC reads more; well inside the 2227 us period
-DEADMAN_MS = 100            # motors stop this long after the last write (0: no dead-man)
+# The defaults of the driver, and of the board file's [esc] keys (flightctl/boards/pi.py): the ESC
+# signal's own in drivers/pulses.py (both Pi boards), pigpio's here.
 DEADMAN_TICK_MS = 10        # the script's countdown step
-REFRESH_S = 0.02            # how often write() re-arms the countdown
 FREQUENCY_TOLERANCE_HZ = 0.5
 WIDTH_TOLERANCE_US = 12.0   # pigpio samples edges every 5 us by default
 MEASURE_S = 0.15            # ~67 periods per pin
 MIN_PERIODS = 10
 STUCK_S = 0.05              # a wave sent this long ago and still not on the pins: output stuck
-OUTPUT_CHECK_S = 0.1        # in flight, write() reads back which wave pigpiod transmits this often
 CHECK_MEASURE_S = 0.03      # disarmed read-back: edges measured this long (~13 periods per pin)
 SCRIPT_SLOTS = 32           # pigpiod's script table
-
-
-class EscError(Exception):
-    """pigpiod refused or lost the ESC output."""
 
 
 def period_us(frequency_hz: float) -> int:
@@ -194,7 +186,7 @@ class PigpioEsc:
 
     def write(self, counts: list[int]) -> None:
         k, lo, hi = self._us_per_count, self.stop_us, self.max_us
-        on = [min(max(int(c * k + 0.5), lo), hi) for c in counts]
+        on = [on_time_us(c, k, lo, hi) for c in counts]
         if on != self._on:
             self._send(on)
         now = self._clock()

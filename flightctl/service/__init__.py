@@ -1,11 +1,12 @@
 """`flightctl run`: the onboard service (systemd/flightctl.service runs it on the quadcopter).
 
-    flightctl run --board pi  [--board-file B.toml] [--params P.toml] --plan-queue DIR --log DIR
-    flightctl run --board pi|sim --plan PLAN.toml|NAME [--params P.toml] --log DIR [--calibrate S]
-    flightctl run --board pi --stop-motors        (the unit's ExecStopPost)
+    flightctl run [--board auto|pi|pi5] [--board-file B.toml] [--params P.toml] --plan-queue DIR --log DIR
+    flightctl run --board pi|pi5|sim --plan PLAN.toml|NAME [--params P.toml] --log DIR [--calibrate S]
+    flightctl run --board auto --stop-motors        (the unit's ExecStopPost)
 
-The board is opened by name through the registry (flightctl/boards/__init__.py); a plan is a plan file or a
-named plan (flightctl/plans/__init__.py).
+The board is opened by name through the registry (flightctl/boards/__init__.py; `auto`, the default, is
+`pi5` on a Raspberry Pi 5 and `pi` elsewhere); a plan is a plan file or a named plan
+(flightctl/plans/__init__.py).
 
 Lifecycle: the board comes up with the ESCs at the stop pulse (disarmed). Pre-arm checks follow,
 each with a named reason: IMU frames good and the vehicle at rest (|a| near g), battery above the
@@ -125,8 +126,8 @@ class Service:
         self._next_output_check = 0.0
 
     def watch_output(self) -> None:
-        """While disarmed: read the ESC output back (boards whose motors can, i.e. the Pi's pigpio
-        driver); if another process changed it, put the stop pulse back, say so, and refuse to arm
+        """While disarmed: read the ESC output back (boards whose motors can: both Pi boards' ESC
+        drivers); if another process changed it, put the stop pulse back, say so, and refuse to arm
         until the service is restarted by hand."""
         check = getattr(self.board.hal.motors, "check_output", None)
         now = time.monotonic()
@@ -234,10 +235,10 @@ class Service:
         return result
 
 
-def stop_motors_main(args, params: Params) -> int:
-    """The stop pulse on every ESC, whatever the last controller left in pigpiod (ExecStopPost)."""
+def stop_motors_main(args, params: Params, devices: dict | None = None) -> int:
+    """The stop pulse on every ESC, whatever the last controller left on them (ExecStopPost)."""
     try:
-        done = stop_motors(args.board, params, _options(args))
+        done = stop_motors(args.board, params, _options(args, devices))
     except BoardUnavailable as e:
         log.error("stop-motors: %s", e)
         return EXIT_ERROR
@@ -245,15 +246,17 @@ def stop_motors_main(args, params: Params) -> int:
     return EXIT_OK
 
 
-def _options(args) -> BoardOptions:
-    return BoardOptions(board_file=args.board_file, seed=args.seed, realtime=True, link=args.link)
+def _options(args, devices: dict | None = None) -> BoardOptions:
+    return BoardOptions(board_file=args.board_file, seed=args.seed, realtime=True, link=args.link,
+                        devices=devices or {})
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="flightctl run", description=__doc__.split("\n\n")[0])
-    p.add_argument("--board", default="pi", help=f"the board to fly (default pi): {described()}")
+    p.add_argument("--board", default="auto", help=f"the board to fly (default auto): {described()}")
     p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
-    p.add_argument("--board-file", help="pi board wiring (TOML); default: the shipped flightctl/boards/pi.toml")
+    p.add_argument("--board-file", help="pi or pi5 board wiring (TOML); default: the shipped "
+                                        "flightctl/boards/pi.toml or pi5.toml")
     p.add_argument("--plan", help="a plan TOML file, or a named plan (hover, paper, ...)")
     p.add_argument("--plan-queue", metavar="DIR", help="fly each plan file put into DIR, once, in turn")
     p.add_argument("--log", default=".", metavar="DIR", help="directory for flight logs (default: .)")
@@ -278,13 +281,14 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     return args
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, devices: dict | None = None) -> int:
+    """`devices`: what the board uses instead of opening its own (BoardOptions.devices; the tests' fakes)."""
     args = parse_args(list(sys.argv[1:] if argv is None else argv))
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="flightctl run: %(message)s", stream=sys.stderr)
     params = load(args.params)
     if args.stop_motors:
-        return stop_motors_main(args, params)
+        return stop_motors_main(args, params, devices)
     plan = check_name(load_plan(args.plan), args.plan) if args.plan else None
     try:
         open_board = opener(args.board)         # an unknown board is an InputError (exit 2)
@@ -306,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
             from flightctl.comms.mavlink import open_link
             link = open_link(args.mavlink, params, arm_required=True)
         try:
-            board = open_board(params, _options(args))
+            board = open_board(params, _options(args, devices))
         except BoardUnavailable as e:
             log.error("not flying: %s", e)
             return EXIT_REFUSED

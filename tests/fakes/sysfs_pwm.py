@@ -1,0 +1,209 @@
+"""A fake of the kernel's sysfs PWM interface (/sys/class/pwm) for the Pi 5's ESC driver
+(flightctl/drivers/pwm_sysfs.py), FUSE-free: a real directory laid out as the kernel lays it out, and
+the kernel's rules enforced on the system calls that reach it through this object (`open`, `pwrite`,
+`pread`, `close`: the `fs` the driver is given), as the kernel enforces them in its sysfs store functions.
+
+The tree (as on a Raspberry Pi 5 with the PWM overlay, kernel 6.6):
+
+    BASE/sys/devices/platform/axi/1000120000.pcie/1f00098000.pwm/pwm/pwmchip2/{export,unexport,npwm,device}
+    BASE/sys/class/pwm/pwmchip2 -> ../../devices/.../1f00098000.pwm/pwm/pwmchip2
+    ...pwmchip2/pwm0/{period,duty_cycle,enable,polarity}   (after `echo 0 > export`)
+
+The rules (drivers/pwm/sysfs.c and core.c of 6.6):
+- export: a number (EINVAL otherwise), below npwm (ENODEV), a channel not already exported or held by a
+  kernel driver (EBUSY; the fan's channel 3 of the second RP1 chip is `cooling_fan`'s); creates pwmC/
+  with period 0, duty_cycle 0, enable 0, polarity normal. unexport: ENODEV unless exported; removes it.
+- period, duty_cycle (ns, unsigned), enable (0 or 1), polarity (normal or inversed): each write applies
+  the whole state, which must have period > 0 and duty_cycle <= period (EINVAL otherwise, and the state
+  stays as it was): so a duty cycle before a period is EINVAL, as is enabling a channel with no period.
+  Later kernels (6.11 on) accept any state while disabled; the stricter rule is the one modelled.
+- a write stores the value the kernel would show (`%d\\n`); reads show it. What a channel outputs is
+  `output(chip, channel)`: the RP1's 50 MHz clock rounds period and duty to 20 ns.
+
+What it does not model: udev's permission change after an export (the files are writable at once),
+the RP1 latching a new duty at the end of the running period (the world reads the latest value), a
+write from another process that bypasses this object (the dead-man process writes the real files with
+`os.pwrite`, unchecked; it writes only the stop pulse, a valid value), and the kernel's own locking
+beyond one lock for the whole tree. An "other process" in the tests writes through this same object.
+"""
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+import threading
+from pathlib import Path
+
+RP1_PWM0, RP1_PWM1 = "1f00098000.pwm", "1f0009c000.pwm"
+PARENT = "sys/devices/platform/axi/1000120000.pcie"
+CLOCK_NS = 20       # the RP1's PWM clock: 50 MHz
+
+
+class FakePwmSysfs:
+    def __init__(self, base: Path, chips: dict[int, tuple[str, int]] | None = None,
+                 kernel_held: dict[tuple[str, int], str] | None = None):
+        """`chips`: pwmchip number -> (device, npwm); the default is a 6.6 kernel's numbering, the RP1's
+        PWM0 at pwmchip2 and PWM1 (the fan's) at pwmchip6. `kernel_held`: (device, channel) -> the kernel
+        consumer holding it."""
+        self.base = Path(base)
+        self.root = self.base / "sys" / "class" / "pwm"
+        self.chips = chips if chips is not None else {2: (RP1_PWM0, 4), 6: (RP1_PWM1, 4)}
+        self.kernel_held = kernel_held if kernel_held is not None else {(RP1_PWM1, 3): "cooling_fan"}
+        self.lock = threading.RLock()
+        self._paths: dict[int, Path] = {}     # open fd -> path
+        self._files: dict[Path, int] = {}     # the kernel's own handle on each channel attribute
+        self.root.mkdir(parents=True, exist_ok=True)
+        self.dirs: dict[str, Path] = {}
+        for n, (device, npwm) in self.chips.items():
+            dev = self.base / PARENT / device
+            chip = dev / "pwm" / f"pwmchip{n}"
+            chip.mkdir(parents=True)
+            (chip / "npwm").write_text(f"{npwm}\n")
+            for name in ("export", "unexport"):
+                (chip / name).write_text("")
+            (chip / "device").symlink_to(os.path.relpath(dev, chip))
+            (self.root / f"pwmchip{n}").symlink_to(os.path.relpath(chip, self.root))
+            self.dirs[device] = chip
+        self.stores: list[tuple[str, str, str]] = []     # (path relative to the root, value, errno name or "")
+
+    # --- the system calls ------------------------------------------------------------------------
+    def open(self, path, flags: int, mode: int = 0o777) -> int:
+        p = Path(os.path.realpath(path))
+        if not p.exists():
+            raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), str(path))
+        fd = os.open(p, flags & ~os.O_CREAT & ~os.O_TRUNC)
+        with self.lock:
+            self._paths[fd] = p
+        return fd
+
+    def close(self, fd: int) -> None:
+        with self.lock:
+            self._paths.pop(fd, None)
+        os.close(fd)
+
+    def pread(self, fd: int, n: int, offset: int) -> bytes:
+        with self.lock:
+            p = self._paths[fd]
+            if not p.exists():
+                raise OSError(errno.ENODEV, os.strerror(errno.ENODEV), str(p))     # its channel was unexported
+            return os.pread(fd, n, offset)
+
+    def pwrite(self, fd: int, data: bytes, offset: int) -> int:
+        """A sysfs store: the whole buffer, whatever the offset (sysfs ignores it)."""
+        with self.lock:
+            p = self._paths[fd]
+            try:
+                self._store(p, bytes(data).decode(errors="replace"))
+            except OSError as e:
+                self.stores.append((self._rel(p), bytes(data).decode(errors="replace").strip(), errno.errorcode[e.errno]))
+                raise
+            self.stores.append((self._rel(p), bytes(data).decode(errors="replace").strip(), ""))
+            return len(data)
+
+    def write(self, path, value: str) -> None:
+        """What `echo VALUE > PATH` does in another process: through the same kernel."""
+        fd = self.open(path, os.O_WRONLY)
+        try:
+            self.pwrite(fd, value.encode(), 0)
+        finally:
+            self.close(fd)
+
+    # --- the kernel's store functions ------------------------------------------------------------
+    def _rel(self, p: Path) -> str:
+        return str(p).split("/pwm/", 1)[-1]
+
+    @staticmethod
+    def _fail(code: int, p: Path):
+        raise OSError(code, os.strerror(code), str(p))
+
+    def _chip_of(self, p: Path) -> tuple[Path, str, int]:
+        chip = p.parent if p.parent.name.startswith("pwmchip") else p.parent.parent
+        device = os.path.basename(os.path.realpath(chip / "device"))
+        return chip, device, int((chip / "npwm").read_text())
+
+    def _store(self, p: Path, text: str) -> None:
+        if not p.exists():
+            self._fail(errno.ENODEV, p)
+        name = p.name
+        if name in ("export", "unexport"):
+            chip, device, npwm = self._chip_of(p)
+            try:
+                c = int(text.strip(), 0)
+            except ValueError:
+                self._fail(errno.EINVAL, p)
+            if not 0 <= c < npwm:
+                self._fail(errno.ENODEV, p)
+            d = chip / f"pwm{c}"
+            if name == "export":
+                if d.exists() or (device, c) in self.kernel_held:
+                    self._fail(errno.EBUSY, p)
+                d.mkdir()
+                for f, v in (("period", "0"), ("duty_cycle", "0"), ("enable", "0"), ("polarity", "normal")):
+                    self._files[d / f] = os.open(d / f, os.O_RDWR | os.O_CREAT, 0o660)
+                    self._put(d / f, v)
+            else:
+                if not d.exists():
+                    self._fail(errno.ENODEV, p)
+                for f in ("period", "duty_cycle", "enable", "polarity"):
+                    os.close(self._files.pop(d / f))
+                shutil.rmtree(d)
+            return
+        if name not in ("period", "duty_cycle", "enable", "polarity"):
+            self._fail(errno.EIO, p)            # a read-only attribute (npwm): no store function
+        state = self._state(p.parent)
+        value = text.strip()
+        if name == "polarity":
+            if value not in ("normal", "inversed"):
+                self._fail(errno.EINVAL, p)
+            state[name] = value
+        else:
+            try:
+                v = int(value, 0)
+            except ValueError:
+                self._fail(errno.EINVAL, p)
+            if v < 0 or (name == "enable" and v not in (0, 1)):
+                self._fail(errno.EINVAL, p)
+            state[name] = v
+        if state["period"] <= 0 or state["duty_cycle"] > state["period"]:      # pwm_apply_state()
+            self._fail(errno.EINVAL, p)
+        self._put(p, str(state[name]))
+
+    def _put(self, p: Path, value: str) -> None:
+        fd, data = self._files[p], (value + "\n").encode()
+        os.pwrite(fd, data, 0)
+        os.ftruncate(fd, len(data))
+
+    def _state(self, channel: Path) -> dict:
+        s = {f: os.pread(self._files[channel / f], 64, 0).decode().strip()
+             for f in ("period", "duty_cycle", "enable", "polarity")}
+        return {"period": int(s["period"]), "duty_cycle": int(s["duty_cycle"]), "enable": int(s["enable"]),
+                "polarity": s["polarity"]}
+
+    # --- test-facing views -----------------------------------------------------------------------
+    def channel(self, device: str, c: int) -> Path:
+        return self.dirs[device] / f"pwm{c}"
+
+    def exported(self, device: str = RP1_PWM0) -> list[int]:
+        return sorted(int(d.name[3:]) for d in self.dirs[device].iterdir() if d.name.startswith("pwm") and d.is_dir())
+
+    def state(self, device: str, c: int) -> dict | None:
+        d = self.channel(device, c)
+        with self.lock:
+            return self._state(d) if d.exists() else None
+
+    def output(self, device: str, c: int) -> tuple[float, float] | None:
+        """What the pin carries: (period, high time) in s as the RP1 makes them (20 ns ticks), or None
+        for no pulses (not exported, disabled: the line is low)."""
+        s = self.state(device, c)
+        if s is None or not s["enable"]:
+            return None
+        period = round(s["period"] / CLOCK_NS) * CLOCK_NS * 1e-9
+        high = round(s["duty_cycle"] / CLOCK_NS) * CLOCK_NS * 1e-9
+        return (period, period - high) if s["polarity"] == "inversed" else (period, high)
+
+    def on_times_us(self, device: str = RP1_PWM0, channels=(0, 1, 2, 3)) -> dict[int, float | None]:
+        out = {}
+        for c in channels:
+            o = self.output(device, c)
+            out[c] = None if o is None else round(o[1] * 1e6, 3)
+        return out
