@@ -127,7 +127,12 @@ def test_the_pi_libraries_come_only_with_an_extra(wheel):
     for library in PI_LIBRARIES:
         assert any(r.startswith(library) for r in pi_extra), library
     assert any(r.startswith("spidev") for r in requires if "extra ==" in r) and \
-        not any(r.startswith("spidev") and 'extra == "pi"' not in r for r in requires)   # Linux-only: pi alone
+        not any(r.startswith("spidev") and 'extra == "pi"' not in r and 'extra == "pi5"' not in r
+                for r in requires)                                                  # Linux-only: the Pi extras alone
+    pi5_extra = [r for r in requires if 'extra == "pi5"' in r]
+    for library in ("gpiod", "spidev", "smbus2"):
+        assert any(r.startswith(library) for r in pi5_extra), library
+    assert not any(r.startswith("pigpio") for r in pi5_extra)                      # pigpio does not run on a Pi 5
 
 
 def test_the_simulator_runs_without_the_pi_libraries(tmp_path):

@@ -211,8 +211,23 @@ class SysfsPwmEsc:
         except BrokenPipeError:
             os.close(self._beat)
             self._beat = -1
-            raise EscError(f"the ESC dead-man stopped the motors: no command reached it for {self.deadman_ms} ms "
-                           "(the loop stalled)") from None
+            raise self._fired() from None
+
+    def _fired(self) -> EscError:
+        return EscError(f"the ESC dead-man stopped the motors: no command reached it for {self.deadman_ms} ms "
+                        "(the loop stalled)")
+
+    def _lost(self, problems: list[str]) -> EscError:
+        """What the read-back differences mean: the dead-man's stop pulse (it has fired and exited), or
+        another process."""
+        if self.armed and self._deadman is not None:
+            try:
+                self._deadman.wait(0.05)
+            except subprocess.TimeoutExpired:
+                pass
+            if self._deadman.poll() is not None:
+                return self._fired()
+        return EscError("ESC output: " + "; ".join(problems))
 
     def arm(self) -> None:
         if self.dir is None:
@@ -244,7 +259,7 @@ class SysfsPwmEsc:
             self._last_check = now
             problems = self.output_problems()
             if problems:
-                raise EscError("ESC output: " + "; ".join(problems))
+                raise self._lost(problems)
 
     def stop(self) -> None:
         """The stop pulse on every channel, always written (another process may have changed it); the

@@ -66,6 +66,25 @@ class FakePwmSysfs:
             self.dirs[device] = chip
         self.stores: list[tuple[str, str, str]] = []     # (path relative to the root, value, errno name or "")
 
+    @classmethod
+    def attach(cls, base: Path, kernel_held: dict[tuple[str, int], str] | None = None) -> "FakePwmSysfs":
+        """The same tree seen from another process (its state is the files'): what it exported stays."""
+        self = cls.__new__(cls)
+        self.base = Path(base)
+        self.root = self.base / "sys" / "class" / "pwm"
+        self.kernel_held = kernel_held if kernel_held is not None else {(RP1_PWM1, 3): "cooling_fan"}
+        self.lock = threading.RLock()
+        self._paths, self._files, self.dirs, self.chips, self.stores = {}, {}, {}, {}, []
+        for link in sorted(self.root.iterdir()):
+            chip = Path(os.path.realpath(link))
+            device = os.path.basename(os.path.realpath(chip / "device"))
+            self.chips[int(link.name[7:])] = (device, int((chip / "npwm").read_text()))
+            self.dirs[device] = chip
+            for ch in chip.glob("pwm[0-9]*"):
+                for f in ("period", "duty_cycle", "enable", "polarity"):
+                    self._files[ch / f] = os.open(ch / f, os.O_RDWR)
+        return self
+
     # --- the system calls ------------------------------------------------------------------------
     def open(self, path, flags: int, mode: int = 0o777) -> int:
         p = Path(os.path.realpath(path))
