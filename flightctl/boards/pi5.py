@@ -20,6 +20,7 @@ propagates. The devices can be passed in (`pwm_root=`, `pwm_fs=`, `gpio_chip=`, 
 from __future__ import annotations
 
 import glob
+import importlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -129,6 +130,9 @@ def open_pi5_board(params: Params, config_path: str | Path | None = None, *, pwm
                    pwm_fs=None, gpio_chip=None, spi=None, smbus=None, clock=None,
                    config: Pi5Config | None = None) -> Board:
     config = config if config is not None else load_board(config_path)
+    for library, given in (("gpiod", gpio_chip), ("spidev", spi), ("smbus2", smbus)):
+        if given is None:           # a missing library is named before any device is touched
+            importlib.import_module(library)
     a = params.airframe
     closers: list = []
     close = closer(closers)
