@@ -1,31 +1,33 @@
 #!/usr/bin/env bash
 # Install flightctl on Raspberry Pi OS (run as root from a checkout of the repository):
 #
-#   sudo scripts/install-pi.sh [--dry-run] [--prefix /opt/flightctl] [--source DIR] [--no-enable]
+#   sudo scripts/install-pi.sh [--dry-run] [--board pi|pi5] [--prefix /opt/flightctl] [--source DIR] [--no-enable]
 #
-# Installs pigpio, enables SPI and I2C, creates the user `flightctl` (groups gpio, spi, i2c),
-# installs the package in a venv under the prefix, installs the systemd units (flightctl.service and
-# the pigpiod drop-in that binds pigpiod to localhost) and enables them. Every step is idempotent:
-# running it again changes nothing that is already in place. --dry-run prints each step as
-# "would: <command>" and changes nothing. The service is enabled but not started: it comes up
-# disarmed at the next boot, or with `systemctl start flightctl`.
+# The board comes from /proc/device-tree/model (--board overrides it): a Raspberry Pi 5 gets the `pi5`
+# board (the RP1's PWM overlay, the udev rule that gives the PWM files to group gpio, the '.[pi5]'
+# extra), a Pi 3/4 the `pi` board (pigpio and its localhost-only pigpiod drop-in, the '.[pi]' extra).
+# Both: SPI and I2C enabled, the user `flightctl` (groups gpio, spi, i2c), the package in a venv under
+# the prefix, flightctl.service with the board's drop-in, enabled. Every step is idempotent. --dry-run
+# prints each step as "would: <command>" and changes nothing. The service is enabled but not started.
 set -euo pipefail
 
 PREFIX=/opt/flightctl
 SOURCE=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 DRY_RUN=0
 ENABLE=1
+BOARD=
 USER_NAME=flightctl
 STATE_DIR=/var/lib/flightctl
 UNIT_DIR=/etc/systemd/system
 
 usage() {
-    sed -n '2,11p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
+    sed -n '2,12p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
 }
 
 while [ $# -gt 0 ]; do
     case "$1" in
         --dry-run) DRY_RUN=1 ;;
+        --board) BOARD=${2:?--board needs pi or pi5}; shift ;;
         --prefix) PREFIX=${2:?--prefix needs a directory}; shift ;;
         --source) SOURCE=${2:?--source needs a directory}; shift ;;
         --no-enable) ENABLE=0 ;;
@@ -61,13 +63,24 @@ if [ ! -f "$SOURCE/pyproject.toml" ] || [ ! -f "$SOURCE/systemd/flightctl.servic
     echo "install-pi.sh: $SOURCE is not a flightctl checkout (no pyproject.toml / systemd/)" >&2
     exit 1
 fi
-if [ -r /proc/device-tree/model ] && grep -q "Raspberry Pi 5" /proc/device-tree/model; then
-    echo "install-pi.sh: warning: pigpio does not run on a Raspberry Pi 5 (the ESC output needs it)" >&2
+# the board: the RP1 I/O chip (Raspberry Pi 5, 500, Compute Module 5) or not (flightctl/boards/detect.py)
+MODEL=$( { tr -d '\0' </proc/device-tree/model; } 2>/dev/null || true)
+if [ -z "$BOARD" ]; then
+    case "$MODEL" in
+        "Raspberry Pi 5"*|"Raspberry Pi Compute Module 5"*) BOARD=pi5 ;;    # the 500 too
+        *) BOARD=pi ;;
+    esac
 fi
+case "$BOARD" in
+    pi) PACKAGES="pigpio python3-venv python3-dev" ;;
+    pi5) PACKAGES="python3-venv python3-dev device-tree-compiler" ;;
+    *) echo "install-pi.sh: --board $BOARD: pi (Raspberry Pi 3/4) or pi5" >&2; exit 2 ;;
+esac
+echo "board: $BOARD (${MODEL:-no device tree model})"
 
-# 1. packages: pigpio (daemon and tools), Python venv support
+# 1. packages: Python venv support; pigpio (daemon and tools) for the pi board, dtc for the pi5 overlay
 missing=()
-for pkg in pigpio python3-venv python3-dev; do
+for pkg in $PACKAGES; do
     if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then
         missing+=("$pkg")
     fi
@@ -76,7 +89,7 @@ if [ ${#missing[@]} -gt 0 ]; then
     step "update the package lists" -- apt-get update
     step "install packages: ${missing[*]}" -- apt-get install -y "${missing[@]}"
 else
-    skip "packages pigpio python3-venv python3-dev installed"
+    skip "packages $PACKAGES installed"
 fi
 
 # 2. SPI (the MPU-9250) and I2C (the INA219); raspi-config nonint: 0 = enable
@@ -94,6 +107,39 @@ if command -v raspi-config >/dev/null 2>&1; then
 else
     echo "install-pi.sh: raspi-config not found: enable SPI and I2C yourself (dtparam=spi=on and dtparam=i2c_arm=on in config.txt)" >&2
     skip "SPI and I2C left as they are (no raspi-config)"
+fi
+
+# 2b. the Pi 5's PWM: the overlay that muxes the RP1's PWM0 onto GPIO 12, 13, 18, 19 (a reboot applies
+# it), and the udev rule that gives the PWM files to group gpio
+if [ "$BOARD" = pi5 ]; then
+    BOOT=/boot/firmware
+    [ -d "$BOOT/overlays" ] || BOOT=/boot
+    DTBO="$BOOT/overlays/flightctl-pwm-pi5.dtbo"
+    DTBO_NEW=$(mktemp)
+    if [ "$DRY_RUN" = 1 ] && ! command -v dtc >/dev/null 2>&1; then
+        step "compile the PWM overlay into $DTBO" -- dtc -@ -q -I dts -O dtb -o "$DTBO" "$SOURCE/scripts/flightctl-pwm-pi5-overlay.dts"
+    else
+        dtc -@ -q -I dts -O dtb -o "$DTBO_NEW" "$SOURCE/scripts/flightctl-pwm-pi5-overlay.dts"
+        if [ -f "$DTBO" ] && cmp -s "$DTBO_NEW" "$DTBO"; then
+            skip "$DTBO up to date"
+        else
+            step "install the PWM overlay $DTBO" -- install -D -m 0644 "$DTBO_NEW" "$DTBO"
+        fi
+    fi
+    rm -f "$DTBO_NEW"
+    if grep -qx "dtoverlay=flightctl-pwm-pi5" "$BOOT/config.txt" 2>/dev/null; then
+        skip "dtoverlay=flightctl-pwm-pi5 in $BOOT/config.txt"
+    else
+        step "add dtoverlay=flightctl-pwm-pi5 to $BOOT/config.txt (reboot to apply)" -- \
+            sh -c "printf '\n[all]\n# flightctl: the RP1 PWM0 on GPIO 12, 13, 18, 19 (the ESCs)\ndtoverlay=flightctl-pwm-pi5\n' >>'$BOOT/config.txt'"
+    fi
+    RULE=/etc/udev/rules.d/90-flightctl-pwm.rules
+    if [ -f "$RULE" ] && cmp -s "$SOURCE/systemd/90-flightctl-pwm.rules" "$RULE"; then
+        skip "$RULE up to date"
+    else
+        step "install $RULE (the PWM files to group gpio)" -- install -D -m 0644 "$SOURCE/systemd/90-flightctl-pwm.rules" "$RULE"
+        step "apply the udev rule" -- sh -c "udevadm control --reload && udevadm trigger --subsystem-match=pwm"
+    fi
 fi
 
 # 3. the service user and its groups
@@ -130,13 +176,13 @@ else
         install -d -o "$USER_NAME" -g "$USER_NAME" -m 0750 "$STATE_DIR" "$STATE_DIR/plans" "$STATE_DIR/logs"
 fi
 
-# 4. the package with its Pi-only libraries (the `pi` extra) in a venv under the prefix (pip upgrades in place: idempotent)
+# 4. the package with the board's libraries (the `pi` or `pi5` extra) in a venv under the prefix (pip upgrades in place: idempotent)
 if [ -x "$VENV/bin/python" ]; then
     skip "venv $VENV exists"
 else
     step "create venv $VENV" -- python3 -m venv "$VENV"
 fi
-step "install flightctl from $SOURCE into $VENV" -- "$VENV/bin/pip" install --quiet --upgrade "$SOURCE[pi]"
+step "install flightctl from $SOURCE into $VENV" -- "$VENV/bin/pip" install --quiet --upgrade "${SOURCE}[$BOARD]"
 step "install docs/pi.md as $PREFIX/share/pi.md" -- install -D -m 0644 "$SOURCE/docs/pi.md" "$PREFIX/share/pi.md"
 
 # 5. systemd units
@@ -156,14 +202,25 @@ trap 'rm -f "$UNIT_SRC"' EXIT
 sed "s#/opt/flightctl#$PREFIX#g" "$SOURCE/systemd/flightctl.service" >"$UNIT_SRC"
 chmod 0644 "$UNIT_SRC"
 install_unit "$UNIT_SRC" "$UNIT_DIR/flightctl.service"
-install_unit "$SOURCE/systemd/pigpiod.service.d/flightctl.conf" "$UNIT_DIR/pigpiod.service.d/flightctl.conf"
+# the board's drop-in; the other board's is removed (a card moved from a Pi 4 to a Pi 5)
+if [ "$BOARD" = pi ]; then DROPIN=pigpio.conf; OTHER=pi5.conf; else DROPIN=pi5.conf; OTHER=pigpio.conf; fi
+install_unit "$SOURCE/systemd/flightctl.service.d/$DROPIN" "$UNIT_DIR/flightctl.service.d/$DROPIN"
+if [ -f "$UNIT_DIR/flightctl.service.d/$OTHER" ]; then
+    step "remove the other board's drop-in $UNIT_DIR/flightctl.service.d/$OTHER" -- rm -f "$UNIT_DIR/flightctl.service.d/$OTHER"
+    UNITS_CHANGED=1
+fi
+if [ "$BOARD" = pi ]; then
+    install_unit "$SOURCE/systemd/pigpiod.service.d/flightctl.conf" "$UNIT_DIR/pigpiod.service.d/flightctl.conf"
+fi
 if [ "$UNITS_CHANGED" = 1 ] || [ "$DRY_RUN" = 1 ]; then
     step "reload systemd" -- systemctl daemon-reload
 fi
 if [ "$ENABLE" = 1 ]; then
-    step "enable pigpiod (restart to bind it to localhost)" -- systemctl enable pigpiod.service
-    if [ "$UNITS_CHANGED" = 1 ] || [ "$DRY_RUN" = 1 ]; then
-        step "restart pigpiod" -- systemctl restart pigpiod.service
+    if [ "$BOARD" = pi ]; then
+        step "enable pigpiod (restart to bind it to localhost)" -- systemctl enable pigpiod.service
+        if [ "$UNITS_CHANGED" = 1 ] || [ "$DRY_RUN" = 1 ]; then
+            step "restart pigpiod" -- systemctl restart pigpiod.service
+        fi
     fi
     step "enable flightctl (starts disarmed at boot)" -- systemctl enable flightctl.service
 fi
@@ -171,5 +228,5 @@ fi
 if [ "$DRY_RUN" = 1 ]; then
     echo "dry run: nothing was changed"
 else
-    echo "installed. Reboot if SPI or I2C were just enabled. Fly: see $PREFIX/share/pi.md"
+    echo "installed ($BOARD board). Reboot if SPI, I2C or the PWM overlay were just enabled. Fly: see $PREFIX/share/pi.md"
 fi

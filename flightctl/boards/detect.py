@@ -14,7 +14,7 @@ from flightctl.boards import Board, BoardOptions, BoardUnavailable, missing_modu
 from flightctl.params import Params
 
 MODEL_PATH = "/proc/device-tree/model"
-RP1_MODELS = ("Raspberry Pi 5", "Raspberry Pi 500", "Raspberry Pi Compute Module 5")
+RP1_MODELS = ("Raspberry Pi 5", "Raspberry Pi Compute Module 5")     # "Raspberry Pi 5" covers the 500
 
 
 def model(path: str | None = None) -> str:
