@@ -5,7 +5,6 @@ at ExecStopPost, and the dead-man process when the controller stalls or is kille
 from __future__ import annotations
 
 import errno
-import os
 import random
 import signal
 import subprocess

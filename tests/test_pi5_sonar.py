@@ -14,6 +14,7 @@ import pytest
 from fakes.gpiochip import FakeGpioDevice
 from flightctl.drivers.gpio_cdev import CdevGpio, GpioBusy
 from flightctl.drivers.hcsr04 import US_PER_M, WATCHDOG_MS, HcSr04
+from test_pi_hcsr04 import measure      # the same measurement as on the pigpio board
 
 TRIGGER, ECHO = 23, 24
 
@@ -33,17 +34,6 @@ def sonar_on(device, **kw):
     return lines, sonar
 
 
-def measure(sonar, timeout: float = 0.2):
-    sonar.trigger()
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        r = sonar.poll()
-        if r is not None:
-            return r
-        time.sleep(0.001)
-    return None
-
-
 def test_echoes_are_timed_by_the_kernel_timestamps(device):
     rng = random.Random(5)
     module = device.attach_sonar(TRIGGER, ECHO)
@@ -61,7 +51,7 @@ def test_echoes_are_timed_by_the_kernel_timestamps(device):
 def test_a_late_reader_still_measures_the_true_width(device):
     """The reader thread is held off for 5 ms (a busy CPU) while the echo comes and goes: the width is
     the difference of the kernel's timestamps, not of the times the events were read."""
-    module = device.attach_sonar(TRIGGER, ECHO, 0.3)
+    device.attach_sonar(TRIGGER, ECHO, 0.3)
     lines, sonar = sonar_on(device)
     with device.lock:                                  # nothing is delivered while the lock is held
         sonar.trigger()

@@ -14,6 +14,9 @@ from dataclasses import dataclass, field
 from importlib import resources
 
 from flightctl.boards import MIN_BATTERY_V, BoardUnavailable
+from flightctl.drivers.hcsr04 import HcSr04
+from flightctl.drivers.ina219 import Ina219
+from flightctl.drivers.mpu9250 import Mpu9250
 from flightctl.errors import InputError, number, read_toml
 
 RESERVED_PINS = {2: "I2C SDA", 3: "I2C SCL", 7: "SPI CE1", 8: "SPI CE0", 9: "SPI MISO", 10: "SPI MOSI",
@@ -157,3 +160,24 @@ def open_smbus(bus: int):
     except OSError as e:
         raise BoardUnavailable(f"cannot open /dev/i2c-{bus} ({e.strerror}); "
                                "is I2C enabled (raspi-config nonint do_i2c 0) and the user in group i2c?") from None
+
+
+def start_sensors(config, gpio, spi, smbus, closers: list) -> tuple[Mpu9250, HcSr04, Ina219]:
+    """The IMU on `spi` (opened from config.imu if None), the sonar on `gpio` (pigpio's calls:
+    `pigpio.pi`, or the GPIO character device's lines) and the power monitor on `smbus` (opened from
+    config.power if None), each started; what is opened is added to `closers`."""
+    if spi is None:
+        spi = open_spi(config.imu)
+        closers.append(spi.close)
+    imu = Mpu9250(spi)
+    imu.start()
+    sonar = HcSr04(gpio, config.sonar.trigger_pin, config.sonar.echo_pin)
+    sonar.start()
+    closers.append(sonar.stop)
+    if smbus is None:
+        smbus = open_smbus(config.power.i2c_bus)
+        closers.append(smbus.close)
+    power = Ina219(smbus, config.power.address, config.power.shunt_ohm, config.power.max_current_a,
+                   bus_name=f"/dev/i2c-{config.power.i2c_bus}")
+    power.start()
+    return imu, sonar, power

@@ -22,13 +22,12 @@ from pathlib import Path
 
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, missing_module
 from flightctl.boards.boardfile import (GPIO, ChecksConfig, ImuConfig, PowerConfig, SonarConfig,
-                                        check_pins, closer, key, load_sections, open_smbus, open_spi)
+                                        check_pins, closer, key, load_sections, start_sensors)
 from flightctl.clock import WallClock
 from flightctl.drivers import esc
 from flightctl.drivers.esc import EscError, PigpioEsc
-from flightctl.drivers.hcsr04 import HcSr04
-from flightctl.drivers.ina219 import Ina219, PowerMonitorError
-from flightctl.drivers.mpu9250 import ImuError, Mpu9250
+from flightctl.drivers.ina219 import PowerMonitorError
+from flightctl.drivers.mpu9250 import ImuError
 from flightctl.errors import InputError
 from flightctl.hal import Hal
 from flightctl.params import Params
@@ -108,20 +107,7 @@ def open_pi_board(params: Params, config_path: str | Path | None = None, *, pi=N
         motors = PigpioEsc(pi, e.pins, a.esc_pwm_hz, e.stop_us, e.max_us, e.deadman_ms, e.tolerance_hz)
         motors.start()
         closers.append(motors.close)
-        if spi is None:
-            spi = open_spi(config.imu)
-            closers.append(spi.close)
-        imu = Mpu9250(spi)
-        imu.start()
-        sonar = HcSr04(pi, config.sonar.trigger_pin, config.sonar.echo_pin)
-        sonar.start()
-        closers.append(sonar.stop)
-        if smbus is None:
-            smbus = open_smbus(config.power.i2c_bus)
-            closers.append(smbus.close)
-        power = Ina219(smbus, config.power.address, config.power.shunt_ohm, config.power.max_current_a,
-                       bus_name=f"/dev/i2c-{config.power.i2c_bus}")
-        power.start()
+        imu, sonar, power = start_sensors(config, pi, spi, smbus, closers)
     except BaseException:
         close()
         raise

@@ -26,13 +26,12 @@ from pathlib import Path
 
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, missing_module
 from flightctl.boards.boardfile import (GPIO, ChecksConfig, ImuConfig, PowerConfig, SonarConfig, check_pins,
-                                        closer, key, load_sections, open_smbus, open_spi)
+                                        closer, key, load_sections, start_sensors)
 from flightctl.clock import WallClock
 from flightctl.drivers import pulses
 from flightctl.drivers.gpio_cdev import CdevGpio, GpioBusy
-from flightctl.drivers.hcsr04 import HcSr04
-from flightctl.drivers.ina219 import Ina219, PowerMonitorError
-from flightctl.drivers.mpu9250 import ImuError, Mpu9250
+from flightctl.drivers.ina219 import PowerMonitorError
+from flightctl.drivers.mpu9250 import ImuError
 from flightctl.drivers.pulses import EscError
 from flightctl.drivers.pwm_sysfs import SYSFS_PWM, SysfsPwmEsc, release
 from flightctl.errors import InputError
@@ -143,26 +142,13 @@ def open_pi5_board(params: Params, config_path: str | Path | None = None, *, pwm
                              pins=p.pins, root=pwm_root, **kw)
         closers.append(motors.close)
         motors.start()
-        if spi is None:
-            spi = open_spi(config.imu)
-            closers.append(spi.close)
-        imu = Mpu9250(spi)
-        imu.start()
         if gpio_chip is None:
             gpio_chip = open_gpio_chip(config.gpio.chip)
             closers.append(gpio_chip.close)
         lines = CdevGpio(gpio_chip, config.sonar.trigger_pin, config.sonar.echo_pin)
         lines.start()
         closers.append(lines.close)
-        sonar = HcSr04(lines, config.sonar.trigger_pin, config.sonar.echo_pin)
-        sonar.start()
-        closers.append(sonar.stop)
-        if smbus is None:
-            smbus = open_smbus(config.power.i2c_bus)
-            closers.append(smbus.close)
-        power = Ina219(smbus, config.power.address, config.power.shunt_ohm, config.power.max_current_a,
-                       bus_name=f"/dev/i2c-{config.power.i2c_bus}")
-        power.start()
+        imu, sonar, power = start_sensors(config, lines, spi, smbus, closers)
     except BaseException:
         close()
         raise

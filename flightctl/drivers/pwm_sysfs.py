@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import errno
 import os
+import select
 import subprocess
 import sys
 import time
@@ -48,6 +49,23 @@ from flightctl.hal import PWM_RANGE, ArmingRefused
 SYSFS_PWM = "/sys/class/pwm"
 EXPORT_WAIT_S = 2.0         # udev gives the new pwmC/ files to group gpio a few ms after the export
 DEADMAN_START_S = 5.0       # the dead-man process says it is ready within this
+
+
+def _read(fs, path: str) -> bytes:
+    fd = fs.open(path, os.O_RDONLY | os.O_CLOEXEC)
+    try:
+        return fs.pread(fd, 64, 0).strip()
+    finally:
+        fs.close(fd)
+
+
+def _store(fs, path: str, value: bytes) -> None:
+    """One sysfs store: a write of the whole value on a fresh descriptor."""
+    fd = fs.open(path, os.O_WRONLY | os.O_CLOEXEC)
+    try:
+        fs.pwrite(fd, value, 0)
+    finally:
+        fs.close(fd)
 
 
 def period_ns(frequency_hz: float) -> int:
@@ -122,7 +140,7 @@ class SysfsPwmEsc:
         """Export the four channels (refusing any already exported), put the stop pulse on them, start
         the dead-man. On any failure what was exported is released again."""
         self.dir = find_chip(self.root, self.chip)
-        npwm = int(self._read(os.path.join(self.dir, "npwm")))
+        npwm = int(_read(self.fs, os.path.join(self.dir, "npwm")))
         for i, c in enumerate(self.channels):
             if c >= npwm:
                 raise EscError(f"{self._name(i)}: {os.path.basename(self.dir)} has {npwm} channels (0..{npwm - 1})")
@@ -133,7 +151,7 @@ class SysfsPwmEsc:
                                    "controller died without its ExecStopPost; `flightctl run --board pi5 "
                                    "--stop-motors` releases it)")
                 try:
-                    self._store(os.path.join(self.dir, "export"), b"%d\n" % c)
+                    _store(self.fs, os.path.join(self.dir, "export"), b"%d\n" % c)
                 except OSError as e:
                     if e.errno == errno.EBUSY:
                         raise EscError(f"{self._name(i)} is held by a kernel driver (EBUSY on export): "
@@ -198,7 +216,6 @@ class SysfsPwmEsc:
 
     @staticmethod
     def _wait_readable(fd: int, timeout: float) -> bool:
-        import select
         return bool(select.select([fd], [], [], timeout)[0])
 
     def _tell(self, what: bytes) -> None:
@@ -308,25 +325,11 @@ class SysfsPwmEsc:
         while self._exported:
             c = self._exported.pop()
             try:
-                self._store(os.path.join(self.dir, "unexport"), b"%d\n" % c)
+                _store(self.fs, os.path.join(self.dir, "unexport"), b"%d\n" % c)
             except OSError:
                 pass
 
     # --- read-back -----------------------------------------------------------------------------
-    def _read(self, path: str) -> bytes:
-        fd = self.fs.open(path, os.O_RDONLY | os.O_CLOEXEC)
-        try:
-            return self.fs.pread(fd, 64, 0).strip()
-        finally:
-            self.fs.close(fd)
-
-    def _store(self, path: str, value: bytes) -> None:
-        fd = self.fs.open(path, os.O_WRONLY | os.O_CLOEXEC)
-        try:
-            self.fs.pwrite(fd, value, 0)
-        finally:
-            self.fs.close(fd)
-
     def output_problems(self) -> list[str]:
         """What the kernel reports on the ESC channels that this driver did not write (empty: nothing)."""
         if self.dir is None:
@@ -377,17 +380,9 @@ def release(root: str, chip: str, channels: Sequence[int], stop_us: int = STOP_U
             continue
         for name, value in (("duty_cycle", b"%d\n" % (stop_us * 1000)), ("enable", b"0\n")):
             try:
-                fd = fs.open(os.path.join(ch, name), os.O_WRONLY | os.O_CLOEXEC)
-                try:
-                    fs.pwrite(fd, value, 0)
-                finally:
-                    fs.close(fd)
+                _store(fs, os.path.join(ch, name), value)
             except OSError:
                 pass        # a period shorter than the stop pulse (not ours): disable and unexport anyway
-        fd = fs.open(os.path.join(d, "unexport"), os.O_WRONLY | os.O_CLOEXEC)
-        try:
-            fs.pwrite(fd, b"%d\n" % c, 0)
-        finally:
-            fs.close(fd)
+        _store(fs, os.path.join(d, "unexport"), b"%d\n" % c)
         done.append(f"pwm{c}")
     return done

@@ -12,11 +12,12 @@ from __future__ import annotations
 import math
 import os
 import socket
-import statistics
 import time
 from pathlib import Path
 
 import pytest
+
+from checks import loop_io, sonar_answers
 
 BOARD_FILE = os.environ.get("FLIGHTCTL_BOARD_FILE")
 
@@ -100,14 +101,11 @@ def test_arming_check_and_the_deadman_script_are_accepted_by_pigpiod(esc, pi):
 
 
 def test_imu_is_an_mpu9250_and_reads_one_g_at_rest(config):
-    import spidev
-
+    from flightctl.boards.boardfile import open_spi
     from flightctl.drivers.mpu9250 import Mpu9250
     from flightctl.hal import ImuSample
 
-    spi = spidev.SpiDev()
-    spi.open(config.imu.spi_bus, config.imu.spi_device)
-    spi.mode = config.imu.spi_mode
+    spi = open_spi(config.imu)
     try:
         imu = Mpu9250(spi)
         imu.start()
@@ -140,45 +138,14 @@ def test_sonar_answers(pi, config):
     sonar = HcSr04(pi, config.sonar.trigger_pin, config.sonar.echo_pin)
     sonar.start()
     try:
-        results = []
-        for _ in range(10):
-            sonar.trigger()
-            time.sleep(0.05)
-            r = sonar.poll()
-            if r is not None:
-                results.append(r)
-        assert results and any(not math.isnan(r) for r in results), results
+        sonar_answers(sonar)
     finally:
         sonar.stop()
 
 
 def test_the_loop_keeps_450hz_with_imu_and_esc_io(esc, config):
     """The inner loop's I/O at 450 Hz for 3 s: IMU burst read + ESC write per tick (no control math)."""
-    import spidev
-
-    from flightctl.clock import WallClock
-    from flightctl.drivers.mpu9250 import Mpu9250
-    from flightctl.hal import ImuSample
-
-    spi = spidev.SpiDev()
-    spi.open(config.imu.spi_bus, config.imu.spi_device)
-    spi.mode = config.imu.spi_mode
-    try:
-        imu = Mpu9250(spi)
-        imu.start()
-        s = ImuSample()
-        clock = WallClock(1 / 450)
-        lates = []
-        below = [round(1030 / 2227 * 40000) + k % 3 for k in range(4)]
-        for k in range(450 * 3):
-            t = clock.wait_next()
-            lates.append(clock.now() - t)
-            imu.read(s)
-            esc.write([c + k % 2 for c in below])          # a new command every tick: the worst case
-        lates.sort()
-        p99 = lates[int(0.99 * len(lates))]
-        print(f"\nloop: {clock.overruns} overruns in {len(lates)} ticks, p99 lateness {p99 * 1e3:.3f} ms, "
-              f"median {statistics.median(lates) * 1e3:.3f} ms, {esc.deferred} commands deferred")
-        assert clock.overruns < 0.01 * len(lates)
-    finally:
-        spi.close()
+    below = [round(1030 / 2227 * 40000) + k % 3 for k in range(4)]
+    loop_io(config, esc.write, lambda k: [c + k % 2 for c in below],       # a new command every tick: the worst case
+            "ESC write (a new wave)")
+    print(f"{esc.deferred} commands deferred")

@@ -11,13 +11,14 @@ and the loop's timing with the sysfs writes.
 """
 from __future__ import annotations
 
-import math
 import os
 import statistics
 import time
 from pathlib import Path
 
 import pytest
+
+from checks import loop_io, sonar_answers
 
 from flightctl.boards.detect import is_pi5
 
@@ -120,14 +121,7 @@ def test_the_sonar_answers_through_the_gpio_character_device(config):
     sonar = HcSr04(lines, config.sonar.trigger_pin, config.sonar.echo_pin)
     sonar.start()
     try:
-        results = []
-        for _ in range(10):
-            sonar.trigger()
-            time.sleep(0.05)
-            r = sonar.poll()
-            if r is not None:
-                results.append(r)
-        assert results and any(not math.isnan(r) for r in results), results
+        sonar_answers(sonar)
     finally:
         sonar.stop()
         lines.close()
@@ -136,32 +130,5 @@ def test_the_sonar_answers_through_the_gpio_character_device(config):
 
 def test_the_loop_keeps_450hz_with_imu_reads_and_pwm_writes(esc, config):
     """The inner loop's I/O at 450 Hz for 3 s: an IMU burst read and four duty-cycle writes per tick."""
-    import spidev
-
-    from flightctl.clock import WallClock
-    from flightctl.drivers.mpu9250 import Mpu9250
-    from flightctl.hal import ImuSample
-
-    spi = spidev.SpiDev()
-    spi.open(config.imu.spi_bus, config.imu.spi_device)
-    spi.mode = config.imu.spi_mode
-    try:
-        imu = Mpu9250(spi)
-        imu.start()
-        s = ImuSample()
-        clock = WallClock(1 / 450)
-        lates, costs = [], []
-        for k in range(450 * 3):
-            t = clock.wait_next()
-            lates.append(clock.now() - t)
-            imu.read(s)
-            t0 = time.perf_counter()
-            esc.write([BELOW_DEAD_ZONE + (k + i) % 3 for i in range(4)])     # every channel changes: the worst case
-            costs.append(time.perf_counter() - t0)
-        lates.sort()
-        print(f"\nloop: {clock.overruns} overruns in {len(lates)} ticks, p99 lateness "
-              f"{lates[int(0.99 * len(lates))] * 1e3:.3f} ms; ESC write (4 duty cycles): median "
-              f"{statistics.median(costs) * 1e6:.1f} us, max {max(costs) * 1e6:.1f} us")
-        assert clock.overruns < 0.01 * len(lates)
-    finally:
-        spi.close()
+    loop_io(config, esc.write, lambda k: [BELOW_DEAD_ZONE + (k + i) % 3 for i in range(4)],   # all change: the worst case
+            "ESC write (4 duty cycles)")
