@@ -118,6 +118,30 @@ def test_a_channel_a_kernel_driver_holds_is_a_refusal(tmp_path):
     assert fake.exported() == []
 
 
+def test_the_channel_files_are_waited_for_until_udev_gives_them_to_group_gpio(fake):
+    fake.udev_delay_s = 0.05                                # udev's rule runs on the export's event
+    t0 = time.monotonic()
+    esc = esc_on(fake)
+    esc.start()
+    assert time.monotonic() - t0 >= 0.05 and fake.on_times_us() == {c: 1000.0 for c in range(4)}
+    esc.close()
+
+
+@pytest.mark.parametrize("what, message", [("chip", r"motor 1 .* cannot be exported \(Permission denied\)"),
+                                           ("channel", r"cannot open .*/pwm0/period \(Permission denied\)")])
+def test_without_the_udev_rule_the_start_says_what_is_missing(fake, what, message):
+    if what == "chip":
+        fake.chip_writable = False
+    else:
+        fake.udev_delay_s = None
+    esc = esc_on(fake)
+    esc._sleep = lambda s: time.sleep(0)                    # no need to wait the 2 s out for real
+    esc._clock = iter(range(0, 100)).__next__               # each look at the clock: a second later
+    with pytest.raises(EscError, match=message + ".*group gpio and the udev rule"):
+        esc.start()
+    assert fake.exported() == []
+
+
 def test_no_pwm_chip_says_which_chips_there_are(tmp_path):
     fake = FakePwmSysfs(tmp_path, chips={0: ("107d517a80.pwm", 2)})
     with pytest.raises(EscError, match=r"PWM chip 1f00098000.pwm not found .* pwmchip0 \(107d517a80.pwm\).*overlay"):

@@ -156,7 +156,8 @@ class SysfsPwmEsc:
                     if e.errno == errno.EBUSY:
                         raise EscError(f"{self._name(i)} is held by a kernel driver (EBUSY on export): "
                                        "this channel is not free for the ESCs") from None
-                    raise
+                    raise EscError(f"{self._name(i)} cannot be exported ({e.strerror}): is the user in group "
+                                   "gpio and the udev rule installed (docs/pi.md)?") from None
                 self._exported.append(c)
             for i, c in enumerate(self.channels):
                 fds = self._open_channel(c)

@@ -20,8 +20,9 @@ The rules (drivers/pwm/sysfs.c and core.c of 6.6):
 - a write stores the value the kernel would show (`%d\\n`); reads show it. What a channel outputs is
   `output(chip, channel)`: the RP1's 50 MHz clock rounds period and duty to 20 ns.
 
-What it does not model: udev's permission change after an export (the files are writable at once),
-the RP1 latching a new duty at the end of the running period (the world reads the latest value), a
+Permissions are those of a process in group gpio: the chip's files writable (udev's rule at boot), a
+new channel's files writable `udev_delay_s` after its export (udev's rule on the export's event; None:
+no rule, EACCES for good). What it does not model: the RP1 latching a new duty at the end of the running period (the world reads the latest value), a
 write from another process that bypasses this object (the dead-man process writes the real files with
 `os.pwrite`, unchecked; it writes only the stop pulse, a valid value), and the kernel's own locking
 beyond one lock for the whole tree. An "other process" in the tests writes through this same object.
@@ -32,6 +33,7 @@ import errno
 import os
 import shutil
 import threading
+import time
 from pathlib import Path
 
 RP1_PWM0, RP1_PWM1 = "1f00098000.pwm", "1f0009c000.pwm"
@@ -52,6 +54,11 @@ class FakePwmSysfs:
         self.lock = threading.RLock()
         self._paths: dict[int, Path] = {}     # open fd -> path
         self._files: dict[Path, int] = {}     # the kernel's own handle on each channel attribute
+        # permissions, for a process that is not root: the chip's files are the gpio group's (udev at
+        # boot) unless `chip_writable` is False; a new channel's files become so `udev_delay_s` after
+        # the export (udev's "change" event), never if it is None (no udev rule)
+        self.chip_writable, self.udev_delay_s = True, 0.0
+        self._exported_at: dict[Path, float] = {}
         self.root.mkdir(parents=True, exist_ok=True)
         self.dirs: dict[str, Path] = {}
         for n, (device, npwm) in self.chips.items():
@@ -75,6 +82,7 @@ class FakePwmSysfs:
         self.kernel_held = kernel_held if kernel_held is not None else {(RP1_PWM1, 3): "cooling_fan"}
         self.lock = threading.RLock()
         self._paths, self._files, self.dirs, self.chips, self.stores = {}, {}, {}, {}, []
+        self.chip_writable, self.udev_delay_s, self._exported_at = True, 0.0, {}
         for link in sorted(self.root.iterdir()):
             chip = Path(os.path.realpath(link))
             device = os.path.basename(os.path.realpath(chip / "device"))
@@ -90,10 +98,20 @@ class FakePwmSysfs:
         p = Path(os.path.realpath(path))
         if not p.exists():
             raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), str(path))
+        if flags & (os.O_WRONLY | os.O_RDWR) and not self._writable(p):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
         fd = os.open(p, flags & ~os.O_CREAT & ~os.O_TRUNC)
         with self.lock:
             self._paths[fd] = p
         return fd
+
+    def _writable(self, p: Path) -> bool:
+        if p.name in ("export", "unexport"):
+            return self.chip_writable
+        exported = self._exported_at.get(p.parent)
+        if exported is None or self.udev_delay_s is None:
+            return exported is None
+        return time.monotonic() >= exported + self.udev_delay_s
 
     def close(self, fd: int) -> None:
         with self.lock:
@@ -157,6 +175,7 @@ class FakePwmSysfs:
                 if d.exists() or (device, c) in self.kernel_held:
                     self._fail(errno.EBUSY, p)
                 d.mkdir()
+                self._exported_at[d] = time.monotonic()
                 for f, v in (("period", "0"), ("duty_cycle", "0"), ("enable", "0"), ("polarity", "normal")):
                     self._files[d / f] = os.open(d / f, os.O_RDWR | os.O_CREAT, 0o660)
                     self._put(d / f, v)
