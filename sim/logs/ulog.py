@@ -19,6 +19,7 @@ from flightctl.sim.logs.common import Imported, Stream, euler_from_frd_ned
 
 FRD = np.array([[1.0], [-1.0], [-1.0]])      # FRD (or NED) to ours: y and z change sign
 ARMED = 2                                    # vehicle_status.arming_state ARMED (every PX4 version)
+DOWNWARD = 25                                # distance_sensor.orientation ROTATION_DOWNWARD_FACING
 FAST_HZ = 48.0                               # motors logged slower than this: static effects only (docs/diagnose.md)
 SLOW_SENSOR_HZ = 100.0                       # a gyro logged slower than this cannot follow the rotation dynamics
 PROFILE_NOTE = ("to log them at full rate set SDLOG_PROFILE bit 4 (High rate: add 16, e.g. 17) or bit 3 "
@@ -116,6 +117,12 @@ def _measurements(u, p: dict, imp: Imported) -> None:
         imp.streams["height"] = Stream("vehicle_air_data baro (above sea level)", air["timestamp"] * 1e-6,
                                        air["baro_alt_meter"][None].astype(float))
         imp.meta["height_source"] = "baro"
+    ds = topic(u, "distance_sensor")
+    if ds is not None and "current_distance" in ds:
+        down = ds["orientation"] == DOWNWARD if "orientation" in ds else np.ones(len(ds["timestamp"]), bool)
+        if down.any():
+            imp.streams["range"] = Stream("distance_sensor (downward)", ds["timestamp"][down] * 1e-6,
+                                          ds["current_distance"][None, down].astype(float))
     lp = topic(u, "vehicle_local_position")
     if lp is not None and "z" in lp:
         imp.streams["alt"] = Stream("vehicle_local_position z", lp["timestamp"] * 1e-6, -lp["z"][None].astype(float))
