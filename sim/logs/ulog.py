@@ -19,6 +19,7 @@ from flightctl.sim.logs.common import Imported, Stream, euler_from_frd_ned
 
 FRD = np.array([[1.0], [-1.0], [-1.0]])      # FRD (or NED) to ours: y and z change sign
 ARMED = 2                                    # vehicle_status.arming_state ARMED (every PX4 version)
+RANGE_MAX_M = 10.0                           # the contract's rangefinder range
 DOWNWARD = 25                                # distance_sensor.orientation ROTATION_DOWNWARD_FACING
 FAST_HZ = 48.0                               # motors logged slower than this: static effects only (docs/diagnose.md)
 SLOW_SENSOR_HZ = 100.0                       # a gyro logged slower than this cannot follow the rotation dynamics
@@ -120,6 +121,9 @@ def _measurements(u, p: dict, imp: Imported) -> None:
     ds = topic(u, "distance_sensor")
     if ds is not None and "current_distance" in ds:
         down = ds["orientation"] == DOWNWARD if "orientation" in ds else np.ones(len(ds["timestamp"]), bool)
+        d = ds["current_distance"]
+        lo, hi = ds.get("min_distance", np.zeros(d.size)), ds.get("max_distance", np.full(d.size, RANGE_MAX_M))
+        down &= (d > lo) & (d < np.minimum(hi, RANGE_MAX_M))      # out of range: no echo (measured-data.md: 0-10 m)
         if down.any():
             imp.streams["range"] = Stream("distance_sensor (downward)", ds["timestamp"][down] * 1e-6,
                                           ds["current_distance"][None, down].astype(float))
