@@ -345,14 +345,15 @@ def main(argv: list[str]) -> int:
                        description=__doc__.split("\n\n")[0])
     e.add_argument("csv", metavar="FLIGHT.csv", help="a flightctl flight log")
     e.add_argument("ulg", metavar="FLIGHT.ulg", help="the ULog to write")
-    i = sub.add_parser("import", help="write another autopilot's log (PX4 .ulg, Betaflight .bbl/.bfl) as a "
-                                      "flight log (CSV, measured-data.md); needs the logs extra",
-                       description="Read a PX4 ULog or a Betaflight blackbox log and write it as this project's "
-                                   "flight log, on the gyro's time base, with the rotor layout, the command scale "
-                                   "and the sensor filters in '# key: value' lines (docs/log-import.md).")
-    i.add_argument("foreign", metavar="FOREIGN_LOG", help="a .ulg, .bbl, .bfl or .BFL file")
+    i = sub.add_parser("import", help="write another autopilot's log (PX4 .ulg, ArduPilot .bin, Betaflight/INAV "
+                                      ".bbl/.bfl/.txt) as a flight log (CSV, measured-data.md); needs the logs extra",
+                       description="Read a PX4 ULog, an ArduPilot DataFlash log or a Betaflight/INAV blackbox log and "
+                                   "write it as this project's flight log, on the gyro's time base, with the rotor "
+                                   "layout, the command scale and the sensor filters in '# key: value' lines "
+                                   "(docs/log-import.md). Of a file of many logs without --index: which hold a flight.")
+    i.add_argument("foreign", metavar="FOREIGN_LOG", help="a .ulg, .bin, .bbl, .bfl, .BFL or INAV .TXT file")
     i.add_argument("out", metavar="OUT.csv", help="the flight log to write")
-    i.add_argument("--index", type=int, metavar="N", help="of a blackbox file holding several logs, log N (from 1)")
+    i.add_argument("--index", type=int, metavar="N", help="of a file holding several logs, log N (from 1)")
     i.add_argument("--plot", metavar="OUT.png", help="also write the figure of what was read: rates, gaps, channels")
     i.add_argument("--quiet", action="store_true", help="no progress on stderr")
     args = p.parse_args(argv)

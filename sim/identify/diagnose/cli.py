@@ -45,10 +45,12 @@ def _parser() -> argparse.ArgumentParser:
                             "it on the rest, and name the one that explains the discrepancy, or none "
                             "(measured-data.md; method: docs/diagnose.md).")
     p.add_argument("logs", nargs="+", metavar="FLIGHT",
-                   help="flight logs of one vehicle: this project's CSV (measured-data.md), PX4's .ulg or "
-                        "Betaflight's .bbl/.bfl (the `logs` extra)")
+                   help="flight logs of one vehicle: this project's CSV (measured-data.md), PX4's .ulg, "
+                        "ArduPilot's .bin or a Betaflight/INAV .bbl/.bfl/.txt (the `logs` extra); one file of "
+                        "many logs is diagnosed log by log")
     p.add_argument("--index", type=int, metavar="N",
-                   help="of a blackbox file holding several logs, only log N (counted from 1; default: every log)")
+                   help="of a file holding several logs, only log N (counted from 1; default: each log that "
+                        "can be judged, on its own)")
     p.add_argument("--validate", nargs="+", metavar="OTHER",
                    help="other flights of the same vehicle: predict them with the model fitted here (nothing refitted "
                         "but the accelerometer's bias) and report the gain of the causes there")
