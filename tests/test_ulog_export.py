@@ -79,16 +79,23 @@ def test_values_in_ned_frd(exported):
     assert np.allclose(pos["z"], -csv["alt"], atol=1e-6)
     out = topic(ulog, "actuator_outputs")
     params = ulog.initial_parameters
-    assert np.allclose(out["output[0]"], csv["P1"] / 255 * 1e6 / params["esc_pwm_hz"], rtol=1e-5)
+    assert np.allclose(out["output[0]"], csv["P1"] / 255 * 1e6 / params["FC_ESC_PWM_HZ"], rtol=1e-5)
     assert 1000 < np.median(out["output[0]"]) < 2000      # an ESC pulse in microseconds
 
 
 def test_parameters_and_version(exported):
+    """Every parameter under PX4's 16-character limit, each named once, and the information message
+    `flightctl_params` gives each short name's full name back."""
     csv, ulog = exported
     params, ref = ulog.initial_parameters, load(None)
-    assert params["M"] == pytest.approx(ref.airframe.M, rel=1e-6)
-    assert params["gains.kp_phi"] == pytest.approx(ref.gains.kp_phi, rel=1e-6)
-    assert params["filters.alpha_yaw"] == pytest.approx(ref.filters.alpha_yaw, rel=1e-6)
+    assert all(len(name) <= 16 for name in params)
+    names = dict(pair.split("=") for pair in ulog.msg_info_dict["flightctl_params"].split(";"))
+    full = {v: params[k] for k, v in names.items()}
+    assert full["M"] == pytest.approx(ref.airframe.M, rel=1e-6)
+    assert full["gains.kp_phi"] == pytest.approx(ref.gains.kp_phi, rel=1e-6)
+    assert full["filters.alpha_roll_pitch"] == pytest.approx(ref.filters.alpha_roll_pitch, rel=1e-6)
+    assert len(names) == len(full) == len(vars(ref.airframe)) + len(vars(ref.gains)) + len(vars(ref.filters))
+    assert params["MAV_TYPE"] == 2 and params["CA_ROTOR_COUNT"] == 4
     info = ulog.msg_info_dict
     assert info["ver_sw"] == csv.meta["software"]
     major, minor, patch, kind = ulog.get_version_info()
@@ -103,3 +110,38 @@ def test_bad_input_is_one_line(tmp_path, capsys):
     assert "missing column" in err and len(err.strip().splitlines()) == 1
     assert cli(["log", "export", str(bad), str(tmp_path / "x.csv")]) == 2
     assert not (tmp_path / "x.ulg").exists()
+
+
+def test_flight_review_topics(exported):
+    """vehicle_status (armed, a mission), vehicle_angular_velocity (the gyro, FRD), vehicle_rates_setpoint
+    (the rate the PD commands: kp/kd times the angle error) and actuator_motors (P / 255)."""
+    csv, ulog = exported
+    status = topic(ulog, "vehicle_status")
+    assert set(status["arming_state"]) == {2} and set(status["nav_state"]) == {3}
+    assert len(status["timestamp"]) == pytest.approx(csv["t"][-1], abs=1.5)        # one a second
+    w = topic(ulog, "vehicle_angular_velocity")
+    assert np.allclose(w["xyz[0]"], csv["gyro_x"], atol=1e-6) and np.allclose(w["xyz[2]"], -csv["gyro_z"], atol=1e-6)
+    sp = topic(ulog, "vehicle_rates_setpoint")
+    g = load(None).gains
+    assert np.allclose(sp["roll"], g.kp_phi / g.kd_phi * (csv["roll_sp"] - csv["roll"]), rtol=1e-5, atol=1e-6)
+    assert np.allclose(sp["pitch"], -g.kp_theta / g.kd_theta * (csv["pitch_sp"] - csv["pitch"]), rtol=1e-5, atol=1e-6)
+    motors = topic(ulog, "actuator_motors")
+    assert np.allclose(motors["control[3]"], csv["P4"] / 255.0, atol=1e-6)
+
+
+def test_an_exported_log_reads_back_with_the_same_samples(exported, tmp_path):
+    """sim -> export -> import: every sample within the ULog's float32 quantisation, the range on its
+    own rows, the vehicle the paper's + layout, and diagnose reads it."""
+    from flightctl.sim.logs import read_foreign
+    csv, ulog = exported
+    path = tmp_path / "f.ulg"
+    ulog.write_ulog(str(path))                     # (pyulog writes back what it read: the same file)
+    (back,) = read_foreign(str(path))
+    assert len(back) == len(csv)
+    for c in ("P1", "P2", "P3", "P4", "gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z", "battery_v", "roll",
+              "pitch", "alt"):
+        assert np.allclose(back[c], csv[c], rtol=1e-6, atol=1e-5), c
+    assert np.array_equal(np.isfinite(back["range"]), np.isfinite(csv["range"]))
+    rotors = [[float(v) for v in r.split()] for r in back.meta["rotors"].split(";")]
+    assert rotors == [[1, 0, -1], [0, 1, 1], [-1, 0, -1], [0, -1, 1]]          # motor 1 North, clockwise
+    assert back.meta["command"].startswith("P = 255 actuator_motors")

@@ -1,88 +1,213 @@
 """Flight logs of other autopilots, read into this project's flight-log table (measured-data.md,
-"Foreign logs"; docs/log-import.md): PX4's ULog through pyulog and Betaflight's blackbox through
-orangebox 0.4.0, both in the `logs` extra (orangebox is GPL-3.0: an optional extra only).
+"Foreign logs"; docs/log-import.md): PX4's ULog through pyulog, ArduPilot's DataFlash through
+pymavlink's DFReader, and the blackbox of Betaflight, INDIflight and INAV through orangebox 0.4.0, all
+in the `logs` extra (orangebox is GPL-3.0: an optional extra only).
 
-    read_foreign(path, index=None) -> [Table]     every log of the file (a blackbox may hold several)
-    import_text(path, index) -> str               the flight-log CSV of one log (`flightctl log import`)
-    read_figure(table) -> Figure                  what was read: rates, gaps, channels
+    each_log(path, index=None, progress=None) -> [LogEntry]   every log of the file, read or skipped on its own
+    read_foreign(path, index=None, progress=None) -> [Table]  the logs read (InputError when none is)
+    import_text(path, index, progress) -> str                 the flight-log CSV of one log (`flightctl log import`)
+    read_figure(table) -> Figure                              what was read: rates, gaps, channels
 """
 from __future__ import annotations
 
+import time
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from flightctl.errors import InputError, read_bytes
 from flightctl.logfile import Table
 from flightctl.sim.logs.common import EXTRA as EXTRA_COLUMNS
 from flightctl.sim.logs.common import Imported, flight_text, to_table
 
-FOREIGN_SUFFIXES = (".ulg", ".bbl", ".bfl")      # compared in lower case: .BFL is Betaflight's too
+FOREIGN_SUFFIXES = (".ulg", ".bbl", ".bfl", ".txt", ".bin", ".log")     # compared in lower case
+DATAFLASH_MAGIC = b"\xa3\x95\x80"        # a DataFlash file opens with its FMT message's definition
+MIN_FLIGHT_S = 2.0                       # s with all four motors running: a log that holds a flight
 
 
-def _kind(path: str) -> str:
+@dataclass
+class LogEntry:
+    """One log of a file: its table when read (`reason` None), else why it was skipped (one line).
+    `seconds` is the log's length (s of rows read), `running_s` how long all four motors ran (above
+    1 % of their range), `text` the flight-log CSV that `flightctl log import` writes of it."""
+    index: int
+    table: Table | None
+    reason: str | None
+    seconds: float
+    text: str | None = None
+    running_s: float = 0.0
+
+    @property
+    def flight(self) -> bool:
+        return self.table is not None and self.running_s >= MIN_FLIGHT_S
+
+
+def kind(path: str) -> str | None:
+    """'ulog', 'blackbox', 'dataflash' or 'dataflash-text' by suffix and content; None for a file that is
+    not another autopilot's log (this project's CSV). InputError for a known suffix with foreign bytes."""
     suffix = Path(path).suffix.lower()
     if suffix not in FOREIGN_SUFFIXES:
-        raise InputError(f"{path}: unknown log type {suffix or '(no suffix)'}: PX4 .ulg or Betaflight .bbl/.bfl")
-    head = read_bytes(path)[:32]          # a regular, readable file (errors.read_bytes), and its magic
+        return None
+    head = read_bytes(path)[:64]          # a regular, readable file (errors.read_bytes), and its magic
+    if head.startswith(b"H Product:Blackbox"):
+        return "blackbox"
+    if suffix in (".txt", ".log"):
+        if suffix == ".log" and head.startswith(b"FMT,"):
+            return "dataflash-text"
+        return None                          # a text file of this project's kind (measured-data.md)
     if not head:
         raise InputError(f"{path}: empty file")
     if suffix == ".ulg":
         if not head.startswith(b"ULog"):
             raise InputError(f"{path}: not a ULog (no ULog header)")
         return "ulog"
-    if not head.startswith(b"H Product:Blackbox"):
-        raise InputError(f"{path}: not a blackbox log (no 'H Product:Blackbox' header)")
-    return "blackbox"
+    if suffix == ".bin":
+        if not head.startswith(DATAFLASH_MAGIC):
+            raise InputError(f"{path}: not an ArduPilot DataFlash log (no FMT message at its start)")
+        return "dataflash"
+    raise InputError(f"{path}: not a blackbox log (no 'H Product:Blackbox' header)")
+
+
+def _kind(path: str) -> str:
+    k = kind(path)
+    if k is None:
+        raise InputError(f"{path}: unknown log type {Path(path).suffix or '(no suffix)'}: PX4 .ulg, ArduPilot .bin, "
+                         "Betaflight/INAV .bbl/.bfl/.txt")
+    return k
 
 
 def count_logs(path: str) -> int:
-    """How many logs the file holds (a ULog one, a blackbox file one or more)."""
-    if _kind(path) == "ulog":
+    """How many logs the file holds (a ULog or DataFlash one, a blackbox file one or more)."""
+    if _kind(path) != "blackbox":
         return 1
     from flightctl.sim.logs import blackbox
-    return _guarded(path, lambda: blackbox.count(path))
+    return len(blackbox.split(read_bytes(path)))
 
 
-def _guarded(path: str, fn):
-    """Run a reader; what a third-party parser raises on a damaged file becomes one line."""
+def _guarded(name: str, fn):
+    """Run a reader; what a third-party parser raises on damaged bytes becomes one line."""
     try:
         return fn()
     except InputError:
         raise
-    except Exception as e:        # orangebox and pyulog raise what the bytes give them
-        raise InputError(f"{path}: damaged or unreadable log ({type(e).__name__}: {e})") from None
+    except Exception as e:        # pyulog, pymavlink and orangebox raise what the bytes give them
+        raise InputError(f"{name}: damaged or unreadable log ({type(e).__name__}: {e})") from None
 
 
-def read_imported(path: str, index: int | None = None) -> list[Imported]:
-    kind = _kind(path)
-    if kind == "ulog":
+def _reason(e: InputError, name: str) -> str:
+    text = str(e)
+    return text[len(name) + 2:] if text.startswith(f"{name}: ") else text
+
+
+def _entry(index: int, name: str, read, progress) -> LogEntry:
+    """Read one log (`read` gives its Imported) into an entry, or the reason it was skipped."""
+    try:
+        imp: Imported = _guarded(name, read)
+        text = _guarded(name, lambda: flight_text(imp, progress))
+        table = to_table(text, name)
+    except InputError as e:
+        return LogEntry(index, None, _reason(e, name), 0.0)
+    from flightctl.sim.identify.diagnose.data import IDLE_P
+    t = table["t"]
+    P = np.vstack([table[f"P{i}"] for i in range(1, 5)])
+    running = (P > IDLE_P).all(axis=0)
+    running_s = float(np.sum(np.diff(t)[running[:-1]])) if t.size > 1 else 0.0
+    return LogEntry(index, table, None, float(t[-1] - t[0]), text, running_s)
+
+
+def each_log(path: str, index: int | None = None, progress=None) -> list[LogEntry]:
+    """Every log of `path` (or the one at `index`, from 1), each read or skipped on its own: a log
+    that is empty, damaged or not a quadrotor never takes the others with it. File-level problems
+    (unreadable, unknown, an index that does not exist) raise InputError."""
+    k = _kind(path)
+    say = progress or (lambda *a: None)
+    if k != "blackbox":
         if index not in (None, 1):
-            raise InputError(f"{path}: a ULog holds one log: --index {index} does not exist")
-        from flightctl.sim.logs import ulog
-        return [_guarded(path, lambda: ulog.read(path))]
+            raise InputError(f"{path}: this log type holds one log: --index {index} does not exist")
+        if k == "ulog":
+            from flightctl.sim.logs import ulog
+            return [_entry(1, path, lambda: ulog.read(path), progress)]
+        from flightctl.sim.logs import dataflash
+        return [_entry(1, path, lambda: dataflash.read(path, text=k == "dataflash-text"), progress)]
     from flightctl.sim.logs import blackbox
-    n = count_logs(path)
+    data = read_bytes(path)
+    spans = blackbox.split(data)
+    n = len(spans)
     if n == 0:
         raise InputError(f"{path}: no log in this blackbox file")
     if index is not None and not 1 <= index <= n:
         raise InputError(f"{path}: --index {index} does not exist (the file holds {n} log{'s' if n > 1 else ''})")
-    return [_guarded(path, lambda i=i: blackbox.read(path, i)) for i in ([index] if index else range(1, n + 1))]
+    out = []
+    for i in [index] if index else range(1, n + 1):
+        a, b = spans[i - 1]
+        name = f"{path}#{i}" if n > 1 else path
+        start = time.perf_counter()
+        entry = _entry(i, name, lambda: blackbox.read(path, i, data[a:b], a, len(data), name), progress)
+        if n > 1:
+            say(f"log {i} of {n}: " + (entry.reason or f"{entry.seconds:.1f} s, motors running {entry.running_s:.1f} s")
+                + f" ({time.perf_counter() - start:.1f} s)")
+        out.append(entry)
+    return out
+
+
+def _ranges(indices: list[int]) -> str:
+    """'2-3, 5, 7-11' of sorted log numbers."""
+    parts, i = [], 0
+    while i < len(indices):
+        j = i
+        while j + 1 < len(indices) and indices[j + 1] == indices[j] + 1:
+            j += 1
+        parts.append(f"{indices[i]}" if i == j else f"{indices[i]}-{indices[j]}")
+        i = j + 1
+    return ", ".join(parts)
+
+
+def skipped(entries: list[LogEntry]) -> str:
+    """Which logs were skipped and why, grouped by reason: '2-3, 5: header only ...; 9: damaged ...'."""
+    by: dict[str, list[int]] = {}
+    for e in entries:
+        if e.table is None:
+            by.setdefault(e.reason or "", []).append(e.index)
+    return "; ".join(f"{'log' if len(v) == 1 else 'logs'} {_ranges(v)}: {r}" for r, v in by.items())
+
+
+def summary(path: str, entries: list[LogEntry]) -> str:
+    """One line: which logs of a file hold a flight, which were read without one, which were skipped."""
+    flights = [e for e in entries if e.flight]
+    ground = [e.index for e in entries if e.table is not None and not e.flight]
+    parts = [f"{path}: holds {len(entries)} logs"]
+    if flights:
+        parts.append(f"{len(flights)} hold a flight (" + ", ".join(
+            f"{e.index}: {e.seconds:.0f} s, motors running {e.running_s:.0f} s" for e in flights) + ")")
+    if ground:
+        parts.append(f"{_ranges(ground)} read without a flight (all four motors running under {MIN_FLIGHT_S:g} s)")
+    if any(e.table is None for e in entries):
+        parts.append("skipped " + skipped(entries))
+    return "; ".join(parts)
+
+
+def read_foreign(path: str, index: int | None = None, progress=None) -> list[Table]:
+    """The tables of the logs of `path` that were read (as `read_flight_log` gives the CSV that
+    `flightctl log import` writes of each); InputError naming every reason when none was."""
+    entries = each_log(path, index, progress)
+    tables = [e.table for e in entries if e.table is not None]
+    if not tables:
+        if len(entries) == 1:
+            raise InputError(f"{path}: {entries[0].reason}")
+        raise InputError(f"{path}: no log could be read: {skipped(entries)}")
+    return tables
 
 
 def import_text(path: str, index: int | None = None, progress=None) -> str:
     """The flight-log CSV text of the one log of `path` (`index` when it holds several)."""
-    if index is None and count_logs(path) > 1:
-        raise InputError(f"{path}: holds {count_logs(path)} logs: choose one with --index 1..{count_logs(path)}")
-    (imp,) = read_imported(path, index)
-    return _guarded(path, lambda: flight_text(imp, progress))
-
-
-def read_foreign(path: str, index: int | None = None, progress=None) -> list[Table]:
-    """Each log of `path` (or the one at `index`, from 1) as the table `read_flight_log` gives for the
-    CSV `flightctl log import` writes of it: the same text, read by the same reader."""
-    out = []
-    for imp in read_imported(path, index):
-        out.append(to_table(_guarded(path, lambda: flight_text(imp, progress)), imp.path))
-    return out
+    entries = each_log(path, index, progress)
+    if len(entries) > 1:
+        raise InputError(summary(path, entries) + ": choose one with --index N")
+    (entry,) = entries
+    if entry.table is None:
+        raise InputError(f"{path}{'#' + str(entry.index) if index else ''}: {entry.reason}")
+    return entry.text
 
 
 def read_figure(table: Table):

@@ -3,9 +3,10 @@ written as this project's flight log (measured-data.md) with the facts the diagn
 `# key: value` lines (docs/log-import.md).
 
 A reader fills a `Imported`: each stream is its own sample times and values (SI, our frames already:
-the reader converts at its edge), the metadata, and notes. `table` turns it into the flight-log text
-and reads that text back with the project's one reader, so that a foreign log and the CSV that
-`flightctl log import` writes give the diagnosis the same table, number for number.
+the reader converts at its edge), the metadata, and notes. `flight_text` turns it into the flight-log
+text and `to_table` reads that text back with the project's one reader, so that a foreign log and the
+CSV that `flightctl log import` writes give the diagnosis the same table, number for number. A missing
+value is an empty cell in every column (measured-data.md).
 """
 from __future__ import annotations
 
@@ -17,10 +18,24 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import FLIGHT_COLUMNS, FlightLogWriter, Table, read_flight_log
+from flightctl.sim.identify.diagnose.data import IDLE_P       # a motor runs above 1 % of its range
 
-EXTRA = ("current", "height", "omega1", "omega2", "omega3", "omega4", "gyro_f_x", "gyro_f_y", "gyro_f_z")
+AXES = ("x", "y", "z")
+# Extra columns (docs/log-import.md has each one's source and unit): the measurements the diagnosis
+# reads, then what draws rate tracking (the rate setpoint, the sticks, the PID terms).
+EXTRA = (("current", "height", "omega1", "omega2", "omega3", "omega4", "gyro_f_x", "gyro_f_y", "gyro_f_z")
+         + tuple(f"setpoint_{a}" for a in AXES) + ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle")
+         + tuple(f"pid_{term}_{a}" for term in "pidf" for a in AXES))
+# stream name -> its columns (streams of one value write the stream's name)
+GROUPS = {"acc": tuple(f"acc_{a}" for a in AXES), "gyro_f": tuple(f"gyro_f_{a}" for a in AXES),
+          "omega": tuple(f"omega{i}" for i in range(1, 5)), "attitude": ("roll", "pitch", "yaw"),
+          "setpoint": tuple(f"setpoint_{a}" for a in AXES), "rc": ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle"),
+          "pid": tuple(c for c in EXTRA if c.startswith("pid_"))}
 GAP_PERIODS = 3.0        # a measured stream is empty across gaps longer than this many of its own periods
 MIN_ROWS = 10
+ISLAND_GAP_S = 1.0       # a few rows cut off from the log by a gap this long at its start or end are not data
+ISLAND_SHARE = 0.01      # ... when they are under this share of the rows
+CELL_FULL_V = 4.2        # a LiPo cell at full charge: the cell count of a resting pack is ceil(V / 4.2)
 
 
 @dataclass
@@ -49,7 +64,8 @@ class Stream:
 class Imported:
     """A foreign log read: streams by column group, metadata, notes. Required streams: `gyro` (3, n,
     rad/s), `acc` (3, n, m/s^2), `motors` (4, n, P on 0-255); optional: `battery_v`, `current`,
-    `height`, `range`, `omega` (4), `attitude` (3: roll, pitch, yaw), `alt`, `gyro_f` (3)."""
+    `height`, `range`, `alt`, `omega` (4, rad/s), `attitude` (3: roll, pitch, yaw), `gyro_f` (3),
+    `setpoint` (3, rad/s), `rc` (4), `pid` (12: P, I, D, F terms on x, y, z)."""
     path: str
     streams: dict[str, Stream]
     meta: dict[str, str]
@@ -88,6 +104,46 @@ def _new_samples(t: np.ndarray, s: Stream) -> np.ndarray:
     return out
 
 
+def _islands(t: np.ndarray, notes: list[str]) -> np.ndarray:
+    """The rows kept: a few rows cut off by a long gap at the start or the end of the log (a logger's
+    first frames before it settles, a last frame written at power-off) are not flight data."""
+    keep = np.ones(t.size, bool)
+    gaps = np.flatnonzero(np.diff(t) > ISLAND_GAP_S)
+    if gaps.size and gaps[0] + 1 <= ISLAND_SHARE * t.size:
+        k = gaps[0] + 1
+        keep[:k] = False
+        notes.append(f"{k} rows before a {t[k] - t[k - 1]:.2f} s gap at the start of the log dropped "
+                     "(a logger's first frames, not flight data)")
+    if gaps.size and t.size - gaps[-1] - 1 <= ISLAND_SHARE * t.size and keep[gaps[-1] + 1]:
+        k = gaps[-1] + 1
+        keep[k:] = False
+        notes.append(f"{t.size - k} rows after a {t[k] - t[k - 1]:.2f} s gap at the end of the log dropped")
+    return keep
+
+
+def battery_cells(imp: Imported, P: np.ndarray | None = None) -> None:
+    """`battery_cells` and `battery_cells_source`: what the reader found in the log's own settings,
+    else ceil(V / 4.2) of the resting voltage (the median before the motors first run)."""
+    if "battery_cells" in imp.meta or "battery_v" not in imp.streams:
+        return
+    s = imp.streams["battery_v"]
+    motors = imp.streams["motors"]
+    running = (motors.values > IDLE_P).all(axis=0)
+    start = motors.t[np.argmax(running)] if running.any() else np.inf
+    rest = s.values[0, s.t < start]
+    v = float(np.median(rest if rest.size else s.values[0, :10]))
+    if v <= 0:
+        return
+    imp.meta["battery_cells"] = str(max(1, math.ceil(v / CELL_FULL_V - 1e-9)))
+    imp.meta["battery_cells_source"] = (f"estimated: ceil(V / {CELL_FULL_V:g} V) of the resting voltage "
+                                        f"{v:.2f} V ({'before the motors start' if rest.size else 'the first readings'})")
+
+
+def _format(x: np.ndarray, fmt: str) -> list[str]:
+    """Cells of one column: a missing value is an empty cell."""
+    return [fmt % v if v == v else "" for v in x.tolist()]
+
+
 def flight_text(imp: Imported, progress=None) -> str:
     """The flight log (measured-data.md) of an imported log, as text: one row per gyro sample."""
     gyro = imp.streams["gyro"]
@@ -96,35 +152,27 @@ def flight_text(imp: Imported, progress=None) -> str:
     if not keep.all():
         imp.notes.append(f"{int((~keep).sum())} gyro samples with a repeated or backward time dropped")
     t = t[keep]
+    g = gyro.values[:, keep]
     if t.size < MIN_ROWS:
         imp.fail(f"{t.size} gyro samples: too short to be a flight log")
+    island = _islands(t, imp.notes)
+    t, g = t[island], g[:, island]
     cols: dict[str, np.ndarray] = {"t": t - t[0]}
-    g = gyro.values[:, keep]
-    for j, a in enumerate("xyz"):
+    for j, a in enumerate(AXES):
         cols[f"gyro_{a}"] = g[j]
-    for name, prefix in (("acc", "acc_"), ("gyro_f", "gyro_f_")):
-        if name in imp.streams:
-            v = _on(t, imp.streams[name])
-            for j, a in enumerate("xyz"):
-                cols[f"{prefix}{a}"] = v[j]
     P = _on(t, imp.streams["motors"])
     for i in range(4):
         cols[f"P{i + 1}"] = P[i]
-    for name in ("battery_v", "current", "height", "alt"):
-        if name in imp.streams:
-            cols[name] = _on(t, imp.streams[name])[0]
-    if "omega" in imp.streams:
-        w = _on(t, imp.streams["omega"])
-        for i in range(4):
-            cols[f"omega{i + 1}"] = w[i]
-    if "attitude" in imp.streams:
-        a = _on(t, imp.streams["attitude"])
-        cols["roll"], cols["pitch"], cols["yaw"] = a
+    for name, s in imp.streams.items():
+        if name in ("gyro", "motors", "range"):
+            continue
+        v = _on(t, s)
+        for j, c in enumerate(GROUPS.get(name, (name,))):
+            cols[c] = v[j]
     if "range" in imp.streams:
         cols["range"] = _new_samples(t, imp.streams["range"])
     for name in ("acc_x", "acc_y", "acc_z", "P1"):
-        bad = ~np.isfinite(cols[name])
-        if bad.all():
+        if name not in cols or not np.isfinite(cols[name]).any():
             imp.fail(f"no {name} on the gyro's time base")
     ok = np.ones(t.size, bool)
     for name in ("acc_x", "acc_y", "acc_z", "P1", "P2", "P3", "P4"):
@@ -133,6 +181,9 @@ def flight_text(imp: Imported, progress=None) -> str:
         imp.notes.append(f"{int((~ok).sum())} rows without a command or accelerometer sample dropped")
         cols = {k: v[ok] for k, v in cols.items()}
         cols["t"] = cols["t"] - cols["t"][0]
+    if cols["t"].size < MIN_ROWS:
+        imp.fail(f"{cols['t'].size} rows with a command and an accelerometer sample: too short to be a flight log")
+    battery_cells(imp)
     meta = dict(imp.meta)
     meta["rate_hz"] = f"{1.0 / float(np.median(np.diff(cols['t']))):.1f}"
     meta["motor_rate_hz"] = f"{imp.streams['motors'].rate_hz():.1f}"
@@ -145,22 +196,13 @@ def flight_text(imp: Imported, progress=None) -> str:
         meta["import_notes"] = "\n".join(imp.notes)
     extra = tuple(c for c in EXTRA if c in cols)
     n = cols["t"].size
-    nan = math.nan
-    rows = []
-    for k in range(n):
-        row = []
-        for c in FLIGHT_COLUMNS:
-            if c == "range":
-                v = cols["range"][k] if "range" in cols else nan
-                row.append("" if not math.isfinite(v) else f"{v:.6g}")
-            else:
-                row.append(cols[c][k] if c in cols else nan)
-        rows.append(tuple(row) + tuple(cols[c][k] for c in extra))
+    empty = [""] * n
+    cells = [_format(cols["t"], "%.6f")]
+    cells += [_format(cols[c], "%.6g") if c in cols else empty for c in FLIGHT_COLUMNS[1:]]
+    cells += [_format(cols[c], "%.6g") for c in extra]
     out = io.StringIO()
-    writer = FlightLogWriter(out, meta, extra=extra)
-    for r in rows:
-        writer.append(r)
-    writer.close()
+    FlightLogWriter(out, meta, extra=extra).close()          # the `# key: value` lines and the header row
+    out.write("".join(",".join(row) + "\n" for row in zip(*cells)))
     if progress:
         progress(f"{imp.path}: {n} rows, {cols['t'][-1]:.1f} s at {meta['rate_hz']} Hz, motors at "
                  f"{meta['motor_rate_hz']} Hz")
@@ -170,3 +212,14 @@ def flight_text(imp: Imported, progress=None) -> str:
 def to_table(text: str, name: str) -> Table:
     """The flight-log text read back with the project's reader (the diagnosis' columns kept)."""
     return read_flight_log(name, min_rows=MIN_ROWS, extra=EXTRA, text=text)
+
+
+def euler_from_frd_ned(q: np.ndarray) -> np.ndarray:
+    """(roll, pitch, yaw) in our frames (conventions.md: body x forward, y left, z up; inertial North,
+    West, Up) of quaternions (4, n; any scale) from body FRD to NED: the same rotation seen with y and
+    z negated in both frames keeps the roll and negates the pitch and yaw."""
+    w, x, y, z = q / np.linalg.norm(q, axis=0)
+    roll = np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2.0 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return np.vstack([roll, -pitch, -yaw])

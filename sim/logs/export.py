@@ -15,15 +15,27 @@ the loop started (the log's time plus its calibration time).
 | vehicle_local_position | z (m, down), dist_bottom (m) | alt (the estimate) |
 | vehicle_local_position_setpoint | z (m, down) | alt_sp |
 | actuator_outputs | noutputs, output[4] (ESC pulse, us), command[4] (P, 0-255) | P1..P4 |
+| actuator_motors | control[4] (P / 255: PX4's normalised motor commands) | P1..P4 |
+| vehicle_angular_velocity | xyz[3] (rad/s, FRD) | gyro_* |
+| vehicle_rates_setpoint | roll, pitch, yaw (rad/s, FRD), thrust_body[3] | setpoint_* where logged, else the rate the PD commands: kp/kd times the angle error (eq. 24 as an angle loop feeding a rate loop, the integral left out); thrust: -mean P / 255 on z |
+| vehicle_status | arming_state (2 armed: the log starts at arming), nav_state (3, a mission: a plan), vehicle_type (1, rotary wing), is_vtol | one sample a second |
+| input_rc | channel_count, rssi, values[18] (us) | rc_* where logged (an imported log): 1500 + 500 stick, throttle 1000 + 1000 |
 | battery_status | voltage_v, voltage_filtered_v (V) | battery_v (rows with a reading) |
 | distance_sensor | current_distance, min_distance, max_distance (m), orientation, type | range (rows with an echo) |
 | vehicle_attitude_groundtruth, vehicle_local_position_groundtruth | q[4]; x, y, z (m) | true_* (simulator only) |
 
-Parameters are the log's `# params:` file, flattened (`kp_z` is `gains.kp_z`), as float parameters.
+The vehicle is described the PX4 way, so that PX4 tools and `flightctl log import` read it: MAV_TYPE 2,
+CA_ROTOR_COUNT 4 and CA_ROTOR{0..3}_PX/PY/KM (the paper's + layout, eq. 25, FRD, KM > 0
+counter-clockwise), PWM_MAIN_FUNC1..4 = 101..104 with PWM_MAIN_MIN/MAX the pulse of P = 0 and 255.
+The log's `# params:` file is flattened (`kp_z` is `gains.kp_z`) into float parameters named as PX4
+allows (at most 16 characters: `FC_` and the section's letter, `FC_G_KP_Z`; a longer name keeps its
+first 12 characters and a 3-character hash), and the `flightctl_params` information message lists
+`SHORT=full.name` for each.
 """
 from __future__ import annotations
 
 import argparse
+import hashlib
 import struct
 import sys
 import tomllib
@@ -35,7 +47,7 @@ from flightctl import __version__
 from flightctl.errors import InputError, output_file
 from flightctl.comms.frames import euler_ned, pulse_us, quaternion, vector_ned
 from flightctl.logfile import read_flight_log
-from flightctl.params import Airframe, from_dict
+from flightctl.params import Airframe, Gains, from_dict
 
 MAGIC = b"ULog\x01\x12\x35"
 FILE_VERSION = 1
@@ -44,7 +56,10 @@ SONAR_RANGE_M = (0.02, 4.0)           # HC-SR04
 TRUTH = ("true_x", "true_y", "true_z", "true_roll", "true_pitch", "true_yaw")
 
 # numpy field type of each ULog type
-_TYPES = {"uint64_t": "<u8", "uint32_t": "<u4", "uint8_t": "u1", "float": "<f4"}
+_TYPES = {"uint64_t": "<u8", "uint32_t": "<u4", "int32_t": "<i4", "uint16_t": "<u2", "uint8_t": "u1",
+          "bool": "u1", "float": "<f4"}
+PARAM_CHARS = 16                      # PX4's limit on a parameter's name
+ARMED, AUTO_MISSION, ROTARY_WING = 2, 3, 1     # vehicle_status.arming_state, nav_state, vehicle_type
 
 
 def _message(kind: str, payload: bytes) -> bytes:
@@ -65,8 +80,27 @@ def _info(key: str, value) -> bytes:
 
 
 def _parameter(name: str, value: float) -> bytes:
-    tkey = f"float {name}".encode()
-    return _message("P", bytes([len(tkey)]) + tkey + struct.pack("<f", value))
+    """A 'P' message: a float, or an int32_t for an int (PX4's integer parameters)."""
+    if isinstance(value, int):
+        tkey, raw = f"int32_t {name}".encode(), struct.pack("<i", value)
+    else:
+        tkey, raw = f"float {name}".encode(), struct.pack("<f", value)
+    return _message("P", bytes([len(tkey)]) + tkey + raw)
+
+
+def short_name(name: str) -> str:
+    """A flattened parameter's name as PX4 allows it (at most 16 characters, upper case):
+    `gains.kp_z` -> `FC_G_KP_Z`; a longer one keeps its first 12 characters and a 3-character hash."""
+    section, _, rest = name.rpartition(".")
+    head = {"": "FC_", "gains": "FC_G_", "filters": "FC_F_"}.get(section)
+    if head is None:                                   # effect{k}.{cause}.{name}
+        head = "FC_E" + section.split(".")[0].removeprefix("effect") + "_"
+    short = (head + rest).upper()
+    if len(short) > PARAM_CHARS:
+        digest = int.from_bytes(hashlib.sha1(name.encode()).digest()[:4], "big")
+        code = "".join("0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ"[(digest // 36 ** k) % 36] for k in range(3))
+        short = short[:PARAM_CHARS - 4] + "_" + code
+    return short
 
 
 class Topic:
@@ -101,6 +135,14 @@ TOPICS = {t.name: t for t in (
     Topic("vehicle_local_position", [("float", "z", 0), ("float", "dist_bottom", 0)]),
     Topic("vehicle_local_position_setpoint", [("float", "z", 0)]),
     Topic("actuator_outputs", [("uint32_t", "noutputs", 0), ("float", "output", 4), ("float", "command", 4)]),
+    Topic("actuator_motors", [("uint64_t", "timestamp_sample", 0), ("float", "control", 4)]),
+    Topic("vehicle_angular_velocity", [("uint64_t", "timestamp_sample", 0), ("float", "xyz", 3)]),
+    Topic("vehicle_rates_setpoint", [("float", "roll", 0), ("float", "pitch", 0), ("float", "yaw", 0),
+                                     ("float", "thrust_body", 3)]),
+    Topic("vehicle_status", [("uint8_t", "arming_state", 0), ("uint8_t", "nav_state", 0),
+                             ("uint8_t", "vehicle_type", 0), ("bool", "is_vtol", 0)]),
+    Topic("input_rc", [("uint64_t", "timestamp_last_signal", 0), ("int32_t", "rssi", 0),
+                       ("uint8_t", "channel_count", 0), ("uint16_t", "values", 18)]),
     Topic("battery_status", [("float", "voltage_v", 0), ("float", "voltage_filtered_v", 0)]),
     Topic("distance_sensor", [("float", "min_distance", 0), ("float", "max_distance", 0),
                               ("float", "current_distance", 0), ("uint8_t", "type", 0),
@@ -141,7 +183,8 @@ def _release(version: str) -> int:
 
 def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
     """Write the ULog file; returns the number of samples per topic."""
-    log = read_flight_log(csv_path, extra=TRUTH)
+    from flightctl.sim.logs.common import EXTRA
+    log = read_flight_log(csv_path, extra=TRUTH + EXTRA)
     meta = log.meta
     params = flat_parameters(meta, log.path)
     esc_hz = params.get("esc_pwm_hz", Airframe.esc_pwm_hz)
@@ -166,7 +209,21 @@ def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
         "vehicle_local_position_setpoint": dict(z=-col["alt_sp"]),
         "actuator_outputs": dict(noutputs=4, output=pulse_us(P, esc_hz), command=P),
     }
+    data["actuator_motors"] = dict(timestamp_sample=ts, control=P / 255.0)
+    data["vehicle_angular_velocity"] = dict(timestamp_sample=ts, xyz=np.column_stack([gx, gy, gz]))
+    data["vehicle_rates_setpoint"] = _rates_setpoint(log, params, P)
     stamps = {name: ts for name in data}
+    second = np.unique(np.clip(np.searchsorted(log["t"], np.arange(log["t"][0], log["t"][-1], 1.0)), 0, n - 1))
+    data["vehicle_status"] = dict(arming_state=ARMED, nav_state=AUTO_MISSION, vehicle_type=ROTARY_WING, is_vtol=0)
+    stamps["vehicle_status"] = ts[second]
+    if all(c in log for c in ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle")):
+        rc = np.column_stack([1500.0 + 500.0 * col[c] for c in ("rc_roll", "rc_pitch", "rc_yaw")]
+                             + [1000.0 + 1000.0 * col["rc_throttle"]])
+        ok = np.isfinite(rc).all(axis=1)
+        values = np.zeros((int(ok.sum()), 18))
+        values[:, :4] = np.clip(rc[ok], 0, 65535)
+        data["input_rc"] = dict(timestamp_last_signal=ts[ok], rssi=100, channel_count=4, values=values)
+        stamps["input_rc"] = ts[ok]
     volts = col["battery_v"]
     has_v = np.isfinite(volts)
     data["battery_status"] = dict(voltage_v=volts[has_v], voltage_filtered_v=volts[has_v])
@@ -193,8 +250,14 @@ def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
     head += _info("ver_hw", meta.get("board", "unknown"))
     head += _info("sys_toolchain", "python")
     head += _info("source_log", Path(log.path).name)
-    for name, value in params.items():
+    short = {short_name(name): name for name in params}
+    if len(short) < len(params):
+        raise InputError(f"{log.path}: two parameters shorten to one PX4 name: rename one")
+    head += _info("flightctl_params", ";".join(f"{k}={v}" for k, v in short.items()))
+    for name, value in _vehicle_parameters(log, params).items():
         head += _parameter(name, value)
+    for name, value in short.items():
+        head += _parameter(name, params[value])
     for msg_id, topic in enumerate(topics):
         head += _message("A", struct.pack("<BH", 0, msg_id) + topic.name.encode())
 
@@ -209,6 +272,44 @@ def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
     body = b"".join([blobs[i] for i in order])
     Path(ulg_path).write_bytes(bytes(head) + body)
     return {topic.name: len(stamps[topic.name]) for topic in topics} | {"rows": n}
+
+
+def _vehicle_parameters(log, params: dict[str, float]) -> dict[str, float | int]:
+    """The vehicle as PX4 describes it: a quadrotor, its rotors (the log's `# rotors:` line, else the
+    paper's + layout with the arm l, eq. 25), the four main outputs as motors 1-4 with the pulse range
+    of P = 0..255."""
+    if "rotors" in log.meta:
+        rotors = [tuple(float(v) for v in r.split()) for r in log.meta["rotors"].split(";")]
+    else:
+        arm = params.get("l", Airframe.l)
+        rotors = [(arm, 0.0, -1.0), (0.0, arm, 1.0), (-arm, 0.0, -1.0), (0.0, -arm, 1.0)]
+    esc_hz = params.get("esc_pwm_hz", Airframe.esc_pwm_hz)
+    out: dict[str, float | int] = {"MAV_TYPE": 2, "CA_ROTOR_COUNT": 4}
+    for i, (x, y, spin) in enumerate(rotors):
+        out.update({f"CA_ROTOR{i}_PX": x, f"CA_ROTOR{i}_PY": -y, f"CA_ROTOR{i}_KM": 0.05 * spin})  # FRD; KM: spin
+        out.update({f"PWM_MAIN_FUNC{i + 1}": 101 + i, f"PWM_MAIN_MIN{i + 1}": 0,
+                    f"PWM_MAIN_MAX{i + 1}": int(round(pulse_us(255.0, esc_hz)))})
+    return out
+
+
+def _rates_setpoint(log, params: dict[str, float], P: np.ndarray) -> dict:
+    """vehicle_rates_setpoint (FRD): the log's rate setpoint where it has one, else the rate this
+    controller's PD commands, kp/kd times the angle error (eq. 24 written as an angle loop feeding a
+    rate loop; the integral left out); the thrust: minus the mean command on z."""
+    col = log.columns
+    if all(f"setpoint_{a}" in log for a in "xyz"):
+        ours = [col[f"setpoint_{a}"] for a in "xyz"]
+    else:
+        g = {k: params.get(f"gains.{k}", getattr(Gains, k)) for k in
+             ("kp_phi", "kd_phi", "kp_theta", "kd_theta", "kp_psi", "kd_psi")}
+        err = [col["roll_sp"] - col["roll"], col["pitch_sp"] - col["pitch"],
+               (col["yaw_sp"] - col["yaw"] + np.pi) % (2 * np.pi) - np.pi]
+        ours = [g[f"kp_{a}"] / g[f"kd_{a}"] * e if g[f"kd_{a}"] > 0 else np.zeros_like(e)
+                for a, e in zip(("phi", "theta", "psi"), err)]
+    roll, pitch, yaw = vector_ned(*ours)
+    thrust = np.zeros((len(P), 3))
+    thrust[:, 2] = -P.mean(axis=1) / 255.0
+    return dict(roll=roll, pitch=pitch, yaw=yaw, thrust_body=thrust)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -244,14 +345,15 @@ def main(argv: list[str]) -> int:
                        description=__doc__.split("\n\n")[0])
     e.add_argument("csv", metavar="FLIGHT.csv", help="a flightctl flight log")
     e.add_argument("ulg", metavar="FLIGHT.ulg", help="the ULog to write")
-    i = sub.add_parser("import", help="write another autopilot's log (PX4 .ulg, Betaflight .bbl/.bfl) as a "
-                                      "flight log (CSV, measured-data.md); needs the logs extra",
-                       description="Read a PX4 ULog or a Betaflight blackbox log and write it as this project's "
-                                   "flight log, on the gyro's time base, with the rotor layout, the command scale "
-                                   "and the sensor filters in '# key: value' lines (docs/log-import.md).")
-    i.add_argument("foreign", metavar="FOREIGN_LOG", help="a .ulg, .bbl, .bfl or .BFL file")
+    i = sub.add_parser("import", help="write another autopilot's log (PX4 .ulg, ArduPilot .bin, Betaflight/INAV "
+                                      ".bbl/.bfl/.txt) as a flight log (CSV, measured-data.md); needs the logs extra",
+                       description="Read a PX4 ULog, an ArduPilot DataFlash log or a Betaflight/INAV blackbox log and "
+                                   "write it as this project's flight log, on the gyro's time base, with the rotor "
+                                   "layout, the command scale and the sensor filters in '# key: value' lines "
+                                   "(docs/log-import.md). Of a file of many logs without --index: which hold a flight.")
+    i.add_argument("foreign", metavar="FOREIGN_LOG", help="a .ulg, .bin, .bbl, .bfl, .BFL or INAV .TXT file")
     i.add_argument("out", metavar="OUT.csv", help="the flight log to write")
-    i.add_argument("--index", type=int, metavar="N", help="of a blackbox file holding several logs, log N (from 1)")
+    i.add_argument("--index", type=int, metavar="N", help="of a file holding several logs, log N (from 1)")
     i.add_argument("--plot", metavar="OUT.png", help="also write the figure of what was read: rates, gaps, channels")
     i.add_argument("--quiet", action="store_true", help="no progress on stderr")
     args = p.parse_args(argv)

@@ -1,7 +1,9 @@
 """The figure of what was read from a log (`flightctl log import --plot`, `flightctl diagnose --plot`):
-each stream's rate of distinct samples with its gaps, then the channels the diagnosis uses over time.
-Drawn from the table and its metadata only, so a foreign log and the CSV imported from it give the
-same figure."""
+each stream's rate of distinct samples with its gaps, then the channels the diagnosis uses over time,
+the rate setpoint dashed beside the gyro where the log has one. Lines break across gaps in the rows
+(no line is drawn through time nothing was logged); a barometer's height is drawn from its first
+reading (an absolute altitude would sit metres away from the estimate's). Drawn from the table and its
+metadata only, so a foreign log and the CSV imported from it give the same figure."""
 from __future__ import annotations
 
 import re
@@ -13,11 +15,12 @@ from flightctl.sim.plots import empty_panel, figure, legend
 
 STREAM = re.compile(r"(.+?) rate_hz=([\d.]+) samples=(\d+) gaps=(\d+) longest_gap_s=([\d.]+)")
 STRIPS = (("commands P (0-255)", ("P1", "P2", "P3", "P4")),
-          ("gyro (rad/s)", ("gyro_x", "gyro_y", "gyro_z")),
+          ("gyro, setpoint dashed (rad/s)", ("gyro_x", "gyro_y", "gyro_z")),
           ("specific force (m/s^2)", ("acc_x", "acc_y", "acc_z")),
           ("battery (V, A)", ("battery_v", "current")),
-          ("height (m)", ("height", "alt", "range")),
+          ("height (m; baro from its first reading)", ("height", "alt", "range")),
           ("rotor speed (rad/s)", ("omega1", "omega2", "omega3", "omega4")))
+GAP_PERIODS = 3.0        # a line breaks where the rows are further apart than this many median periods
 
 
 def streams(table: Table) -> list[tuple[str, float, int, int, float]]:
@@ -52,12 +55,28 @@ def read_figure(table: Table):
                  f"{t[-1] - t[0]:.1f} s, rows at {meta.get('rate_hz', '?')} Hz, motors at "
                  f"{meta.get('motor_rate_hz', '?')} Hz", fontsize=9)
     step = max(1, t.size // 6000)
+    gap = np.flatnonzero(np.diff(t) > GAP_PERIODS * np.median(np.diff(t))) + 1 if t.size > 2 else np.array([], int)
+    tt = np.insert(t, gap, np.nan)[::step]
+
+    def line(x):
+        """x with NaN at the gaps (a line breaks there), decimated; a value missing inside a stream's
+        own span is bridged (its samples are sparser than the rows), not outside it."""
+        ok = np.isfinite(x)
+        if ok.sum() >= 2:
+            inside = (np.arange(x.size) >= np.argmax(ok)) & (np.arange(x.size) <= x.size - 1 - np.argmax(ok[::-1]))
+            x = np.where(inside & ~ok, np.interp(t, t[ok], x[ok]), x)
+        return np.insert(x, gap, np.nan)[::step]
+
     for ax, (label, names) in zip(axes[1:], STRIPS):
         shown = [n for n in names if n in table and np.isfinite(table[n]).any()]
         for n in shown:
             x = table[n]
-            ok = np.isfinite(x)
-            ax.plot(t[ok][::step], x[ok][::step], lw=0.6, label=n)
+            if n == "height" and table.meta.get("height_source") == "baro":
+                x = x - x[np.isfinite(x)][0]
+            drawn = ax.plot(tt, line(x), lw=0.6, label=n)
+            sp = n.replace("gyro_", "setpoint_")
+            if sp != n and sp in table and np.isfinite(table[sp]).any():
+                ax.plot(tt, line(table[sp]), lw=0.6, ls="--", color=drawn[0].get_color(), label=sp)
         if shown:
             legend(ax, fontsize=7)
         else:

@@ -3,6 +3,10 @@
 PX4's body frame is x forward, y right, z down (FRD), its earth frame North-East-Down: to ours (x
 forward, y left, z up; North, West, Up) y and z change sign, and the accelerometer's specific force
 reads -g on z at rest in FRD, +g in ours. `sensor_combined` is the time base (the gyro's).
+
+What the vehicle is comes from the log's own description (`px4motors`): the airframe (MAV_TYPE,
+CA_AIRFRAME, SYS_AUTOSTART), the rotors (CA_ROTOR*), the output functions and their ranges, and
+which outputs move while armed.
 """
 from __future__ import annotations
 
@@ -10,127 +14,75 @@ import math
 
 import numpy as np
 
-from flightctl.sim.logs.common import Imported, Stream
+from flightctl.errors import InputError
+from flightctl.sim.logs.common import Imported, Stream, euler_from_frd_ned
 
-# PX4's quad X (the airframes without CA_ROTOR* parameters): motor 1 front right, 2 rear left, 3 front
-# left, 4 rear right, in FRD (x, y); 1 and 2 counter-clockwise.
-PX4_QUAD_X = ((1.0, 1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, -1.0, -1.0), (-1.0, 1.0, -1.0))
-QUADROTOR = 2                                    # MAV_TYPE
+FRD = np.array([[1.0], [-1.0], [-1.0]])      # FRD (or NED) to ours: y and z change sign
+ARMED = 2                                    # vehicle_status.arming_state ARMED (every PX4 version)
+RANGE_MAX_M = 10.0                           # the contract's rangefinder range
+DOWNWARD = 25                                # distance_sensor.orientation ROTATION_DOWNWARD_FACING
+FAST_HZ = 48.0                               # motors logged slower than this: static effects only (docs/diagnose.md)
+SLOW_SENSOR_HZ = 100.0                       # a gyro logged slower than this cannot follow the rotation dynamics
+PROFILE_NOTE = ("to log them at full rate set SDLOG_PROFILE bit 4 (High rate: add 16, e.g. 17) or bit 3 "
+                "(System identification: add 8) and reboot")
 
 
 def _ulog(path: str):
     try:
         from pyulog import ULog
     except ImportError:
-        from flightctl.errors import InputError
-        raise InputError(f"{path}: reading a ULog needs the logs extra: pip install '.[logs]' (from the checkout)")
-    from flightctl.errors import InputError
+        raise InputError(f"{path}: reading a ULog needs the logs extra: pip install '.[logs]' (from the checkout)") from None
     try:
         return ULog(path)
     except Exception as e:             # pyulog raises what the bytes give it: a truncated or foreign file
         raise InputError(f"{path}: not a readable ULog ({type(e).__name__}: {e})") from None
 
 
-def _topic(u, name: str):
-    """The data of the first instance of a topic, or None."""
-    sets = [d for d in u.data_list if d.name == name]
+def topic(u, name: str, instance: int | None = None):
+    """The data of a topic's instance (the lowest when None), or None."""
+    sets = [d for d in u.data_list if d.name == name and (instance is None or d.multi_id == instance)]
     return min(sets, key=lambda d: d.multi_id).data if sets else None
 
 
-def _motor_rows(ao: dict) -> np.ndarray:
-    """The rows of actuator_outputs that carry the motors: two publishers may share instance 0 (the
-    main and the auxiliary outputs, told apart by `noutputs`); the motors' group is the one whose
-    first four outputs vary most over the log."""
-    groups = {int(k): ao["noutputs"] == k for k in np.unique(ao["noutputs"])}
-    out = np.vstack([ao[f"output[{i}]"] for i in range(4)])
-    return max(groups.values(), key=lambda rows: float(out[:, rows].std(axis=1).sum()) if rows.sum() > 1 else -1.0)
-
-
-def _layout(u, imp: Imported) -> tuple[str, str]:
-    """(`rotors` metadata, its source): CA_ROTOR* parameters, or the quad X of older airframes."""
-    p = u.initial_parameters
-    if "CA_ROTOR_COUNT" in p:
-        count = int(p["CA_ROTOR_COUNT"])
-        if count != 4:
-            imp.fail(f"CA_ROTOR_COUNT = {count}: diagnose knows quadrotors (4)")
-        rotors = []
-        for i in range(4):
-            x, y, km = (float(p.get(f"CA_ROTOR{i}_{k}", math.nan)) for k in ("PX", "PY", "KM"))
-            if not all(math.isfinite(v) for v in (x, y, km)) or km == 0:
-                imp.fail(f"CA_ROTOR{i}_PX/PY/KM missing or zero: the rotor layout is unknown")
-            rotors.append((x, y, 1.0 if km > 0 else -1.0))      # KM > 0: counter-clockwise (PX4's control allocation)
-        arm = max(math.hypot(x, y) for x, y, _ in rotors)
-        source = "PX4's CA_ROTOR{0..3}_PX/PY/KM parameters (FRD positions, KM > 0 counter-clockwise)"
-    else:
-        mav = int(p.get("MAV_TYPE", -1))
-        if mav != QUADROTOR:
-            imp.fail(f"MAV_TYPE = {mav} and no CA_ROTOR* parameters: not a quadrotor this reader knows")
-        rotors, arm = list(PX4_QUAD_X), math.sqrt(2.0)
-        source = (f"PX4's quad X for SYS_AUTOSTART {int(p.get('SYS_AUTOSTART', 0))} (MAV_TYPE 2, no CA_ROTOR* "
-                  "parameters): motor 1 front right, 2 rear left, 3 front left, 4 rear right; 1 and 2 counter-clockwise")
-    text = "; ".join(f"{x / arm:.4f} {-y / arm:.4f} {s:+.0f}" for x, y, s in rotors)     # FRD y to our y
-    return text, source
+def armed_times(u) -> tuple[np.ndarray, np.ndarray] | None:
+    """(times, armed 0/1) from actuator_armed, else vehicle_status.arming_state; None when neither."""
+    aa = topic(u, "actuator_armed")
+    if aa is not None and "armed" in aa:
+        return aa["timestamp"] * 1e-6, aa["armed"].astype(bool)
+    vs = topic(u, "vehicle_status")
+    if vs is not None and "arming_state" in vs:
+        return vs["timestamp"] * 1e-6, vs["arming_state"] == ARMED
+    return None
 
 
 def read(path: str) -> Imported:
+    from flightctl.sim.logs import px4motors
     u = _ulog(path)
     imp = Imported(path, {}, {}, [])
-    sc = _topic(u, "sensor_combined")
+    p = u.initial_parameters
+    rotors, source = px4motors.vehicle(u, p, imp)        # refuses what is not a quadrotor, names why
+    armed = armed_times(u)
+    if armed is not None and not armed[1].any():
+        imp.fail("never armed: the motors did not run in this log (actuator_armed / vehicle_status.arming_state)")
+    sc = topic(u, "sensor_combined")
     if sc is None or "gyro_rad[0]" not in sc:
         imp.fail("no sensor_combined topic: the gyro was not logged")
     t = sc["timestamp"] * 1e-6
     g = np.vstack([sc[f"gyro_rad[{i}]"] for i in range(3)]).astype(float)
     a = np.vstack([sc[f"accelerometer_m_s2[{i}]"] for i in range(3)]).astype(float)
-    imp.streams["gyro"] = Stream("sensor_combined gyro", t, g * np.array([[1.0], [-1.0], [-1.0]]))
+    imp.streams["gyro"] = Stream("sensor_combined gyro", t, g * FRD)
     ta = t + sc.get("accelerometer_timestamp_relative", np.zeros(t.size)) * 1e-6
-    imp.streams["acc"] = Stream("sensor_combined accelerometer", ta, a * np.array([[1.0], [-1.0], [-1.0]]))
-    ao = _topic(u, "actuator_outputs")
-    if ao is None:
-        imp.fail("no actuator_outputs topic: the motor commands were not logged")
-    rows = _motor_rows(ao)
-    nout = np.vstack([ao[f"output[{i}]"] for i in range(8) if f"output[{i}]" in ao])
-    if int(ao["noutputs"][rows].max()) > 4 or (nout.shape[0] > 4 and np.ptp(nout[4:, rows]) > 0):
-        imp.fail("more than 4 motor outputs in use: diagnose knows quadrotors (4)")
-    p = u.initial_parameters
-    lo = [p.get(f"PWM_MAIN_MIN{i}", -1) for i in range(1, 5)]
-    hi = [p.get(f"PWM_MAIN_MAX{i}", -1) for i in range(1, 5)]
-    lo = np.array([v if v > 0 else p.get("PWM_MAIN_MIN", 1000) for v in lo], dtype=float)[:, None]
-    hi = np.array([v if v > 0 else p.get("PWM_MAIN_MAX", 2000) for v in hi], dtype=float)[:, None]
-    raw = np.vstack([ao[f"output[{i}]"][rows] for i in range(4)]).astype(float)
-    P = 255.0 * (raw - lo) / (hi - lo)
-    clipped = int(((P < 0) | (P > 255)).any(axis=0).sum())
-    if clipped:
-        imp.notes.append(f"{clipped} actuator_outputs samples outside PWM_MAIN_MIN..MAX (stopped or disarmed: 0) "
-                         "clipped to 0-255")
-    imp.streams["motors"] = Stream("actuator_outputs", ao["timestamp"][rows] * 1e-6, np.clip(P, 0.0, 255.0), held=True)
-    bs = _topic(u, "battery_status")
-    if bs is not None:
-        tb = bs["timestamp"] * 1e-6
-        imp.streams["battery_v"] = Stream("battery_status voltage", tb, bs["voltage_v"][None].astype(float))
-        if np.any(bs["current_a"] > 0):
-            imp.streams["current"] = Stream("battery_status current", tb, bs["current_a"][None].astype(float))
-    air = _topic(u, "vehicle_air_data")
-    height_source = "none"
-    if air is not None:
-        imp.streams["height"] = Stream("vehicle_air_data baro", air["timestamp"] * 1e-6,
-                                       air["baro_alt_meter"][None].astype(float))
-        height_source = "baro"
-    lp = _topic(u, "vehicle_local_position")
-    if lp is not None:
-        imp.streams["alt"] = Stream("vehicle_local_position z", lp["timestamp"] * 1e-6, -lp["z"][None].astype(float))
-    att = _topic(u, "vehicle_attitude")
-    if att is not None:
-        from flightctl.sim.logs.blackbox import _euler_from_frd_ned
-        q = np.vstack([att[f"q[{i}]"] for i in range(4)]).astype(float)
-        imp.streams["attitude"] = Stream("vehicle_attitude", att["timestamp"] * 1e-6, _euler_from_frd_ned(q))
-    esc = _topic(u, "esc_status")
-    if esc is not None and all(f"esc[{i}].esc_rpm" in esc for i in range(4)):
-        rpm = np.vstack([esc[f"esc[{i}].esc_rpm"] for i in range(4)]).astype(float)
-        if np.any(rpm != 0):
-            imp.streams["omega"] = Stream("esc_status rpm", esc["timestamp"] * 1e-6, rpm * 2.0 * math.pi / 60.0)
-        else:
-            imp.notes.append("esc_status rpm are all zero: no rotor speeds")
-    rotors, source = _layout(u, imp)
+    imp.streams["acc"] = Stream("sensor_combined accelerometer", ta, a * FRD)
+    rate = imp.streams["gyro"].rate_hz()
+    if rate < SLOW_SENSOR_HZ:
+        imp.notes.append(f"sensor_combined at {rate:.1f} Hz: too slow to follow the vehicle's rotation (its dynamics "
+                         "are tens of Hz); read with the rate declared, for static effects only; " + PROFILE_NOTE)
+    motors = px4motors.motors(u, p, imp, armed)
+    imp.streams["motors"] = motors
+    if motors.rate_hz() < FAST_HZ:
+        imp.notes.append(f"motor commands logged at {motors.rate_hz():.1f} Hz (PX4's default logger profile logs them "
+                         "at about 10 Hz): held between their samples, enough for static effects only; " + PROFILE_NOTE)
+    _measurements(u, p, imp)
     cutoff = float(p.get("IMU_GYRO_CUTOFF", 0) or 0)
     info = u.msg_info_dict
     imp.meta.update({
@@ -138,11 +90,63 @@ def read(path: str) -> Imported:
         "firmware": f"PX4 {info.get('ver_sw_release', '')} {str(info.get('ver_sw', ''))[:8]} {info.get('ver_hw', '')}".strip(),
         "craft": str(info.get("sys_name", "")),
         "rotors": rotors, "rotors_source": source,
-        "command_range": f"{lo.min():g} {hi.max():g}",
-        "command": "P = 255 (pwm - PWM_MAIN_MIN) / (PWM_MAIN_MAX - PWM_MAIN_MIN): actuator_outputs in us",
         "gyro_source": ("sensor_combined.gyro_rad: the integrated raw gyro (IMU_GYRO_CUTOFF "
                         f"{cutoff:g} Hz filters the controller's copy, not this one)"),
         "gyro_filter": "none", "acc_source": "sensor_combined.accelerometer_m_s2", "acc_filter": "none",
-        "height_source": height_source,
     })
     return imp
+
+
+def _measurements(u, p: dict, imp: Imported) -> None:
+    """Battery, heights, attitude, rotor speeds, the rate setpoint, the battery's cells."""
+    bs = topic(u, "battery_status")
+    if bs is not None:
+        tb = bs["timestamp"] * 1e-6
+        v = bs["voltage_v"].astype(float)
+        ok = v > 0.5                     # 0 until the first reading
+        imp.streams["battery_v"] = Stream("battery_status voltage", tb[ok], v[None, ok])
+        if "current_a" in bs and np.any(bs["current_a"] > 0):
+            imp.streams["current"] = Stream("battery_status current", tb, bs["current_a"][None].astype(float))
+    for name in ("BAT1_N_CELLS", "BAT_N_CELLS"):
+        if int(p.get(name, 0) or 0) > 0:
+            imp.meta["battery_cells"] = str(int(p[name]))
+            imp.meta["battery_cells_source"] = f"PX4 parameter {name}"
+            break
+    air = topic(u, "vehicle_air_data")
+    imp.meta["height_source"] = "none"
+    if air is not None and "baro_alt_meter" in air:
+        imp.streams["height"] = Stream("vehicle_air_data baro (above sea level)", air["timestamp"] * 1e-6,
+                                       air["baro_alt_meter"][None].astype(float))
+        imp.meta["height_source"] = "baro"
+    ds = topic(u, "distance_sensor")
+    if ds is not None and "current_distance" in ds:
+        down = ds["orientation"] == DOWNWARD if "orientation" in ds else np.ones(len(ds["timestamp"]), bool)
+        d = ds["current_distance"]
+        lo, hi = ds.get("min_distance", np.zeros(d.size)), ds.get("max_distance", np.full(d.size, RANGE_MAX_M))
+        down &= (d > lo) & (d < np.minimum(hi, RANGE_MAX_M))      # out of range: no echo (measured-data.md: 0-10 m)
+        if down.any():
+            imp.streams["range"] = Stream("distance_sensor (downward)", ds["timestamp"][down] * 1e-6,
+                                          ds["current_distance"][None, down].astype(float))
+    lp = topic(u, "vehicle_local_position")
+    if lp is not None and "z" in lp:
+        imp.streams["alt"] = Stream("vehicle_local_position z", lp["timestamp"] * 1e-6, -lp["z"][None].astype(float))
+    att = topic(u, "vehicle_attitude")
+    if att is not None:
+        q = np.vstack([att[f"q[{i}]"] for i in range(4)]).astype(float)
+        imp.streams["attitude"] = Stream("vehicle_attitude", att["timestamp"] * 1e-6, euler_from_frd_ned(q))
+    rs = topic(u, "vehicle_rates_setpoint")
+    if rs is not None and all(k in rs for k in ("roll", "pitch", "yaw")):
+        sp = np.vstack([rs[k] for k in ("roll", "pitch", "yaw")]).astype(float)
+        imp.streams["setpoint"] = Stream("vehicle_rates_setpoint", rs["timestamp"] * 1e-6, sp * FRD)
+    esc = topic(u, "esc_status")
+    if esc is not None and all(f"esc[{i}].esc_rpm" in esc for i in range(4)):
+        order = imp.meta.pop("esc_order", None)
+        idx = [int(k) for k in order.split()] if order else [0, 1, 2, 3]
+        rpm = np.vstack([esc[f"esc[{i}].esc_rpm"] for i in idx]).astype(float)
+        if np.any(rpm != 0):
+            imp.streams["omega"] = Stream("esc_status rpm", esc["timestamp"] * 1e-6, np.abs(rpm) * 2.0 * math.pi / 60.0)
+            imp.meta["omega_source"] = (f"esc_status esc[{','.join(map(str, idx))}].esc_rpm (the ESCs' telemetry, "
+                                        "rpm) for motors 1-4")
+        else:
+            imp.notes.append("esc_status rpm are all zero: no rotor speeds")
+    imp.meta.pop("esc_order", None)

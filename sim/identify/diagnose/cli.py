@@ -1,11 +1,16 @@
 """`flightctl diagnose`: name what the model gets wrong in flight logs (measured-data.md).
 
-    flightctl diagnose FLIGHT.csv|F.ulg|F.bbl|F.bfl [...] [--index N] [--params PARAMS.toml] --json REPORT.json
-                       [--validate OTHER ...] [--plot PREFIX] [--quiet]
+    flightctl diagnose FLIGHT.csv|F.ulg|F.bin|F.bbl|F.bfl|F.txt [...] [--index N] [--params PARAMS.toml]
+                       --json REPORT.json [--validate OTHER ...] [--plot PREFIX] [--quiet]
 
-Logs of other autopilots (PX4's ULog, Betaflight's blackbox) are read by `flightctl.sim.logs` into
-the same table as `flightctl log import` writes; their vehicle's base model is identified from the
-flight (docs/real-flights.md).
+Logs of other autopilots (PX4's ULog, ArduPilot's DataFlash, the blackbox of Betaflight and INAV) are
+read by `flightctl.sim.logs` into the same table as `flightctl log import` writes; their vehicle's
+base model is identified from the flight (docs/real-flights.md).
+
+Several files are one vehicle, diagnosed jointly. One file of many logs (a blackbox file holds one
+per arming) is diagnosed log by log: each log that can be judged gets its own report, the others are
+named with the reason they were skipped (REPORT.json's `logs` list); the exit status is 0 when at
+least one log was judged.
 
 Prints a text report on stdout and progress on stderr. Everything is read, checked, computed and
 rendered before the first file is written: bad input writes nothing (one line on stderr naming the
@@ -23,7 +28,6 @@ from flightctl import params as paramfile
 from flightctl.errors import InputError, output_file
 from flightctl.logfile import read_flight_log
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
-from flightctl.sim.logs import FOREIGN_SUFFIXES
 from flightctl.sim.identify.diagnose import report as diagnose_report
 from flightctl.sim.identify.diagnose.verdict import diagnose, say, validate
 
@@ -41,10 +45,12 @@ def _parser() -> argparse.ArgumentParser:
                             "it on the rest, and name the one that explains the discrepancy, or none "
                             "(measured-data.md; method: docs/diagnose.md).")
     p.add_argument("logs", nargs="+", metavar="FLIGHT",
-                   help="flight logs of one vehicle: this project's CSV (measured-data.md), PX4's .ulg or "
-                        "Betaflight's .bbl/.bfl (the `logs` extra)")
+                   help="flight logs of one vehicle: this project's CSV (measured-data.md), PX4's .ulg, "
+                        "ArduPilot's .bin or a Betaflight/INAV .bbl/.bfl/.txt (the `logs` extra); one file of "
+                        "many logs is diagnosed log by log")
     p.add_argument("--index", type=int, metavar="N",
-                   help="of a blackbox file holding several logs, only log N (counted from 1; default: every log)")
+                   help="of a file holding several logs, only log N (counted from 1; default: each log that "
+                        "can be judged, on its own)")
     p.add_argument("--validate", nargs="+", metavar="OTHER",
                    help="other flights of the same vehicle: predict them with the model fitted here (nothing refitted "
                         "but the accelerometer's bias) and report the gain of the causes there")
@@ -62,16 +68,25 @@ def _parser() -> argparse.ArgumentParser:
 
 def read_logs(paths: list[str], index: int | None, progress) -> list:
     """Each log as a flight-log table: this project's CSV, or a foreign log through
-    `flightctl.sim.logs` (every log of a blackbox file, or the one at `index`)."""
+    `flightctl.sim.logs` (every log of a blackbox file that can be read, or the one at `index`);
+    the logs skipped are named on the progress lines."""
+    from flightctl.sim.logs import kind, read_foreign
     tables = []
     for log in paths:
         progress(f"reading {log}")
-        if Path(log).suffix.lower() in FOREIGN_SUFFIXES:
-            from flightctl.sim.logs import read_foreign
+        if kind(log) is not None:
             tables += read_foreign(log, index, progress)
         else:
             tables.append(read_flight_log(log, min_seconds=MIN_LOG_S, min_rows=10, extra=FOREIGN_COLUMNS))
     return tables
+
+
+def _per_log(path: str, index: int | None) -> bool:
+    """A single file of many logs (and no --index): each log is diagnosed on its own."""
+    if index is not None:
+        return False
+    from flightctl.sim.logs import count_logs, kind
+    return kind(path) is not None and count_logs(path) > 1
 
 
 def main(argv: list[str]) -> int:
@@ -86,32 +101,99 @@ def main(argv: list[str]) -> int:
     out_json = Path(args.json)
     if args.index is not None and args.index < 1:
         raise InputError(f"--index {args.index}: logs are counted from 1")
+    output_file(out_json, "--json")
+    if len(args.logs) == 1 and _per_log(args.logs[0], args.index):
+        return _each(args, params, progress, held, t0)
     tables = read_logs(args.logs, args.index, progress)
     others = read_logs(args.validate, None, progress) if args.validate else []
-    plots = {}
-    if args.plot:
-        plots = {k: Path(f"{args.plot}-{k}.png") for k in ("residuals", "explained")}
-        plots.update({f"read-{k}": Path(f"{args.plot}-read-{k}.png") for k in range(1, len(tables) + 1)})
-    output_file(out_json, "--json")
-    for path in plots.values():
-        output_file(path, "--plot")
-    d = diagnose(tables, params.airframe, progress, params.effects, params_given=args.params is not None)
-    if others:
-        d.validation = validate(d, others, params.airframe, progress)
-    report_text = diagnose_report.text(d)
-    images = diagnose_report.figures(d) if plots else {}
-    if plots:
-        from flightctl.sim.logs import read_figure
-        from flightctl.sim.plots import png
-        images.update({f"read-{k}": png(read_figure(t)) for k, t in enumerate(tables, 1)})
+    plots = _plot_paths(args.plot, len(tables))
+    d = _judge(tables, others, params, args.params is not None, progress)
+    images = _images(d, tables, plots)
+    text = diagnose_report.text(d)
     report = d.report()
     report["runtime_s"] = round(time.perf_counter() - t0, 2)
-    text = json.dumps(report, indent=2, allow_nan=False) + "\n"
-    out_json.write_text(text)
+    _write(out_json, report, plots, images)
+    print(text, end="")
+    progress(f"done in {time.perf_counter() - t0:.1f} s: {d.cause} {d.parameters}")
+    for a in held:
+        say(*a)
+    return 0
+
+
+def _plot_paths(prefix: str | None, n_tables: int, tag: str = "") -> dict[str, Path]:
+    if not prefix:
+        return {}
+    plots = {k: Path(f"{prefix}{tag}-{k}.png") for k in ("residuals", "explained")}
+    plots.update({f"read-{k}": Path(f"{prefix}{tag}-read-{k}.png") for k in range(1, n_tables + 1)})
+    for path in plots.values():
+        output_file(path, "--plot")
+    return plots
+
+
+def _judge(tables, others, params, given: bool, progress):
+    d = diagnose(tables, params.airframe, progress, params.effects, params_given=given)
+    if others:
+        d.validation = validate(d, others, params.airframe, progress)
+    return d
+
+
+def _images(d, tables, plots) -> dict[str, bytes]:
+    if not plots:
+        return {}
+    from flightctl.sim.logs import read_figure
+    from flightctl.sim.plots import png
+    images = diagnose_report.figures(d)
+    images.update({f"read-{k}": png(read_figure(t)) for k, t in enumerate(tables, 1)})
+    return images
+
+
+def _write(out_json: Path, report: dict, plots: dict, images: dict) -> None:
+    out_json.write_text(json.dumps(report, indent=2, allow_nan=False) + "\n")
     for k, path in plots.items():
         path.write_bytes(images[k])
-    print(report_text, end="")
-    progress(f"done in {time.perf_counter() - t0:.1f} s: {d.cause} {d.parameters}")
+
+
+def _each(args, params, progress, held, t0) -> int:
+    """A file of many logs: each log that holds a flight diagnosed on its own; the others named."""
+    from flightctl.sim.logs import each_log, skipped
+    path = args.logs[0]
+    progress(f"reading {path}: a file of many logs, each diagnosed on its own")
+    entries = each_log(path, None, progress)
+    others = read_logs(args.validate, None, progress) if args.validate else []
+    judged, logs = [], []
+    for e in entries:
+        if e.table is not None:
+            progress(f"log {e.index}: diagnosing {e.seconds:.1f} s")
+            try:
+                judged.append((e, _judge([e.table], others, params, args.params is not None, progress)))
+            except InputError as err:
+                text = str(err)
+                e.reason = text.split(": ", 1)[1] if text.startswith(e.table.path) and ": " in text else text
+                e.table = None
+    if not judged:
+        raise InputError(f"{path}: no log could be judged: {skipped(entries)}")
+    reports = {e.index: d.report() for e, d in judged}
+    for e in entries:
+        logs.append({"index": e.index, "judged": True, "report": reports[e.index]} if e.index in reports
+                    else {"index": e.index, "judged": False, "reason": e.reason})
+    first, d0 = judged[0]
+    plots, images = {}, {}
+    for e, d in judged:              # PREFIX-logK-residuals.png, ... per log judged
+        p = _plot_paths(args.plot, 1, f"-log{e.index}")
+        for k, image in _images(d, [e.table], p).items():
+            plots[str(p[k])], images[str(p[k])] = p[k], image
+    report = dict(reports[first.index])
+    report["logs"] = logs
+    report["logs_note"] = (f"the file holds {len(entries)} logs, each diagnosed on its own: the top-level keys are "
+                           f"the report of log {first.index}, the first judged; every log's report or the reason it "
+                           "was skipped is in `logs`")
+    report["runtime_s"] = round(time.perf_counter() - t0, 2)
+    texts = [f"== {path} log {e.index} of {len(entries)} ==\n" + diagnose_report.text(d) for e, d in judged]
+    _write(Path(args.json), report, plots, images)
+    print("".join(texts), end="")
+    if any(e.table is None for e in entries):
+        print(f"skipped: {skipped(entries)}")
+    progress(f"done in {time.perf_counter() - t0:.1f} s: {len(judged)} of {len(entries)} logs judged")
     for a in held:
         say(*a)
     return 0

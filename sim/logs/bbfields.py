@@ -1,0 +1,263 @@
+"""One blackbox log's frames and header as this project's streams (docs/log-import.md): Betaflight
+3.x to 4.5, INDIflight, INAV; each field, unit and frame with its evidence there.
+
+Every main frame holds one gyro sample, the motor commands and the latest battery readings, so the
+frame is the time base. Frames: the sensors are x forward, y left, z up and the accelerometer reads
++1 g up at rest: our body frame (conventions.md), no axis changes sign. INDIflight's quaternion `quat`
+is body (x forward, y right, z down) to North-East-Down.
+"""
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+
+from flightctl.physics import G
+from flightctl.sim.logs.common import Imported, Stream, euler_from_frd_ned
+
+QUAD_X = ((-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0))   # motors 1-4: rear right, front right,
+QUAD_X_SPIN = (-1.0, 1.0, 1.0, -1.0)                               # rear left, front left; 1 and 4 clockwise
+ROTOR_NAMES = {1: "a single rotor", 2: "a bicopter", 3: "a tricopter", 6: "a hexacopter", 8: "an octocopter"}
+DEG = math.pi / 180.0
+RPM = 2.0 * math.pi / 60.0
+LOWPASS_TYPES = {0: "pt1", 1: "biquad", 2: "pt2", 3: "pt3"}        # Betaflight's lowpass_type enum
+# Betaflight's debug modes (debugType_e): GYRO_SCALED holds the gyro before its filters (deg/s) up to
+# 4.2 (the enum changed after); DSHOT_RPM_TELEMETRY the ESCs' eRPM / 100, RPM_FILTER the rotation
+# frequency in Hz after a pt1 (rpm_notch_lpf) - both numbers unchanged from 4.1 to 4.5.
+GYRO_SCALED, DSHOT_RPM_TELEMETRY, RPM_FILTER = 6, 45, 46
+DEFAULT_POLES = 14                 # Betaflight's motor_poles default (a 12N14P motor)
+
+
+def version(firmware: str) -> tuple[int, ...]:
+    """(major, minor, patch) of 'Betaflight 4.2.0 (8f2d21460) STM32F745'; () when not found."""
+    m = re.search(r"(\d+)\.(\d+)\.(\d+)", firmware)
+    return tuple(int(x) for x in m.groups()) if m else ()
+
+
+def kind_of(firmware: str) -> str:
+    low = firmware.lower()
+    for k in ("indiflight", "inav", "betaflight", "cleanflight", "emuflight"):
+        if low.startswith(k):
+            return k
+    return "unknown"
+
+
+def _lowpass(h: dict, stem: str, dyn_note: list[str]) -> str | None:
+    """One low-pass stage of Betaflight 4.3+ (and INDIflight) names: `<stem>_static_hz`, its dynamic
+    range `<stem>_dyn_hz` [min, max] (its lowest cut-off, at the lowest throttle, is declared), `<stem>_type`."""
+    kind = LOWPASS_TYPES.get(int(h.get(f"{stem}_type", 0) or 0), "pt1")
+    dyn = h.get(f"{stem}_dyn_hz")
+    if isinstance(dyn, list) and dyn and dyn[0]:
+        dyn_note.append(f"{stem}_dyn_hz {dyn}: its lowest cut-off {dyn[0]} Hz (at the lowest throttle) declared")
+        return f"{kind} {dyn[0]:g}"
+    hz = h.get(f"{stem}_static_hz")
+    return f"{kind} {hz:g}" if hz else None
+
+
+def filters(h: dict) -> tuple[str, str, str]:
+    """(the low-pass chain of `gyroADC` in the project's syntax, a note, the notches): Betaflight up to
+    4.2 (`gyro_lowpass_hz`, `gyro_lowpass2_hz`), 4.3+ and INDIflight (`gyro_lpf1_static_hz`, ...), INAV
+    (`gyro_lpf_hz`). Notches (dynamic, rpm) are named, not declared: away from their frequencies (the
+    motors', hundreds of Hz) they hardly delay."""
+    notes: list[str] = []
+    if "gyro_lpf1_static_hz" in h or "gyro_lpf1_dyn_hz" in h:
+        chain = [s for s in (_lowpass(h, "gyro_lpf1", notes), _lowpass(h, "gyro_lpf2", notes)) if s]
+    elif "gyro_lowpass_hz" in h:
+        chain = []
+        dyn = h.get("gyro_lowpass_dyn_hz")
+        kind = LOWPASS_TYPES.get(int(h.get("gyro_lowpass_type", 0) or 0), "pt1")
+        if isinstance(dyn, list) and dyn and dyn[0]:
+            chain.append(f"{kind} {dyn[0]:g}")
+            notes.append(f"gyro_lowpass_dyn_hz {dyn}: its lowest cut-off {dyn[0]} Hz (at the lowest throttle) declared")
+        elif h.get("gyro_lowpass_hz"):
+            chain.append(f"{kind} {h['gyro_lowpass_hz']:g}")
+        if h.get("gyro_lowpass2_hz"):
+            chain.append(f"{LOWPASS_TYPES.get(int(h.get('gyro_lowpass2_type', 0) or 0), 'pt1')} {h['gyro_lowpass2_hz']:g}")
+    else:                                                  # INAV: gyro_lpf_hz, its type not in the header
+        chain = [f"pt1 {h['gyro_lpf_hz']:g}"] if h.get("gyro_lpf_hz") else []
+        if chain:
+            notes.append("INAV's gyro_lpf_hz, taken as its default pt1 (the type is not in the header)")
+    notches = []
+    if int(h.get("dyn_notch_count", 1) or 0) and h.get("dyn_notch_max_hz"):
+        notches.append(f"dynamic notch {h.get('dyn_notch_min_hz', '?')}-{h['dyn_notch_max_hz']} Hz, "
+                       f"q {h.get('dyn_notch_q', '?')}, count {h.get('dyn_notch_count', 'one per axis')}")
+    harmonics = h.get("rpm_filter_harmonics", h.get("gyro_rpm_notch_harmonics"))
+    if int(h.get("dshot_bidir", 0) or 0) and harmonics:
+        notches.append(f"rpm filter {harmonics} harmonics from "
+                       f"{h.get('rpm_filter_min_hz', h.get('gyro_rpm_notch_min', '?'))} Hz, "
+                       f"q {h.get('rpm_filter_q', h.get('gyro_rpm_notch_q', '?'))}")
+    return "; ".join(chain) or "none", "; ".join(notes), "; ".join(notches) or "none"
+
+
+def battery_scale(kind: str, ver: tuple[int, ...]) -> tuple[float | None, str]:
+    """Volts per count of `vbatLatest` (Blackbox Explorer's reading by firmware): Betaflight 4.0+,
+    INDIflight and INAV 0.01 V; Betaflight 3.1-3.5 and Cleanflight 2 0.1 V; older logs ADC counts (None)."""
+    if kind in ("inav", "indiflight", "emuflight") or (kind == "betaflight" and ver >= (4, 0, 0)):
+        return 0.01, "0.01 V"
+    if (kind == "betaflight" and ver >= (3, 1, 0)) or (kind == "cleanflight" and ver >= (2, 0, 0)):
+        return 0.1, "0.1 V (before Betaflight 4.0)"
+    return None, "ADC counts (vbat_scale)"
+
+
+def cells(h: dict, scale: float | None) -> tuple[str, str] | None:
+    """(cell count, its source) from the header, as Blackbox Explorer estimates it: the voltage at
+    power-on `vbatref` over the cell's full voltage `vbatcellvoltage` [min, warning, max]."""
+    ref, cell = h.get("vbatref"), h.get("vbatcellvoltage")
+    if not ref or scale is None or not isinstance(cell, list) or len(cell) < 3 or not cell[2]:
+        return None
+    full = cell[2] / (100.0 if cell[2] > 100 else 10.0)           # 0.01 V (Betaflight 4) or 0.1 V
+    v = ref * scale
+    n = max(1, math.ceil(v / full - 1e-9))
+    return str(n), f"header: vbatref {v:.2f} V at power-on over vbatcellvoltage's full cell {full:.2f} V"
+
+
+def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[str]) -> Imported:
+    imp = Imported(name, {}, {}, list(notes))
+    col = {n: i for i, n in enumerate(names)}
+    firmware = str(h.get("Firmware revision", ""))
+    kind, ver = kind_of(firmware), version(firmware)
+    motors = sorted((n for n in names if n.startswith("motor[")), key=lambda n: int(n[6:-1]))
+    if not motors:
+        imp.fail("no motor[] fields: the motor commands were not logged")
+    if len(motors) != 4:
+        what = ROTOR_NAMES.get(len(motors), f"{len(motors)} motors")
+        imp.fail(f"{len(motors)} motors (motor[0..{len(motors) - 1}]): {what}, not a quadrotor: diagnose knows "
+                 "quadrotors (4)")
+    for need in ("time", "gyroADC[0]", "accSmooth[0]"):
+        if need not in col:
+            imp.fail(f"no {need.split('[')[0]} field: {'the time' if need == 'time' else 'that sensor'} was not logged")
+    t = a[:, col["time"]] * 1e-6
+    hires = 10.0 if int(h.get("blackbox_high_resolution", 0) or 0) else 1.0   # gyro logged in 0.1 deg/s
+
+    def field(prefix, k, cols=None):
+        return np.vstack([a[:, col[f"{prefix}[{i}]"]] if f"{prefix}[{i}]" in col else np.full(len(t), np.nan)
+                          for i in (cols or range(k))])
+
+    # the gyro before its filters where the log has it; else gyroADC with its low-pass declared
+    filtered = field("gyroADC", 3) / hires * DEG
+    chain, note, notches = filters(h)
+    debug = int(h.get("debug_mode", 0) or 0)
+    if kind == "indiflight" and "gyroADCafterRpm[0]" in col:
+        gyro, source = field("gyroADCafterRpm", 3) / hires * DEG, "gyroADCafterRpm (after the rpm notches, before the low-pass)"
+    elif "gyroUnfilt[0]" in col:
+        gyro, source = field("gyroUnfilt", 3) / hires * DEG, "gyroUnfilt (before the filters)"
+    elif kind == "inav" and "gyroRaw[0]" in col:
+        gyro, source = field("gyroRaw", 3) * DEG, "gyroRaw (INAV's gyro before its filters)"
+    elif debug == GYRO_SCALED and "debug[0]" in col and kind == "betaflight" and ver < (4, 3, 0):
+        gyro, source = field("debug", 3) * DEG, "debug[0..2] (debug_mode GYRO_SCALED: before the filters)"
+    else:
+        gyro, source = filtered, "gyroADC (filtered)"
+    gyro_filter = chain if gyro is filtered else "none"
+    if gyro is not filtered:
+        imp.streams["gyro_f"] = Stream("gyroADC", t, filtered)
+    imp.streams["gyro"] = Stream("gyro", t, gyro)
+    one_g = float(h.get("acc_1G", 2048) or 2048)
+    if "accUnfiltered[0]" in col:
+        acc, acc_source, acc_filter = field("accUnfiltered", 3), "accUnfiltered", "none"
+    else:
+        acc, acc_source = field("accSmooth", 3), "accSmooth"
+        lpf = float(h.get("acc_lpf_hz", 0) or 0) / (1.0 if kind == "inav" else 100.0)   # Betaflight: centi-Hz
+        acc_filter = f"biquad {lpf:g}" if lpf > 0 else "none"
+    imp.streams["acc"] = Stream("acc", t, acc / one_g * G)
+    lo, hi = (float(v) for v in h.get("motorOutput", [0, 2047])[:2])
+    raw = np.vstack([a[:, col[m]] for m in motors])
+    P = 255.0 * (raw - lo) / (hi - lo)
+    clipped = int(((P < 0) | (P > 255)).any(axis=0).sum())
+    if clipped:
+        imp.notes.append(f"{clipped} rows with a motor command outside motorOutput [{lo:g}, {hi:g}] "
+                         "(stopped or disarmed: 0) clipped to 0-255")
+    imp.streams["motors"] = Stream("motors", t, np.clip(P, 0.0, 255.0), held=True)
+    _battery(imp, h, a, col, t, kind, ver)
+    _rotor_speeds(imp, h, a, col, t, field, debug, kind)
+    _tracking(imp, a, col, t, field, hires, kind)
+    height_source = "none"
+    if "extPos[2]" in col and np.any(a[:, col["extPos[2]"]] != 0):
+        imp.streams["height"] = Stream("extPos (motion capture)", t, -a[None, :, col["extPos[2]"]] * 1e-3)
+        height_source = "mocap"
+    elif "BaroAlt" in col:
+        imp.streams["height"] = Stream("BaroAlt", t, a[None, :, col["BaroAlt"]] * 0.01)
+        height_source = "baro"
+    if "quat[0]" in col:
+        imp.streams["attitude"] = Stream("quat", t, euler_from_frd_ned(field("quat", 4)))
+    reversed_ = h.get("yaw_motors_reversed", h.get("motor_direction_inverted"))
+    spins = tuple(-s for s in QUAD_X_SPIN) if reversed_ else QUAD_X_SPIN
+    s2 = math.sqrt(0.5)
+    mixer = "INAV's quad X" if kind == "inav" else "Betaflight's quad X"
+    imp.meta.update({
+        "vehicle": "foreign", "format": ("inav" if kind == "inav" else "betaflight") + " blackbox", "source": name,
+        "firmware": firmware, "craft": str(h.get("Craft name", "")).strip(),
+        "rotors": "; ".join(f"{x * s2:.4f} {y * s2:.4f} {s:+.0f}" for (x, y), s in zip(QUAD_X, spins)),
+        "rotors_source": (f"{mixer} (motor 1 rear right, 2 front right, 3 rear left, 4 front left), "
+                          + (f"yaw_motors_reversed = {int(reversed_)}" if reversed_ is not None else
+                             "the motor direction not in the header: props in (motors 1 and 4 clockwise) assumed")),
+        "command_range": f"{lo:g} {hi:g}",
+        "command": f"P = 255 (motor - {lo:g}) / ({hi:g} - {lo:g}): the command over motorOutput",
+        "gyro_source": source + (f"; {note}" if note and gyro_filter != "none" else ""),
+        "gyro_filter": gyro_filter, "gyro_notches": notches,
+        "acc_source": acc_source, "acc_filter": acc_filter,
+        "height_source": height_source,
+    })
+    return imp
+
+
+def _battery(imp, h, a, col, t, kind, ver):
+    name = "vbat" if kind == "inav" and "vbat" in col else "vbatLatest"
+    if name in col:
+        scale, unit = battery_scale(kind, ver)
+        raw = a[:, col[name]]
+        if scale is None:        # ADC counts: Blackbox Explorer's vbatADCToMillivolts
+            v = raw * 3.3 * 10.0 * float(h.get("vbat_scale", 110) or 110) / 4095.0 / 1000.0
+        else:
+            v = raw * scale
+        ok = v > 0.5                    # 0 (or a few counts) until the first reading after power-on
+        if ok.any():
+            imp.streams["battery_v"] = Stream(f"{name} ({unit})", t[ok], v[None, ok])
+        found = cells(h, scale)
+        if found:
+            imp.meta["battery_cells"], imp.meta["battery_cells_source"] = found
+    amps = "amperage" if kind == "inav" and "amperage" in col else "amperageLatest"
+    if amps in col and np.any(a[:, col[amps]] != 0):
+        imp.streams["current"] = Stream(f"{amps} (0.01 A)", t, a[None, :, col[amps]] * 0.01)
+
+
+def _rotor_speeds(imp, h, a, col, t, field, debug, kind):
+    """omega1..4 (rad/s): INDIflight's ESC telemetry; Betaflight 4.3+'s eRPM[] (bidirectional DShot,
+    eRPM / 100); the debug modes DSHOT_RPM_TELEMETRY (the same) and RPM_FILTER (Hz, after a pt1)."""
+    poles = h.get("motor_poles")
+    pole_note = "" if poles else f" (motor_poles not in the header: Betaflight's default {DEFAULT_POLES} assumed)"
+    poles = float(poles or DEFAULT_POLES)
+    if "omegaUnfiltered[0]" in col and np.any(field("omegaUnfiltered", 4) != 0):
+        w, source = field("omegaUnfiltered", 4), "omegaUnfiltered (ESC telemetry, rad/s)"
+    elif "eRPM[0]" in col and np.any(field("eRPM", 4) > 0):
+        w = field("eRPM", 4) * 100.0 / (poles / 2.0) * RPM
+        source = f"eRPM[0..3] (bidirectional DShot, eRPM / 100): rpm = 100 eRPM / (motor_poles / 2), motor_poles {poles:g}"
+    elif kind != "inav" and debug == DSHOT_RPM_TELEMETRY and "debug[3]" in col:
+        w = field("debug", 4) * 100.0 / (poles / 2.0) * RPM
+        source = f"debug[0..3] (debug_mode DSHOT_RPM_TELEMETRY, eRPM / 100), motor_poles {poles:g}"
+    elif kind != "inav" and debug == RPM_FILTER and "debug[3]" in col:
+        w = field("debug", 4) * 2.0 * math.pi
+        source = f"debug[0..3] (debug_mode RPM_FILTER: rotation in Hz after a pt1 at rpm_notch_lpf {h.get('rpm_notch_lpf', h.get('rpm_filter_lpf_hz', '?'))} Hz)"
+        pole_note = ""
+    else:
+        return
+    imp.streams["omega"] = Stream("rotor speeds", t, w)
+    imp.meta["omega_source"] = source + pole_note
+    imp.meta["motor_poles"] = f"{poles:g}"
+
+
+def _tracking(imp, a, col, t, field, hires, kind):
+    """What draws rate tracking: the rate setpoint (Betaflight setpoint[0..2], INAV axisRate[0..2];
+    deg/s, the gyro's frame), the sticks (rcCommand, normalised) and the PID terms (axisP/I/D/F, in
+    the mixer's units: 1000 is its full range)."""
+    sp = "axisRate" if kind == "inav" else "setpoint"
+    if f"{sp}[0]" in col:
+        imp.streams["setpoint"] = Stream(f"{sp}[0..2]", t, field(sp, 3) / hires * DEG)
+    if "rcCommand[0]" in col:
+        rc = field("rcCommand", 4)
+        rc = np.where(rc >= 2.0 ** 31, rc - 2.0 ** 32, rc)      # orangebox reads some of INAV's as unsigned
+        rc[:3] /= 500.0
+        rc[3] = (rc[3] - 1000.0) / 1000.0
+        imp.streams["rc"] = Stream("rcCommand", t, rc)
+    if "axisP[0]" in col:
+        imp.streams["pid"] = Stream("axisP/I/D/F", t, np.vstack([field(f"axis{k}", 3) for k in "PIDF"]) / 1000.0)

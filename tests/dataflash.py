@@ -1,0 +1,48 @@
+"""A DataFlash (`.bin`) writer for the tests: ArduPilot's log format as pymavlink's DFReader reads it
+(each message 0xA3 0x95, its type, its fields packed little-endian; FMT messages define the types), so
+that a flight of this project's simulator can be written as an ArduCopter log and read back."""
+from __future__ import annotations
+
+import struct
+
+HEAD = b"\xa3\x95"
+CODES = {"B": "B", "H": "H", "f": "f", "Q": "Q", "n": "4s", "N": "16s", "Z": "64s"}
+FORMATS = {  # name: (type id, format, columns)
+    "PARM": (129, "QNf", "TimeUS,Name,Value"),
+    "MSG": (130, "QZ", "TimeUS,Message"),
+    "IMU": (131, "QBffffff", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),
+    "RCOU": (132, "Q" + "H" * 14, "TimeUS," + ",".join(f"C{i}" for i in range(1, 15))),
+    "BAT": (133, "QBff", "TimeUS,Inst,Volt,Curr"),
+    "ATT": (134, "Qffffff", "TimeUS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw"),
+    "RATE": (135, "Qfff", "TimeUS,RDes,PDes,YDes"),
+    "ESC": (136, "QBf", "TimeUS,Instance,RPM"),
+    "ARM": (137, "QB", "TimeUS,ArmState"),
+    "BARO": (138, "QBf", "TimeUS,I,Alt"),
+}
+
+
+def _pack(fmt: str, values) -> bytes:
+    out = []
+    for code, v in zip(fmt, values):
+        out.append(v.encode() if isinstance(v, str) else v)
+    return struct.pack("<" + "".join(CODES[c] for c in fmt), *out)
+
+
+class DataFlash:
+    def __init__(self):
+        self.buf = bytearray()
+        fmt = (128, "BBnNZ", "Type,Length,Name,Format,Columns")
+        self._fmt("FMT", *fmt)
+        for name, (tid, f, cols) in FORMATS.items():
+            self._fmt(name, tid, f, cols)
+
+    def _fmt(self, name, tid, f, cols):
+        length = 3 + struct.calcsize("<" + "".join(CODES[c] for c in f))
+        self.buf += HEAD + bytes([128]) + _pack("BBnNZ", (tid, length, name, f, cols))
+
+    def add(self, name: str, *values) -> None:
+        tid, f, _ = FORMATS[name]
+        self.buf += HEAD + bytes([tid]) + _pack(f, values)
+
+    def bytes(self) -> bytes:
+        return bytes(self.buf)
