@@ -27,7 +27,7 @@ from pathlib import Path
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import Calibration
-from flightctl.control.spin import MotorLossDetector
+from flightctl.control.motor_loss import MotorLossDetector
 from flightctl.drivers.mpu9250 import Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.params import load

@@ -15,7 +15,8 @@ import random
 import pytest
 
 from flightctl.cli import main
-from flightctl.control.spin import OPPOSITE, SpinController
+from flightctl.control.motor_loss import OPPOSITE
+from flightctl.control.spin import SpinController
 from flightctl.loop import FlightLoop
 from flightctl.params import load
 from flightctl.plans import PLANS
