@@ -44,7 +44,7 @@ class SpinController:
     def __init__(self, params: Params, tau_motor: float | None = None):
         a = self.a = params.airframe
         d = spin_design.design_inputs(params, tau_motor)
-        self.tau_m = d[-1]
+        self.tau_m = d[16]
         self.why_not = spin_design.unusable(d)
         self.r_bar = spin_design.equilibrium_spin(d)
         self.kw = a.dt / self.tau_m if self.tau_m > a.dt else 1.0   # the rotors' speeds per loop

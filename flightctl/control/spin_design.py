@@ -49,7 +49,7 @@ R_LO = -8.0              # rad/s: the schedule's lowest spin (against the pair's
 SPIN_STEP = 2.0          # rad/s between scheduled spin rates
 OMEGA_STEPS = 5          # steps of the rotors' momentum, from none ...
 OMEGA_TOP = 1.25         # ... to this much of the pair's summed speed in hover
-RATE_SCALE, AXIS_SCALE = 0.5, 0.2    # rad/s, -: the LQR's acceptable body rate and tilt of n
+RATE_SCALE, AXIS_SCALE = 1.0, 0.2    # rad/s, -: the LQR's acceptable body rate and tilt of n
 EPS_DAMPING = 0.05       # 1/s
 SCHEMA = 2               # bump when the design changes: the disk cache's key includes it
 PAIRS = ((0, 2), (1, 3))
@@ -76,9 +76,10 @@ def design_inputs(params: Params, tau_motor: float | None = None) -> tuple:
     """Every number the design depends on, in a fixed order (the cache's key)."""
     a = params.airframe
     tau = motor_time_constant(params) if tau_motor is None else tau_motor
+    lo, hi = next(((lo, hi) for name, lo, hi in params.ranges if name == "Jp"), (a.Jp, a.Jp))
     return (SCHEMA, a.M, a.g, a.l, a.Jxx, a.Jyy, a.Jzz, a.Jp, a.c1, a.g1, a.g2, a.gamma1, a.dt,
             effect_value(params, "linear_yaw_drag", "gamma0"), effect_value(params, "rotor_inflow", "k"),
-            effect_value(params, "rotor_inflow", "hub"), tau)
+            effect_value(params, "rotor_inflow", "hub"), tau, lo, hi)
 
 
 def pair_torque(d: tuple) -> float:
@@ -116,7 +117,7 @@ def pair_model(d: tuple, pair: tuple[int, int], r: float, H: float):
     """Continuous (A, B) at spin r and rotor momentum H = Jp Omega (module docstring), for x = (p, q,
     n_x, n_y[, torque]) and the torque command (N m) across the pair's arm."""
     import numpy as np
-    _, M, g, l, Jxx, Jyy, Jzz, Jp, c1, g1, g2, gamma1, dt, gamma0, k_in, hub, tau = d
+    l, Jxx, Jyy, Jzz, k_in, hub, tau = d[3], d[4], d[5], d[6], d[14], d[15], d[16]
     own = 2.0 * k_in * l * l * math.sqrt(2.0)        # the inflow's damping on the pair's axis (f = 2B)
     dx = 0.5 * hub + (own if pair == (1, 3) else 0.0) + EPS_DAMPING * Jxx
     dy = 0.5 * hub + (own if pair == (0, 2) else 0.0) + EPS_DAMPING * Jyy
@@ -152,6 +153,23 @@ def torque_scale(d: tuple) -> float:
     return d[3] * d[1] * d[2] / 2.0
 
 
+def radius(d: tuple, pair, r: float, H: float, K, held=None) -> float:
+    """The spectral radius of the loop closed by the gains K on the model of `d` at (r, H), held
+    over one loop (`held`: that model's `discrete` (Ad, Bd), when the caller has it): below 1 the
+    linearised loop is stable, its slowest mode decaying by that factor a loop."""
+    import numpy as np
+    if held is None:
+        A, B = pair_model(d, pair, r, H)
+        held = discrete(A, B, d[12])
+    Ad, Bd = held
+    return float(max(abs(np.linalg.eigvals(Ad - Bd @ np.array(K[:Ad.shape[0]])[None, :]))))
+
+
+def with_jp(d: tuple, Jp: float) -> tuple:
+    """`d` with another rotor inertia."""
+    return d[:7] + (Jp,) + d[8:]
+
+
 def lqr(d: tuple, pair, r: float, H: float) -> list[float]:
     """The discrete LQR gain (torque per unit state) at (r, H)."""
     import numpy as np
@@ -176,24 +194,62 @@ def grid(d: tuple) -> tuple[list[float], list[float]]:
     return rates, [H_full * OMEGA_TOP * j / OMEGA_STEPS for j in range(OMEGA_STEPS + 1)]
 
 
-def schedule(d: tuple) -> dict:
-    """{"rates", "momenta", (pair as "i,j"): gains [j][k] (5 each)} over `grid`, in the pair's signs:
-    pair 1-3 turns clockwise (its reaction +z, conventions.md), so it spins the body at +r with its
-    rotors' momentum -H about z_b; pair 2-4 the other way."""
+ROBUST_JP = 4            # rotor inertias across the file's range at which each candidate is judged
+
+
+def robust_gains(d: tuple, pair, r: float, frac: float) -> tuple[list[float] | None, float]:
+    """The gains at spin r (signed, the pair's direction) and the pair's rotor speed `frac` of its hover
+    one, with the worst spectral radius they give over the file's rotor inertia range (d[17], d[18]).
+    The gyroscopic coupling (Jzz - Jyy) r + H changes sign between r_s at the bottom and at the top of
+    Jp's range, and a gain designed on the wrong sign destabilises the other axis: the candidates are
+    the LQR on the nominal Jp and on a model without the coupling (which never relies on its sign),
+    and the loop takes the one whose worst radius over the range is smallest."""
+    import numpy as np
     from numpy.linalg import LinAlgError
+    sign = 1.0 if pair == (0, 2) else -1.0
+    speed = pair_speed(d) * frac
+    lo, hi = d[17], d[18]
+    if not hi > lo:
+        try:
+            K = lqr(d, pair, r, -sign * d[7] * speed)
+        except (LinAlgError, ValueError):     # no spin, no momentum: one axis cannot be turned at all
+            return None, float("nan")
+        return K, radius(d, pair, r, -sign * d[7] * speed, K)
+    trues = []
+    for J in np.geomspace(lo, hi, ROBUST_JP):
+        t = with_jp(d, float(J))
+        A, B = pair_model(t, pair, r, -sign * J * speed)
+        trues.append(discrete(A, B, d[12]))
+    coupling = (d[6] - d[5]) if pair == (0, 2) else (d[6] - d[4])
+    best = (None, float("nan"))
+    for Hd in (d[7] * speed, sign * coupling * r):
+        try:
+            K = lqr(d, pair, r, -sign * Hd)
+        except (LinAlgError, ValueError):
+            continue
+        worst = max(radius(d, pair, r, 0.0, K, held) for held in trues)
+        if best[0] is None or worst < best[1]:
+            best = (K, worst)
+    return best
+
+
+def schedule(d: tuple) -> dict:
+    """{"rates", "momenta", "radius": {pair: [j][k]}, (pair as "i,j"): gains [j][k] (5 each)} over
+    `grid`, in the pair's signs: pair 1-3 turns clockwise (its reaction +z, conventions.md), so it
+    spins the body at +r with its rotors' momentum -H about z_b; pair 2-4 the other way."""
     rates, momenta = grid(d)
-    out: dict = {"rates": rates, "momenta": momenta}
+    out: dict = {"rates": rates, "momenta": momenta, "radius": {}}
     for pair in PAIRS:
         sign = 1.0 if pair == (0, 2) else -1.0
-        rows = []
-        for H in momenta:
-            row = []
+        rows, radii = [], []
+        for j in range(len(momenta)):
+            row, rad = [], []
             for r in rates:
-                try:
-                    row.append(lqr(d, pair, sign * r, -sign * H))
-                except (LinAlgError, ValueError):   # no spin, no momentum: one axis cannot be turned at all
-                    row.append(None)
+                K, worst = robust_gains(d, pair, sign * r, OMEGA_TOP * j / OMEGA_STEPS)
+                row.append(K)
+                rad.append(worst)
             rows.append(row)
+            radii.append(rad)
         solved = [(j, k) for j, row in enumerate(rows) for k, K in enumerate(row) if K is not None]
         for j, row in enumerate(rows):
             for k, K in enumerate(row):
@@ -201,6 +257,7 @@ def schedule(d: tuple) -> dict:
                     jj, kk = min(solved, key=lambda jk: (abs(jk[0] - j) + abs(jk[1] - k), -jk[0]))
                     row[k] = rows[jj][kk]
         out["%d,%d" % pair] = rows
+        out["radius"]["%d,%d" % pair] = radii
     return out
 
 
@@ -217,7 +274,9 @@ _MEMORY: dict = {}
 
 
 def key(d: tuple) -> str:
-    return hashlib.sha256(repr(d).encode()).hexdigest()[:20]
+    """The cache's name for the schedule of `d`: a hash of it and of the design's own constants."""
+    constants = (R_LO, SPIN_STEP, OMEGA_STEPS, OMEGA_TOP, RATE_SCALE, AXIS_SCALE, EPS_DAMPING, GYRO_MAX)
+    return hashlib.sha256(repr((d, constants)).encode()).hexdigest()[:20]
 
 
 def load(d: tuple) -> dict:
