@@ -209,7 +209,7 @@ class FlightLoop:
                     if flying:
                         ctl.on_range(echo, t)
                 if flying:
-                    lost = 0 if spinning else detector.update(sample, ctl.mixer.f, ctl.alt, dt)
+                    lost = 0 if spinning else detector.update(sample, ctl.mixer.f, dt)
                     if lost:
                         giving = 1.0 - detector.missing
                         if spin.why_not or flown_on_four(self.params, lost, giving):

@@ -72,7 +72,7 @@ def iteration_us(n: int = 1000, batches: int = 100) -> float:
         for _ in range(n):
             read(sample)
             correct(sample)
-            watch(sample, f, 1.5, dt)      # the motor-loss check, on the thrusts of the loop before
+            watch(sample, f, dt)           # the motor-loss check, on the thrusts of the loop before
             step(sample, dt, 0.01, -0.02, 0.1, 1.5)
         best = min(best, time.perf_counter() - start)
     return best / n * 1e6

@@ -8,12 +8,13 @@ middle, a battery that sags, a weak motor) are taken away. A stopped rotor (or a
 leaves its whole thrust missing: the torque residual points along its arm and the collective one is
 down by its thrust; a weak one (a failing ESC, a chipped propeller) leaves part of it missing. The
 smaller of the two, as a fraction of the thrust motor i was asked for, is its missing share. Above
-THRESHOLD for LOOPS loops it names motor i at once; above WEAK for WEAK_LOOPS loops it names motor i
-too, each with the share it misses, and `flown_on_four` decides what the loop does with it. A rotor lag the model lacks, in a manoeuvre, looks like a missing thrust in the torque
+THRESHOLD for LOOPS loops of calm flight it names motor i at once; above WEAK for WEAK_LOOPS loops
+(calm when the count began) it names motor i too, each with the share it misses, and `flown_on_four` decides what the loop does with it. A rotor lag the model lacks, in a manoeuvre, looks like a missing thrust in the torque
 for tens of milliseconds, but not in the collective (the two sides of an axis change in opposite
-directions); and the count only starts in calm flight (the body rates, low-passed, below CALM) above
-MIN_ALT: a vehicle already tumbling, or resting on the floor, is not read as a lost rotor (the floor
-carries weight: the collective residual is then the other way).
+directions); and the count only starts in calm flight (the body rates, low-passed, below CALM): a
+vehicle already tumbling is not read as a lost rotor. It looks at any height: a vehicle resting on
+the floor has the floor carrying weight, the collective residual the other way; a touchdown's jolt
+(JOLT above the commanded thrusts) holds the count off for JOLT_S (a hop, legs settling).
 """
 from __future__ import annotations
 
@@ -31,9 +32,10 @@ WEAK = 0.2               # missing at least this share ...
 WEAK_LOOPS = 45          # ... for this many loops (100 ms) in a row: named with its share
 CALM = 1.0               # rad/s: |p| + |q| low-passed over CALM_S: the count starts only below this
 CALM_S = 0.1
-MIN_ALT = -1.0           # m: looked for everywhere in flight (the floor, carrying weight, never looks like a fall)
 TRIM = 0.6               # a motor giving less than this share of its command is not flown on four ...
 TRIM_TILT = radians(10)  # ... nor one whose missing thrust the P term leaves this tilt for
+JOLT = 0.5 * 9.80665     # m/s^2 of specific force above the commanded thrusts': the floor met (a touchdown) ...
+JOLT_S = 0.5             # s: ... after which nothing is looked for this long (a hop, legs settling)
 HIGH = 1.6               # a residual beyond this many times the motor's thrust is not one motor's
 OPPOSITE = (2, 3, 0, 1)  # motor index -> the index of the motor across the frame
 
@@ -59,7 +61,7 @@ class MotorLossDetector:
     `accept()`: the loop flies on with that motor (a weak one): its missing thrust becomes part of
     the residuals' slow part."""
     __slots__ = ("km", "kf", "kb", "kc", "fl", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
-                 "strong", "missing", "fast", "damp", "p", "q", "half", "quiet", "ic1", "Jxx", "Jyy", "Jp", "jx",
+                 "strong", "missing", "fast", "damp", "hold", "jolt_loops", "p", "q", "half", "quiet", "ic1", "Jxx", "Jyy", "Jp", "jx",
                  "jy", "l", "iM", "M", "il")
 
     def __init__(self, params: Params, tau_motor: float | None = None):
@@ -83,6 +85,7 @@ class MotorLossDetector:
         self.count = [0, 0, 0, 0]
         self.strong = [0, 0, 0, 0]
         self.missing, self.fast = 0.0, False
+        self.jolt_loops = int(JOLT_S / dt + 0.5)
         self.reset(a.B)
 
     def reset(self, f0: float) -> None:
@@ -92,9 +95,10 @@ class MotorLossDetector:
             self.count[i] = self.strong[i] = 0
         self.rx = self.ry = self.rz = self.bx = self.by = self.bz = 0.0
         self.calm = 0.0
+        self.hold = 0
         self.p = self.q = None
 
-    def update(self, s: ImuSample, f: list[float], alt: float, dt: float) -> int:
+    def update(self, s: ImuSample, f: list[float], dt: float) -> int:
         fl, km = self.fl, self.km
         f0 = fl[0] = fl[0] + km * (f[0] - fl[0])    # the thrusts now, from the commands (one loop late)
         f1 = fl[1] = fl[1] + km * (f[1] - fl[1])
@@ -120,7 +124,11 @@ class MotorLossDetector:
         self.calm += self.kc * ((p if p > 0 else -p) + (q if q > 0 else -q) - self.calm)
         count, strong = self.count, self.strong
         fall = (self.bz - rz) * self.M             # the collective thrust missing (N)
-        if alt <= MIN_ALT or fall <= self.quiet:   # on the floor the floor carries weight: no fall
+        if tz > JOLT:                              # the floor pushing up: a touchdown
+            self.hold = self.jolt_loops
+        elif self.hold > 0:
+            self.hold -= 1
+        if self.hold or fall <= self.quiet:   # on the floor the floor carries weight: no fall
             count[0] = count[1] = count[2] = count[3] = strong[0] = strong[1] = strong[2] = strong[3] = 0
         else:
             ex, ey = rx - self.bx, ry - self.by
@@ -138,7 +146,7 @@ class MotorLossDetector:
                     share = drop
                 if WEAK < share < HIGH and (calm or count[i] > 0):
                     count[i] += 1
-                    strong[i] = strong[i] + 1 if share > THRESHOLD else 0
+                    strong[i] = strong[i] + 1 if share > THRESHOLD and calm else 0
                     if strong[i] >= LOOPS or count[i] >= WEAK_LOOPS:
                         lost, self.missing, self.fast = i + 1, share, strong[i] >= LOOPS
                 else:
