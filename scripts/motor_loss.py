@@ -63,7 +63,7 @@ def loss(plan: str, params, spec: str, plant: dict | None = None, seed: int = 0)
     return {"outcome": fl.outcome, "ms": None if named is None else 1e3 * (named[0] - at),
             "what": "" if named is None else named[1], "tilt": float(tilt[after].max()),
             "touchdown": max((abs(v) for _, v in fl.touchdowns), default=math.nan),
-            "drift": float(drift.max()), "spin": float(np.abs(L["gyro_z"][air]).max()) if air.any() else 0.0,
+            "drift": float(drift.max()), "r0": float(L["gyro_z"][i0]), "z0": float(L["true_z"][i0]), "spin": float(np.abs(L["gyro_z"][air]).max()) if air.any() else 0.0,
             "flight": fl, "at": at}
 
 
@@ -173,8 +173,18 @@ def _row(r: dict) -> str:
 def markdown(m: dict, figure: str) -> str:
     f = m["figure"]
     d = m["design"]
+    trims = {g: next((k / 100 for k in range(100) if ml.flown_on_four(params_of("paper-as-flown", g), 2, k / 100)), None)
+             for g in GAIN_SETS}
+    coupling = d[6] - d[5]
+    r_s = {name: J * sd.pair_speed(d) / coupling for name, J in (("the bottom of the as-flown Jp range", d[17]),
+                                                                ("the as-flown Jp", d[7]), ("Table 2's Jp", d[18]))}
     lines = [f"`python scripts/motor_loss.py` measured everything in this block (seeded flights, the "
              f"onboard loop against the simulated quadcopter).", "",
+             "**The rule's edge**: the smallest share a motor on the roll axis may give and be flown on four: "
+             + ", ".join(f"{g} {v:.2f}" for g, v in trims.items()) + ".", "",
+             "**Where the coupling vanishes** (pair 1-3 at its hover speed): r_s = "
+             + ", ".join(f"{v:.1f} rad/s with {k} ({J:.3g})" for (k, v), J in zip(r_s.items(), (d[17], d[7], d[18])))
+             + ".", "",
              f"**The spin.** The pair's reaction torques balance eq. 6's yaw drag at **{m['r_bar']:.1f} rad/s** on "
              f"the reference airframe (the loop's own event text says it); {m['r_gamma_half']:.1f} rad/s at half the "
              f"identified gamma1 and {m['r_g1_twice']:.1f} at twice g1 (beyond the gyro's {sd.GYRO_MAX:.1f} rad/s once "
@@ -191,13 +201,13 @@ def markdown(m: dict, figure: str) -> str:
              "|---|---|---|---|---|---|---|---|---|"]
     for name, gains, mot, at, r in m["anywhere"]:
         lines.append(f"| {name} | {gains} | {mot} | {at:g} | {_row(r)} |")
-    lines += ["", "**During the yaw turns** (as-flown, Table 6; 0.1 s into each yaw step, at 2.3-2.6 rad/s: "
-              "for motors 1 and 3 lost the pair spins the body the other way to the turns at 40 and 58 s, for "
-              "2 and 4 to those at 46 and 52 s):", "",
-              "| motor | at (s) | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) |",
-              "|---|---|---|---|---|---|---|"]
+    lines += ["", "**During the yaw turns** (as-flown, Table 6; 0.1 s into each yaw step: the pair left after "
+              "motor 1 or 3 spins the body at negative r, after 2 or 4 at positive r, so a yaw rate of the "
+              "other sign is a turn against the pair's spin):", "",
+              "| motor | at (s) | yaw rate then (rad/s) | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) |",
+              "|---|---|---|---|---|---|---|---|"]
     for mot, at, r in m["turns"]:
-        lines.append(f"| {mot} | {at:g} | {_row(r)} |")
+        lines.append(f"| {mot} | {at:g} | {r['r0']:+.2f} | {_row(r)} |")
     lines += ["", "**The plant at the ends of its ranges** (as-flown, hover, motor 2 at 8 s; the loop told the "
               "file's values; Jp's range is the file's, gamma1 and g1 halved and doubled):", "",
               "| plant | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) | largest spin (rad/s) |",
@@ -211,11 +221,11 @@ def markdown(m: dict, figure: str) -> str:
     for gains, share, r in m["partial"]:
         words = r["what"].split(":")[0] if r["what"] else "-"
         lines.append(f"| {gains} | {share:g} | {_row(r)} | {words} |")
-    lines += ["", "**Near the floor** (as-flown, motor 3; the take-off passes 0.1 m at about 1.2 s and 0.3 m at "
-              "1.6 s; the plan's landing is at 0.3 m at 81 s):", "",
-              "| at (s) | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) |", "|---|---|---|---|---|---|"]
+    lines += ["", "**Near the floor** (as-flown, Table 6, motor 3, in the paper flight's take-off and landing):", "",
+              "| at (s) | height then (m) | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) |",
+              "|---|---|---|---|---|---|---|"]
     for at, r in m["low"]:
-        lines.append(f"| {at:g} | {_row(r)} |")
+        lines.append(f"| {at:g} | {r['z0']:.2f} | {_row(r)} |")
     if m["margins"]:
         lines += ["", f"**No false alarm.** The detector's largest missing share held for {ml.LOOPS} loops and for "
                   f"{ml.WEAK_LOOPS} loops in calm flight without a loss, against THRESHOLD {ml.THRESHOLD} and WEAK "
@@ -229,8 +239,8 @@ def markdown(m: dict, figure: str) -> str:
               f"motor time constant, held over one loop): the spectral radius of the loop closed by the scheduled "
               f"gains, the worst over the as-flown file's Jp range ({d[17]:.2g} to {d[18]:.2g} kg m^2), pair 1-3, at "
               f"spin rates r (in the pair's direction) and the pair's rotor speed as a share of its hover one. Below 1 "
-              f"the loop is stable; 1 at r = 0 without rotor momentum is the axis along the pair, which nothing "
-              f"turns.", "", "| rotor speed | " + " | ".join(f"r = {rates[k]:g}" for k in show) + " |",
+              f"the loop is stable. At r = 0 the axis along the pair is not turned (1: marginal; -: no gain solves "
+              f"there, the nearest point's stand in): the spin must build.", "", "| rotor speed | " + " | ".join(f"r = {rates[k]:g}" for k in show) + " |",
               "|---" * (len(show) + 1) + "|"]
     for j, row in enumerate(s["radius"]["0,2"]):
         share = sd.OMEGA_TOP * j / sd.OMEGA_STEPS

@@ -233,6 +233,45 @@ def robust_gains(d: tuple, pair, r: float, frac: float) -> tuple[list[float] | N
     return best
 
 
+_BLAS_NAMES = ("openblas", "scipy_openblas")   # + _set_num_threads, or + _set_num_threads64_ (64-bit ints)
+
+
+class OneBlasThread:
+    """Within it, OpenBLAS (numpy's and scipy's, found among the process' loaded libraries) runs one
+    thread. Its threads on the design's 5x5 problems cost more than the work: on a loaded 2-core machine
+    the schedule took 12 s of CPU with them and 0.7 s without (scripts/benchmark.py). Linux; elsewhere,
+    or without OpenBLAS, nothing changes."""
+
+    def __enter__(self):
+        import ctypes
+        import numpy  # noqa: F401  (their libraries loaded, to be found)
+        import scipy.linalg  # noqa: F401
+        self.restore = []
+        try:
+            with open("/proc/self/maps") as f:
+                paths = {line.split()[-1] for line in f if "openblas" in line.lower() and "/" in line}
+        except OSError:
+            return self
+        for path in paths:
+            try:
+                lib = ctypes.CDLL(path)
+            except OSError:
+                continue
+            for base in _BLAS_NAMES:
+                get = getattr(lib, base + "_get_num_threads", None) or getattr(lib, base + "_get_num_threads64_", None)
+                put = getattr(lib, base + "_set_num_threads", None) or getattr(lib, base + "_set_num_threads64_", None)
+                if get is not None and put is not None:
+                    self.restore.append((put, get()))
+                    put(1)
+                    break
+        return self
+
+    def __exit__(self, *exc):
+        for put, n in self.restore:
+            put(n)
+        return False
+
+
 def schedule(d: tuple) -> dict:
     """{"rates", "momenta", "radius": {pair: [j][k]}, (pair as "i,j"): gains [j][k] (5 each)} over
     `grid`, in the pair's signs: pair 1-3 turns clockwise (its reaction +z, conventions.md), so it
@@ -297,7 +336,8 @@ def load(d: tuple) -> dict:
         except (OSError, ValueError):
             s = None
     if s is None:
-        s = schedule(d)
+        with OneBlasThread():
+            s = schedule(d)
         s["inputs"] = list(d)
         if path is not None:
             try:
