@@ -24,7 +24,8 @@ from typing import Callable
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import Calibration
-from flightctl.control.spin import MotorLossDetector, SpinController
+from flightctl.control.motor_loss import MotorLossDetector, flown_on_four
+from flightctl.control.spin import SpinController
 from flightctl.hal import PWM_RANGE, Hal, ImuSample
 from flightctl.logfile import FlightLogWriter
 from flightctl.params import Params
@@ -174,6 +175,8 @@ class FlightLoop:
                     last_echo = t
                     res.t_arm = t_arm
                     self._event(t, "armed")
+                    if spin.why_not:
+                        self._event(t, f"no two-rotor landing after a lost motor on this vehicle: {spin.why_not}")
             else:
                 try:
                     sp = plan.at(t - t_arm)
@@ -206,10 +209,16 @@ class FlightLoop:
                     if flying:
                         ctl.on_range(echo, t)
                 if flying:
-                    lost = 0 if spinning else detector.update(sample, ctl.mixer.f, ctl.alt, dt)
+                    lost = 0 if spinning else detector.update(sample, ctl.mixer.f, dt)
                     if lost:
-                        spinning = landing = True
-                        self._spin(t, lost, spin, ctl.alt)
+                        giving = 1.0 - detector.missing
+                        if spin.why_not or flown_on_four(self.params, lost, giving):
+                            detector.accept()          # flown on four rotors: a weak motor, or no other way
+                            self._weak(t, lost, giving, spin.why_not, landing, ctl.alt)
+                            landing = True
+                        else:
+                            spinning = landing = True
+                            self._spin(t, lost, giving, detector.fast, spin, ctl.alt)
                         plan = self.plan
                         sp = plan.sp
                     est = ctl.est
@@ -299,17 +308,30 @@ class FlightLoop:
             res.reason = "stopped: stop requested"
             self._event(clock.now(), res.reason)
 
-    def _spin(self, t: float, lost: int, spin: SpinController, alt: float) -> None:
+    def _spin(self, t: float, lost: int, giving: float, fast: bool, spin: SpinController, alt: float) -> None:
         """Motor `lost` is gone (control/spin.py): from now on the spin controller flies the two rotors
         of the other arm down, on the landing's thrust (`_land`: the rest of the plan becomes a descent,
         the log's setpoint)."""
         est = self.ctl.est
         spin.start(lost, est.roll, est.pitch, est.yaw, self.ctl.mixer.f)
         a, b = (m + 1 for m in spin.pair)
-        self._land(t, alt, f"motor {lost} lost (its thrust missing in torque and collective): motors {lost} "
-                           f"and {spin.off[1] + 1} stopped, flying on motors {a} and {b} spinning at about "
-                           f"{spin.r_bar:.0f} rad/s, yaw given up: landing")
+        self._land(t, alt, f"motor {lost} lost ({'at least ' if fast else ''}{100 * (1 - giving):.0f} % of its "
+                           f"thrust missing in torque and "
+                           f"collective): motors {lost} and {spin.off[1] + 1} stopped, flying on motors {a} and {b}, "
+                           f"yaw given up, spinning up toward {spin.r_bar:.0f} rad/s: landing")
         self._why = f"motor {lost} lost: landing on two rotors"   # even where the plan was landing already
+
+    def _weak(self, t: float, motor: int, giving: float, why_not: str, landing: bool, alt: float) -> None:
+        """Motor `motor` gives only `giving` of its thrust, and the loop flies on with four rotors
+        (control/motor_loss.py `flown_on_four`, or no two-rotor mode on this vehicle): it lands."""
+        what = (f"motor {motor} weak (giving about {100 * giving:.0f} % of its commanded thrust): flying on "
+                f"four rotors" if not why_not else
+                f"motor {motor} lost ({100 * (1 - giving):.0f} % of its thrust missing in torque and collective): "
+                f"no two-rotor mode on this vehicle, flying on four rotors")
+        if landing:
+            self._event(t, what)
+        else:
+            self._land(t, alt, what + ": landing")
 
     def _land(self, t: float, alt: float, why: str) -> bool:
         """From clock time `t`: replace the rest of the plan by roll and pitch back to level and a

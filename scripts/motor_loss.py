@@ -1,63 +1,269 @@
-"""A landing after a lost motor (docs/safety.md, "Losing a motor"): the as-flown model hovers at
-1.5 m through the full onboard path, motor 2 stops at 6.3 s after arming (`--fault motor_stop`), the
-loop names it, flies on motors 1 and 3 spinning, and lands. Draws altitude, spin rate, the tilt of the
-thrust axis and the four commands, with the spin rate the model predicts at equilibrium
-(flightctl/control/spin.py: gamma1 r^2 = 2 (g1 f + g2), f = M g / 2) for the identified gamma1 and for
-half and twice it, and prints the figures.
+"""Losing a motor, measured (docs/safety.md, "Losing a motor"): every number of that section, and its
+figure, from the onboard loop against the simulated quadcopter.
 
-    python scripts/motor_loss.py [--out docs/motor-loss.png] [--motor 2] [--at 6.3]
+    python scripts/motor_loss.py                      # print the numbers, draw motor-loss.png here
+    python scripts/motor_loss.py --doc docs/safety.md --out docs/motor-loss.png   # rewrite the docs
+    python scripts/motor_loss.py --check docs/safety.md                           # exit 1 if they differ
+
+The flights (seeded, so that the numbers reproduce to the digit): the figure's (the as-flown model in
+the hover at 1.5 m, motor 2 stopped at 6.3 s); each motor lost at times drawn anywhere in the paper
+flight, on both models and both gain sets, and during every yaw turn of it; the plant's Jp, gamma1 and
+g1 at the ends of their ranges (the loop told the file's values); partial losses; and the detector's
+largest missing share in flights without a loss (every plan, both models and gain sets, and draws of
+the as-flown file's ranges). The equilibrium spin and the linearised loop's spectral radius come from
+flightctl/control/spin_design.py, the computation the loop itself uses (its event text too).
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
-import tempfile
+import os
+import random
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from flightctl.control.spin import SpinController
-from flightctl.params import load
-from flightctl.sim.world import faults
-from flightctl.sim.plots import figure, legend, save
+from flightctl.control import motor_loss as ml
+from flightctl.control import spin_design as sd
+from flightctl.params import GAIN_SETS, load
 from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import SCENARIOS
+from flightctl.sim.world import faults
+
+BEGIN, END = "<!-- motor loss: begin (written by scripts/motor_loss.py) -->", "<!-- motor loss: end -->"
+MODELS = (("base", None), ("as-flown", "paper-as-flown"))
+DRAWS = 5                       # losses per model and gain set at random times of the paper flight
+AIRBORNE = (1.0, 81.5)          # s: the paper flight is off the floor from 1 s to its touchdown at 81.7 s
+TURNS = (40.1, 46.1, 52.1, 58.1)   # s: 0.1 s into each yaw step of the paper flight (2.3-2.6 rad/s)
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
-    ap.add_argument("--out", default="docs/motor-loss.png", help="the figure (PNG)")
-    ap.add_argument("--motor", type=int, default=2, help="the motor that stops (1-4, default 2)")
-    ap.add_argument("--at", type=float, default=6.3, help="when, s after arming (default 6.3)")
-    args = ap.parse_args(argv)
-    params = load("paper-as-flown")
-    a = params.airframe
-    with tempfile.TemporaryDirectory() as tmp:
-        flight = fly(SCENARIOS["hover"](), params, Path(tmp) / "f.csv",
-                     faults=[faults.parse(f"motor_stop:motor={args.motor},at={args.at}")])
-    L = flight.log
+def params_of(spec, gains="table6"):
+    return dataclasses.replace(load(spec), gains=GAIN_SETS[gains])
+
+
+def loss(plan: str, params, spec: str, plant: dict | None = None, seed: int = 0) -> dict:
+    """One flight with the fault `spec`: outcome, naming, tilt, touchdown speed, drift, spin."""
+    fault = faults.parse(spec)
+    airframe = dataclasses.replace(params.airframe, **plant) if plant else None
+    fl = fly(SCENARIOS[plan](), params, os.devnull, faults=[fault], seed=seed, plant_airframe=airframe)
+    L, at = fl.log, fault.at
     t = L["t"]
-    spin = SpinController(params)
-    r_bar = spin.r_bar
-    air = (t > args.at) & (L["true_z"] > 0.05)
-    r_end = float(np.median(np.abs(L["gyro_z"][air][-450:]))) if air.any() else math.nan
+    after = t >= at
+    named = next(((te, w) for te, w in fl.result.events if te >= at and (" lost (" in w or " weak (" in w)), None)
     tilt = np.degrees(np.arccos(np.clip(np.cos(L["true_roll"]) * np.cos(L["true_pitch"]), -1, 1)))
-    lost = next((te for te, what in flight.result.events if "lost" in what), math.nan)
-    print(f"motor {args.motor} stopped at {args.at:g} s, named at {lost:.3f} s ({1e3 * (lost - args.at):.0f} ms); "
-          f"{flight.outcome}, touchdown at {max(abs(v) for _, v in flight.touchdowns):.2f} m/s")
-    print(f"spin: {r_end:.1f} rad/s in the last second before touchdown; predicted at equilibrium "
-          f"{r_bar:.1f} rad/s (gamma1 = {a.gamma1:.3g}), {r_bar * math.sqrt(2):.1f} (gamma1 / 2), "
-          f"{r_bar / math.sqrt(2):.1f} (2 gamma1); the gyro reads up to {math.radians(2000):.1f} rad/s")
-    print(f"largest tilt of the thrust axis after the loss: {float(np.max(tilt[t > args.at])):.0f} deg")
+    i0 = int(np.flatnonzero(after)[0])
+    i1 = max(i0 - 45, 0)                         # the velocity it had (0.1 s before): not the loss's
+    x, y = L["true_x"], L["true_y"]
+    v0 = ((x[i0] - x[i1]) / (t[i0] - t[i1]), (y[i0] - y[i1]) / (t[i0] - t[i1]))
+    ts = t[after] - t[i0]
+    drift = np.hypot(x[after] - x[i0] - v0[0] * ts, y[after] - y[i0] - v0[1] * ts)
+    air = after & (L["true_z"] > 0.05)
+    return {"outcome": fl.outcome, "ms": None if named is None else 1e3 * (named[0] - at),
+            "what": "" if named is None else named[1], "tilt": float(tilt[after].max()),
+            "touchdown": max((abs(v) for _, v in fl.touchdowns), default=math.nan),
+            "drift": float(drift.max()), "r0": float(L["gyro_z"][i0]), "z0": float(L["true_z"][i0]), "spin": float(np.abs(L["gyro_z"][air]).max()) if air.any() else 0.0,
+            "flight": fl, "at": at}
+
+
+def margins() -> list[tuple[str, float, float]]:
+    """The detector's largest missing share held for LOOPS and for WEAK_LOOPS loops in calm flight, in
+    every plan without a loss (both models, both gain sets), and over draws of the as-flown ranges."""
+    from flightctl.loop import FlightLoop
+    from flightctl.plans import PLANS
+    from flightctl.sim import causes
+    from flightctl.sim.sweeps.montecarlo import draw, drawn_airframe
+    from flightctl.sim.world.board import SIM_CALIBRATE_S, sim_board
+    import flightctl.loop as loop_module
+    seen: list[float] = []
+
+    class Watched(ml.MotorLossDetector):
+        __slots__ = ()
+
+        def update(self, s, f, dt):
+            out = super().update(s, f, dt)
+            if self.p is not None:
+                fall = (self.bz - self.rz) * self.M
+                ex, ey = self.rx - self.bx, self.ry - self.by
+                best = 0.0
+                for i, along in enumerate((ey, -ex, -ey, ex)):
+                    fi = max(self.fl[i], self.half)
+                    best = max(best, min(along * self.il / fi, fall / fi))
+                seen.append(best if self.calm < ml.CALM else 0.0)
+            return out
+
+    def held(n):
+        a = np.array(seen)
+        return float(np.lib.stride_tricks.sliding_window_view(a, n).min(axis=1).max()) if len(a) >= n else 0.0
+
+    rows = []
+    inner = loop_module.MotorLossDetector
+    loop_module.MotorLossDetector = Watched
+    try:
+        for name, spec in MODELS:
+            worst = [0.0, 0.0]
+            for plan in PLANS:
+                for gains in GAIN_SETS:
+                    seen.clear()
+                    params = params_of(spec, gains)
+                    hal, world = sim_board(params, (), seed=1)
+                    FlightLoop(hal, params, PLANS[plan](), None, calibrate_s=SIM_CALIBRATE_S).run()
+                    worst = [max(worst[0], held(ml.LOOPS)), max(worst[1], held(ml.WEAK_LOOPS))]
+            rows.append((f"every plan, {name} model, both gain sets", *worst))
+        base = causes.load_vehicle("paper-as-flown")
+        n = 6
+        drawn = draw(base, n, 28)
+        worst = [0.0, 0.0]
+        for k in range(n):
+            d = {key: float(v[k]) for key, v in drawn.items()}
+            for gains in GAIN_SETS:
+                params = causes.load_vehicle("paper-as-flown", GAIN_SETS[gains])
+                effects = tuple(causes.make(e.cause, **{**dict(e.parameters), **{p: v for (c, p), v in d.items()
+                                                                                  if c == e.cause}})
+                                for e in params.effects)
+                seen.clear()
+                hal, world = sim_board(params, effects, seed=k, airframe=drawn_airframe(params.airframe, d))
+                FlightLoop(hal, params, PLANS["paper"](), None, calibrate_s=SIM_CALIBRATE_S).run()
+                worst = [max(worst[0], held(ml.LOOPS)), max(worst[1], held(ml.WEAK_LOOPS))]
+        rows.append((f"the paper flight over {n} draws of the as-flown ranges, both gain sets", *worst))
+    finally:
+        loop_module.MotorLossDetector = inner
+    return rows
+
+
+def measure(quick: bool = False) -> dict:
+    asf = params_of("paper-as-flown")
+    d = sd.design_inputs(asf)
+    out = {"design": d, "r_bar": sd.equilibrium_spin(d),
+           "r_gamma_half": sd.equilibrium_spin(d[:11] + (d[11] / 2,) + d[12:]),
+           "r_gamma_twice": sd.equilibrium_spin(d[:11] + (d[11] * 2,) + d[12:]),
+           "r_g1_twice": sd.equilibrium_spin(d[:9] + (d[9] * 2,) + d[10:]),
+           "schedule": sd.load(d)}
+    out["figure"] = loss("hover", asf, "motor_stop:motor=2,at=6.3")
+    rng = random.Random(28)
+    anywhere = []
+    for name, spec in MODELS:
+        for gains in GAIN_SETS:
+            for _ in range(1 if quick else DRAWS):
+                m, at = rng.randint(1, 4), round(rng.uniform(*AIRBORNE), 2)
+                anywhere.append((name, gains, m, at, loss("paper", params_of(spec, gains), f"motor_stop:motor={m},at={at}")))
+    out["anywhere"] = anywhere
+    # during the yaw turns: each motor, so that half the losses meet a yaw rate against the pair's spin
+    out["turns"] = [(m, at, loss("paper", asf, f"motor_stop:motor={m},at={at}"))
+                    for at in TURNS for m in ((1, 2) if quick else (1, 2, 3, 4))]
+    lo_hi = {"Jp": (asf.airframe.Jp, next(r[1:] for r in asf.ranges if r[0] == "Jp"))}
+    out["ends"] = [(f"{k} = {v:.3g}", loss("hover", asf, "motor_stop:motor=2,at=8", {k: v}))
+                   for k, v in (("Jp", lo_hi["Jp"][1][0]), ("Jp", lo_hi["Jp"][1][1]),
+                                ("gamma1", asf.airframe.gamma1 / 2), ("gamma1", asf.airframe.gamma1 * 2),
+                                ("g1", asf.airframe.g1 / 2), ("g1", asf.airframe.g1 * 2))]
+    out["partial"] = [(gains, share, loss("hover", params_of("paper-as-flown", gains),
+                                          f"motor_partial:motor=2,share={share},at=8"))
+                      for gains in GAIN_SETS for share in (0.1, 0.3, 0.5, 0.6, 0.7)]
+    out["low"] = [(at, loss("paper", asf, f"motor_stop:motor=3,at={at}")) for at in (1.2, 1.6, 81.0)]
+    out["margins"] = [] if quick else margins()
+    return out
+
+
+def _row(r: dict) -> str:
+    return (f"{r['outcome']} | {r['ms']:.0f} | {r['tilt']:.0f} | {r['touchdown']:.2f} | {r['drift']:.1f}"
+            if r["ms"] is not None else f"{r['outcome']} | not named | {r['tilt']:.0f} | {r['touchdown']:.2f} | {r['drift']:.1f}")
+
+
+def markdown(m: dict, figure: str) -> str:
+    f = m["figure"]
+    d = m["design"]
+    trims = {g: next((k / 100 for k in range(100) if ml.flown_on_four(params_of("paper-as-flown", g), 2, k / 100)), None)
+             for g in GAIN_SETS}
+    coupling = d[6] - d[5]
+    r_s = {name: J * sd.pair_speed(d) / coupling for name, J in (("the bottom of the as-flown Jp range", d[17]),
+                                                                ("the as-flown Jp", d[7]), ("Table 2's Jp", d[18]))}
+    lines = [f"`python scripts/motor_loss.py` measured everything in this block (seeded flights, the "
+             f"onboard loop against the simulated quadcopter).", "",
+             "**The rule's edge**: the smallest share a motor on the roll axis may give and be flown on four: "
+             + ", ".join(f"{g} {v:.2f}" for g, v in trims.items()) + ".", "",
+             "**Where the coupling vanishes** (pair 1-3 at its hover speed): r_s = "
+             + ", ".join(f"{v:.1f} rad/s with {k} ({J:.3g})" for (k, v), J in zip(r_s.items(), (d[17], d[7], d[18])))
+             + ".", "",
+             f"**The spin.** The pair's reaction torques balance eq. 6's yaw drag at **{m['r_bar']:.1f} rad/s** on "
+             f"the reference airframe (the loop's own event text says it); {m['r_gamma_half']:.1f} rad/s at half the "
+             f"identified gamma1 and {m['r_g1_twice']:.1f} at twice g1 (beyond the gyro's {sd.GYRO_MAX:.1f} rad/s once "
+             f"the spin settles, which a landing from a few metres does not wait for), {m['r_gamma_twice']:.1f} at "
+             f"twice gamma1.", "",
+             f"![A landing on two rotors]({figure})", "",
+             f"The figure: the as-flown model in the hover at 1.5 m, motor 2 stopped at {f['at']:g} s. The loop names "
+             f"it {f['ms']:.0f} ms later; the thrust axis tilts to {f['tilt']:.0f} degrees while the spin builds; the "
+             f"spin reaches {f['spin']:.1f} rad/s before touchdown; the touchdown is at {f['touchdown']:.2f} m/s; the "
+             f"vehicle drifts {f['drift']:.1f} m from where the loss found it (beyond the velocity it had).", "",
+             "**Anywhere in the paper flight** (each motor at times drawn from a seeded generator while it is off "
+             "the floor):", "",
+             "| model | gains | motor | at (s) | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for name, gains, mot, at, r in m["anywhere"]:
+        lines.append(f"| {name} | {gains} | {mot} | {at:g} | {_row(r)} |")
+    lines += ["", "**During the yaw turns** (as-flown, Table 6; 0.1 s into each yaw step: the pair left after "
+              "motor 1 or 3 spins the body at negative r, after 2 or 4 at positive r, so a yaw rate of the "
+              "other sign is a turn against the pair's spin):", "",
+              "| motor | at (s) | yaw rate then (rad/s) | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) |",
+              "|---|---|---|---|---|---|---|---|"]
+    for mot, at, r in m["turns"]:
+        lines.append(f"| {mot} | {at:g} | {r['r0']:+.2f} | {_row(r)} |")
+    lines += ["", "**The plant at the ends of its ranges** (as-flown, hover, motor 2 at 8 s; the loop told the "
+              "file's values; Jp's range is the file's, gamma1 and g1 halved and doubled):", "",
+              "| plant | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) | largest spin (rad/s) |",
+              "|---|---|---|---|---|---|---|"]
+    for what, r in m["ends"]:
+        lines.append(f"| {what} | {_row(r)} | {r['spin']:.1f} |")
+    lines += ["", "**Partial losses** (as-flown, hover, motor 2 giving a share of its commanded thrust from 8 s; "
+              "the loop's answer by the rule above):", "",
+              "| gains | share given | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) | the loop's words |",
+              "|---|---|---|---|---|---|---|---|"]
+    for gains, share, r in m["partial"]:
+        words = r["what"].split(":")[0] if r["what"] else "-"
+        lines.append(f"| {gains} | {share:g} | {_row(r)} | {words} |")
+    lines += ["", "**Near the floor** (as-flown, Table 6, motor 3, in the paper flight's take-off and landing):", "",
+              "| at (s) | height then (m) | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) |",
+              "|---|---|---|---|---|---|---|"]
+    for at, r in m["low"]:
+        lines.append(f"| {at:g} | {r['z0']:.2f} | {_row(r)} |")
+    if m["margins"]:
+        lines += ["", f"**No false alarm.** The detector's largest missing share held for {ml.LOOPS} loops and for "
+                  f"{ml.WEAK_LOOPS} loops in calm flight without a loss, against THRESHOLD {ml.THRESHOLD} and WEAK "
+                  f"{ml.WEAK}:", "", f"| flights | held {ml.LOOPS} loops | held {ml.WEAK_LOOPS} loops |", "|---|---|---|"]
+        for what, a, b in m["margins"]:
+            lines.append(f"| {what} | {a:.3f} | {b:.3f} |")
+    s = m["schedule"]
+    rates = s["rates"]
+    show = [k for k, r in enumerate(rates) if r in (-8.0, -4.0, 0.0, 2.0, 4.0, 8.0, 12.0, 16.0, 20.0, 24.0, 28.0, 32.0)]
+    lines += ["", f"**The linearised loop** (spin_design.py: eq. 7 about the spin, the pair's torque through the "
+              f"motor time constant, held over one loop): the spectral radius of the loop closed by the scheduled "
+              f"gains, the worst over the as-flown file's Jp range ({d[17]:.2g} to {d[18]:.2g} kg m^2), pair 1-3, at "
+              f"spin rates r (in the pair's direction) and the pair's rotor speed as a share of its hover one. Below 1 "
+              f"the loop is stable. At r = 0 the axis along the pair is not turned (1: marginal; -: no gain solves "
+              f"there, the nearest point's stand in): the spin must build.", "", "| rotor speed | " + " | ".join(f"r = {rates[k]:g}" for k in show) + " |",
+              "|---" * (len(show) + 1) + "|"]
+    for j, row in enumerate(s["radius"]["0,2"]):
+        share = sd.OMEGA_TOP * j / sd.OMEGA_STEPS
+        lines.append(f"| {share:.2f} | " + " | ".join("-" if not math.isfinite(row[k]) else f"{row[k]:.4f}"
+                                                       for k in show) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def draw_figure(m: dict, out: str) -> None:
+    from flightctl.sim.plots import figure, legend, save
+    f = m["figure"]
+    L, at, r_bar = f["flight"].log, f["at"], m["r_bar"]
+    t = L["t"]
+    tilt = np.degrees(np.arccos(np.clip(np.cos(L["true_roll"]) * np.cos(L["true_pitch"]), -1, 1)))
     fig, ax = figure(4, 1, size=(9.0, 10.0), sharex="col")
     ax[0, 0].plot(t, L["true_z"], label="true altitude")
     ax[0, 0].plot(t, L["alt"], lw=0.8, label="estimate")
     ax[0, 0].set_ylabel("altitude (m)")
     ax[1, 0].plot(t, np.abs(L["gyro_z"]), label="|r| (gyro)")
-    for value, what, style in ((r_bar, "predicted, gamma1", "-"), (r_bar * math.sqrt(2), "gamma1 / 2", ":"),
-                               (r_bar / math.sqrt(2), "2 gamma1", "--")):
+    for value, what, style in ((r_bar, "balance, gamma1", "-"), (m["r_gamma_half"], "gamma1 / 2", ":"),
+                               (m["r_gamma_twice"], "2 gamma1", "--")):
         ax[1, 0].axhline(value, color="0.3", ls=style, lw=0.9, label=f"{what}: {value:.1f} rad/s")
-    ax[1, 0].axhline(math.radians(2000), color="tab:red", lw=0.8, label="gyro full scale (2000 deg/s)")
+    ax[1, 0].axhline(sd.GYRO_MAX, color="tab:red", lw=0.8, label="gyro full scale (2000 deg/s)")
     ax[1, 0].set_ylabel("spin rate (rad/s)")
     ax[2, 0].plot(t, tilt, label="true tilt of the thrust axis")
     ax[2, 0].set_ylabel("tilt (deg)")
@@ -66,13 +272,49 @@ def main(argv=None) -> int:
     ax[3, 0].set_ylabel("command P (0-255)")
     ax[3, 0].set_xlabel("time since arming (s)")
     for row in ax[:, 0]:
-        row.axvline(args.at, color="k", ls=":", lw=0.8)
+        row.axvline(at, color="k", ls=":", lw=0.8)
         row.grid(alpha=0.3)
         legend(row)
-    fig.suptitle(f"as-flown model, hover at 1.5 m: motor {args.motor} stops at {args.at:g} s; "
-                 f"{flight.outcome}")
-    save(fig, args.out)
+    fig.suptitle(f"as-flown model, hover at 1.5 m: motor 2 stops at {at:g} s; {f['flight'].outcome}")
+    save(fig, out)
+
+
+def block_of(text: str) -> str:
+    head, sep, rest = text.partition(BEGIN)
+    body, sep2, _ = rest.partition(END)
+    if not (sep and sep2):
+        raise SystemExit(f"the markers {BEGIN} ... {END} are not in the document")
+    return body.strip("\n") + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
+    ap.add_argument("--out", default="motor-loss.png", help="the figure (PNG; default ./motor-loss.png)")
+    ap.add_argument("--doc", help="rewrite the block between the markers of this document")
+    ap.add_argument("--check", help="compare the block of this document with a fresh one: exit 1 if they differ")
+    ap.add_argument("--quick", action="store_true", help="fewer flights (a trial; not for the docs)")
+    args = ap.parse_args(argv)
+    m = measure(args.quick)
+    figure = "motor-loss.png"
+    text = markdown(m, figure)
+    if args.check:
+        old = block_of(Path(args.check).read_text(encoding="utf-8"))
+        if old != text:
+            import difflib
+            sys.stdout.writelines(difflib.unified_diff(old.splitlines(True), text.splitlines(True), "docs", "fresh"))
+            return 1
+        print(f"{args.check}: the motor-loss block is what the flights give")
+        return 0
+    print(text)
+    draw_figure(m, args.out)
     print(f"figure -> {args.out}")
+    if args.doc:
+        path = Path(args.doc)
+        doc = path.read_text(encoding="utf-8")
+        head, _, rest = doc.partition(BEGIN)
+        _, _, tail = rest.partition(END)
+        path.write_text(f"{head}{BEGIN}\n{text}{END}{tail}", encoding="utf-8")
+        print(f"{args.doc}: the motor-loss block rewritten")
     return 0
 
 

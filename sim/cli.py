@@ -81,7 +81,7 @@ def metrics_json(flown, flight, wall_s: float) -> dict:
     if flown.name == "hover" and flight.flew:
         out["hold_last_10s"] = hold_metrics(log, until=flown.plan.duration)   # null: the hover was cut short
     for step in flown.steps:
-        m = step_metrics(log, step, flight.t_arm)
+        m = step_metrics(log, step, flight.t_arm, events=flight.result.events)
         out["steps"].append({"channel": step.channel, "t": step.t, "start": step.start, "end": step.end,
                              "window_s": step.window, "flown_s": m.flown_s, "flown": m.flown,
                              "rise_s": _finite(m.rise_s), "overshoot": _finite(m.overshoot),
@@ -154,7 +154,7 @@ def main(argv: list[str]) -> int:
               f"{h['tilt'] * 57.2958:.2f} deg" if h else
               f"  the hover was cut short at t = {duration:.1f} s, before the plan's {flown.plan.duration:g} s")
     for step in flown.steps:
-        print("  " + step_metrics(log, step, flight.t_arm).row())
+        print("  " + step_metrics(log, step, flight.t_arm, events=flight.result.events).row())
     if flown.steps:
         print(LEGEND)
     if args.json:

@@ -41,12 +41,14 @@ def test_the_motors_stop_in_the_air_only_when_the_action_is_stop(matrix, name):
 def test_the_actions_are_the_stated_ones(matrix):
     stated = {"imu_frozen": "stop", "imu_garbage": "stop", "imu_intermittent": "hold", "cpu_stall": "hold",
               "battery_critical": "land", "log_full": "land", "sonar_silent": "land", "sonar_stuck": "land",
-              "motor_stop": "land"}
+              "motor_stop": "land", "motor_partial": "land"}
     assert {n: matrix[n]["action"] for n in stated} == stated
     assert matrix["imu_intermittent"]["outcome"] == "landed upright"
     assert matrix["cpu_stall"]["outcome"] == "landed upright"
     assert matrix["motor_stop"]["outcome"] == "landed upright"    # on two rotors (issue 18)
     assert matrix["motor_stop"]["detect_ms"] <= 100
+    assert matrix["motor_partial"]["outcome"] == "landed upright"  # a motor at 30 % of its command
+    assert matrix["motor_partial"]["detect_ms"] <= 200
     assert 40 <= matrix["cpu_stall"]["detect_ms"] <= 60           # the 50 ms stall, named at its end
     assert matrix["log_full"]["log_dropped_rows"] > 0
 

@@ -308,14 +308,14 @@ def test_model_f_is_a_function_of_its_arguments():
 def test_effect_rotor_drag():
     m = Model(Airframe(), (fx.make("rotor_drag", k=0.3),))
     # yawed 90 deg (nose West), moving North at 2 m/s: the body sees (0, -2, 0), drag (0, +0.6, 0) N,
-    # which in the inertial frame is (-0.6, 0, 0): against the motion
+    # which in the inertial frame is (-0.6, 0, 0): against the motion (four rotors at hover thrust)
     x = state(z=3.0, psi=math.pi / 2, vx=2.0)
-    u = (0.0, 0.0, 0.0, 0.0, BATT)
+    u = hover_u()
     xd = m.f(0.0, x, u)
     assert xd[3] == pytest.approx(-0.3 * 2.0 / M, rel=1e-12)
     assert xd[4] == pytest.approx(0.0, abs=1e-12)
-    assert xd[5] == pytest.approx(-G, rel=1e-12)
-    assert m.specific_force(0.0, x, u) == pytest.approx((0.0, 0.3 * 2.0 / M, 0.0), abs=1e-12)
+    assert xd[5] == pytest.approx(0.0, abs=1e-9)
+    assert m.specific_force(0.0, x, u) == pytest.approx((0.0, 0.3 * 2.0 / M, G), abs=1e-9)
     # no torque from it without a yaw rate
     assert xd[9:12] == pytest.approx([0.0, 0.0, 0.0], abs=1e-12)
     # a yaw rate moves each rotor sideways at r l: the optional yaw term damps it, -yaw r, and nothing
@@ -326,6 +326,33 @@ def test_effect_rotor_drag():
     xr = yawing.f(0.0, state(z=3.0, r=2.0), u)
     assert xr[11] - free[11] == pytest.approx(-0.3 * L * L * 2.0 / JZZ, rel=1e-12)
     assert xr[3:5] == pytest.approx([0.0, 0.0], abs=1e-12) and xr[9:11] == pytest.approx(free[9:11], abs=1e-12)
+
+
+@pytest.mark.parametrize("stopped", [(), (1, 3), (0,), (0, 1, 2, 3)])
+def test_the_airflow_terms_scale_with_the_rotors_that_run(stopped):
+    """rotor_drag's force and yaw damping and rotor_inflow's hub moment come from the air the rotors
+    move: a stopped rotor (command below the dead zone, eq. 26) adds none. The force is k/4 per rotor;
+    the yaw term holds the rotors beyond the two whose share eq. 6's gamma1 holds (the rig's pair), so
+    it is yaw (n - 2) / 2 for n rotors running, none below two; the hub moment hub/4 per rotor. A rotor
+    between (a quarter of hover thrust) shares by its induced velocity, sqrt(f / (B/4))."""
+    k, yaw, hub, r, p, vx = 1.2, 0.05, 0.024, 3.0, 1.5, 2.0
+    run = 4 - len(stopped)
+    u = list(hover_u())
+    for i in stopped:
+        u[i] = H2 - 5.0                        # below the dead zone: no thrust, no airflow
+    u = tuple(u)
+    x = state(z=3.0, vx=vx, r=r, p=p)
+    plain = Model(Airframe()).f(0.0, x, u)
+    drag = Model(Airframe(), (fx.make("rotor_drag", k=k, yaw=yaw),)).f(0.0, x, u)
+    assert drag[3] - plain[3] == pytest.approx(-k * run / 4 * vx / M, rel=1e-12, abs=1e-12)
+    assert drag[11] - plain[11] == pytest.approx(-yaw * max(run - 2, 0) / 2 * r / JZZ, rel=1e-12, abs=1e-12)
+    inflow = Model(Airframe(), (fx.make("rotor_inflow", k=0.0, hub=hub),)).f(0.0, x, u)
+    assert inflow[9] - plain[9] == pytest.approx(-hub * run / 4 * p / JXX, rel=1e-12, abs=1e-12)
+    # one rotor at a ninth of hover thrust (1/9 B < B/4): its share is sqrt(4/9) = 2/3
+    P_ninth = H2 + D / 3.0
+    u3 = (PH, PH, PH, P_ninth, BATT)
+    assert (Model(Airframe(), (fx.make("rotor_inflow", k=0.0, hub=hub),)).f(0.0, x, u3)[9]
+            - Model(Airframe()).f(0.0, x, u3)[9]) == pytest.approx(-hub * (3 + 2 / 3) / 4 * p / JXX, rel=1e-9)
 
 
 def test_effect_rotor_inflow_hub_damping():

@@ -8,6 +8,12 @@ because a yaw drag identified on the spinning vehicle holds part of it already: 
 (eq. 6, section 3.2) spun the quadcopter on rotors 1 and 3 with 2 and 4 off, so its gamma1 r^2
 includes the edgewise drag of the two running rotors; in flight, 2 and 4 add theirs, (k / 2) l^2
 (scripts/as_flown.py). The fit below predicts the accelerometer's x and y and reports k only.
+
+Both terms come from the air the rotors move: they scale with the rotors that run
+(`rotor_inflow.airflow`, the summed shares s, 4 for four rotors carrying thrust). The force is the
+four rotors' k times s / 4; `yaw` holds the rotors beyond the two whose share eq. 6's gamma1 holds
+already, so it is yaw (s - 2) / 2, none below two: on one pair (a lost motor and the one across it
+stopped, flightctl/control/spin.py) the yaw drag is eq. 6's alone, as on the rig.
 """
 from __future__ import annotations
 
@@ -15,6 +21,7 @@ import math
 
 import numpy as np
 
+from flightctl.sim.causes.rotor_inflow import airflow
 from flightctl.sim.identify.diagnose.candidate import GridCandidate, Result
 from flightctl.sim.identify.diagnose.data import stretches
 from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, Change
@@ -22,9 +29,12 @@ from flightctl.sim.identify.diagnose.scoring import linear_stats, solve
 from flightctl.sim.world.model import R, Effect, Parameter
 
 
-def drag_wrench(k: float, yaw: float, u, v, r):
-    """The body-frame drag force -k (u, v) and the rotors' yaw damping -yaw r."""
-    return -k * u, -k * v, -yaw * r
+def drag_wrench(k: float, yaw: float, running, u, v, r):
+    """The body-frame drag force -k (u, v) and the rotors' yaw damping -yaw r, for `running` rotors'
+    worth of airflow (`airflow`: 4 for four rotors carrying thrust)."""
+    kr = 0.25 * k * running
+    beyond = 0.5 * (running - 2.0 + abs(running - 2.0))      # max(running - 2, 0): beyond gamma1's pair
+    return -kr * u, -kr * v, -0.5 * yaw * beyond * r
 
 
 class RotorDrag(Effect):
@@ -35,8 +45,13 @@ class RotorDrag(Effect):
     required = {"k": Parameter("N s/m", 0.0, 20.0)}
     optional = {"yaw": Parameter("N m s/rad", 0.0, 10.0)}
 
+    def attach(self, airframe, offset):
+        super().attach(airframe, offset)
+        self._B = airframe.M * airframe.g / 4.0
+
     def wrench(self, t, x, f, vb, force, torque):
-        fx, fy, tz = drag_wrench(self.parameters["k"], self.parameters.get("yaw", 0.0), vb[0], vb[1], x[R])
+        fx, fy, tz = drag_wrench(self.parameters["k"], self.parameters.get("yaw", 0.0),
+                                 airflow(f[0], f[1], f[2], f[3], self._B), vb[0], vb[1], x[R])
         force[0] += fx
         force[1] += fy
         torque[2] += tz   # each rotor's drag at r l, arm l

@@ -35,6 +35,14 @@ that is a hub moment -N_b rho a c Omega R^4 p / 16 per rotor if the blades do no
 rotor): 0.0059 N m s/rad per rotor, 0.024 for four (scripts/as_flown.py), on roll and pitch. A
 flapping blade relieves it (an articulated rotor passes none to the hub): 0 is the lower end.
 Diagnose fits `k` only.
+
+**Rotors that stop.** `k`, `hub` and `rotor_drag`'s terms all come from the air each rotor moves: a
+stopped rotor (a lost motor, flightctl/control/spin.py) moves none. Each rotor's share of them is
+`airflow_share`: its induced velocity, sqrt(f_i / (ON B)), below ON of the hover thrust, and the
+hover value the terms were derived at above it, so that four rotors that carry thrust (no rotor of the
+paper flight or the single steps goes below 0.32 B in the air, tests/test_model.py) fly the model as
+derived. `k`'s term scales by itself (sqrt(f_i / B) above); `hub` is the four rotors' moment times the
+mean share (`airflow`).
 """
 from __future__ import annotations
 
@@ -45,6 +53,22 @@ from flightctl.sim.identify.diagnose.dataset import C
 from flightctl.sim.world.model import P, Q, Effect, Parameter, body_torques
 
 
+ON = 0.25   # of the hover thrust B: below this a rotor's airflow terms fall with its induced velocity
+
+
+def airflow_share(f, B: float):
+    """One rotor's share of the airflow terms at thrust f >= 0: sqrt(min(f / (ON B), 1)) (floats,
+    arrays, compiled: plain arithmetic)."""
+    x = f / (ON * B)
+    return (0.5 * (x + 1.0 - abs(x - 1.0))) ** 0.5
+
+
+def airflow(f1, f2, f3, f4, B: float):
+    """The four rotors' summed shares of the airflow terms: 4 when all carry at least ON B, 2 when one
+    pair is stopped."""
+    return airflow_share(f1, B) + airflow_share(f2, B) + airflow_share(f3, B) + airflow_share(f4, B)
+
+
 def thrust_change(f1, f2, f3, f4, k: float, B: float, l: float, w, p, q):
     """The four rotors' thrust changes -k sqrt(f_i / B) (w + p y_i - q x_i) ("+" layout), for
     floats (the simulator) or arrays (the fit)."""
@@ -52,11 +76,13 @@ def thrust_change(f1, f2, f3, f4, k: float, B: float, l: float, w, p, q):
             -k * (f3 / B) ** 0.5 * (w + q * l), -k * (f4 / B) ** 0.5 * (w - p * l))
 
 
-def inflow_wrench(f1, f2, f3, f4, k: float, B: float, l: float, hub: float, w, p, q):
-    """The thrust changes' force along z_b and their roll and pitch torques, with the hub's damping."""
+def inflow_wrench(f1, f2, f3, f4, k: float, B: float, l: float, hub: float, running, w, p, q):
+    """The thrust changes' force along z_b and their roll and pitch torques, with the hub's damping
+    (`hub` for four rotors, times `running` / 4: `airflow`)."""
     d1, d2, d3, d4 = thrust_change(f1, f2, f3, f4, k, B, l, w, p, q)
     t_phi, t_theta, _ = body_torques(d1, d2, d3, d4, 0.0, 0.0, 0.0, 0.0, l)
-    return d1 + d2 + d3 + d4, t_phi - hub * p, t_theta - hub * q
+    h = 0.25 * hub * running
+    return d1 + d2 + d3 + d4, t_phi - h * p, t_theta - h * q
 
 
 class RotorInflow(Effect):
@@ -70,8 +96,10 @@ class RotorInflow(Effect):
         self._B = airframe.M * airframe.g / 4.0
 
     def wrench(self, t, x, f, vb, force, torque):
-        fz, tx, ty = inflow_wrench(f[0], f[1], f[2], f[3], self.parameters["k"], self._B, self.a.l,
-                                   self.parameters.get("hub", 0.0), vb[2], x[P], x[Q])
+        B = self._B
+        fz, tx, ty = inflow_wrench(f[0], f[1], f[2], f[3], self.parameters["k"], B, self.a.l,
+                                   self.parameters.get("hub", 0.0), airflow(f[0], f[1], f[2], f[3], B),
+                                   vb[2], x[P], x[Q])
         force[2] += fz
         torque[0] += tx
         torque[1] += ty

@@ -26,9 +26,9 @@ FAULT_AFTER_S = 6.0   # s after arming: in a steady hover at 1 m
 NAMED_BY = {"imu_frozen": "IMU frame refused (frozen", "imu_garbage": "IMU frame refused",
             "imu_intermittent": "IMU frame refused", "gyro_saturation": "IMU saturated",
             "sonar_silent": "altitude lost", "sonar_stuck": "altitude lost",
-            "battery_critical": "battery low", "motor_stop": "lost (its thrust missing",
+            "battery_critical": "battery low", "motor_stop": " of its ", "motor_partial": " of its ",
             "cpu_stall": "loop stalled", "log_full": "log write failed"}
-OPTIONS = {"cpu_stall": "ms=50", "battery_critical": "cell=3.3"}   # the matrix's figures
+OPTIONS = {"cpu_stall": "ms=50", "battery_critical": "cell=3.3", "motor_partial": "share=0.3"}   # the matrix's figures
 
 
 def hover_plan(fault_after: float = FAULT_AFTER_S, hold: float = 4.0) -> Plan:

@@ -26,6 +26,7 @@ class StepMetrics:
     steady_error: float     # mean error over the last second (rad or m)
     coupling: dict[str, float]   # largest departure of each other channel from its setpoint
     flown_s: float = 0.0    # how much of the step's window the flight covered (it may end first)
+    why: str = "the flight ended before this step"   # why it was not flown (whole or in part)
 
     @property
     def flown(self) -> bool:
@@ -36,12 +37,12 @@ class StepMetrics:
         unit, k = ("deg", 180 / math.pi) if s.channel in ANGLES else ("m", 1.0)
         head = f"{s.channel:>5} {s.start * k:+6.1f} -> {s.end * k:+6.1f} {unit:<3}  "
         if self.flown_s <= 0.0:
-            return head + "not flown: the flight ended before this step"
+            return head + f"not flown: {self.why}"
         couple = ", ".join(f"{c} {v * (180 / math.pi if c in ANGLES else 1):.2f}"
                            for c, v in self.coupling.items())
         settling = (f"{self.settling_s:5.2f} s" if math.isfinite(self.settling_s)
                     else f"not settled in {self.step.window:.1f} s")
-        cut = "" if self.flown else f"  (the flight ended {self.flown_s:.1f} s into its {self.step.window:.1f} s)"
+        cut = "" if self.flown else f"  ({self.why} {self.flown_s:.1f} s into its {self.step.window:.1f} s)"
         return (head + f"rise {self.rise_s:5.2f} s  overshoot {100 * self.overshoot:5.1f} %  settling {settling}  "
                 f"steady error {self.steady_error * k:+7.3f} {unit}  coupling: {couple}{cut}")
 
@@ -55,9 +56,26 @@ def _error(channel: str, y: np.ndarray, target) -> np.ndarray:
     return (e + np.pi) % (2 * np.pi) - np.pi if channel == "yaw" else e
 
 
-def step_metrics(log: Table, step: Step, t_arm: float, source: str = "true") -> StepMetrics:
+def interruption(events) -> tuple[float, str] | None:
+    """(time since arming, why) of the loop's first landing that replaced the rest of the plan (a lost
+    motor, a low battery, ...; flightctl/loop.py's events ending in ": landing"), or None."""
+    for t, what in events:
+        if what.endswith(": landing"):
+            return t, what[:-len(": landing")].split(" (")[0].split(":")[0]
+    return None
+
+
+def step_metrics(log: Table, step: Step, t_arm: float, source: str = "true", events=()) -> StepMetrics:
+    """The step's response; `events`: the loop's (FlightResult.events), from which a landing that
+    replaced the plan cuts the window (`interruption`): a step after it was not flown."""
     t = log["t"] - t_arm
-    sel = (t >= step.t) & (t < step.t + step.window)      # the next move starts at the window's end
+    cut = interruption(events)
+    end = step.t + step.window
+    if cut is not None and cut[0] < end:
+        if cut[0] <= step.t:
+            return StepMetrics(step, math.nan, math.nan, math.nan, math.nan, {}, 0.0, f"{cut[1]}")
+        end = cut[0]
+    sel = (t >= step.t) & (t < end)      # the next move starts at the window's end
     ts = t[sel] - step.t
     col = TRUE[step.channel] if source == "true" else step.channel
     y = log[col][sel]
@@ -83,8 +101,9 @@ def step_metrics(log: Table, step: Step, t_arm: float, source: str = "true") -> 
         col = TRUE[other] if source == "true" else other
         err = np.abs(_error(other, log[col][sel], log[f"{other}_sp"][sel]))
         coupling[other] = float(np.max(err)) if err.size else math.nan
-    flown = float(min(t[-1], step.t + step.window) - step.t) if t.size else 0.0
-    return StepMetrics(step, rise, overshoot, settling, steady, coupling, max(flown, 0.0))
+    flown = float(min(t[-1], end) - step.t) if t.size else 0.0
+    why = f"{cut[1]}" if cut is not None and end < step.t + step.window else "the flight ended"
+    return StepMetrics(step, rise, overshoot, settling, steady, coupling, max(flown, 0.0), why)
 
 
 def hold_metrics(log: Table, last_s: float = 10.0, until: float | None = None) -> dict[str, float] | None:

@@ -27,7 +27,7 @@ import numpy as np
 from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, thrust_from_speed
 from flightctl.sim.causes.motor_dynamics import SPIN, reaction_torque, speed_rate
 from flightctl.sim.causes.rotor_drag import drag_wrench
-from flightctl.sim.causes.rotor_inflow import inflow_wrench
+from flightctl.sim.causes.rotor_inflow import airflow, inflow_wrench
 from flightctl.sim.world.model import N_RIGID, aggregate, body_velocity, rigid_derivative, rotation_from_trig
 
 
@@ -82,7 +82,7 @@ def layout(model):
             or not set(causes) <= set(COMPILED_CAUSES)):
         return None
     a = model.a
-    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, a.h1, a.h2, a.Jp]
+    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, a.M * a.g / 4.0, 0.0, 0.0, 0.0, a.h1, a.h2, a.Jp]
     codes = []
     for e in model.effects:
         p = e.parameters
@@ -124,17 +124,19 @@ def rotors(x, cmd, codes, q, Rm, xdot):
     for i in range(4):
         w[i] = rotor_speed(f[i], c1)
     vb = body_velocity(Rm, x[3], x[4], x[5])
+    running = airflow(f[0], f[1], f[2], f[3], q[_B]) if codes.shape[0] else 4.0
     Fx = Fy = Fz = Tx = Ty = Tz = 0.0
     for code in codes:
         if code == INFLOW:
-            dz, dx, dy = inflow_wrench(f[0], f[1], f[2], f[3], q[_K_IN], q[_B], q[_L], q[_HUB], vb[2], x[9], x[10])
+            dz, dx, dy = inflow_wrench(f[0], f[1], f[2], f[3], q[_K_IN], q[_B], q[_L], q[_HUB], running, vb[2],
+                                       x[9], x[10])
             Fz += dz
             Tx += dx
             Ty += dy
         elif code == REACTION:
             Tz += reaction_torque(q[_JP], spin_up)
         else:
-            dx, dy, dz = drag_wrench(q[_K_DRAG], q[_YAW], vb[0], vb[1], x[11])
+            dx, dy, dz = drag_wrench(q[_K_DRAG], q[_YAW], running, vb[0], vb[1], x[11])
             Fx += dx
             Fy += dy
             Tz += dz
@@ -225,7 +227,8 @@ def _compiled():
     rigid = c(model.rigid_derivative, yaw_drag=eq["yaw_drag"], angular_acceleration=m["angular_acceleration"],
               euler_rates=m["euler_rates"])
     inflow = c(rotor_inflow.inflow_wrench, body_torques=m["body_torques"], thrust_change=c(rotor_inflow.thrust_change))
-    wrenches = c(rotors, inflow_wrench=inflow, drag_wrench=c(rotor_drag.drag_wrench),
+    flow = c(rotor_inflow.airflow, airflow_share=c(rotor_inflow.airflow_share))
+    wrenches = c(rotors, inflow_wrench=inflow, drag_wrench=c(rotor_drag.drag_wrench), airflow=flow,
                  speed_rate=c(motor_dynamics.speed_rate), reaction_torque=c(motor_dynamics.reaction_torque),
                  rotor_torque=eq["rotor_torque"], rotor_speed=eq["rotor_speed"],
                  thrust_from_speed=eq["thrust_from_speed"], body_velocity=m["body_velocity"])

@@ -14,6 +14,9 @@ meet them exactly as on the quadcopter. `parse("imu_frozen:at=5")` -> a Fault;
   and the motors get that voltage (eq. 26);
 - motor_stop: motor `motor` (1..4, default 1) gives no thrust in the plant while the loop still
   commands it (the PWM counts reach the plant; its P is replaced by 0);
+- motor_partial: motor `motor` gives `share` (0..1) of the thrust it is commanded (a failing ESC, a
+  chipped propeller): its P is replaced by the one whose thrust that is (eq. 26: P' = h2 + sqrt(share)
+  (P - h2)), so that its speed and torque (eq. 27-28) follow; motor_stop is share 0;
 - cpu_stall: once, at `at`, the loop misses `ms` (50) of ticks: the sim clock jumps while the motors
   hold their last command (an ESC keeps its last pulse width);
 - log_full: every write of the flight log from `at` raises OSError ENOSPC (a full card).
@@ -56,15 +59,9 @@ class Fault:
                 if world.t >= self.at:
                     battery.voltage = min(battery.voltage, v)
             battery.advance = advance
-        elif name == "motor_stop":
-            plant, inner, k = world.plant, world.plant.command, int(self.options.get("motor", 1)) - 1
-
-            def command(P1, P2, P3, P4, battery_v):
-                P = [P1, P2, P3, P4]
-                if world.t >= self.at:
-                    P[k] = 0.0
-                inner(P[0], P[1], P[2], P[3], battery_v)
-            plant.command = command
+        elif name in ("motor_stop", "motor_partial"):
+            _motor(world, self.at, int(self.options.get("motor", 1)) - 1,
+                   self.options.get("share", 0.5) if name == "motor_partial" else 0.0)
         elif name == "cpu_stall":
             clock, inner = hal.clock, hal.clock.wait_next
             missed = max(1, round(self.options.get("ms", 50.0) / 1000.0 / clock.period))
@@ -115,6 +112,19 @@ def _imu(fault: Fault, hal, world) -> None:
     chip.xfer2 = xfer2
 
 
+def _motor(world, at: float, k: int, share: float) -> None:
+    """From `at`, motor k's command value P gives `share` of its thrust (eq. 26); share 0: P = 0."""
+    plant, inner, h2 = world.plant, world.plant.command, world.plant.model.a.h2
+    root = share ** 0.5
+
+    def command(P1, P2, P3, P4, battery_v):
+        P = [P1, P2, P3, P4]
+        if world.t >= at:
+            P[k] = h2 + root * (P[k] - h2) if share > 0.0 and P[k] > h2 else 0.0
+        inner(P[0], P[1], P[2], P[3], battery_v)
+    plant.command = command
+
+
 def _at(world, at: float, action) -> None:
     """Call `action()` once, at the first world step that reaches `at`."""
     inner, state = world.advance, {"done": False}
@@ -145,13 +155,14 @@ class _FullDisk:
         self._f.close()
 
 
-FAULTS = _IMU + ("sonar_silent", "sonar_stuck", "battery_critical", "motor_stop", "cpu_stall", "log_full")
-_LIMITS = {"cell": (2.5, 4.2), "motor": (1, 4), "ms": (20.0, 100.0), "every": (2, 1e6)}   # the brief's 20-100 ms
+FAULTS = _IMU + ("sonar_silent", "sonar_stuck", "battery_critical", "motor_stop", "motor_partial", "cpu_stall",
+                   "log_full")
+_LIMITS = {"cell": (2.5, 4.2), "motor": (1, 4), "ms": (20.0, 100.0), "every": (2, 1e6), "share": (0.0, 1.0)}   # the brief's 20-100 ms
 
 
 def parse(text: str) -> Fault:
     """NAME[:k=v,...]: `at` (s) for all; `every`, `seed` (IMU), `cell` (V, battery_critical), `motor`
-    (1..4, motor_stop), `ms` (20..100, cpu_stall)."""
+    (1..4, motor_stop, motor_partial), `share` (0..1, motor_partial: default 0.5), `ms` (20..100, cpu_stall)."""
     name, _, rest = text.partition(":")
     if name not in FAULTS:
         raise InputError(f"--fault {text}: unknown fault {name!r} (known: {', '.join(FAULTS)})")

@@ -1,0 +1,169 @@
+"""Naming a lost motor: the loop's detector (docs/safety.md, "Losing a motor"), from what the loop has:
+the gyro, the accelerometer and the thrusts it commanded one loop earlier (the mixer's, through the
+motor time constant the parameter file carries, if any). Eq. 7 turned around gives the roll and pitch
+torques the body felt, `J dw/dt + w x (J w + Jp Omega z_b)` (the gyro differenced), and the specific
+force along z_b the collective thrust; what the commanded thrusts predict (the "+" layout, eq. 25) is
+subtracted, both low-passed over FILTER_S, and their slow parts (BIAS_S: a centre of mass off the
+middle, a battery that sags, a weak motor) are taken away. A stopped rotor (or a lost propeller) i
+leaves its whole thrust missing: the torque residual points along its arm and the collective one is
+down by its thrust; a weak one (a failing ESC, a chipped propeller) leaves part of it missing. The
+smaller of the two, as a fraction of the thrust motor i was asked for, is its missing share. Above
+THRESHOLD for LOOPS loops of calm flight it names motor i at once; above WEAK for WEAK_LOOPS loops
+(calm when the count began) it names motor i too, each with the share it misses, and `flown_on_four` decides what the loop does with it. A rotor lag the model lacks, in a manoeuvre, looks like a missing thrust in the torque
+for tens of milliseconds, but not in the collective (the two sides of an axis change in opposite
+directions); and the count only starts in calm flight (the body rates, low-passed, below CALM): a
+vehicle already tumbling is not read as a lost rotor. It looks at any height: a vehicle resting on
+the floor has the floor carrying weight, the collective residual the other way; a touchdown's jolt
+(JOLT above the commanded thrusts) holds the count off for JOLT_S (a hop, legs settling).
+"""
+from __future__ import annotations
+
+from math import radians, sqrt
+
+from flightctl.control.spin_design import effect_value, motor_time_constant
+from flightctl.hal import ImuSample
+from flightctl.params import Params
+
+FILTER_S = 0.01          # s: the residuals' low-pass
+BIAS_S = 0.5             # s: their slow part, followed while no motor is suspected
+THRESHOLD = 0.6          # of the suspected motor's commanded thrust, missing in torque and in collective, ...
+LOOPS = 9                # ... for this many loops (20 ms) in a row: lost
+WEAK = 0.15              # missing at least this share ...
+WEAK_LOOPS = 45          # ... for this many loops (100 ms) in a row: named with its share
+CALM = 1.0               # rad/s: |p| + |q| low-passed over CALM_S: the count starts only below this
+CALM_S = 0.1
+TRIM = 0.6               # a motor giving less than this share of its command is not flown on four ...
+TRIM_TILT = radians(10)  # ... nor one whose missing thrust the P term leaves this tilt for
+JOLT = 0.5 * 9.80665     # m/s^2 of specific force above the commanded thrusts': the floor met (a touchdown) ...
+JOLT_S = 0.5             # s: ... after which nothing is looked for this long (a hop, legs settling)
+HIGH = 1.6               # a residual beyond this many times the motor's thrust is not one motor's
+OPPOSITE = (2, 3, 0, 1)  # motor index -> the index of the motor across the frame
+
+
+def flown_on_four(params: Params, motor: int, giving: float) -> bool:
+    """The rule for a motor (1..4) named with the share it gives (`giving`, 0..1): flown on four
+    rotors (the loop lands on them) when it gives at least TRIM and the paper's PID (eq. 24) holds the
+    tilt its missing thrust leaves within TRIM_TILT; else the loss mode (control/spin.py). With the
+    other side of its axis lowered by u and its own raised by u (eq. 25), the torques balance at
+    u = B (1 - S) / (1 + S), which the P term gives at a tilt error u / kp (the I terms of Table 4
+    and 6 are negligible over a landing)."""
+    g, B = params.gains, params.airframe.B
+    kp = g.kp_theta if motor in (1, 3) else g.kp_phi
+    if not giving >= TRIM or kp <= 0.0:
+        return False
+    return B * (1.0 - giving) / ((1.0 + giving) * kp) <= TRIM_TILT
+
+
+class MotorLossDetector:
+    """`update` every loop in flight, before the controller mixes anew; it returns the motor (1..4)
+    found missing thrust the loop it is sure, else 0, with `missing` the share it misses (0..1) and
+    `fast` whether the fast test named it (its rotor may still be running down: at least that share).
+    `accept()`: the loop flies on with that motor (a weak one): its missing thrust becomes part of
+    the residuals' slow part."""
+    __slots__ = ("km", "kf", "kb", "kc", "fl", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
+                 "strong", "missing", "fast", "damp", "hold", "jolt_loops", "p", "q", "half", "quiet", "ic1", "Jxx", "Jyy", "Jp", "jx",
+                 "jy", "l", "iM", "M", "il")
+
+    def __init__(self, params: Params, tau_motor: float | None = None):
+        a = params.airframe
+        dt = a.dt
+        tau = motor_time_constant(params) if tau_motor is None else tau_motor
+        self.km = dt / (tau + dt)
+        self.kf, self.kb, self.kc = dt / (FILTER_S + dt), dt / (BIAS_S + dt), dt / (CALM_S + dt)
+        self.half = 0.5 * a.B              # a commanded thrust counts as at least this (near-idle rotors)
+        # a collective drop (N) at most this cannot be WEAK of any motor's thrust (each counts as
+        # at least `half`): no motor is suspected, and the loop need not look at each (most loops)
+        self.quiet = WEAK * self.half
+        # the airframe's constants of eq. 7, 9 and 27, bound once (the loop reads them every period)
+        self.ic1, self.Jxx, self.Jyy, self.Jp = 1.0 / a.c1, a.Jxx, a.Jyy, a.Jp
+        self.jx, self.jy = a.Jzz - a.Jyy, a.Jxx - a.Jzz
+        # the roll and pitch damping of the rotors' airflow the file carries (rotor_inflow: 2 k l^2 of the
+        # thrust changes and the hub moment, for four rotors at hover): torque the rotors gave, too
+        self.damp = 2.0 * effect_value(params, "rotor_inflow", "k") * a.l * a.l + effect_value(params, "rotor_inflow", "hub")
+        self.l, self.il, self.M, self.iM = a.l, 1.0 / a.l, a.M, 1.0 / a.M
+        self.fl = [0.0, 0.0, 0.0, 0.0]
+        self.count = [0, 0, 0, 0]
+        self.strong = [0, 0, 0, 0]
+        self.missing, self.fast = 0.0, False
+        self.jolt_loops = int(JOLT_S / dt + 0.5)
+        self.reset(a.B)
+
+    def reset(self, f0: float) -> None:
+        """At take-off: the rotors at f0 each, nothing suspected."""
+        for i in range(4):
+            self.fl[i] = f0
+            self.count[i] = self.strong[i] = 0
+        self.rx = self.ry = self.rz = self.bx = self.by = self.bz = 0.0
+        self.calm = 0.0
+        self.hold = 0
+        self.p = self.q = None
+
+    def update(self, s: ImuSample, f: list[float], dt: float) -> int:
+        fl, km = self.fl, self.km
+        f0 = fl[0] = fl[0] + km * (f[0] - fl[0])    # the thrusts now, from the commands (one loop late)
+        f1 = fl[1] = fl[1] + km * (f[1] - fl[1])
+        f2 = fl[2] = fl[2] + km * (f[2] - fl[2])
+        f3 = fl[3] = fl[3] + km * (f[3] - fl[3])
+        p, q, r = s.gx, s.gy, s.gz
+        if self.p is None:
+            self.p, self.q = p, q
+            return 0
+        ic1, l = self.ic1, self.l
+        Om = -sqrt(f0 * ic1) + sqrt(f1 * ic1) - sqrt(f2 * ic1) + sqrt(f3 * ic1)   # eq. 9 with eq. 27
+        JpOm = self.Jp * Om
+        # eq. 7 turned around: the torque the body felt, less the one the commanded thrusts give
+        d = self.damp
+        tx = self.Jxx * (p - self.p) / dt + q * r * self.jx + q * JpOm + d * p - l * (f1 - f3)
+        ty = self.Jyy * (q - self.q) / dt + p * r * self.jy - p * JpOm + d * q - l * (f2 - f0)
+        tz = s.az - (f0 + f1 + f2 + f3) * self.iM
+        self.p, self.q = p, q
+        kf = self.kf
+        rx = self.rx = self.rx + kf * (tx - self.rx)
+        ry = self.ry = self.ry + kf * (ty - self.ry)
+        rz = self.rz = self.rz + kf * (tz - self.rz)
+        self.calm += self.kc * ((p if p > 0 else -p) + (q if q > 0 else -q) - self.calm)
+        count, strong = self.count, self.strong
+        fall = (self.bz - rz) * self.M             # the collective thrust missing (N)
+        if tz > JOLT:                              # the floor pushing up: a touchdown
+            self.hold = self.jolt_loops
+        elif self.hold > 0:
+            self.hold -= 1
+        if self.hold or fall <= self.quiet:   # on the floor the floor carries weight: no fall
+            count[0] = count[1] = count[2] = count[3] = strong[0] = strong[1] = strong[2] = strong[3] = 0
+        else:
+            ex, ey = rx - self.bx, ry - self.by
+            lost, half, calm = 0, self.half, self.calm < CALM
+            il = self.il
+            # the missing torque of motor i lies along its arm: +y for 1, -x for 2, -y for 3, +x for 4
+            for i in range(4):
+                fi = fl[i]
+                if fi < half:
+                    fi = half
+                along = ey if i == 0 else -ex if i == 1 else -ey if i == 2 else ex
+                share = along * il / fi
+                drop = fall / fi
+                if drop < share:
+                    share = drop
+                if WEAK < share < HIGH and (calm or count[i] > 0):
+                    count[i] += 1
+                    strong[i] = strong[i] + 1 if share > THRESHOLD and calm else 0
+                    if strong[i] >= LOOPS or count[i] >= WEAK_LOOPS:
+                        lost, self.missing, self.fast = i + 1, share, strong[i] >= LOOPS
+                else:
+                    count[i] = strong[i] = 0
+            if lost:
+                return lost
+            if count[0] or count[1] or count[2] or count[3]:
+                return 0
+        kb = self.kb                               # nothing suspected: the residuals' slow part
+        self.bx += kb * (rx - self.bx)
+        self.by += kb * (ry - self.by)
+        self.bz += kb * (rz - self.bz)
+        return 0
+
+    def accept(self) -> None:
+        """Fly on with the motor just named (weak, trimmed): what it misses is the residuals' new slow
+        part, and nothing is suspected."""
+        self.bx, self.by, self.bz = self.rx, self.ry, self.rz
+        for i in range(4):
+            self.count[i] = self.strong[i] = 0
