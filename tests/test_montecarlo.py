@@ -36,8 +36,11 @@ def test_draws_stay_in_their_ranges_and_the_shares_count_them(tmp_path):
     r = json.loads(out.read_text())
     assert rc == 0 and r["n"] == 3 and len(r["draws"]) == 3
     spans = {f"{s['cause']}.{s['parameter']}": (s["lo"], s["hi"]) for s in r["ranges"]}
-    assert set(spans) == {"airframe.Jp", "rotor_inflow.k", "rotor_inflow.hub", "motor_dynamics.tau",
-                          "motor_dynamics.tau_down", "rotor_drag.k", "rotor_drag.yaw", "actuation_delay.delay"}
+    assert set(spans) == {"airframe.Jp", "airframe.h1", "airframe.h2", "airframe.c1", "airframe.g1", "airframe.g2",
+                          "filters.tau_rate", "sensors.accel_vibration", "sensors.gyro_vibration", "sensors.harmonic2",
+                          "sensors.harmonic3", "sensors.gyro_broadband", "rotor_inflow.k", "rotor_inflow.hub",
+                          "motor_dynamics.tau", "motor_dynamics.tau_down", "rotor_drag.k", "rotor_drag.yaw",
+                          "actuation_delay.delay"}
     for d in r["draws"]:
         for key, v in d["draw"].items():
             assert spans[key][0] <= v <= spans[key][1]

@@ -68,6 +68,10 @@ class BatchController:
         self.a_rp = col(lambda p: p.filters.alpha_roll_pitch)
         w = col(lambda p: 1.0 / p.filters.tau_tilt_air if p.filters.tau_tilt_air > 0.0 else 0.0)
         self.k_air, self.ki_air = 2.0 * w, w * w
+        tau_rate = col(lambda p: p.filters.tau_rate)                 # the D path's EMA (0: none)
+        self.rate_filtered = tau_rate > 0.0
+        self.tau_rate = np.where(self.rate_filtered, tau_rate, 1.0)
+        self.a_rate, self.rate_dt = np.ones(self.n), None
         self.paper = structure == "paper"
         self.in_flight = np.zeros(self.n, dtype=bool)
         self.tilt_bias = (np.zeros(self.n), np.zeros(self.n))
@@ -107,6 +111,18 @@ class BatchController:
             p, q, r = gx - self.bx, gy - self.by, gz
         w = q * sr + r * cr
         droll, dpitch, dyaw = p + w * sp / cp, q * cr - r * sr, w / cp
+        rate_roll, rate_pitch, rate_yaw = droll, dpitch, dyaw
+        if not self.paper and self.rate_filtered.any():   # the D term's rates through their EMA
+            if dt != self.rate_dt:
+                self.rate_dt = dt
+                self.a_rate = np.where(self.rate_filtered, 1.0 - np.exp(-dt / self.tau_rate), 1.0)
+            a = self.a_rate
+            b = 1.0 - a
+            fp = self.p = a * p + b * self.p
+            fq = self.q = a * q + b * self.q
+            fr = self.r = a * r + b * self.r
+            fw = fq * sr + fr * cr
+            rate_roll, rate_pitch, rate_yaw = fp + fw * sp / cp, fq * cr - fr * sr, fw / cp
         roll_g, pitch_g, yaw_g = roll + droll * dt, pitch + dpitch * dt, yaw + dyaw * dt
         acc_roll = np.arctan2(ay, az) - self.tilt_bias[0]
         acc_pitch = np.arctan2(-ax, np.sqrt(ay * ay + az * az)) - self.tilt_bias[1]
@@ -133,9 +149,9 @@ class BatchController:
                 self.by = np.where(air, self.by - ki * (ep * cr), self.by)
         yaw_g = (yaw_g + math.pi) % TWO_PI - math.pi
         if self.paper:   # eq. 24 literally: the difference quotient of the fused angles
-            droll, dpitch = (roll_g - roll) / dt, (pitch_g - pitch) / dt
-            dyaw = ((yaw_g - yaw + math.pi) % TWO_PI - math.pi) / dt
-        self.droll, self.dpitch, self.dyaw = droll, dpitch, dyaw
+            rate_roll, rate_pitch = (roll_g - roll) / dt, (pitch_g - pitch) / dt
+            rate_yaw = ((yaw_g - yaw + math.pi) % TWO_PI - math.pi) / dt
+        self.droll, self.dpitch, self.dyaw = rate_roll, rate_pitch, rate_yaw
         self.roll, self.pitch, self.yaw = roll_g, pitch_g, yaw_g
 
     def on_range(self, distance, t: float) -> None:
@@ -200,8 +216,8 @@ class BatchPlant:
     def hover(self, z: float) -> None:
         """Every vehicle level at altitude z, at rest, its rotors at the hover command."""
         a = self.a
-        P = a.h2 + math.sqrt(a.B / a.h1)   # eq. 26 inverted at f = B
-        u = self.input(np.full((4, self.n), P))
+        P = a.h2 + np.sqrt(a.B / np.asarray(a.h1))   # eq. 26 inverted at f = B (h1, h2 drawn per vehicle)
+        u = self.input(np.broadcast_to(P, (4, self.n)).copy())
         f_cmd = self.model._commanded(u)
         x = np.zeros((self.model.n, self.n))
         x[Z] = z
@@ -301,10 +317,10 @@ def with_draws(params: Params, draws: dict[tuple[str, str], np.ndarray] | None =
     """The parameter file's effects with some parameters drawn per vehicle: draws maps (cause,
     parameter) to an (N,) array, which the effect then holds in place of its value."""
     from flightctl.sim import causes
-    from flightctl.sim.sweeps.montecarlo import AIRFRAME
+    from flightctl.sim.sweeps.montecarlo import AIRFRAME, TABLES
     effects = causes.combined(params, ())
     for (cause, name), values in (draws or {}).items():
-        if cause == AIRFRAME:          # the plant's airframe (`drawn_airframe`)
+        if cause == AIRFRAME or cause in TABLES:   # the airframe (`drawn_airframe`), the controller's and sensors' tables
             continue
         effect = next((e for e in effects if e.cause == cause), None)
         if effect is None or name not in effect.parameters:
@@ -316,11 +332,13 @@ def with_draws(params: Params, draws: dict[tuple[str, str], np.ndarray] | None =
 def _chunk(job) -> BatchFlight:
     """One worker's share of `simulate`."""
     params, n, draws, gains, plan, start, end, record_every = job
-    from flightctl.sim.sweeps.montecarlo import drawn_airframe
+    from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params
     plant = BatchPlant(drawn_airframe(params.airframe, draws), with_draws(params, draws), n)
     plan.restart()
     plant.hover(plan.at(start)[3])
-    ctl = BatchController(params if gains is None else [dataclasses.replace(params, gains=g) for g in gains], n)
+    # each vehicle's controller: its draw of the constants it knows (eq. 26's h1, h2, its rate filter)
+    vehicles = [drawn_params(params, {k: float(v[i]) for k, v in draws.items()}) for i in range(n)] if draws else [params] * n
+    ctl = BatchController([p if gains is None else dataclasses.replace(p, gains=gains[i]) for i, p in enumerate(vehicles)])
     return fly(plant, ctl, plan.at, end - start, record_every, t0=start)
 
 
