@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -176,7 +177,7 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
     from flightctl.sim import causes
     from flightctl.sim.sweeps.batch import simulate
     from flightctl.sim.flights.metrics import settles
-    from flightctl.sim.world.model import PHI, PSI, THETA
+    from flightctl.sim.world.model import N_RIGID, PHI, PSI, THETA
     from flightctl.sim.flights.scenarios import SCENARIOS
     from flightctl.sim.sweeps import judge
     params = causes.load_vehicle(spec)
@@ -189,11 +190,11 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
     out = {}
     for g in GAINS:
         flight = simulate(causes.load_vehicle(spec, GAIN_SETS[g]), sc.plan, start, end, n, draws,
-                          workers=workers or os.cpu_count() or 1, record_every=9)
+                          workers=workers or os.cpu_count() or 1, record_every=9, seed=seed)
         st = flight.states
         log = {"t": flight.t, "true_roll": st[:, PHI], "true_pitch": st[:, THETA],
-               "true_yaw": (st[:, PSI] + np.pi) % (2 * np.pi) - np.pi}
-        log.update(roll=log["true_roll"], pitch=log["true_pitch"], yaw=log["true_yaw"])   # ideal sensors
+               "true_yaw": (st[:, PSI] + np.pi) % (2 * np.pi) - np.pi,
+               "roll": st[:, N_RIGID], "pitch": st[:, N_RIGID + 1], "yaw": st[:, N_RIGID + 2]}   # the estimates
         flies = ~flight.crashed
         out[g] = (flies, settles(log, steps, 0.0) & flies, flight.crash_t, judge.score(judge.step_figures(log, steps, 0.0)))
         if progress is not None:
@@ -204,8 +205,8 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
                     "outcome": "in the air" if out[g][0][k] else f"crashed at {out[g][2][k]:.2f} s"} for g in GAINS}}
             for k in range(n)]
     return _result(spec, scenario, n, seed, spans, rows, ("flies", "settles"),
-                   simulator=f"batched simulator (sim/sweeps/batch.py): ideal sensors, from {start:g} s to {end:g} s "
-                             "after arming")
+                   simulator=f"batched simulator (sim/sweeps/batch.py): the simulated chip and sonar, from {start:g} s "
+                             f"to {end:g} s after arming, in the air")
 
 
 def summary(result: dict) -> str:
@@ -256,3 +257,65 @@ def plot(result: dict, path: str | Path) -> None:
 
 def write_json(result: dict, path: str | Path) -> None:
     Path(path).write_text(json.dumps(result, indent=1) + "\n")
+
+
+VERDICTS = ("paper's account", "table6 beats table4")
+
+
+def _position(result: dict, key: str, v: float) -> float:
+    """Where v lies in its range, 0 to 1 (in its logarithm where the range spans a decade or more and
+    starts above 0: drawn so, or its top follows a drawn value)."""
+    r = next(r for r in result["ranges"] if f"{r['cause']}.{r['parameter']}" == key)
+    lo, hi = r["lo"], r["hi"]
+    if lo > 0.0 and hi / lo >= 10.0:
+        return math.log(v / lo) / math.log(hi / lo)
+    return (v - lo) / (hi - lo) if hi > lo else 0.5
+
+
+def deciding(result: dict, what: str = "paper's account") -> list[tuple[str, float, float, int, int]]:
+    """Which ranges decide `what` (a paired verdict): per ranged parameter, the share of the draws in
+    the lower and in the upper half of its range where it holds, and the two counts; largest
+    difference first."""
+    rows = result["draws"]
+    out = []
+    for key in rows[0]["draw"] if rows else ():
+        low = [r[what] for r in rows if _position(result, key, r["draw"][key]) < 0.5]
+        high = [r[what] for r in rows if _position(result, key, r["draw"][key]) >= 0.5]
+        share = lambda xs: sum(xs) / len(xs) if xs else math.nan   # noqa: E731
+        out.append((key, share(low), share(high), len(low), len(high)))
+    return sorted(out, key=lambda row: -abs(row[2] - row[1]) if row[1] == row[1] and row[2] == row[2] else 0.0)
+
+
+def plot_deciding(result: dict, path: str | Path, bins: int = 4) -> None:
+    """Which ranges decide the paper's account: per ranged parameter, the share where it holds in the
+    lower and upper half of the range (left); for the four that move it most, the share in `bins`
+    bins of the range (right), beside the share where Table 6 beats Table 4."""
+    from flightctl.sim.plots import figure, legend, save
+    order = deciding(result)
+    fig, ax = figure(1, 2, size=(13.0, 0.32 * len(order) + 2.5))
+    a = ax[0, 0]
+    y = list(range(len(order)))[::-1]
+    a.barh([v + 0.2 for v in y], [100 * r[1] for r in order], height=0.4, color="tab:blue", label="lower half of its range")
+    a.barh([v - 0.2 for v in y], [100 * r[2] for r in order], height=0.4, color="tab:orange", label="upper half")
+    a.set_yticks(y)
+    a.set_yticklabels([r[0] for r in order], fontsize=8)
+    a.axvline(100 * result["paired"]["paper's account"], color="k", lw=0.8, ls="--", label="all draws")
+    a.set_xlabel("draws where the paper's account holds (%)")
+    a.grid(alpha=0.3, axis="x")
+    legend(a)
+    b = ax[0, 1]
+    rows = result["draws"]
+    for key, colour in zip([r[0] for r in order[:4]], ("tab:red", "tab:green", "tab:purple", "tab:brown")):
+        pos = [min(int(_position(result, key, r["draw"][key]) * bins), bins - 1) for r in rows]
+        for what, style in zip(VERDICTS, ("-o", ":s")):
+            shares = [100 * sum(r[what] for r, p in zip(rows, pos) if p == k) / max(1, pos.count(k)) for k in range(bins)]
+            b.plot([(k + 0.5) / bins for k in range(bins)], shares, style, color=colour,
+                   label=f"{key}: {what}" if what == VERDICTS[0] else f"{key}: table6 beats table4")
+    b.set_xlabel("position in the parameter's range (0 = bottom, 1 = top; in its logarithm where it spans a decade)")
+    b.set_ylabel("share of the draws (%)")
+    b.set_ylim(-5, 105)
+    b.grid(alpha=0.3)
+    legend(b)
+    fig.suptitle(f"Which ranges decide the paper's account: flightctl sim {result['scenario']} --monte-carlo "
+                 f"{result['n']} --params {result['params']}" + (" --batch" if "simulator" in result else ""))
+    save(fig, path)

@@ -196,32 +196,11 @@ class SimMpu9250:
         self.fault = None
         self.who_am_i = who_am_i
         self.has_mag = has_mag
-        n = world.noise
-        g = world.rng.gauss
-        self.gyro_bias = (g(0, n.gyro_bias), g(0, n.gyro_bias), g(0, n.gyro_bias))
-        self.accel_bias = (g(0, n.accel_bias), g(0, n.accel_bias), g(0, n.accel_bias))
-        # the physical state of the die, which a register reset leaves alone
-        self.gyro_temp_coeff = (g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff))
-        self.accel_temp_coeff = (g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff))
+        self._s, self._c = chip_die(world.noise, world.a, world.rng)   # `chip_frame`'s state and constants
+        c = self._c
+        self.accel_bias, self.gyro_bias = tuple(c[_C_A0:_C_A0 + 3]), tuple(c[_C_G0:_C_G0 + 3])
         self._t_on = self._t_last = world.t
         self._started = False             # the DLPF stage has its first read
-        # `chip_frame`'s state: the DLPF stage's outputs, the random-walk part of the zero-rate offset
-        # (rad/s), each rotor's angle
-        self._s = [0.0] * N_CHIP_STATE
-        self._s[_S_PHASE:] = [world.rng.uniform(0.0, _TAU) for _ in range(4)]
-        z = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # phase of each arm's z bending
-        a = world.a
-        self._c = [0.0] * N_CHIP_CONST    # its constants (`_configure` sets those of the registers)
-        c = self._c
-        c[_C_A0:_C_A0 + 3], c[_C_AC:_C_AC + 3] = self.accel_bias, self.accel_temp_coeff
-        c[_C_G0:_C_G0 + 3], c[_C_GC:_C_GC + 3] = self.gyro_bias, self.gyro_temp_coeff
-        c[_C_ZC:_C_ZC + 4], c[_C_ZS:_C_ZS + 4] = [math.cos(v) for v in z], [math.sin(v) for v in z]
-        c[_C_WALK] = n.gyro_bias_walk
-        B = a.M * a.g / 4.0                          # hover thrust per rotor
-        c[_C_KV] = n.vibration / B                   # m/s^2 per newton of the rotor's thrust
-        c[_C_KVG] = n.gyro_vibration / B             # rad/s per newton
-        c[_C_H2], c[_C_H3], c[_C_YAW] = n.harmonic2, n.harmonic3, n.yaw_share
-        c[_C_BB] = n.gyro_broadband / (4.0 * B)      # rad/s rms per newton of the four rotors' thrust
         compiled = chip_frame_compiled()
         self._frame, self._arrays = compiled or chip_frame, compiled is not None
         if self._arrays:                             # compiled, it takes arrays (the same values)
@@ -344,6 +323,34 @@ _S_WALK, _S_PHASE, N_CHIP_STATE = 6, 9, 13
  _C_A0, _C_AC, _C_G0, _C_GC, _C_ZC, _C_ZS, _C_KVG, _C_TCG2, _C_G_DELAY, _C_H2, _C_H3, _C_BB, _C_YAW,
  N_CHIP_CONST) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14, 17, 20, 23, 27, 31, 32, 33, 34, 35, 36, 37, 38)
 _BURST = reg.ACCEL_XOUT_H
+
+
+def chip_die(noise: SensorNoise, airframe, rng) -> tuple[list, list]:
+    """One chip's `chip_frame` state and constants as it leaves the factory and sits on the vehicle:
+    its zero-rate and zero-g offsets and their temperature slopes (drawn with the spreads of `noise`),
+    each rotor's angle and each arm's bending phase (uniform), and the vehicle's vibration and
+    broadband noise per newton of thrust. `rng` is a `random.Random`; the constants the driver's
+    register writes set (`SimMpu9250._configure`) are left at 0. The batched simulator
+    (sim/sweeps/batch_imu.py) builds its chips with this too."""
+    n, g, a = noise, rng.gauss, airframe
+    gyro_bias = (g(0, n.gyro_bias), g(0, n.gyro_bias), g(0, n.gyro_bias))
+    accel_bias = (g(0, n.accel_bias), g(0, n.accel_bias), g(0, n.accel_bias))
+    gyro_temp_coeff = (g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff))
+    accel_temp_coeff = (g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff))
+    s = [0.0] * N_CHIP_STATE
+    s[_S_PHASE:] = [rng.uniform(0.0, _TAU) for _ in range(4)]
+    z = [rng.uniform(0.0, _TAU) for _ in range(4)]   # phase of each arm's bending
+    c = [0.0] * N_CHIP_CONST
+    c[_C_A0:_C_A0 + 3], c[_C_AC:_C_AC + 3] = accel_bias, accel_temp_coeff
+    c[_C_G0:_C_G0 + 3], c[_C_GC:_C_GC + 3] = gyro_bias, gyro_temp_coeff
+    c[_C_ZC:_C_ZC + 4], c[_C_ZS:_C_ZS + 4] = [math.cos(v) for v in z], [math.sin(v) for v in z]
+    c[_C_WALK] = n.gyro_bias_walk
+    B = a.M * a.g / 4.0                          # hover thrust per rotor
+    c[_C_KV] = n.vibration / B                   # m/s^2 per newton of the rotor's thrust
+    c[_C_KVG] = n.gyro_vibration / B             # rad/s per newton
+    c[_C_H2], c[_C_H3], c[_C_YAW] = n.harmonic2, n.harmonic3, n.yaw_share
+    c[_C_BB] = n.gyro_broadband / (4.0 * B)      # rad/s rms per newton of the four rotors' thrust
+    return s, c
 
 
 def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t, dt, temp, started):
