@@ -21,9 +21,10 @@ from flightctl.errors import InputError, number, read_toml
 INERTIA_TOLERANCE = 0.10  # accepted excess of one principal inertia over the sum of the others
 
 
-def _p(default, unit, lo, hi, source, doc=""):
-    """One schema entry: stored as dataclass field metadata."""
-    return field(default=default, metadata=dict(unit=unit, lo=lo, hi=hi, source=source, doc=doc))
+def _p(default, unit, lo, hi, source, doc="", log=False):
+    """One schema entry: stored as dataclass field metadata. `log`: a plausible range of this value is
+    drawn uniformly in its logarithm (a time constant whose plausible values span decades)."""
+    return field(default=default, metadata=dict(unit=unit, lo=lo, hi=hi, source=source, doc=doc, log=log))
 
 
 @dataclass(frozen=True)
@@ -107,6 +108,36 @@ class Filters:
                              "flightctl (docs/estimator.md): the in-flight accelerometer correction; 0 = off, "
                              "as the base model has no rotor drag, so its accelerometer reads no tilt in flight",
                              "a vehicle with rotor drag sets it long beside M/k (the as-flown file: 8192 dt)")
+    tau_rate: float = _p(0.0, "s", 0.0, 1.0,
+                         "flightctl (docs/estimator.md): the EMA (eq. 36-38's form) on the body rates the D term "
+                         "takes in the flight estimator; 0 = the gyro as the chip delivers it",
+                         "the paper's text puts its 128 dt EMA there; the vehicle's rate path is a range "
+                         "(the as-flown file)", log=True)
+
+
+@dataclass(frozen=True)
+class Sensors:
+    """What the vehicle's frame and rotors add to its IMU's readings in flight, beyond the chip's own
+    datasheet noise (sim/world/devices.py `SensorNoise`): the rotors' vibration at each rotor's speed
+    and its harmonics on both sensors, and the gyro's broadband part. The simulator reads it; the
+    onboard code never does. The defaults are the reference airframe's as the simulator has always
+    flown it (the accelerometer's 1/rev only); a vehicle file carries its own, with ranges."""
+    accel_vibration: float = _p(0.5, "m/s^2", 0.0, 50.0,
+                                "plausible: a 3 g mm imbalance at hover speed on the 1.645 kg frame "
+                                "(docs/estimator.md)", "each rotor's 1/rev specific force at hover thrust, "
+                                "before the DLPF; it grows with the thrust")
+    gyro_vibration: float = _p(0.0, "rad/s", 0.0, 5.0, "none in the reference airframe",
+                               "each rotor's 1/rev body rate (roll and pitch) at hover thrust, before the DLPF")
+    harmonic2: float = _p(0.0, "-", 0.0, 5.0, "none in the reference airframe",
+                          "the 2/rev (blade-pass, two blades) line's amplitude over the 1/rev's, both sensors")
+    harmonic3: float = _p(0.0, "-", 0.0, 5.0, "none in the reference airframe",
+                          "the 3/rev line's amplitude over the 1/rev's, both sensors")
+    gyro_broadband: float = _p(0.0, "rad/s", 0.0, 5.0, "none in the reference airframe",
+                               "the roll and pitch rates' broadband (frame and airflow) noise at hover thrust, "
+                               "rms per read; it grows with the thrust")
+    yaw_share: float = _p(0.6, "-", 0.0, 2.0,
+                          "paper, sec. 4.4.4: r within 0.006 rad/s where p and q were within 0.01",
+                          "the yaw rate's vibration and broadband noise over the roll and pitch rates'")
 
 
 @dataclass(frozen=True)
@@ -127,6 +158,9 @@ class Params:
     filters: Filters = Filters()
     effects: tuple[EffectSpec, ...] = ()
     ranges: tuple[tuple[str, float, float], ...] = ()   # airframe (value, lo, hi): `range.NAME = [lo, hi]`
+    sensors: Sensors = Sensors()
+    # (table, value, lo, hi) of [filters] and [sensors]: `range.NAME = [lo, hi]` inside the table
+    table_ranges: tuple[tuple[str, str, float, float], ...] = ()
 
 
 VEHICLES = Path(__file__).parent / "vehicles"   # shipped parameter files, by name (`--params NAME`)
@@ -166,24 +200,27 @@ def _short(value) -> str:
 def from_dict(data: dict, gains: Gains | None = None) -> Params:
     """Validate a parsed TOML document. `gains` picks the base gain set that [gains] overrides."""
     data = {k: dict(v) if isinstance(v, dict) else v for k, v in data.items()}  # never mutate the caller's tables
-    tables = {"gains": (Gains, gains or TABLE6), "filters": (Filters, Filters())}
-    built = {}
+    tables = {"gains": (Gains, gains or TABLE6), "filters": (Filters, Filters()), "sensors": (Sensors, Sensors())}
+    built, table_ranges = {}, []
     for name, (cls, base) in tables.items():
         table = data.pop(name, {})
         if not isinstance(table, dict):
             raise InputError(f"{name}: expected a table [{name}]")
+        table = dict(table)
         preset = table.pop("preset", None) if cls is Gains else None
         if preset is not None:
             if not isinstance(preset, str) or preset not in GAIN_SETS:
                 raise InputError(f"gains.preset: unknown gain set {preset!r} (known: {', '.join(GAIN_SETS)})")
             base = GAIN_SETS[preset]
+        spans = table.pop("range", {}) if cls is not Gains else {}
         built[name] = _build(cls, table, f"{name}.", base)
+        table_ranges += [(name, *span) for span in _spans(spans, dataclasses.asdict(built[name]), f"{name}.", cls)]
     effects = _effects(data.pop("effect", []))
     ranges = data.pop("range", {})
     airframe = _build(Airframe, data, "")
     airframe.check()
     return Params(airframe=airframe, effects=effects, ranges=_spans(ranges, dataclasses.asdict(airframe), "", Airframe),
-                  **built)
+                  table_ranges=tuple(table_ranges), **built)
 
 
 def _spans(ranges, values: dict, where: str, cls=None) -> tuple[tuple[str, float, float], ...]:
@@ -251,7 +288,7 @@ def load(path: str | Path | None, gains: Gains | None = None) -> Params:
         raise InputError(f"{path}: {e}") from None
 
 
-def dumps(params: Params, sources: dict[str, str] | None = None, tables=("gains", "filters")) -> str:
+def dumps(params: Params, sources: dict[str, str] | None = None, tables=("gains", "filters", "sensors")) -> str:
     """TOML text of a parameter set, with unit and source of each value as comments. A vehicle file
     leaves out [gains] so that `--gains` chooses them."""
     sources = sources or {}
@@ -267,6 +304,7 @@ def dumps(params: Params, sources: dict[str, str] | None = None, tables=("gains"
     for name in tables:
         lines.append(f"\n[{name}]")
         emit(getattr(params, name))
+        lines += [f"range.{k} = [{lo!r}, {hi!r}]" for table, k, lo, hi in params.table_ranges if table == name]
     for e in params.effects:
         lines.append("\n[[effect]]")
         lines.append(f"cause = {json.dumps(e.cause)}")

@@ -22,7 +22,7 @@ from flightctl.params import GAIN_SETS, VEHICLES, Params, dumps, load, resolve
 from flightctl.sim.causes import load_vehicle
 
 DEFAULTS = "defaults"
-TABLES = ("airframe", "gains", "filters")
+TABLES = ("airframe", "gains", "filters", "sensors")
 _LINE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*=[^#]*#\s*(.*)$")
 
 
@@ -53,8 +53,8 @@ def _read(spec: str | None, gains: str) -> tuple[Params, dict[str, str], str]:
 def _keys_set(path: Path) -> set[str]:
     data = read_toml(path)
     out = {k for k, v in data.items() if not isinstance(v, (dict, list))}
-    for table in ("gains", "filters"):
-        out |= set(data.get(table, {})) - {"preset"}
+    for table in ("gains", "filters", "sensors"):
+        out |= set(data.get(table, {})) - {"preset", "range"}
     return out
 
 

@@ -84,8 +84,11 @@ def test_the_compiled_chip_writes_the_plain_ones_registers():
         c = rng.uniform(-0.5, 0.5, devices.N_CHIP_CONST)
         c[[devices._C_A_LSB, devices._C_G_LSB]] = rng.uniform(1e3, 2e4, 2)
         c[[devices._C_KA, devices._C_KG]] = rng.uniform(0.0, 1.0, 2)
-        c[[devices._C_TC2, devices._C_PERIOD, devices._C_A_DELAY]] = rng.uniform(1e-6, 5e-3, 3)
+        c[[devices._C_TC2, devices._C_PERIOD, devices._C_A_DELAY, devices._C_TCG2, devices._C_G_DELAY]] = \
+            rng.uniform(1e-6, 5e-3, 5)
         c[devices._C_KV] = rng.choice([0.0, rng.uniform(0.0, 0.01)])
+        c[devices._C_KVG] = rng.choice([0.0, rng.uniform(0.0, 0.01)])
+        c[[devices._C_BB, devices._C_H2, devices._C_H3, devices._C_YAW]] = rng.uniform(0.0, 1.0, 4)
         truth = list(rng.uniform(-20.0, 20.0, 6))
         if k % 10 == 0:
             truth[k % 6] = rng.choice([1e5, -1e5, 1e30, -1e30, np.inf])

@@ -29,9 +29,26 @@ def _diagnose(log, out, *extra):
     return json.loads(out.read_text())
 
 
+def _quiet_imu(tmp) -> str:
+    """The as-flown file without its [sensors] table: the plant's terms with the reference airframe's
+    IMU. The vehicle's gyro noise (docs/as-flown.md) raises the floor of every held-out RMSE, which
+    would hide the terms' own share of it; the effects, which diagnose carries, are the file's."""
+    lines, skip = [], False
+    for line in (paramfile.VEHICLES / f"{AS_FLOWN}.toml").read_text().splitlines():
+        if line.startswith("["):
+            skip = line.strip() == "[sensors]"
+        if not skip:
+            lines.append(line)
+    path = tmp / "as-flown-quiet-imu.toml"
+    path.write_text("\n".join(lines) + "\n")
+    assert paramfile.load(path).effects == paramfile.load(AS_FLOWN).effects
+    return str(path)
+
+
 @pytest.fixture(scope="module")
 def as_flown_log(tmp_path_factory):
-    return _fly(tmp_path_factory.mktemp("asflown"), "as_flown", 3)
+    tmp = tmp_path_factory.mktemp("asflown")
+    return _fly(tmp, "as_flown", 3, "--params", _quiet_imu(tmp))
 
 
 def test_base_model_with_the_files_effects_holds_the_plant(as_flown_log, tmp_path):

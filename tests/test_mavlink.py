@@ -178,7 +178,7 @@ def test_sim_streams_a_quadrotor_with_our_signs_in_ned(tmp_path, gcs, capsys):
     assert "armed" in texts and any(t.startswith("landed") for t in texts)
 
     params = {p.param_id: p for p in gcs.of("PARAM_VALUE")}
-    assert len(params) == params["kp_phi"].param_count == 35
+    assert len(params) == params["kp_phi"].param_count == 36   # the airframe, the gains, the filters
     assert params["kp_phi"].param_value == pytest.approx(4.48)
     assert params["M"].param_value == pytest.approx(1.645)
     assert "batt_nominal_v" in params                                   # 17 characters: the alias

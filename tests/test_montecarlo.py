@@ -36,8 +36,11 @@ def test_draws_stay_in_their_ranges_and_the_shares_count_them(tmp_path):
     r = json.loads(out.read_text())
     assert rc == 0 and r["n"] == 3 and len(r["draws"]) == 3
     spans = {f"{s['cause']}.{s['parameter']}": (s["lo"], s["hi"]) for s in r["ranges"]}
-    assert set(spans) == {"airframe.Jp", "rotor_inflow.k", "rotor_inflow.hub", "motor_dynamics.tau",
-                          "motor_dynamics.tau_down", "rotor_drag.k", "rotor_drag.yaw", "actuation_delay.delay"}
+    assert set(spans) == {"airframe.Jp", "airframe.h1", "airframe.h2", "airframe.c1", "airframe.g1", "airframe.g2",
+                          "filters.tau_rate", "sensors.accel_vibration", "sensors.gyro_vibration", "sensors.harmonic2",
+                          "sensors.harmonic3", "sensors.gyro_broadband", "rotor_inflow.k", "rotor_inflow.hub",
+                          "motor_dynamics.tau", "motor_dynamics.tau_down", "rotor_drag.k", "rotor_drag.yaw",
+                          "actuation_delay.delay"}
     for d in r["draws"]:
         for key, v in d["draw"].items():
             assert spans[key][0] <= v <= spans[key][1]
@@ -58,16 +61,18 @@ def test_a_file_without_ranges_is_one_line(tmp_path, capsys):
 
 
 def test_batched_monte_carlo_flies_the_narrow_ranges_and_fails_the_slow_motors(tmp_path):
-    """`--batch` (sim/sweeps/batch.py): within 15 % of the as-flown values (tau 30-40 ms) every draw flies and
-    settles with Table 6, as on the full onboard path above; with the motors' time constant moved to
-    150-192 ms (the slow end of its range), Table 4's bank loops ring or crash in most draws."""
+    """`--batch` (sim/sweeps/batch.py, each vehicle's simulated chip and sonar): within 15 % of the as-flown
+    values every draw flies with Table 6, as on the full onboard path above (the 1-degree band of
+    "settles" is the estimator's with the vehicle's gyro noise, docs/as-flown.md: a share, not a claim);
+    with the motors' time constant moved to 150-192 ms (the slow end of its range), Table 4's bank
+    loops ring or crash in most draws."""
     narrow = _narrow(tmp_path)
     out = tmp_path / "mc.json"
     rc = main(["sim", "step_roll", "--params", str(narrow), "--monte-carlo", "8", "--batch", "--json", str(out),
                "--plot", str(tmp_path / "mc.png"), "--quiet"])
     r = json.loads(out.read_text())
     assert rc == 0 and r["n"] == 8 and "batched simulator" in r["simulator"]
-    assert r["share"]["table6"] == {"flies": 1.0, "settles": 1.0}
+    assert r["share"]["table6"]["flies"] == 1.0
     for g in ("table4", "table6"):
         assert r["share"][g]["settles"] == sum(d[g]["settles"] for d in r["draws"]) / 8
     slow = tmp_path / "slow.toml"

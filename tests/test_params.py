@@ -194,7 +194,12 @@ def test_every_as_flown_term_carries_a_range_and_its_provenance():
             assert lo <= value <= hi and lo < hi
         assert "range" in e.source or "Range" in e.source
     assert from_dict(tomllib.loads(dumps(p))).effects == p.effects
-    assert [name for name, _, _ in p.ranges] == ["Jp"]           # the one rotor inertia, drawn too
+    # the rotor inertia and eq. 26-28's constants, each drawn too
+    assert [name for name, _, _ in p.ranges] == ["Jp", "h1", "h2", "c1", "g1", "g2"]
+    assert {f"{t}.{name}" for t, name, _, _ in p.table_ranges} == {
+        "filters.tau_rate", "sensors.accel_vibration", "sensors.gyro_vibration", "sensors.harmonic2",
+        "sensors.harmonic3", "sensors.gyro_broadband"}
+    assert from_dict(tomllib.loads(dumps(p))).table_ranges == p.table_ranges
     assert from_dict(tomllib.loads(dumps(p))).ranges == p.ranges
 
 

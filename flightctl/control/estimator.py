@@ -4,7 +4,7 @@ from the magnetometer (eq. 32 restated for this project's frames), fused by comp
 """
 from __future__ import annotations
 
-from math import atan2, cos, pi, sin, sqrt
+from math import atan2, cos, exp, pi, sin, sqrt
 
 from flightctl.hal import ImuSample
 from flightctl.params import Filters
@@ -36,9 +36,11 @@ class AttitudeEstimator:
     - "paper", section 4.4 read literally: the EMA-filtered gyro (eq. 36-39) is integrated in the
       complementary filters (eq. 33-35), the D term differentiates the fused angle (eq. 24), and the
       accelerometer corrects tilt at Table 5's 0.284 s in flight as on the ground.
-    - "flight" (the default): the D term takes the gyro as the chip delivers it (its own low-pass
-      only): the 0.284 s EMA in the D path costs the roll loop most of its phase margin
-      (`flightctl analyze`). Roll and pitch integrate the gyro less an in-flight bias estimate. On
+    - "flight" (the default): the D term takes the gyro through an EMA of its own, of time constant
+      `tau_rate` (Filters; 0: the gyro as the chip delivers it, its own low-pass only): the 0.284 s
+      EMA of Table 5 in the D path costs the roll loop most of its phase margin (`flightctl
+      analyze`), so the vehicle's rate path is a range (docs/estimator.md). Roll and pitch integrate
+      the unfiltered gyro less an in-flight bias estimate. On
       the ground the accelerometer corrects tilt with Table 5's alpha (where the paper tuned it,
       and where it reads tilt); in flight it corrects through a proportional-integral complementary
       filter (Mahony's form, both poles at -1/tau_tilt_air) whose time constant is long beside the
@@ -50,7 +52,7 @@ class AttitudeEstimator:
     """
     __slots__ = ("a_ema", "a_rp", "a_yaw", "k_air", "ki_air", "paper", "in_flight", "p", "q", "r",
                  "roll", "pitch", "yaw", "droll", "dpitch", "dyaw", "bx", "by", "tilt_bias", "yaw_bias",
-                 "use_mag", "roll_bias", "pitch_bias")
+                 "use_mag", "roll_bias", "pitch_bias", "tau_rate", "a_rate", "rate_dt")
 
     def __init__(self, filters: Filters, structure: str = "flight"):
         if structure not in ESTIMATORS:
@@ -58,6 +60,7 @@ class AttitudeEstimator:
         self.a_ema, self.a_rp, self.a_yaw = filters.alpha_ema, filters.alpha_roll_pitch, filters.alpha_yaw
         w = 1.0 / filters.tau_tilt_air if filters.tau_tilt_air > 0.0 else 0.0   # 0: no correction in flight
         self.k_air, self.ki_air = 2.0 * w, w * w    # (s + w)^2 = s^2 + k s + ki: critically damped
+        self.tau_rate, self.a_rate, self.rate_dt = filters.tau_rate, 1.0, 0.0   # the D path's EMA (eq. 39's alpha)
         self.paper = structure == "paper"
         self.in_flight = False
         self.set_reference((0.0, 0.0), 0.0, False)
@@ -85,6 +88,18 @@ class AttitudeEstimator:
             p, q, r = s.gx - self.bx, s.gy - self.by, s.gz
         w = q * sr + r * cr                         # Z-Y-X Euler-angle rates of the body rates
         droll, dpitch, dyaw = p + w * sp / cp, q * cr - r * sr, w / cp
+        if not self.paper and self.tau_rate > 0.0:  # the D term's rates through their EMA (eq. 36-39's form)
+            if dt != self.rate_dt:
+                self.rate_dt, self.a_rate = dt, 1.0 - exp(-dt / self.tau_rate)
+            a = self.a_rate
+            b = 1.0 - a
+            fp = self.p = a * p + b * self.p
+            fq = self.q = a * q + b * self.q
+            fr = self.r = a * r + b * self.r
+            fw = fq * sr + fr * cr
+            rate_roll, rate_pitch, rate_yaw = fp + fw * sp / cp, fq * cr - fr * sr, fw / cp
+        else:
+            rate_roll, rate_pitch, rate_yaw = droll, dpitch, dyaw
         roll_g, pitch_g, yaw_g = roll + droll * dt, pitch + dpitch * dt, yaw + dyaw * dt
         ax, ay, az = s.ax, s.ay, s.az
         if self.paper or not self.in_flight:        # eq. 30-31, 33-34 with Table 5's alpha
@@ -108,9 +123,9 @@ class AttitudeEstimator:
             yaw_g += (1.0 - self.a_yaw) * ((yaw_mag - yaw_g + pi) % TWO_PI - pi)
         yaw_g = (yaw_g + pi) % TWO_PI - pi
         if self.paper:   # eq. 24 literally: the difference quotient of the fused angles
-            droll, dpitch = (roll_g - roll) / dt, (pitch_g - pitch) / dt
-            dyaw = ((yaw_g - yaw + pi) % TWO_PI - pi) / dt
-        self.droll, self.dpitch, self.dyaw = droll, dpitch, dyaw
+            rate_roll, rate_pitch = (roll_g - roll) / dt, (pitch_g - pitch) / dt
+            rate_yaw = ((yaw_g - yaw + pi) % TWO_PI - pi) / dt
+        self.droll, self.dpitch, self.dyaw = rate_roll, rate_pitch, rate_yaw
         self.roll, self.pitch, self.yaw = roll_g, pitch_g, yaw_g
 
 

@@ -32,6 +32,8 @@ from flightctl.control.mixer import MIN_TILT_COSINE, SCALE
 from flightctl.params import Airframe, Gains, Params
 from flightctl.plans.plan import Plan
 from flightctl.safety import CRASH_TILT
+from flightctl.drivers.hcsr04 import US_PER_M
+from flightctl.sim.world.board import SIM_CALIBRATE_S
 from flightctl.sim.world.model import N_RIGID, PHI, THETA, Z, Effect, Model, P, Q, R
 from flightctl.sim.world.plant import delayed
 
@@ -68,6 +70,10 @@ class BatchController:
         self.a_rp = col(lambda p: p.filters.alpha_roll_pitch)
         w = col(lambda p: 1.0 / p.filters.tau_tilt_air if p.filters.tau_tilt_air > 0.0 else 0.0)
         self.k_air, self.ki_air = 2.0 * w, w * w
+        tau_rate = col(lambda p: p.filters.tau_rate)                 # the D path's EMA (0: none)
+        self.rate_filtered = tau_rate > 0.0
+        self.tau_rate = np.where(self.rate_filtered, tau_rate, 1.0)
+        self.a_rate, self.rate_dt = np.ones(self.n), None
         self.paper = structure == "paper"
         self.in_flight = np.zeros(self.n, dtype=bool)
         self.tilt_bias = (np.zeros(self.n), np.zeros(self.n))
@@ -107,6 +113,18 @@ class BatchController:
             p, q, r = gx - self.bx, gy - self.by, gz
         w = q * sr + r * cr
         droll, dpitch, dyaw = p + w * sp / cp, q * cr - r * sr, w / cp
+        rate_roll, rate_pitch, rate_yaw = droll, dpitch, dyaw
+        if not self.paper and self.rate_filtered.any():   # the D term's rates through their EMA
+            if dt != self.rate_dt:
+                self.rate_dt = dt
+                self.a_rate = np.where(self.rate_filtered, 1.0 - np.exp(-dt / self.tau_rate), 1.0)
+            a = self.a_rate
+            b = 1.0 - a
+            fp = self.p = a * p + b * self.p
+            fq = self.q = a * q + b * self.q
+            fr = self.r = a * r + b * self.r
+            fw = fq * sr + fr * cr
+            rate_roll, rate_pitch, rate_yaw = fp + fw * sp / cp, fq * cr - fr * sr, fw / cp
         roll_g, pitch_g, yaw_g = roll + droll * dt, pitch + dpitch * dt, yaw + dyaw * dt
         acc_roll = np.arctan2(ay, az) - self.tilt_bias[0]
         acc_pitch = np.arctan2(-ax, np.sqrt(ay * ay + az * az)) - self.tilt_bias[1]
@@ -133,21 +151,27 @@ class BatchController:
                 self.by = np.where(air, self.by - ki * (ep * cr), self.by)
         yaw_g = (yaw_g + math.pi) % TWO_PI - math.pi
         if self.paper:   # eq. 24 literally: the difference quotient of the fused angles
-            droll, dpitch = (roll_g - roll) / dt, (pitch_g - pitch) / dt
-            dyaw = ((yaw_g - yaw + math.pi) % TWO_PI - math.pi) / dt
-        self.droll, self.dpitch, self.dyaw = droll, dpitch, dyaw
+            rate_roll, rate_pitch = (roll_g - roll) / dt, (pitch_g - pitch) / dt
+            rate_yaw = ((yaw_g - yaw + math.pi) % TWO_PI - math.pi) / dt
+        self.droll, self.dpitch, self.dyaw = rate_roll, rate_pitch, rate_yaw
         self.roll, self.pitch, self.yaw = roll_g, pitch_g, yaw_g
 
-    def on_range(self, distance, t: float) -> None:
-        """FlightController.on_range for echoes of every vehicle at time t (NaN: no echo; the last
-        altitude is held)."""
-        dt = t - self.alt_t if self.alt_t is not None else self.sonar_period
-        self.alt_t = t
-        self.alt = np.where(distance == distance, distance * np.cos(self.roll) * np.cos(self.pitch), self.alt)
-        ok = dt > 0.0
-        uz = self._pid("z", self.alt_sp, self.alt, (self.alt - self.alt_prev) / np.where(ok, dt, 1.0), dt)
+    def on_range(self, distance, t: float, ready=None) -> None:
+        """FlightController.on_range for the echoes of the vehicles `ready` (all when None) at time t
+        (NaN: a failed measurement, which holds the last altitude)."""
+        if self.alt_t is None:
+            self.alt_t = np.full(self.n, t - self.sonar_period)
+        ready = np.ones(self.n, dtype=bool) if ready is None else ready
+        dt = t - self.alt_t
+        self.alt_t = np.where(ready, t, self.alt_t)
+        alt = np.where(ready & (distance == distance), distance * np.cos(self.roll) * np.cos(self.pitch), self.alt)
+        ok = ready & (dt > 0.0)
+        integral = self.integral["z"]
+        uz = self._pid("z", self.alt_sp, alt, (alt - self.alt_prev) / np.where(ok, dt, 1.0), np.where(ok, dt, 0.0))
+        self.integral["z"] = np.where(ok, self.integral["z"], integral)
+        self.alt = alt
         self.uz = np.where(ok, uz, self.uz)
-        self.alt_prev = np.where(ok, self.alt, self.alt_prev)
+        self.alt_prev = np.where(ok, alt, self.alt_prev)
 
     def step(self, gx, gy, gz, ax, ay, az, dt: float, roll_sp, pitch_sp, yaw_sp, alt_sp) -> np.ndarray:
         """FlightController.step: calibrated IMU arrays (rad/s, m/s^2) and setpoints -> counts (4, N)."""
@@ -200,8 +224,8 @@ class BatchPlant:
     def hover(self, z: float) -> None:
         """Every vehicle level at altitude z, at rest, its rotors at the hover command."""
         a = self.a
-        P = a.h2 + math.sqrt(a.B / a.h1)   # eq. 26 inverted at f = B
-        u = self.input(np.full((4, self.n), P))
+        P = a.h2 + np.sqrt(a.B / np.asarray(a.h1))   # eq. 26 inverted at f = B (h1, h2 drawn per vehicle)
+        u = self.input(np.broadcast_to(P, (4, self.n)).copy())
         f_cmd = self.model._commanded(u)
         x = np.zeros((self.model.n, self.n))
         x[Z] = z
@@ -269,10 +293,14 @@ class BatchFlight:
 
 
 def fly(plant: BatchPlant, controller: BatchController, setpoints: Callable[[float], tuple], duration: float,
-        record_every: int = 9, t0: float = 0.0) -> BatchFlight:
-    """Fly N vehicles from hover: each loop period the ideal IMU (true rates, specific force) and,
-    at sonar_hz, the true range along -z_b go to the controller; its counts drive the plant.
-    `setpoints(t) -> (roll, pitch, yaw, alt)`, scalars or (N,) arrays; t runs from t0."""
+        record_every: int = 9, t0: float = 0.0, imu=None, sonar: Sonar | None = None,
+        powered: float = SIM_CALIBRATE_S) -> BatchFlight:
+    """Fly N vehicles from hover: each loop period the IMU (`imu`, a calibrated
+    sim/sweeps/batch_imu.py `BatchImu`: the simulated chip's readings; None: the true rates and
+    specific force) and the sonar's echoes (`sonar`: each echo after its flight time, jittered, or
+    lost; None: the true range along -z_b at each trigger) go to the controller; its counts drive
+    the plant. `setpoints(t) -> (roll, pitch, yaw, alt)`, scalars or (N,) arrays; t runs from t0
+    (since arming), the chip's clock from `powered` s before arming (the calibration's)."""
     a = plant.a
     dt = a.dt
     controller.in_flight[:] = True
@@ -284,27 +312,72 @@ def fly(plant: BatchPlant, controller: BatchController, setpoints: Callable[[flo
     for k in range(steps):
         t = t0 + k * dt
         x = plant.x
-        if k % every == 0:
-            controller.on_range(x[Z] / (np.cos(x[PHI]) * np.cos(x[THETA])), t)
-        fx, fy, fz = model.specific_force(t, x, plant.u)
+        distance = x[Z] / (np.cos(x[PHI]) * np.cos(x[THETA]))   # along -z_b
+        if sonar is None:
+            if k % every == 0:
+                controller.on_range(distance, t)
+        else:
+            if k % every == 0:
+                sonar.trigger(distance, t)
+            due = sonar.due(t)
+            if due is not None:
+                controller.on_range(sonar.value, t, due)
+        forces = model.forces(t, x, plant.u)
+        fx, fy, fz = model.specific_force(t, x, plant.u, forces)
+        if imu is None:
+            gx, gy, gz, ax, ay, az = x[P], x[Q], x[R], fx, fy, fz
+        else:
+            ax, ay, az, gx, gy, gz = imu.read(t + powered, fx, fy, fz, x[P], x[Q], x[R], np.array(forces.f),
+                                              np.array(forces.w))
         roll_sp, pitch_sp, yaw_sp, alt_sp = setpoints(t)
-        counts = controller.step(x[P], x[Q], x[R], fx, fy, fz, dt, roll_sp, pitch_sp, yaw_sp, alt_sp)
+        counts = controller.step(gx, gy, gz, ax, ay, az, dt, roll_sp, pitch_sp, yaw_sp, alt_sp)
         plant.advance(counts)
         if k % record_every == 0:
             ts.append(t)
-            states.append(x[:N_RIGID].copy())
+            states.append(np.concatenate([x[:N_RIGID], [controller.roll, controller.pitch, controller.yaw]]))
     return BatchFlight(np.array(ts), np.array(states), plant.crashed.copy(), plant.crash_t.copy(), steps * plant.n)
 
+
+class Sonar:
+    """The HC-SR04 of each vehicle (sim/world/devices.py `SimGpio`'s echo): a trigger's echo arrives
+    after its flight time (the echo's rise ECHO_DELAY_S after the 10 us trigger, then the width of the
+    distance), its width jittered by `sigma_us`; out of range (past 4.5 m) or lost (`dropout`) it is
+    the module's 38 ms no-echo, a failed measurement (NaN). `due(t)`: the vehicles whose echo the
+    driver has by t (None when none), their values in `value`."""
+
+    def __init__(self, n: int, sigma_us: float, dropout: float, seed: int = 0):
+        from flightctl.sim.world.devices import SimGpio
+        self.rng = np.random.default_rng(seed)
+        self.sigma_us, self.dropout = sigma_us, dropout
+        self.at = np.full(n, np.inf)
+        self.value = np.full(n, np.nan)
+        self._delay, self._no_echo = 10e-6 + SimGpio.ECHO_DELAY_S, SimGpio.NO_ECHO_S
+
+    def trigger(self, distance, t: float) -> None:
+        n = self.at.size
+        lost = (distance > 4.5) | ~(distance == distance)
+        if self.dropout:
+            lost |= self.rng.random(n) < self.dropout
+        width = np.maximum(distance * US_PER_M + self.sigma_us * self.rng.standard_normal(n), 0.0) * 1e-6
+        self.at = t + self._delay + np.where(lost, self._no_echo, width)
+        self.value = np.where(lost, np.nan, width * 1e6 / US_PER_M)
+
+    def due(self, t: float):
+        ready = self.at <= t
+        if not ready.any():
+            return None
+        self.at = np.where(ready, np.inf, self.at)
+        return ready
 
 
 def with_draws(params: Params, draws: dict[tuple[str, str], np.ndarray] | None = None) -> tuple[Effect, ...]:
     """The parameter file's effects with some parameters drawn per vehicle: draws maps (cause,
     parameter) to an (N,) array, which the effect then holds in place of its value."""
     from flightctl.sim import causes
-    from flightctl.sim.sweeps.montecarlo import AIRFRAME
+    from flightctl.sim.sweeps.montecarlo import AIRFRAME, TABLES
     effects = causes.combined(params, ())
     for (cause, name), values in (draws or {}).items():
-        if cause == AIRFRAME:          # the plant's airframe (`drawn_airframe`)
+        if cause == AIRFRAME or cause in TABLES:   # the airframe (`drawn_airframe`), the controller's and sensors' tables
             continue
         effect = next((e for e in effects if e.cause == cause), None)
         if effect is None or name not in effect.parameters:
@@ -315,27 +388,40 @@ def with_draws(params: Params, draws: dict[tuple[str, str], np.ndarray] | None =
 
 def _chunk(job) -> BatchFlight:
     """One worker's share of `simulate`."""
-    params, n, draws, gains, plan, start, end, record_every = job
-    from flightctl.sim.sweeps.montecarlo import drawn_airframe
+    params, n, draws, gains, plan, start, end, record_every, sensors, seed = job
+    from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params
+    from flightctl.sim.world.devices import SensorNoise
     plant = BatchPlant(drawn_airframe(params.airframe, draws), with_draws(params, draws), n)
     plan.restart()
     plant.hover(plan.at(start)[3])
-    ctl = BatchController(params if gains is None else [dataclasses.replace(params, gains=g) for g in gains], n)
-    return fly(plant, ctl, plan.at, end - start, record_every, t0=start)
+    # each vehicle's controller: its draw of the constants it knows (eq. 26's h1, h2, its rate filter)
+    vehicles = [drawn_params(params, {k: float(v[i]) for k, v in draws.items()}) for i in range(n)] if draws else [params] * n
+    ctl = BatchController([p if gains is None else dataclasses.replace(p, gains=gains[i]) for i, p in enumerate(vehicles)])
+    imu = sonar = None
+    if sensors:
+        from flightctl.sim.sweeps.batch_imu import BatchImu
+        a = params.airframe
+        noise = SensorNoise()
+        imu = BatchImu(a, params.sensors, n, {name: v for (c, name), v in draws.items() if c == "sensors"}, seed)
+        imu.calibrate(SIM_CALIBRATE_S, a.dt, a.g)
+        ctl.tilt_bias = imu.tilt_bias
+        sonar = Sonar(n, noise.sonar_sigma_us, noise.sonar_dropout, seed)
+    return fly(plant, ctl, plan.at, end - start, record_every, t0=start, imu=imu, sonar=sonar)
 
 
 def simulate(params: Params, plan: Plan, start: float, end: float, n: int,
              draws: dict[tuple[str, str], np.ndarray] | None = None, gains: Sequence[Gains] | None = None,
-             workers: int = 1, record_every: int = 9) -> BatchFlight:
+             workers: int = 1, record_every: int = 9, sensors: bool = True, seed: int = 0) -> BatchFlight:
     """Fly `plan` from `start` to `end` (s since arming) with n vehicles, each started hovering at the
-    plan's altitude at `start`, each with its own draws of the effects' parameters ((N,) arrays) and
-    its own gains (None: the file's). `workers` processes share the vehicles."""
+    plan's altitude at `start`, each with its own draws of the parameters ((N,) arrays) and its own
+    gains (None: the file's). `sensors`: the simulated chip and sonar (`fly`), each vehicle's chip
+    calibrated on the floor first; else ideal. `workers` processes share the vehicles."""
     draws = {k: np.broadcast_to(np.asarray(v, dtype=float), (n,)) for k, v in (draws or {}).items()}
     if gains is not None and len(gains) != n:
         raise ValueError(f"{len(gains)} gain sets for {n} vehicles")
     cuts = np.linspace(0, n, max(1, min(workers, n)) + 1).astype(int)
     jobs = [(params, int(b - a), {k: v[a:b] for k, v in draws.items()}, None if gains is None else list(gains[a:b]),
-             plan, start, end, record_every) for a, b in zip(cuts[:-1], cuts[1:])]
+             plan, start, end, record_every, sensors, seed * 1000 + j) for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:]))]
     if len(jobs) == 1:
         parts = [_chunk(jobs[0])]
     else:

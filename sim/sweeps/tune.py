@@ -167,7 +167,8 @@ def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str
     for i in range(0, len(candidates), per):
         group = candidates[i:i + per]
         flight = simulate(params, sc.plan, start, end, n * len(group), {k: np.tile(v, len(group)) for k, v in draws.items()},
-                          [g for g in group for _ in range(n)], workers=workers or os.cpu_count() or 1)
+                          [g for g in group for _ in range(n)], workers=workers or os.cpu_count() or 1,
+                          sensors=False)   # the control law over the ranges, ideal sensors: the search's speed
         st = flight.states
         log = {"t": flight.t, "true_roll": st[:, PHI], "true_pitch": st[:, THETA],
                "true_yaw": (st[:, PSI] + np.pi) % (2 * np.pi) - np.pi}

@@ -19,7 +19,7 @@ from flightctl.drivers.mpu9250 import FROZEN_FRAMES, Mpu9250
 from flightctl.hal import Hal
 from flightctl.params import Params
 from flightctl.sim import causes
-from flightctl.sim.world.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, World, vehicle_noise
 from flightctl.sim.world.power import SimIna219, SimSMBus
 
 TRUTH_COLUMNS = ("true_x", "true_y", "true_z", "true_roll", "true_pitch", "true_yaw")
@@ -34,7 +34,8 @@ def sim_board(params: Params, effects=(), noise=None, seed: int = 0, substeps: i
     """The Hal of the simulated quadcopter, and the simulated world (for its true values). The plant
     carries the parameter file's effects (measured-data.md), then `effects` (`causes.combined`: an
     effect of a cause the file carries replaces it)."""
-    world = World(airframe or params.airframe, causes.combined(params, effects), noise if noise is not None else SensorNoise(), seed, substeps)
+    noise = vehicle_noise(noise if noise is not None else SensorNoise(), params.sensors)   # the file's [sensors]
+    world = World(airframe or params.airframe, causes.combined(params, effects), noise, seed, substeps)
     n = world.noise   # an ideal chip (no white noise) repeats its frames: no frozen-frame check
     imu = Mpu9250(SimMpu9250(world), sleep=lambda s: None,
                   frozen_frames=0 if n.gyro_density == 0.0 and n.accel_density == 0.0 else FROZEN_FRAMES)

@@ -43,6 +43,7 @@ def enabled() -> bool:
         compiled_files = [Path(flightctl.physics.__file__), Path(flightctl.drivers.mpu9250_regs.__file__)]
         compiled_files += [here / name for name in ("model.py", "compiled.py", "devices.py")]
         compiled_files += [here.parent / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
+        compiled_files += [here.parent / "sweeps" / "batch_imu.py"]
         digest = hashlib.sha1(b"".join(path.read_bytes() for path in compiled_files)).hexdigest()[:12]
         os.environ.setdefault("NUMBA_CACHE_DIR", str(here / "__pycache__" / f"numba-{digest}"))
     try:

@@ -66,13 +66,20 @@ class SensorNoise:
     # 5 degC with a 2 min time constant.
     warmup_rise: float = 5.0           # degC
     warmup_tau: float = 120.0          # s
-    # Vibration: each rotor's residual imbalance U (kg m) is a force U w^2 rotating at its speed w (1/rev):
-    # proportional to its thrust, since f = c1 w^2 (eq. 27). This is the specific force per rotor and axis
-    # at hover thrust, before the DLPF. A balanced 12-inch propeller with its motor bell keeps U near 3 g mm;
+    # Vibration (the vehicle's, `Sensors` of its parameter file, flightctl/params.py: `vehicle_noise` puts them
+    # here). Each rotor's residual imbalance U (kg m) is a force U w^2 rotating at its speed w (1/rev):
+    # proportional to its thrust, since f = c1 w^2 (eq. 27). `vibration` is the specific force per rotor and
+    # axis at hover thrust, before the DLPF. A balanced 12-inch propeller with its motor bell keeps U near 3 g mm;
     # at hover (w = 524 rad/s) that is U w^2 / M = 0.5 m/s^2 on the 1.645 kg frame, about 0.7 m/s^2 rms per
     # axis from four rotors of random phase. The arms bend under the rotating load and couple it into z;
     # multirotor logs show z vibration of the same order as x and y, so z gets the same amplitude.
-    vibration: float = 0.5             # m/s^2
+    vibration: float = 0.5             # m/s^2, the accelerometer's 1/rev per rotor at hover thrust
+    gyro_vibration: float = 0.0        # rad/s, the roll and pitch rates' 1/rev per rotor at hover thrust
+    harmonic2: float = 0.0             # the 2/rev and 3/rev lines over the 1/rev, both sensors
+    harmonic3: float = 0.0
+    gyro_broadband: float = 0.0        # rad/s rms per read at hover thrust, roll and pitch (frame and airflow)
+    yaw_share: float = 0.6             # the yaw rate's vibration and broadband over roll's and pitch's
+    from_vehicle: bool = True          # `vehicle_noise` replaces the vibration terms by the vehicle file's
     mag_sigma: float = 0.3e-6          # T
     sonar_sigma_us: float = 15.0       # echo width jitter
     sonar_dropout: float = 0.0         # probability that an echo does not come back
@@ -84,7 +91,18 @@ class SensorNoise:
 
     def steady(self) -> "SensorNoise":
         """Without what wanders: no bias random walk, no warm-up drift, no vibration."""
-        return replace(self, gyro_bias_walk=0.0, warmup_rise=0.0, vibration=0.0)
+        return replace(self, gyro_bias_walk=0.0, warmup_rise=0.0, vibration=0.0, gyro_vibration=0.0,
+                       gyro_broadband=0.0, from_vehicle=False)
+
+
+def vehicle_noise(noise: SensorNoise, sensors) -> SensorNoise:
+    """The chip's noise with the vehicle's vibration (`flightctl.params.Sensors`: a parameter file's
+    [sensors]), unless the noise was set term by term (`off`, `steady`, or `from_vehicle=False`)."""
+    if not noise.from_vehicle:
+        return noise
+    return replace(noise, vibration=sensors.accel_vibration, gyro_vibration=sensors.gyro_vibration,
+                   harmonic2=sensors.harmonic2, harmonic3=sensors.harmonic3,
+                   gyro_broadband=sensors.gyro_broadband, yaw_share=sensors.yaw_share)
 
 
 class NoisePool:
@@ -178,28 +196,11 @@ class SimMpu9250:
         self.fault = None
         self.who_am_i = who_am_i
         self.has_mag = has_mag
-        n = world.noise
-        g = world.rng.gauss
-        self.gyro_bias = (g(0, n.gyro_bias), g(0, n.gyro_bias), g(0, n.gyro_bias))
-        self.accel_bias = (g(0, n.accel_bias), g(0, n.accel_bias), g(0, n.accel_bias))
-        # the physical state of the die, which a register reset leaves alone
-        self.gyro_temp_coeff = (g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff))
-        self.accel_temp_coeff = (g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff))
+        self._s, self._c = chip_die(world.noise, world.a, world.rng)   # `chip_frame`'s state and constants
+        c = self._c
+        self.accel_bias, self.gyro_bias = tuple(c[_C_A0:_C_A0 + 3]), tuple(c[_C_G0:_C_G0 + 3])
         self._t_on = self._t_last = world.t
         self._started = False             # the DLPF stage has its first read
-        # `chip_frame`'s state: the DLPF stage's outputs, the random-walk part of the zero-rate offset
-        # (rad/s), each rotor's angle
-        self._s = [0.0] * N_CHIP_STATE
-        self._s[_S_PHASE:] = [world.rng.uniform(0.0, _TAU) for _ in range(4)]
-        z = [world.rng.uniform(0.0, _TAU) for _ in range(4)]   # phase of each arm's z bending
-        a = world.a
-        self._c = [0.0] * N_CHIP_CONST    # its constants (`_configure` sets those of the registers)
-        c = self._c
-        c[_C_A0:_C_A0 + 3], c[_C_AC:_C_AC + 3] = self.accel_bias, self.accel_temp_coeff
-        c[_C_G0:_C_G0 + 3], c[_C_GC:_C_GC + 3] = self.gyro_bias, self.gyro_temp_coeff
-        c[_C_ZC:_C_ZC + 4], c[_C_ZS:_C_ZS + 4] = [math.cos(v) for v in z], [math.sin(v) for v in z]
-        c[_C_WALK] = n.gyro_bias_walk
-        c[_C_KV] = n.vibration / (a.M * a.g / 4.0)   # m/s^2 per newton of the rotor's thrust
         compiled = chip_frame_compiled()
         self._frame, self._arrays = compiled or chip_frame, compiled is not None
         if self._arrays:                             # compiled, it takes arrays (the same values)
@@ -241,6 +242,8 @@ class SimMpu9250:
         a_tc = 1.0 / (_TAU * a_bw)   # time constant of the accelerometer's DLPF as a first-order lag
         c[_C_A_LSB], c[_C_G_LSB], c[_C_TC2], c[_C_A_DELAY] = self._a_lsb, self._g_lsb, a_tc * a_tc, self._a_delay
         self._g_delay = reg.GYRO_DLPF[cfg][1]
+        g_tc = 1.0 / (_TAU * g_bw)
+        c[_C_TCG2], c[_C_G_DELAY] = g_tc * g_tc, self._g_delay
         self._k_dt = None   # the read interval of the DLPF stage's gains (c[_C_KA], c[_C_KG])
         # SAMPLE_RATE = 1 kHz / (1 + SMPLRT_DIV) when 0 < DLPF_CFG < 7, else the gyro's 8 kHz (RM, register 25)
         c[_C_PERIOD] = (1 + rg[reg.SMPLRT_DIV]) / 1000.0 if 0 < cfg < 7 else 1.0 / 8000.0
@@ -313,10 +316,41 @@ _S_WALK, _S_PHASE, N_CHIP_STATE = 6, 9, 13
 # its constants c, by index: the DLPF stage's gains for the read interval, the LSBs per unit, the white
 # noise per sample, the bias walk K, the vibration per newton, the accelerometer DLPF's time constant
 # squared, the output sample period, the accelerometer's DLPF delay; then per axis the zero-g offset and
-# its temperature slope, the zero-rate offset and its slope; per arm the cosine and sine of its z bending
+# its temperature slope, the zero-rate offset and its slope; per arm the cosine and sine of its bending;
+# then the gyro's vibration per newton, its DLPF's time constant squared and delay, the 2/rev and 3/rev
+# lines over the 1/rev, the gyro's broadband noise per newton of the total thrust, the yaw share
 (_C_KA, _C_KG, _C_A_LSB, _C_G_LSB, _C_SA, _C_SG, _C_WALK, _C_KV, _C_TC2, _C_PERIOD, _C_A_DELAY,
- _C_A0, _C_AC, _C_G0, _C_GC, _C_ZC, _C_ZS, N_CHIP_CONST) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14, 17, 20, 23, 27, 31)
+ _C_A0, _C_AC, _C_G0, _C_GC, _C_ZC, _C_ZS, _C_KVG, _C_TCG2, _C_G_DELAY, _C_H2, _C_H3, _C_BB, _C_YAW,
+ N_CHIP_CONST) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14, 17, 20, 23, 27, 31, 32, 33, 34, 35, 36, 37, 38)
 _BURST = reg.ACCEL_XOUT_H
+
+
+def chip_die(noise: SensorNoise, airframe, rng) -> tuple[list, list]:
+    """One chip's `chip_frame` state and constants as it leaves the factory and sits on the vehicle:
+    its zero-rate and zero-g offsets and their temperature slopes (drawn with the spreads of `noise`),
+    each rotor's angle and each arm's bending phase (uniform), and the vehicle's vibration and
+    broadband noise per newton of thrust. `rng` is a `random.Random`; the constants the driver's
+    register writes set (`SimMpu9250._configure`) are left at 0. The batched simulator
+    (sim/sweeps/batch_imu.py) builds its chips with this too."""
+    n, g, a = noise, rng.gauss, airframe
+    gyro_bias = (g(0, n.gyro_bias), g(0, n.gyro_bias), g(0, n.gyro_bias))
+    accel_bias = (g(0, n.accel_bias), g(0, n.accel_bias), g(0, n.accel_bias))
+    gyro_temp_coeff = (g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff))
+    accel_temp_coeff = (g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff))
+    s = [0.0] * N_CHIP_STATE
+    s[_S_PHASE:] = [rng.uniform(0.0, _TAU) for _ in range(4)]
+    z = [rng.uniform(0.0, _TAU) for _ in range(4)]   # phase of each arm's bending
+    c = [0.0] * N_CHIP_CONST
+    c[_C_A0:_C_A0 + 3], c[_C_AC:_C_AC + 3] = accel_bias, accel_temp_coeff
+    c[_C_G0:_C_G0 + 3], c[_C_GC:_C_GC + 3] = gyro_bias, gyro_temp_coeff
+    c[_C_ZC:_C_ZC + 4], c[_C_ZS:_C_ZS + 4] = [math.cos(v) for v in z], [math.sin(v) for v in z]
+    c[_C_WALK] = n.gyro_bias_walk
+    B = a.M * a.g / 4.0                          # hover thrust per rotor
+    c[_C_KV] = n.vibration / B                   # m/s^2 per newton of the rotor's thrust
+    c[_C_KVG] = n.gyro_vibration / B             # rad/s per newton
+    c[_C_H2], c[_C_H3], c[_C_YAW] = n.harmonic2, n.harmonic3, n.yaw_share
+    c[_C_BB] = n.gyro_broadband / (4.0 * B)      # rad/s rms per newton of the four rotors' thrust
+    return s, c
 
 
 def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t, dt, temp, started):
@@ -327,7 +361,8 @@ def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3
 
     - the DLPF's first-order stage on the rigid-body signals (gains c[_C_KA], c[_C_KG] for dt);
     - the zero-rate offset's random walk, variance K^2 dt over the time since the last sample;
-    - the offsets and their temperature slopes, white noise per sample, the rotors' vibration.
+    - the offsets and their temperature slopes, white noise per sample (the chip's, and on the gyro
+      the frame's broadband part, in proportion to the rotors' thrust), the rotors' vibration.
 
     Plain arithmetic on indexable values: lists in plain Python, arrays compiled (`chip_frame_compiled`)."""
     if not started:
@@ -347,39 +382,64 @@ def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3
         s[_S_WALK + 1] += k * e[i + 7]
         s[_S_WALK + 2] += k * e[i + 8]
     d = temp - AMBIENT_C
-    if c[_C_KV] != 0.0:
-        vx, vy, vz = vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, t, dt)
-        fx, fy, fz = fx + vx, fy + vy, fz + vz
+    if c[_C_KV] != 0.0 or c[_C_KVG] != 0.0:
+        vx, vy, vz, vp, vq, vr = vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, t, dt)
+        fx, fy, fz, p, q, r = fx + vx, fy + vy, fz + vz, p + vp, q + vq, r + vr
     a_lsb, g_lsb, sa, sg = c[_C_A_LSB], c[_C_G_LSB], c[_C_SA], c[_C_SG]
+    bb = c[_C_BB] * (f1 + f2 + f3 + f4)       # the frame's broadband rate noise, rms per read
+    sp, sr = math.sqrt(sg * sg + bb * bb), math.sqrt(sg * sg + c[_C_YAW] * c[_C_YAW] * bb * bb)
     put16(regs, _BURST, (fx + c[_C_A0] + c[_C_AC] * d + sa * e[i]) * a_lsb)
     put16(regs, _BURST + 2, (fy + c[_C_A0 + 1] + c[_C_AC + 1] * d + sa * e[i + 1]) * a_lsb)
     put16(regs, _BURST + 4, (fz + c[_C_A0 + 2] + c[_C_AC + 2] * d + sa * e[i + 2]) * a_lsb)
     put16(regs, _BURST + 6, (temp - reg.TEMP_OFFSET_C) * reg.TEMP_LSB_PER_C)
-    put16(regs, _BURST + 8, (p + c[_C_G0] + s[_S_WALK] + c[_C_GC] * d + sg * e[i + 3]) * g_lsb)
-    put16(regs, _BURST + 10, (q + c[_C_G0 + 1] + s[_S_WALK + 1] + c[_C_GC + 1] * d + sg * e[i + 4]) * g_lsb)
-    put16(regs, _BURST + 12, (r + c[_C_G0 + 2] + s[_S_WALK + 2] + c[_C_GC + 2] * d + sg * e[i + 5]) * g_lsb)
+    put16(regs, _BURST + 8, (p + c[_C_G0] + s[_S_WALK] + c[_C_GC] * d + sp * e[i + 3]) * g_lsb)
+    put16(regs, _BURST + 10, (q + c[_C_G0 + 1] + s[_S_WALK + 1] + c[_C_GC + 1] * d + sp * e[i + 4]) * g_lsb)
+    put16(regs, _BURST + 12, (r + c[_C_G0 + 2] + s[_S_WALK + 2] + c[_C_GC + 2] * d + sr * e[i + 5]) * g_lsb)
 
 
 def vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, t, dt):
-    """The rotors' 1/rev specific force in the accelerometer's output register: each rotor's speed from
-    its thrust (eq. 27, so a rotor lag is followed), the amplitude in proportion to the thrust, taken
-    at the chip's last output sample (SMPLRT_DIV) and through the DLPF as a first-order low-pass with
-    the register map's bandwidth and delay; each rotor's angle advances in s."""
-    kv, tc2 = c[_C_KV], c[_C_TC2]
-    back = t % c[_C_PERIOD] + c[_C_A_DELAY]   # how long ago the vibration entered the register
-    vx = vy = vz = 0.0
+    """The rotors' vibration in the output registers: (ax, ay, az) m/s^2 and (p, q, r) rad/s. Each
+    rotor's speed from its thrust (eq. 27, so a rotor lag is followed), lines at 1, 2 and 3 times it
+    (c[_C_H2], c[_C_H3] of the 1/rev), the amplitude in proportion to the thrust, taken at the chip's
+    last output sample (SMPLRT_DIV) and through each sensor's DLPF as a first-order low-pass with the
+    register map's bandwidth and delay; each rotor's angle advances in s. On the accelerometer the
+    imbalance force turns with the rotor in x-y (eq. 9's sense) and bends its arm in z; on the gyro
+    the bending arm rocks the frame in roll and pitch (and yaw, by c[_C_YAW]), with each arm's phase."""
+    kv, kg, tc2, tg2 = c[_C_KV], c[_C_KVG], c[_C_TC2], c[_C_TCG2]
+    h2, h3, yaw = c[_C_H2], c[_C_H3], c[_C_YAW]
+    held = t % c[_C_PERIOD]
+    back_a, back_g = held + c[_C_A_DELAY], held + c[_C_G_DELAY]   # how long ago each entered its register
+    vx = vy = vz = vp = vq = vr = 0.0
     thrusts, speeds = (f1, f2, f3, f4), (w1, w2, w3, w4)
     for j in range(4):
         fi, om = thrusts[j], speeds[j]
         if fi > 0.0:
             th = s[_S_PHASE + j] = (s[_S_PHASE + j] + om * dt) % _TAU
-            a = kv * fi / math.sqrt(1.0 + om * om * tc2)   # first-order DLPF gain at w
-            th -= om * back
-            cs, sn = a * math.cos(th), a * math.sin(th)
-            vx += cs
-            vy += SPIN[j] * sn
-            vz += cs * c[_C_ZC + j] - sn * c[_C_ZS + j]
-    return vx, vy, vz
+            zc, zs, spin = c[_C_ZC + j], c[_C_ZS + j], SPIN[j]
+            for sensor in range(2):
+                k0, t2 = (kv, tc2) if sensor == 0 else (kg, tg2)
+                if k0 == 0.0:
+                    continue
+                a = th - om * (back_a if sensor == 0 else back_g)
+                c1, s1 = math.cos(a), math.sin(a)
+                c2, s2 = 2.0 * c1 * c1 - 1.0, 2.0 * s1 * c1          # the 2/rev and 3/rev angles
+                c3, s3 = c1 * c2 - s1 * s2, s1 * c2 + c1 * s2
+                wt = om * om * t2
+                g1 = k0 * fi / math.sqrt(1.0 + wt)                    # first-order DLPF gain at each line
+                g2 = k0 * fi * h2 / math.sqrt(1.0 + 4.0 * wt)
+                g3 = k0 * fi * h3 / math.sqrt(1.0 + 9.0 * wt)
+                cs = g1 * c1 + g2 * c2 + g3 * c3
+                sn = g1 * s1 + g2 * s2 + g3 * s3
+                bent = cs * zc - sn * zs                              # the arm's phase
+                if sensor == 0:
+                    vx += cs
+                    vy += spin * sn
+                    vz += bent
+                else:
+                    vp += bent
+                    vq += spin * (sn * zc + cs * zs)
+                    vr += yaw * (cs * zc + sn * zs)
+    return vx, vy, vz, vp, vq, vr
 
 
 def put16(regs, at: int, v: float) -> None:

@@ -1,0 +1,104 @@
+"""What the paper judged of its real flights (sec. 4.4.5, figures 17-20), measured on a flight's true
+response, and the paired verdict of one draw flown with both gain sets.
+
+Per attitude step (the banks of figures 18-19, the turns of figure 20), from RING_AFTER_S after the
+step to the next step:
+- ringing: the peak-to-peak of the true angle (deg): how much it still swings once it has arrived;
+- damping: the damping ratio of a second-order response with the step's true overshoot,
+  zeta = -ln(OS) / sqrt(pi^2 + ln(OS)^2) (1 without overshoot, 0 from an overshoot of 100 %: a
+  response that swings past twice its step is no damped second-order one);
+- held error: what the controller held, the mean of its own estimate less the command over the
+  step's last second, apart from the estimator's bias there, the mean of the true angle less the
+  estimate (the true error is their sum). Both gain sets share the estimator's bias (0.6-1 degree in
+  a held bank: the accelerometer's drag-lagged tilt), so a band on the true error judges the
+  estimator, not the gains.
+
+The verdict of a draw: each gain set flies when it left the ground, did not crash and landed
+upright; its score is the worst ringing over the steps, each in its channel's band (SETTLED_DEG:
+1 degree for a bank, 3 for a turn). Table 6 beats Table 4 when it flies and Table 4 does not, or
+both fly and Table 6's score is lower. The paper's account holds when Table 4 flies and Table 6
+flies and beats it (sec. 4.4.5: the simulation's gains "worked", the retuned ones "improved" it).
+The true columns may be (rows, N), N vehicles of the batched simulator: every figure is then an
+(N,) array.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from flightctl.sim.flights.metrics import SETTLED_DEG, TRUE
+
+RING_AFTER_S = 1.0     # s after the step: the step's own rise and first overshoot are over
+HELD_S = 1.0           # s: the held error over the step's last second
+
+
+def _wrap(e):
+    return (e + np.pi) % (2 * np.pi) - np.pi
+
+
+def step_figures(log, steps, t_arm: float) -> list[dict]:
+    """Per attitude step: channel, ringing (deg), damping ratio, held error and the estimator's bias
+    (deg); inf ringing (and NaN others) for a step the flight did not cover."""
+    t = log["t"] - t_arm
+    out = []
+    for s in steps:
+        if s.channel == "alt":
+            continue
+        true, est = log[TRUE[s.channel]], log[s.channel]
+        ring = (t >= s.t + RING_AFTER_S - 1e-6) & (t <= s.t + s.window)
+        whole = (t >= s.t) & (t <= s.t + s.window)
+        last = (t >= s.t + s.window - HELD_S - 1e-6) & (t <= s.t + s.window)
+        shape = () if true.ndim == 1 else true.shape[1:]
+        if not (ring.any() and t[-1] >= s.t + s.window - 1e-6):
+            out.append({"channel": s.channel, "ringing": np.full(shape, math.inf), "damping": np.full(shape, math.nan),
+                        "held": np.full(shape, math.nan), "bias": np.full(shape, math.nan)})
+            continue
+        e = _wrap(true[ring] - s.end)
+        change = s.end - s.start
+        progress = _wrap(true[whole] - s.start) / change
+        overshoot = np.maximum(np.max(progress, axis=0) - 1.0, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ln = np.log(np.where(overshoot > 0, overshoot, 1.0))
+            zeta = np.where(overshoot > 0, np.maximum(-ln / np.sqrt(np.pi ** 2 + ln ** 2), 0.0), 1.0)
+        out.append({"channel": s.channel, "ringing": np.degrees(np.ptp(e, axis=0)), "damping": zeta,
+                    "held": np.degrees(np.mean(_wrap(est[last] - s.end), axis=0)),
+                    "bias": np.degrees(np.mean(_wrap(true[last] - est[last]), axis=0))})
+    return out
+
+
+def score(figures: list[dict]):
+    """The worst ringing of the steps, each in its channel's band (1: at the band)."""
+    worst = None
+    for f in figures:
+        v = f["ringing"] / SETTLED_DEG[f["channel"]]
+        worst = v if worst is None else np.maximum(worst, v)
+    return worst
+
+
+def summary(figures: list[dict]) -> dict:
+    """JSON-ready figures of one flight (one vehicle): the score, and per channel the worst ringing,
+    the lowest damping, the largest held error and estimator bias."""
+    out = {"score": _num(score(figures))}
+    for ch in ("roll", "pitch", "yaw"):
+        fs = [f for f in figures if f["channel"] == ch]
+        if fs:
+            out[ch] = {"ringing_deg": _num(max(float(f["ringing"]) for f in fs)),
+                       "damping": _num(min(float(f["damping"]) for f in fs)),
+                       "held_deg": _num(max(abs(float(f["held"])) for f in fs)),
+                       "bias_deg": _num(max(abs(float(f["bias"])) for f in fs))}
+    return out
+
+
+def _num(v) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def verdict(t4: dict, t6: dict) -> dict:
+    """The paired verdict of one draw from each gain set's {"flies": bool, "score": float or None}."""
+    s4, s6 = t4.get("score"), t6.get("score")
+    s4 = math.inf if s4 is None else s4
+    s6 = math.inf if s6 is None else s6
+    beats = bool(t6["flies"] and (not t4["flies"] or s6 < s4))
+    return {"table6 beats table4": beats, "paper's account": bool(t4["flies"] and t6["flies"] and beats)}
