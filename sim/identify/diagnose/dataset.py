@@ -92,6 +92,17 @@ def sensor_filters(chain, fs: float) -> list[tuple[list, list]]:
     return out
 
 
+def _sos(stages) -> np.ndarray | None:
+    """The (b, a) stages of `sensor_filters` as one cascade of second-order sections, or None."""
+    if not stages:
+        return None
+    rows = []
+    for b, a in stages:
+        b, a = list(b) + [0.0] * (3 - len(b)), list(a) + [0.0] * (3 - len(a))
+        rows.append(b + a)
+    return np.array(rows, float)
+
+
 class DataSet:
     """`r_base` (C, n) is the low-passed base residual over the airborne samples; `block` gives each
     sample's block, `block_edges` the (start, stop) of each; `base_free` (K, C, n) the identified
@@ -104,11 +115,12 @@ class DataSet:
         self.fs = 1.0 / float(np.median(np.concatenate([np.diff(f.t) for f in files])))
         self.lowpass_hz = lowpass_hz
         self.sos = signal.butter(2, lowpass_hz, fs=self.fs, output="sos")
-        self._sensor = [(sensor_filters(f.gyro_filter, self.fs), sensor_filters(f.acc_filter, self.fs))
+        self._sensor = [(_sos(sensor_filters(f.gyro_filter, self.fs)), _sos(sensor_filters(f.acc_filter, self.fs)))
                         for f in files]
         # the stretches: (file index, start, stop) of input rows
         self.stretches = [(i, s0, s1) for i, f in enumerate(files) for s0, s1 in stretches(f.airborne)]
         self.n = sum(s1 - s0 for _, s0, s1 in self.stretches)
+        self._last_row = {i: max(s1 for j, _, s1 in self.stretches if j == i) for i, _, _ in self.stretches}
         self.seconds = self.n / self.fs
         a = self.a
         self.D = [self.drive(thrust_from_command(f.P, a.h1, a.h2)) for f in files]   # eq. 26
@@ -193,15 +205,21 @@ class DataSet:
 
     def _sense(self, i, x):
         """What the sensors show of model-side (..., C, n) arrays of file i: the log's declared gyro
-        and accelerometer filters, causal, over the whole file."""
+        and accelerometer filters, causal, over the whole file (the rows that are not all zero)."""
         from scipy import signal
         gyro, acc = self._sensor[i]
-        if not (gyro or acc):
+        if gyro is None and acc is None:
             return x
         x = np.array(x, dtype=float)
-        for rows, stages in ((GYRO, gyro), (ACC, acc)):
-            for b, a in stages:
-                x[..., rows, :] = signal.lfilter(b, a, x[..., rows, :], axis=-1)
+        for rows, sos in ((GYRO, gyro), (ACC, acc)):
+            if sos is None:
+                continue
+            part = x[..., rows, :]
+            flat = part.reshape(-1, part.shape[-1])
+            live = np.flatnonzero(np.any(flat != 0.0, axis=1))
+            if live.size:
+                flat[live] = signal.sosfilt(sos, flat[live], axis=-1)
+                x[..., rows, :] = flat.reshape(part.shape)
         return x
 
     def flat_filtered(self, per_file, sensor: bool = True):
@@ -210,10 +228,13 @@ class DataSet:
         sensor filters (the measurements went through them on the vehicle)."""
         from scipy import signal
         parts = []
+        sensed = {}        # the sensor filters run once over each file, not once per stretch
         for i, s0, s1 in self.stretches:
             x = per_file[i]
             if sensor and x.ndim >= 2:
-                x = self._sense(i, x)
+                if i not in sensed:
+                    sensed[i] = self._sense(i, x[..., :self._last_row[i]])
+                x = sensed[i]
             x = x[..., s0:s1]
             if x.ndim >= 2:      # rows that are zero stay zero: filter only the others (speed)
                 flat = x.reshape(-1, x.shape[-1])
