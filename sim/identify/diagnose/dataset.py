@@ -21,7 +21,7 @@ import numpy as np
 
 from flightctl.params import Airframe
 from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, yaw_drag
-from flightctl.sim.identify.diagnose.data import FileData, Layout, stretches
+from flightctl.sim.identify.diagnose.data import EDGE_S, FileData, Layout, stretches
 
 CHANNELS = ("p_dot", "q_dot", "r_dot", "acc_x", "acc_y", "acc_z")
 UNITS = ("rad/s^2", "rad/s^2", "rad/s^2", "m/s^2", "m/s^2", "m/s^2")
@@ -120,7 +120,12 @@ class DataSet:
         # the stretches: (file index, start, stop) of input rows
         self.stretches = [(i, s0, s1) for i, f in enumerate(files) for s0, s1 in stretches(f.airborne)]
         self.n = sum(s1 - s0 for _, s0, s1 in self.stretches)
-        self._last_row = {i: max(s1 for j, _, s1 in self.stretches if j == i) for i, _, _ in self.stretches}
+        # each stretch with the trimmed edges of its flight (data.EDGE_S) on either side, for the filter
+        pads = [int(round(EDGE_S / float(np.median(np.diff(f.t))))) for f in files]
+        self._padded = [(max(0, s0 - pads[i]), min(files[i].t.size - 1, s1 + pads[i])) for i, s0, s1 in self.stretches]
+        self._last_row = {}
+        for (i, _, _), (_, p1) in zip(self.stretches, self._padded):
+            self._last_row[i] = max(self._last_row.get(i, 0), p1)
         self.seconds = self.n / self.fs
         a = self.a
         self.D = [self.drive(thrust_from_command(f.P, a.h1, a.h2)) for f in files]   # eq. 26
@@ -153,6 +158,7 @@ class DataSet:
         self.carried: dict[str, np.ndarray] = {}     # cause -> its filtered term in the base prediction
         self.carried_parameters: dict[str, dict] = {}
         self.extra_free: list[np.ndarray] = []       # free columns a cause of the chain brought (C, n)
+        self.rotor_speeds: dict | None = None        # the log's own rotor speeds' check (rotorspeed.py), if any
         self.rebase()
 
     def drive(self, F: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
@@ -224,27 +230,30 @@ class DataSet:
 
     def flat_filtered(self, per_file, sensor: bool = True):
         """The stretches of per-file (..., n) arrays, each stretch low-passed forward and backward.
-        `sensor`: the arrays are the model's channels (..., C, n), so they first go through the log's
-        sensor filters (the measurements went through them on the vehicle)."""
+        Each is filtered with the EDGE_S of flight on either side that the airborne mask trimmed off
+        (`_padded`): the filter's start-up transient falls there, not on the data. `sensor`: the arrays
+        are the model's channels (..., C, n), so they first go through the log's sensor filters (the
+        measurements went through them on the vehicle)."""
         from scipy import signal
         parts = []
         sensed = {}        # the sensor filters run once over each file, not once per stretch
-        for i, s0, s1 in self.stretches:
+        for (i, s0, s1), (p0, p1) in zip(self.stretches, self._padded):
             x = per_file[i]
             if sensor and x.ndim >= 2:
                 if i not in sensed:
                     sensed[i] = self._sense(i, x[..., :self._last_row[i]])
                 x = sensed[i]
-            x = x[..., s0:s1]
+            x = x[..., p0:p1]
+            inner = slice(s0 - p0, s1 - p0)
             if x.ndim >= 2:      # rows that are zero stay zero: filter only the others (speed)
                 flat = x.reshape(-1, x.shape[-1])
-                y = np.zeros_like(flat)
+                y = np.zeros((flat.shape[0], s1 - s0))
                 rows = np.flatnonzero(np.any(flat != 0.0, axis=1))
                 if rows.size:
-                    y[rows] = signal.sosfiltfilt(self.sos, flat[rows], axis=-1)
-                parts.append(y.reshape(x.shape))
+                    y[rows] = signal.sosfiltfilt(self.sos, flat[rows], axis=-1)[:, inner]
+                parts.append(y.reshape(x.shape[:-1] + (s1 - s0,)))
             else:
-                parts.append(signal.sosfiltfilt(self.sos, x, axis=-1))
+                parts.append(signal.sosfiltfilt(self.sos, x, axis=-1)[inner])
         return np.concatenate(parts, axis=-1)
 
     def predict_file(self, i, D, scale=None, torque_extra=None, force_extra=None) -> Pred:

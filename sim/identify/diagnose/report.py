@@ -117,11 +117,17 @@ def text(d: Diagnosis) -> str:
         L.append(f"  verdict: {d.cause} {d.parameters}: held-out RMSE {d.rmse_base:.4g} -> {d.rmse_extended:.4g}, "
                  f"gain {d.gain:.3f} (significant in {d.significant[d.cause]})")
     best = next((r for r in d.results if r.cause == d.cause), None)
+    for r in rep["not_physical"]:
+        params = ", ".join(f"{k}={v:.4g}" if isinstance(v, (int, float)) else f"{k}={v}" for k, v in r["parameters"].items())
+        L.append(f"  fits, but not physical: {r['cause']} {params} (gain {r['gain']:+.3f}): {r['why']}")
     check = rep.get("rotor_speed_check")
     if check:
         L.append(f"  check against the log's rotor speeds: commanded speed -> measured, lag {1e3 * check['tau']:.1f} ms "
                  f"(per motor {', '.join(f'{1e3 * t:.0f}' for t in check['per_motor_tau'])} ms) and delay "
-                 f"{1e3 * check['delay']:.1f} ms")
+                 f"{1e3 * check['delay']:.1f} ms; {check['agreement']['what']}")
+    gains = rep.get("rotor_gain_check")
+    if gains:
+        L.append(f"  rotor gains: {gains['verdict']}: {gains['why']}")
     val = rep.get("validation")
     if val:
         L.append(f"  validation on {', '.join(val['files'])} ({val['airborne_s']} s airborne), the model as fitted here: "

@@ -17,12 +17,12 @@ from flightctl.errors import InputError
 from flightctl.logfile import Table
 from flightctl.params import Airframe, EffectSpec
 from flightctl.sim.causes import CAUSES, make
-from flightctl.sim.identify.diagnose.base import identify
+from flightctl.sim.identify.diagnose.base import YAW_UNKNOWN, identify, yaw_identified
 from flightctl.sim.identify.diagnose.candidate import Result, columns_of
 from flightctl.sim.identify.diagnose.data import MIN_STRETCH_S, Layout, load_file
 from flightctl.sim.identify.diagnose.dataset import (CHANNELS, LOWPASS_HZ, N_BLOCKS, OFFSET, UNITS, Change,
                                                      DataSet, Vehicle)
-from flightctl.sim.identify.diagnose.rotorspeed import rotor_speed_lag
+from flightctl.sim.identify.diagnose.rotorspeed import rotor_gain_check, rotor_speed_lag, timing_agreement
 from flightctl.sim.identify.diagnose.scoring import (DM_CHANNEL_WINDOW_S, DM_WINDOW_S, MIN_CHANNEL_GAIN, MIN_GAIN,
                                                      T_CHANNEL, T_CRIT, geomean, heldout_linear, significance)
 
@@ -33,6 +33,7 @@ MIN_AIRBORNE_S = 1.0     # s of airborne data needed in total to judge anything
 DYNAMIC_MIN_HZ = 4.0 * LOWPASS_HZ
 # Causes that are one physical effect modelled two ways: once one is in the chain the other is not tried.
 TWINS = {"motor_lag": "motor_dynamics", "motor_dynamics": "motor_lag"}
+TIMING = ("actuation_delay", "motor_lag", "motor_dynamics")     # the causes that time the actuation
 
 METRIC = ("geometric mean over 6 channels of the held-out RMSE of the one-loop-period equation error: "
           "angular acceleration p, q, r (rad/s^2, differenced gyro) and specific force x, y, z (m/s^2, "
@@ -59,6 +60,11 @@ class Round:
     significant: dict[str, str]            # cause -> why significant: "all channels" or the one channel
     named: Result | None = None
 
+    @property
+    def not_physical(self) -> list[Result]:
+        """The candidates that fit significantly but whose size is not physical (not named)."""
+        return [r for r in self.results if r.not_physical and r.note is None and r.significance.named_by()]
+
     def candidates(self) -> list[dict]:
         out = []
         for r in self.results:
@@ -67,6 +73,7 @@ class Round:
                         "rmse_extended": _num(geomean(r.score.rmse()), 6),
                         "t_stat": _num(r.t_stat, 2), "significant": r.cause in self.significant,
                         "significant_in": self.significant.get(r.cause),
+                        "not_physical": r.not_physical,
                         "channels": {c: {"gain": _num(g), "t": _num(t, 2)}
                                      for c, g, t in zip(CHANNELS, s.channel_gain, s.channel_t)},
                         "block_gains": [_num(g, 4) for g in s.block_gain]})
@@ -82,6 +89,7 @@ class Diagnosis:
     lowpass_hz: float = LOWPASS_HZ
     final: dict[str, Result] = field(default_factory=dict)   # the chain's causes, each refitted on top of the others
     rotor_speed_check: dict | None = None
+    rotor_gain_check: dict | None = None
     validation: dict | None = field(default=None)
 
     # the first round is the contract's top level: the strongest cause and every candidate
@@ -135,6 +143,18 @@ class Diagnosis:
     def gain(self) -> float:
         return self.chain[0].gain if self.chain else 0.0
 
+    def gyro_timing(self) -> tuple[str, float] | None:
+        """(cause, s): the timing the gyro gives: the chain's timing cause, else the timing candidate
+        with the best held-out gain."""
+        for c, r in self.final.items():
+            if c in TIMING:
+                return c, float(next(iter(r.parameters.values())))
+        timing = [r for r in self.results if r.cause in TIMING]
+        if not timing:
+            return None
+        r = max(timing, key=lambda r: r.gain)
+        return r.cause, float(next(iter(r.parameters.values())))
+
     def report(self) -> dict:
         """The JSON report: the keys of measured-data.md, then the project's extras."""
         base_rmse = self.base.score.rmse()
@@ -174,8 +194,20 @@ class Diagnosis:
                      "lowpass_hz": self.lowpass_hz, "base_effects": self.carried},
             "notes": list(dict.fromkeys(self.notes)),   # a note said twice (two passes) once
         }
+        seen = set()
+        out["not_physical"] = []
+        for rnd in self.rounds:
+            for r in rnd.not_physical:
+                if r.cause not in seen:
+                    seen.add(r.cause)
+                    out["not_physical"].append({"cause": r.cause, "parameters": r.parameters, "gain": _num(r.gain),
+                                                "why": r.not_physical})
+        out["physical_checks"] = {c.name: c.candidate.physical_check for c in CAUSES.values() if c.candidate.physical_check}
         if self.rotor_speed_check is not None:
-            out["rotor_speed_check"] = self.rotor_speed_check
+            out["rotor_speed_check"] = {**self.rotor_speed_check,
+                                        "agreement": timing_agreement(self.rotor_speed_check, self.gyro_timing())}
+        if self.rotor_gain_check is not None:
+            out["rotor_gain_check"] = self.rotor_gain_check
         if self.validation is not None:
             out["validation"] = self.validation
         return out
@@ -214,7 +246,8 @@ def _motor_rate(tables: list[Table]) -> float | None:
     return min(rates) if rates else None
 
 
-def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, speeds, notes: list[str], progress) -> Vehicle:
+def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, speeds, notes: list[str], progress,
+             timed: bool = True) -> Vehicle:
     """The base model: a foreign vehicle's identified from the flight unless a parameter file is
     given; this project's airframe otherwise."""
     foreign = [f.foreign for f in files]
@@ -228,7 +261,7 @@ def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, speeds, notes: 
         layout = Layout(tuple(v * scale for v in lay.x), tuple(v * scale for v in lay.y), lay.spin, "m", lay.source)
         notes.append("base model: the parameter file's airframe with the log's rotor layout (arm = l)")
         return Vehicle.known(a, layout)
-    vehicle, more = identify(files, lowpass_hz, progress, speeds)
+    vehicle, more = identify(files, lowpass_hz, progress, speeds, timed)
     notes += [f"base model: {n}" for n in more]
     return vehicle
 
@@ -261,8 +294,10 @@ def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str
             continue
         cand = c.candidate(ds)
         why = cand.why_not()
-        if why is None and static_only and getattr(cand, "dynamic", False):
+        if why is None and static_only and cand.dynamic:
             why = static_only
+        if why is None and cand.needs_yaw and ds.vehicle.identified and not yaw_identified(ds.vehicle):
+            why = f"{YAW_UNKNOWN}: too little yaw in the flight to tell its effectiveness from zero"
         if why is not None:
             not_judged.append({"cause": cand.cause, "why": why})
             progress(f"{label}{cand.cause}: not judged ({why})")
@@ -270,9 +305,11 @@ def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str
         r = cand.run()
         r.significance = significance(r.score, base.score, ds.fs)
         r.explanatory = cand.explanatory()
+        r.not_physical = cand.physical(r)
         results.append(r)
         judged[r.cause] = cand
-        progress(f"{label}{cand.cause}: {r.parameters} held-out gain {r.gain:+.4f} (t = {r.t_stat:.1f})")
+        progress(f"{label}{cand.cause}: {r.parameters} held-out gain {r.gain:+.4f} (t = {r.t_stat:.1f})"
+                 + (f"; not physical: {r.not_physical}" if r.not_physical else ""))
     results.sort(key=lambda r: -r.gain)
     significant = {}
     for r in results:
@@ -280,6 +317,9 @@ def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str
         why = judged[r.cause].not_named(r) if by else None
         if why:
             notes.append(why)
+        elif by and r.not_physical:
+            r.note = None
+            notes.append(f"{r.cause} {r.parameters} fits (held-out gain {r.gain:.3f}), but not physical: {r.not_physical}")
         elif by:
             significant[r.cause] = by
     rnd = Round(base, results, not_judged, significant)
@@ -303,8 +343,13 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
                        f"them at {DYNAMIC_MIN_HZ:g} Hz or more")
         notes.append(f"{static_only}; only static effects are judged, on data low-passed at {lowpass:.2g} Hz")
     speeds = rotor_speed_lag(files)
-    vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, speeds, notes, progress)
+    vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, speeds, notes, progress, static_only is None)
     ds = DataSet(files, vehicle, lowpass)
+    ds.rotor_speeds = speeds
+    gain_check = None
+    if vehicle.identified:
+        gain_check = rotor_gain_check(vehicle.gains, vehicle.identification["rotor_gain"]["stderr"], vehicle.layout, speeds)
+        progress(f"rotor gains: {gain_check['verdict']}: {gain_check['why']}")
     progress(f"{ds.n} samples airborne ({ds.seconds:.1f} s), {N_BLOCKS} blocks")
     carried = carry(ds, effects, notes, progress)
     rounds, skip = [], set()
@@ -321,7 +366,8 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
         ds = _folded(first, [(r.named.cause, r.named.parameters) for r in rounds])
     final = _backfit(first, [(r.named.cause, r.named.parameters) for r in rounds if r.named is not None],
                      notes, progress)
-    return Diagnosis(rounds, first, notes, carried, lowpass, final=final, rotor_speed_check=speeds)
+    return Diagnosis(rounds, first, notes, carried, lowpass, final=final, rotor_speed_check=speeds,
+                     rotor_gain_check=gain_check)
 
 
 def validate(d: Diagnosis, tables: list[Table], a: Airframe, progress=say) -> dict:
@@ -373,7 +419,9 @@ def _on_top(ds0: DataSet, chain: list[tuple[str, dict]], i: int) -> Result:
     r = cand.run()
     r.significance = significance(r.score, base, ds.fs)
     r.explanatory = cand.explanatory()
-    r.note = cand.not_named(r) if r.significance.named_by() else "not significant"
+    r.not_physical = cand.physical(r)
+    r.note = ((cand.not_named(r) or (f"not physical: {r.not_physical}" if r.not_physical else None))
+              if r.significance.named_by() else "not significant")
     return r
 
 
