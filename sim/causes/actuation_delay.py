@@ -42,12 +42,13 @@ def _shift(F, m):
 
 class ActuationDelayFit(GridCandidate):
     """The thrust series shifted by the delay, linearly interpolated between periods (the average
-    over the period); a grid over the whole physical range, 0 to 300 ms (2.5 ms steps to 50 ms, then
-    5 ms), refined between the best point's neighbours."""
+    over the period); a grid over the whole physical range, 0 to 300 ms (2.5 ms steps to 50 ms, 5 ms to
+    100 ms, then 10 ms), refined between the best point's neighbours."""
     effect = ActuationDelay
     changes_thrust = dynamic = True
     explains = MotorLagFit.explains
-    grid = np.concatenate([np.arange(0.0, 0.05, 0.0025), np.arange(0.05, MAX_TIMING_S + 1e-9, 0.005)])
+    grid = np.concatenate([np.arange(0.0, 0.05, 0.0025), np.arange(0.05, 0.1, 0.005),
+                           np.arange(0.1, MAX_TIMING_S + 1e-9, 0.01)])
     physical_check = TIMING_CHECK
 
     def thrusts(self, parameters):

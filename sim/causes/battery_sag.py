@@ -27,6 +27,16 @@ class BatterySag(Effect):
             s[i] *= k
 
 
+def pack_range(files) -> tuple[float, float] | None:
+    """(lowest, highest) battery voltage the logs measured (PACK_PERCENTILES of every logged row), or
+    None without any."""
+    V = np.concatenate([f.battery_v[np.isfinite(f.battery_v)] for f in files])
+    if V.size == 0:
+        return None
+    lo, hi = np.percentile(V, PACK_PERCENTILES)
+    return float(lo), float(hi)
+
+
 class BatterySagFit(AffineCandidate):
     """Thrust times (V / v_nominal)^2: D = (c V^2 - 1) G with G the thrust-proportional part of the
     prediction, affine in c = 1 / v_nominal^2."""
@@ -94,10 +104,7 @@ class BatterySagFit(AffineCandidate):
         return None
 
     def pack_range(self) -> tuple[float, float]:
-        """(lowest, highest) battery voltage the logs measured (PACK_PERCENTILES of every logged row)."""
-        V = np.concatenate([f.battery_v[np.isfinite(f.battery_v)] for f in self.ds.files])
-        lo, hi = np.percentile(V, PACK_PERCENTILES)
-        return float(lo), float(hi)
+        return pack_range(self.ds.files)
 
     def cells(self) -> tuple[int, str] | None:
         """(cell count, where it comes from): the logs' `# battery_cells:`, else for this project's

@@ -80,6 +80,12 @@ class ComOffsetFit(AffineCandidate):
         ds.vehicle = dataclasses.replace(ds.vehicle, layout=shifted)
         ds.rebase()
 
+    def why_not(self):
+        if self.ds.vehicle.identified:
+            return ("the centre of mass is identified in the base model of this vehicle (base_model.com), apart "
+                    "from the rotors' gains")
+        return None
+
     def physical(self, result):
         dx, dy = result.parameters["dx"], result.parameters["dy"]
         d = math.hypot(dx, dy)

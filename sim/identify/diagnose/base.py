@@ -39,13 +39,14 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.params import Airframe
 from flightctl.physics import G, thrust_from_command
-from flightctl.sim.identify.diagnose.candidate import columns_of
 from flightctl.sim.identify.diagnose.data import FileData, Layout
-from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, THRUST_CHANNELS, Change, DataSet, Vehicle
+from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, THRUST_CHANNELS, DataSet, Vehicle
+from flightctl.sim.identify.diagnose.rotorspeed import hover_gains
 from flightctl.sim.identify.diagnose.scoring import linear_stats, reparametrized, solve
 
 H2_LOW = -1000.0   # P units: far below the idle, the curve is nearly linear in P over the flight
-# The timings at which the base model may be identified (`_timing`): the candidates' 0-300 ms
+# The timings at which the base model may be identified (`_timing`): the candidates' 0-300 ms. A pure
+# delay aligns the commands with the motion as well as a lag of the same total for this purpose.
 # A base model for causes: each axis' effectiveness at least T_BASE jackknife standard errors above zero
 # (8 blocks: t with 7 degrees of freedom, one-sided 1 %)
 T_BASE = 3.0
@@ -56,7 +57,7 @@ T_BASE = 3.0
 # has g1 / (2 l) = 0.040 (conventions.md). Taken at 0.01 (docs/real-flights.md).
 YAW_RATIO_MIN = 0.01
 YAW_UNKNOWN = "the yaw effectiveness is not identified from this log"
-TIMING_GRID = {"delay": np.arange(0.0, 0.3001, 0.005), "lag": np.geomspace(0.002, 0.3, 24)}
+TIMING_GRID = {"delay": np.concatenate([np.arange(0.0, 0.1, 0.005), np.arange(0.1, 0.3001, 0.01)])}
 NAMES = ("k_p", "k_q", "k_r", "k_z", "gamma")
 UNITS = ("rad/s^2 per P^2 (arm)", "rad/s^2 per P^2 (arm)", "rad/s^2 per P^2", "m/s^2 per P^2", "1/rad")
 WHAT = ("h1 l / Jxx: roll", "h1 l / Jyy: pitch", "h1 g1 / Jzz: yaw", "h1 / M: specific force",
@@ -107,22 +108,30 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     hi = float(P_air.min()) - 1.0
 
     # (P - h2)^2 = P^2 - 2 h2 P + h2^2 (every airborne P is above h2): the channels of the three parts,
-    # filtered once, give the columns at any h2
+    # filtered once; the block statistics of each thrust channel's three, and of the yaw drag, give
+    # the fit at any h2 without another pass over the data (`reparametrized`)
     parts = [ds.flat_filtered([ds.predict_file(i, ds.drive(P ** k)).unit[0] for i, P in enumerate(Ps)])
              for k in (2, 1, 0)]
-
-    def columns(h2):
-        U = parts[0] - 2.0 * h2 * parts[1] + h2 * h2 * parts[2]
-        cols = []
-        for c in THRUST_CHANNELS:
-            x = np.zeros_like(U)
-            x[c] = U[c]
+    cols = []
+    for c in THRUST_CHANNELS:
+        for part in parts:
+            x = np.zeros((C, ds.n))
+            x[c] = part[c]
             cols.append(x)
-        return columns_of(Change(None, np.zeros((0, C, ds.n))), cols + [drag])
+    st_parts = linear_stats(ds, ds.measured, np.stack(cols + [drag], axis=-1))
+    del cols
+
+    def at(h2):
+        """The columns' map: each thrust channel's (P - h2)^2 from its three parts, the drag as is."""
+        M = np.zeros((3 * len(THRUST_CHANNELS) + 1, len(THRUST_CHANNELS) + 1))
+        for j in range(len(THRUST_CHANNELS)):
+            M[3 * j:3 * j + 3, j] = (1.0, -2.0 * h2, h2 * h2)
+        M[-1, -1] = 1.0
+        return M
 
     def best_h2(keep):
         from scipy import optimize
-        obj = lambda h: solve(linear_stats(ds, ds.measured, columns(h)), keep, ds.block_counts)[0]
+        obj = lambda h: solve(reparametrized(st_parts, at(h)), keep, ds.block_counts)[0]
         grid = np.concatenate([np.linspace(H2_LOW, -100.0, 4), np.linspace(-100.0, hi, 12)])
         j = int(np.argmin([obj(h) for h in grid]))
         lo, up = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
@@ -140,14 +149,24 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
                          "(every fit refines it: the speed part of the drive is a free column)")
     # each channel's effectiveness a_c and each rotor's gain g_i: channel c = a_c sum_i g_i X_ci
     st = linear_stats(ds, ds.measured, _rotor_columns(ds, Ps, h2, drag))
-    theta, gains = _effectiveness(st, allb, ds.block_counts)
+    theta, gains, com = _effectiveness(st, allb, ds.block_counts)
     jack = [_effectiveness(st, np.arange(N_BLOCKS) != b, ds.block_counts) for b in range(N_BLOCKS)]
     sd = np.concatenate([[h2_sd], jackknife_sd(np.array([j[0] for j in jack]))])
     gains_sd = jackknife_sd(np.array([j[1] for j in jack]))
+    com_sd = jackknife_sd(np.array([j[2] for j in jack]))
     progress(f"base model identified from the flight: h2 = {h2:.1f}, "
              + ", ".join(f"{n} = {v:.4g} +- {e:.2g}" for n, v, e in zip(NAMES, theta, sd[1:])))
     layout, more = _refuse(files, layout, theta, sd[1:])
     notes += more
+    hover = hover_gains(gains, com, layout)
+    hover_sd = jackknife_sd(np.array([hover_gains(j[1], j[2], layout) for j in jack]))
+    report_com = {"dx": round(float(com[0]), 4), "dy": round(float(com[1]), 4),
+                  "stderr": [float(f"{e:.2g}") for e in com_sd], "unit": "arm lengths",
+                  "what": "the centre of mass off the thrust centre (x forward, y left): the rotors' torques "
+                          "are taken about it (each rotor at (x_i - dx, y_i - dy))"}
+    layout = Layout(tuple(x - com[0] for x in layout.x), tuple(y - com[1] for y in layout.y), layout.spin,
+                    layout.unit, layout.source + f"; centre of mass at ({com[0]:+.3f}, {com[1]:+.3f}) arm lengths "
+                                                 "from the data")
     k_p, k_q, k_r, k_z = theta[:4]
     report = {"h2": {"value": float(f"{h2:.5g}"), "stderr": float(f"{sd[0]:.2g}"), "unit": "P units",
                      "what": f"eq. 26: the thrust is zero at P = h2 (from {h2_source})"}}
@@ -156,7 +175,11 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     report["rotor_gain"] = {"value": [round(float(g), 4) for g in gains],
                             "stderr": [float(f"{e:.2g}") for e in gains_sd], "unit": "-",
                             "what": "each rotor's thrust and torque against the mean of the four (eq. 7's "
-                                    "effectiveness of each rotor; rotor_gain_check says what a pattern is)"}
+                                    "effectiveness of each rotor), the centre of mass apart"}
+    report["com"] = report_com
+    report["hover_gain"] = {"value": [round(float(g), 4) for g in hover], "stderr": [float(f"{e:.2g}") for e in hover_sd],
+                            "unit": "-", "what": "each rotor's thrust in hover against the mean of the four: its gain "
+                                                 "and the centre of mass's trim together (rotor_gain_check)"}
     report["median_P"] = {"value": round(float(np.median(P_air)), 1), "unit": "P units",
                           "what": "the median command in flight (the accelerometer's bias hides the thrust's level)"}
     report["layout"] = {"x": list(layout.x), "y": list(layout.y), "spin": list(layout.spin), "unit": layout.unit,
@@ -250,37 +273,61 @@ def _timing(ds: DataSet, drag: np.ndarray) -> tuple[str, float]:
 
 
 def _rotor_columns(ds: DataSet, Ps, h2: float, drag: np.ndarray) -> np.ndarray:
-    """(C, n, 17): each rotor's unit thrust (from the commands Ps, per file) on each thrust channel (16
-    columns, channel-major), and the yaw drag."""
-    cols = []
+    """(C, n, 25): each rotor's unit thrust (from the commands Ps, per file) on each thrust channel (16
+    columns, channel-major: its torques through the layout and its thrust), each rotor's thrust on the
+    roll and on the pitch channel (8: the torque of the thrust about a centre of mass off the thrust
+    centre), and the yaw drag."""
+    cols, trim = [], []
     F = [thrust_from_command(P, 1.0, h2) for P in Ps]
     per_rotor = []
     for m in range(4):
         Fm = [np.where(np.arange(4)[:, None] == m, x, 0.0) for x in F]
         per_rotor.append(ds.flat_filtered([ds.predict_file(i, ds.drive(Fm[i])).unit[0] for i in range(len(Ps))]))
+        rows = []
+        for x in F:
+            y = np.zeros((C, x.shape[1]))
+            y[0] = y[1] = x[m]
+            rows.append(y)
+        trim.append(ds.flat_filtered(rows))
     for c in THRUST_CHANNELS:
         for m in range(4):
             x = np.zeros((C, ds.n))
             x[c] = per_rotor[m][c]
             cols.append(x)
+    for c in (0, 1):
+        for m in range(4):
+            x = np.zeros((C, ds.n))
+            x[c] = trim[m][c]
+            cols.append(x)
     return np.stack(cols + [drag], axis=-1)
 
 
-def _effectiveness(st, keep, counts, passes: int = 12) -> tuple[np.ndarray, np.ndarray]:
-    """((k_p, k_q, k_r, k_z, gamma), the rotors' gains with mean 1) of channel c = a_c sum_i g_i X_ci
-    (+ gamma on r_dot): bilinear, fitted by alternating least squares on the block statistics of the
-    17 columns of `_rotor_columns`, each step a linear fit through `reparametrized`."""
+def _effectiveness(st, keep, counts, passes: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """((k_p, k_q, k_r, k_z, gamma), the rotors' gains with mean 1, the centre of mass (dx, dy) in arm
+    lengths) of channel c = a_c sum_i g_i X_ci (+ gamma on r_dot), the roll and pitch channels with the
+    torque of the thrust about the centre of mass: roll + a_p (-dy) sum_i g_i f_i, pitch + a_q dx sum_i
+    g_i f_i (each rotor at (x_i - dx, y_i - dy) from it). A centre of mass off the middle is not a
+    pattern of rotor gains: a rotor's gain changes its thrust in every channel (the specific force, the
+    yaw torque), the centre of mass only the roll and pitch torques. Bilinear, fitted by alternating
+    least squares on the block statistics of the 25 columns of `_rotor_columns`, each step a linear fit
+    through `reparametrized`."""
     g = np.ones(4)
     for _ in range(passes):
-        M = np.zeros((17, 5))                   # the columns' coefficients from (a_p, a_q, a_r, a_z, gamma)
+        M = np.zeros((25, 7))     # the columns' coefficients from (a_p, a_q, a_r, a_z, b_p, b_q, gamma)
         for c in range(4):
             M[4 * c:4 * c + 4, c] = g
-        M[16, 4] = 1.0
+        M[16:20, 4] = g
+        M[20:24, 5] = g
+        M[24, 6] = 1.0
         a = solve(reparametrized(st, M), keep, counts)[1]
-        M = np.zeros((17, 5))                   # ... from (g_1..g_4, gamma)
+        M = np.zeros((25, 5))     # ... from (g_1..g_4, gamma)
         for c in range(4):
             M[4 * c:4 * c + 4, :4] = a[c] * np.eye(4)
-        M[16, 4] = 1.0
+        M[16:20, :4] = a[4] * np.eye(4)
+        M[20:24, :4] = a[5] * np.eye(4)
+        M[24, 4] = 1.0
         th = solve(reparametrized(st, M), keep, counts)[1]
         g = th[:4] / th[:4].mean()
-    return np.concatenate([a[:4] * th[:4].mean(), [th[4]]]), g
+    k = a[:4] * th[:4].mean()
+    com = np.array([a[5] / a[1] if a[1] else 0.0, -a[4] / a[0] if a[0] else 0.0])
+    return np.concatenate([k, [th[4]]]), g, com

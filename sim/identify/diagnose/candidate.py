@@ -15,6 +15,7 @@ from flightctl.sim.identify.diagnose.scoring import (Score, Significance, fitted
 from flightctl.sim.model import Effect
 
 MIN_TIMING_PERIODS = 1.5  # lag or delay shorter than this many loop periods is not named
+REFINE_XATOL = 3e-3       # a grid fit's refinement stops within this share of the neighbours' interval
 # The physical range of a rotor's timing (lag or delay): docs/as-flown.md's motor time constants run from
 # 20 ms (INDIflight's 3-inch rotors, bench) to 192 ms (the open-loop estimate with Table 2's rotor inertia;
 # 170 ms measured for a 920 KV motor with a 9.4-inch propeller on an open-loop ESC); ESC and loop delays
@@ -225,7 +226,7 @@ class GridCandidate(Candidate):
             lo, hi = g[j - 1], g[j + 1]
             try:
                 res = optimize.minimize_scalar(self.objective, bounds=(lo, hi), method="bounded",
-                                               options={"xatol": (hi - lo) * 1e-3})
+                                               options={"xatol": (hi - lo) * REFINE_XATOL})
                 return float(res.x)
             except ValueError:
                 return float(g[j])
@@ -237,23 +238,21 @@ class GridCandidate(Candidate):
         for th in self.grid:
             e, A = self.design(th)
             stats.append(linear_stats(ds, e, A))
-        cache: dict[int, tuple] = {}
-        folds = []
         blocks = np.arange(N_BLOCKS)
-
-        def fold(b):
-            keep = blocks != b
-            fits = [solve(st, keep, ds.block_counts) for st in stats]
+        chosen = []                       # each fold's grid point and fit on its training blocks
+        for b in blocks:
+            fits = [solve(st, blocks != b, ds.block_counts) for st in stats]
             j = int(np.argmin([f[0] for f in fits]))
-            folds.append(float(self.grid[j]))
-            if j not in cache:
-                cache.clear()
-                cache[j] = self.design(self.grid[j])
-            e, A = cache[j]
-            i0, i1 = ds.block_edges[b]
-            return fitted(e[:, i0:i1], None if A is None else A[:, i0:i1], fits[j][1]), fits[j][2]
-
-        score = heldout(ds, fold)
+            chosen.append((j, fits[j]))
+        folds = [float(self.grid[j]) for j, _ in chosen]
+        pieces = {}                       # each grid point's design computed once, for every fold that chose it
+        for j in sorted({j for j, _ in chosen}):
+            e, A = self.design(self.grid[j])
+            for b, (jb, fit) in enumerate(chosen):
+                if jb == j:
+                    i0, i1 = ds.block_edges[b]
+                    pieces[b] = fitted(e[:, i0:i1], None if A is None else A[:, i0:i1], fit[1]), fit[2]
+        score = heldout(ds, pieces.__getitem__)
         allb = np.ones(N_BLOCKS, bool)
         theta = self._best([solve(st, allb, ds.block_counts)[0] for st in stats])
         e, A = self.design(theta)

@@ -2,6 +2,7 @@
 
     flightctl diagnose FLIGHT.csv|F.ulg|F.bbl|F.bfl [...] [--index N] [--params PARAMS.toml] --json REPORT.json
                        [--validate OTHER ...] [--plot PREFIX] [--quiet]
+    flightctl diagnose --corpus DIR [--table OUT.md] [--json OUT.json] [--jobs N] [--quiet]
 
 Logs of other autopilots (PX4's ULog, Betaflight's blackbox) are read by `flightctl.sim.logs` into
 the same table as `flightctl log import` writes; their vehicle's base model is identified from the
@@ -40,7 +41,7 @@ def _parser() -> argparse.ArgumentParser:
                 description="Fit every candidate extension of the model to part of the flight logs, score "
                             "it on the rest, and name the one that explains the discrepancy, or none "
                             "(measured-data.md; method: docs/diagnose.md).")
-    p.add_argument("logs", nargs="+", metavar="FLIGHT",
+    p.add_argument("logs", nargs="*", metavar="FLIGHT",
                    help="flight logs of one vehicle: this project's CSV (measured-data.md), PX4's .ulg or "
                         "Betaflight's .bbl/.bfl (the `logs` extra)")
     p.add_argument("--index", type=int, metavar="N",
@@ -51,7 +52,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--params", metavar="PARAMS.toml",
                    help="the base model: its airframe and its [[effect]] tables (default: the reference "
                         "airframe, no effects)")
-    p.add_argument("--json", required=True, metavar="REPORT.json", help="the report (measured-data.md, diagnose)")
+    p.add_argument("--json", metavar="REPORT.json",
+                   help="the report (measured-data.md, diagnose); with --corpus, every log's report and refusal")
+    p.add_argument("--corpus", metavar="DIR",
+                   help="diagnose every log in DIR and its folders (every log of a file of many), in parallel, "
+                        "one row per log (docs/real-flights.md)")
+    p.add_argument("--table", metavar="OUT.md",
+                   help="with --corpus: the table, written between OUT.md's corpus markers if it has them")
+    p.add_argument("--jobs", type=int, metavar="N", help="with --corpus: processes (default: the cores, at most)")
     p.add_argument("--plot", metavar="PREFIX",
                    help="write PREFIX-residuals.png (residual vs time, base and after each cause), "
                         "PREFIX-explained.png (residual vs the variable that explains it) and, per log, "
@@ -74,13 +82,42 @@ def read_logs(paths: list[str], index: int | None, progress) -> list:
     return tables
 
 
+class Progress:
+    """Progress lines on stderr, one per stage, each with the time elapsed. On a terminal they are
+    live; otherwise (scripts, checks, `2> log`) they are held until the logs are read and accepted
+    (`release`: the base model stands), then live, so that bad input is the only line on stderr, as
+    measured-data.md requires, and a long diagnosis still shows where it is."""
+
+    def __init__(self, quiet: bool = False):
+        self.t0 = time.perf_counter()
+        self.quiet = quiet
+        self.held: list[str] | None = None if sys.stderr.isatty() else []
+
+    def __call__(self, *args) -> None:
+        if self.quiet:
+            return
+        line = f"[{time.perf_counter() - self.t0:6.1f} s] " + " ".join(map(str, args))
+        if self.held is None:
+            say(line)
+        else:
+            self.held.append(line)
+
+    def release(self) -> None:
+        for line in self.held or ():
+            say(line)
+        self.held = None
+
+
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
-    # On a terminal, progress is live. Otherwise (scripts, checks) it is held until the run succeeds,
-    # so that an error is the only line on stderr, as measured-data.md requires.
-    held: list[tuple] = []
-    progress = ((lambda *a: None) if args.quiet else say if sys.stderr.isatty()
-                else (lambda *a: held.append(a)))
+    if args.corpus is not None:
+        from flightctl.sim.identify.diagnose.corpus import main as corpus
+        return corpus(args)
+    if not args.logs:
+        raise InputError("name the flight logs to diagnose, or a folder of them with --corpus DIR")
+    if args.json is None:
+        raise InputError("--json REPORT.json is required (measured-data.md)")
+    progress = Progress(args.quiet)
     t0 = time.perf_counter()
     params = paramfile.load(args.params)
     out_json = Path(args.json)
@@ -95,7 +132,8 @@ def main(argv: list[str]) -> int:
     output_file(out_json, "--json")
     for path in plots.values():
         output_file(path, "--plot")
-    d = diagnose(tables, params.airframe, progress, params.effects, params_given=args.params is not None)
+    d = diagnose(tables, params.airframe, progress, params.effects, params_given=args.params is not None,
+                 accepted=progress.release)
     if others:
         d.validation = validate(d, others, params.airframe, progress)
     report_text = diagnose_report.text(d)
@@ -112,6 +150,5 @@ def main(argv: list[str]) -> int:
         path.write_bytes(images[k])
     print(report_text, end="")
     progress(f"done in {time.perf_counter() - t0:.1f} s: {d.cause} {d.parameters}")
-    for a in held:
-        say(*a)
+    progress.release()
     return 0

@@ -8,12 +8,12 @@ measured each rotor's speed shows two things directly:
   against the measured speed, affine per rotor (Omega = a (P - h2) by eq. 26 and 27: a scale and an
   offset for each rotor), fitted by least squares over the whole physical range (lag and delay each
   0-300 ms: a grid, then refined), on the airborne rows only (`rotor_speed_lag`);
-- **what a pattern of rotor gains is** (`rotor_gain_check`): a motor that gives less thrust for its
-  command (weak, or its ESC) also turns slower for it, so its speed falls below the others' common
-  speed-per-command curve, by the square root of its thrust (eq. 27); a centre of mass off the middle
-  asks the rotors on one side for more thrust, which the base model, whose rotors sit around the
-  thrust centre, cannot tell from rotor gains in hover: then all four turn on one curve, and the gains
-  form a front/rear or left/right pattern (linear in the rotors' positions).
+- **what a pattern of the rotors' thrusts in hover is** (`rotor_gain_check`): a motor that gives less
+  thrust for its command (weak, or its ESC) also turns slower for it, so its speed falls below the
+  others' common speed-per-command curve, by the square root of its thrust (eq. 27); a centre of mass
+  off the middle asks the rotors on one side for more thrust, which in hover leaves the same pattern
+  as rotor gains: then all four turn on one curve, and the pattern is front/rear or left/right
+  (linear in the rotors' positions, `trim_pattern`).
 """
 from __future__ import annotations
 
@@ -34,10 +34,11 @@ MAX_ROWS = 20000                   # airborne rows used by the coarse grid (even
 # larger: a lag and a delay of the same total look alike on hover data, and the gyro sees the thrust
 # through the sensors' own timing (docs/real-flights.md)
 AGREE_S, AGREE_SHARE = 0.005, 0.2
-# Rotor gains: on one speed-per-command curve when every rotor's thrust from its speed (the square of
-# its speed against the common curve's) is within CURVE_TOL of the mean; a pattern worth explaining
-# when some gain is off 1 by more than GAIN_TOL and by two jackknife standard errors.
-CURVE_TOL = 0.04
+# A rotor is slow for its command when the thrust its speed gives (the square of its speed against
+# the four's common speed-per-command curve) is CURVE_TOL below the mean: the four rotors of the
+# INDIflight logs spread by up to 2.4 % of thrust; a pattern of thrusts is worth explaining when some
+# rotor is off the mean by more than GAIN_TOL and by two jackknife standard errors.
+CURVE_TOL = 0.03
 GAIN_TOL = 0.03
 
 
@@ -140,69 +141,91 @@ def timing_agreement(check: dict, gyro: tuple[str, float] | None) -> dict:
                      f"{1e3 * tol:.1f} ms: {1e3 * AGREE_S:g} ms or {100 * AGREE_SHARE:g} % of the larger)")}
 
 
-def com_of_gains(gains, layout: Layout) -> tuple[float, float, float]:
-    """(dx, dy, share): the centre-of-mass offset whose hover trim the rotor gains `gains` (mean 1)
-    stand for, in the layout's units, and the share of the gains' pattern it explains. In hover
-    (equal thrusts f) rotors with gains g_i give the torques f sum_i r_i (g_i - 1) about the thrust
-    centre; a centre of mass at d gives -f N d (N rotors): d = -sum_i r_i (g_i - 1) / N. The pattern
-    a centre of mass leaves in the gains is linear in the rotors' positions (least squares)."""
-    g = np.asarray(gains, float) - np.mean(gains)
+def trim_pattern(layout: Layout) -> np.ndarray:
+    """(N, 2): the gains' pattern of a centre of mass off the middle in hover, g_i - 1 = pattern @ (dx, dy).
+    In hover (equal thrusts f) rotors with gains g_i give the torques f sum_i r_i (g_i - 1) about the
+    thrust centre, a centre of mass at d gives -f N d (N rotors): the pattern linear in the rotors'
+    positions r_i that does so is g - 1 = -N R (R^T R)^-1 d."""
     R = np.column_stack([layout.x, layout.y])
-    n = g.size
-    dx, dy = -(R.T @ g) / n
-    coef = np.linalg.lstsq(R, g, rcond=None)[0]
+    return -R.shape[0] * R @ np.linalg.inv(R.T @ R)
+
+
+def hover_gains(gains, com, layout: Layout) -> np.ndarray:
+    """Each rotor's thrust in hover against the mean of the four: its own gain and the centre of mass's
+    trim together (what a base model without a centre of mass would call the rotors' gains)."""
+    g = np.asarray(gains, float) * (1.0 + trim_pattern(layout) @ np.asarray(com, float))
+    return g / g.mean()
+
+
+def com_of_gains(gains, layout: Layout) -> tuple[float, float, float]:
+    """(dx, dy, share): the centre of mass whose hover trim the gains (mean 1) stand for, in the
+    layout's units, and the share of the gains' pattern it explains (least squares on `trim_pattern`)."""
+    g = np.asarray(gains, float) - np.mean(gains)
+    T = trim_pattern(layout)
+    d = np.linalg.lstsq(T, g, rcond=None)[0]
     total = float(g @ g)
-    share = float(1.0 - np.sum((g - R @ coef) ** 2) / total) if total > 0 else 1.0
-    return float(dx), float(dy), share
+    share = float(1.0 - np.sum((g - T @ d) ** 2) / total) if total > 0 else 1.0
+    return float(d[0]), float(d[1]), share
 
 
 def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None) -> dict:
-    """What a pattern of rotor gains (each rotor's thrust against the mean of the four, with their
-    jackknife standard errors) is: {"verdict", "why", "thrust_gain", "speed_thrust_gain", "com"}.
-    verdict: "none" (every gain 1 within its uncertainty), "weak motor" (a rotor below the others'
-    speed-per-command curve, by the square root of its low gain), "centre of mass" (all four on one
-    curve and a pattern linear in the rotors' positions), "rotor" (all on one curve, but a pattern no
-    centre of mass makes: a propeller that gives less thrust at its speed), or "not told apart" (no
-    rotor speeds in the log)."""
+    """What the pattern of the rotors' thrusts in hover is (`hover_gains`, with their jackknife standard
+    errors): {"verdict", "why", "thrust_gain", "speed_thrust_gain", "com"}. A weak motor and a centre of
+    mass off the middle leave the same pattern in hover; the log's rotor speeds tell them apart: the
+    thrust each rotor's speed gives (eq. 27) is its motor's part, the rest of the pattern is the centre
+    of mass's (linear in the rotors' positions) or a propeller's. verdict: "none"; "weak motor" (the
+    slowest rotor for its command, CURVE_TOL below the common curve, with its thrust in hover below the
+    mean); "centre of mass" (what the speeds leave is a front/rear or left/right pattern); both; "rotor"
+    (what the speeds leave is no centre of mass's pattern: a propeller that gives another thrust at its
+    speed); "not told apart" (a pattern, and no rotor speeds in the log)."""
     g = np.asarray(gains, float)
     sd = np.asarray(gains_sd, float)
-    dx, dy, share = com_of_gains(g, layout)
     unit = "m" if layout.unit == "m" else "arm lengths"
-    side = "front/rear" if abs(dx) >= abs(dy) else "left/right"
-    com = {"dx": round(dx, 4), "dy": round(dy, 4), "unit": unit, "share": round(share, 3)}
-    out = {"thrust_gain": [round(float(v), 4) for v in g], "com": com, "speed_thrust_gain": None}
-    off = np.abs(g - 1.0)
-    if not np.any((off > GAIN_TOL) & (off > 2.0 * sd)):
-        out.update(verdict="none", why=f"every rotor's gain is 1 within {GAIN_TOL:g} or its uncertainty")
-        return out
-    pattern = (f"a {side} pattern: the hover trim of a centre of mass at ({dx:+.3f}, {dy:+.3f}) {unit}, which "
-               f"explains {100 * share:.0f} % of it")
+    out = {"thrust_gain": [round(float(v), 4) for v in g], "speed_thrust_gain": None}
+
+    def pattern(r):
+        return bool(np.any((np.abs(r - 1.0) > GAIN_TOL) & (np.abs(r - 1.0) > 2.0 * sd)))
+
+    def com(r, what):
+        dx, dy, share = com_of_gains(r, layout)
+        out["com"] = {"dx": round(dx, 4), "dy": round(dy, 4), "share": round(share, 3), "unit": unit}
+        side = "front/rear" if abs(dx) >= abs(dy) else "left/right"
+        return share, (f"{what} a {side} pattern, the hover trim of a centre of mass at ({dx:+.3f}, {dy:+.3f}) "
+                       f"{unit} ({100 * share:.0f} % of it)")
+
     if speeds is None or speeds.get("speed_gain") is None:
-        out.update(verdict="not told apart",
-                   why=f"no rotor speeds in this log: a weak motor and a centre of mass off the middle give the "
-                       f"same gains in hover; the gains are {pattern}")
+        share, text = com(g, "the thrusts in hover are")
+        if not pattern(g):
+            out.update(verdict="none", why=f"every rotor's thrust in hover is the mean's within {GAIN_TOL:g} or two "
+                                           "of its standard errors")
+        else:
+            out.update(verdict="not told apart",
+                       why=f"{text}; without rotor speeds in the log a weak motor and a centre of mass off the middle "
+                           "look the same in hover")
         return out
     s = np.asarray(speeds["speed_gain"], float)
     q = s * s / np.mean(s * s)                 # the thrust each rotor's speed gives (eq. 27), against the mean
     out["speed_thrust_gain"] = [round(float(v), 4) for v in q]
-    slow = int(np.argmin(q))
-    if q[slow] < 1.0 - CURVE_TOL and g[slow] < 1.0 - GAIN_TOL:
-        out.update(verdict="weak motor",
-                   why=f"motor {slow + 1} turns slower for its command than the others: its speed gives "
-                       f"{100 * (1 - q[slow]):.0f} % less thrust than the common curve, and the gyro sees "
-                       f"{100 * (1 - g[slow]):.0f} % less")
-    elif np.all(np.abs(q - 1.0) <= CURVE_TOL):
+    found, why = [], []
+    m = int(np.argmin(q))
+    if q[m] < 1.0 - CURVE_TOL and g[m] < 1.0 - GAIN_TOL:
+        found.append("weak motor")
+        why.append(f"motor {m + 1} turns slower for its command than the others (its speed gives "
+                   f"{100 * (1 - q[m]):.0f} % less thrust than the common curve) and gives {100 * (1 - g[m]):.0f} % "
+                   "less thrust in hover: a weak motor")
+    rest = g / q
+    rest = rest / rest.mean()
+    share, text = com(rest, "what the speeds leave is")
+    if pattern(rest):
         if share >= 0.5:
-            out.update(verdict="centre of mass",
-                       why=f"not a weak motor: the four rotors turn on one speed-per-command curve (within "
-                           f"{100 * np.max(np.abs(q - 1.0)):.1f} % of thrust); the gains are {pattern}")
+            found.append("centre of mass")
+            why.append(f"{text}: the rotors turn on their speed-per-command curve there, so not a weak motor")
         else:
-            out.update(verdict="rotor",
-                       why=f"not a weak motor: the four rotors turn on one speed-per-command curve, but the gains "
-                           f"are not the pattern of a centre of mass ({100 * share:.0f} % of it): a propeller that "
-                           f"gives another thrust at its speed, or a yaw trim")
+            found.append("rotor")
+            why.append(f"{text}: not a centre of mass's; a propeller that gives another thrust at its speed")
+    if not found:
+        out.update(verdict="none", why=f"every rotor's thrust in hover is what its speed gives within {GAIN_TOL:g} or "
+                                       f"two of its standard errors, and no rotor is {100 * CURVE_TOL:g} % slow")
     else:
-        out.update(verdict="not told apart",
-                   why=f"the rotors' speeds do not lie on one curve (thrust from speed "
-                       f"{', '.join(f'{v:.3f}' for v in q)}) and no motor stands out as slow; the gains are {pattern}")
+        out.update(verdict=" and ".join(found), why="; ".join(why))
     return out

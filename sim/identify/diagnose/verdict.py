@@ -17,6 +17,7 @@ from flightctl.errors import InputError
 from flightctl.logfile import Table
 from flightctl.params import Airframe, EffectSpec
 from flightctl.sim.causes import CAUSES, make
+from flightctl.sim.causes.battery_sag import pack_range
 from flightctl.sim.identify.diagnose.base import YAW_UNKNOWN, identify, yaw_identified
 from flightctl.sim.identify.diagnose.candidate import Result, columns_of
 from flightctl.sim.identify.diagnose.data import MIN_STRETCH_S, Layout, load_file
@@ -191,7 +192,8 @@ class Diagnosis:
                             **v.identification} if v.identified else
                            {"identified": False, "what": "this project's airframe (conventions.md or --params)"}),
             "data": {"files": [f.path for f in self.ds.files], "airborne_s": round(self.ds.seconds, 2),
-                     "lowpass_hz": self.lowpass_hz, "base_effects": self.carried},
+                     "lowpass_hz": self.lowpass_hz, "base_effects": self.carried,
+                     "battery_v": (None if (v := pack_range(self.ds.files)) is None else [round(x, 2) for x in v])},
             "notes": list(dict.fromkeys(self.notes)),   # a note said twice (two passes) once
         }
         seen = set()
@@ -303,7 +305,7 @@ def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str
             progress(f"{label}{cand.cause}: not judged ({why})")
             continue
         r = cand.run()
-        r.significance = significance(r.score, base.score, ds.fs)
+        r.significance = significance(r.score, base.score, ds.fs_flat)
         r.explanatory = cand.explanatory()
         r.not_physical = cand.physical(r)
         results.append(r)
@@ -328,9 +330,11 @@ def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str
 
 
 def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[EffectSpec, ...] = (),
-             params_given: bool = False) -> Diagnosis:
+             params_given: bool = False, accepted=None) -> Diagnosis:
     """Every candidate of `flightctl.sim.causes` fitted and scored on the logs, on top of the base
-    model (with `effects`, a parameter file's `[[effect]]` tables), and the chain of causes."""
+    model (with `effects`, a parameter file's `[[effect]]` tables), and the chain of causes.
+    `accepted()` is called once the logs are judged usable and the base model stands (what can
+    refuse the logs has been asked)."""
     for e in effects:
         make(e.cause, **dict(e.parameters))     # the registry's checks (known cause, names, ranges) first
     notes: list[str] = []
@@ -348,9 +352,12 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
     ds.rotor_speeds = speeds
     gain_check = None
     if vehicle.identified:
-        gain_check = rotor_gain_check(vehicle.gains, vehicle.identification["rotor_gain"]["stderr"], vehicle.layout, speeds)
+        hover = vehicle.identification["hover_gain"]
+        gain_check = rotor_gain_check(hover["value"], hover["stderr"], files[0].layout, speeds)
         progress(f"rotor gains: {gain_check['verdict']}: {gain_check['why']}")
-    progress(f"{ds.n} samples airborne ({ds.seconds:.1f} s), {N_BLOCKS} blocks")
+    progress(f"{ds.seconds:.1f} s airborne ({ds.n} samples kept at {ds.fs_flat:.0f} Hz), {N_BLOCKS} blocks")
+    if accepted is not None:
+        accepted()
     carried = carry(ds, effects, notes, progress)
     rounds, skip = [], set()
     first = ds
@@ -365,7 +372,7 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
         skip |= {r.cause, TWINS.get(r.cause, r.cause)}
         ds = _folded(first, [(r.named.cause, r.named.parameters) for r in rounds])
     final = _backfit(first, [(r.named.cause, r.named.parameters) for r in rounds if r.named is not None],
-                     notes, progress)
+                     notes, progress, alone={r.cause: r for r in rounds[0].results})
     return Diagnosis(rounds, first, notes, carried, lowpass, final=final, rotor_speed_check=speeds,
                      rotor_gain_check=gain_check)
 
@@ -417,8 +424,15 @@ def _on_top(ds0: DataSet, chain: list[tuple[str, dict]], i: int) -> Result:
     cand = CAUSES[chain[i][0]].candidate(ds)
     base = heldout_linear(ds, ds.r_base, columns_of(Change(None, ds.base_free)))
     r = cand.run()
-    r.significance = significance(r.score, base, ds.fs)
+    r.significance = significance(r.score, base, ds.fs_flat)
     r.explanatory = cand.explanatory()
+    return _judged(r, cand)
+
+
+def _judged(r: Result, cand) -> Result:
+    """A copy of `r` with its note of the backfit: why it is not named (not significant, the
+    candidate's own reason, not physical), or None."""
+    r = copy.copy(r)
     r.not_physical = cand.physical(r)
     r.note = ((cand.not_named(r) or (f"not physical: {r.not_physical}" if r.not_physical else None))
               if r.significance.named_by() else "not significant")
@@ -436,17 +450,22 @@ def _refit(ds0: DataSet, chain: list[tuple[str, dict]], passes: int) -> tuple[li
     return chain, results
 
 
-def _backfit(ds0: DataSet, chain: list[tuple[str, dict]], notes: list[str], progress) -> dict[str, Result]:
+def _backfit(ds0: DataSet, chain: list[tuple[str, dict]], notes: list[str], progress,
+             alone: dict[str, Result] | None = None) -> dict[str, Result]:
     """The chain refitted jointly (each cause on top of all the others, twice over), then each cause
     tested on top of the others refitted without it: one that is then not significant is dropped (a
     cause named early can take up part of one named later, and a small one can stand in for the
-    bias that leaves). Returns {cause: its Result on top of the others}, in chain order."""
+    bias that leaves). Returns {cause: its Result on top of the others}, in chain order. `alone`: each
+    cause's Result on the base model alone (the first round), which is a chain of one's, not run again."""
     if not chain:
         return {}
     while True:
         chain, results = _refit(ds0, chain, 2 if len(chain) > 1 else 0)
         if len(chain) == 1:
-            return {chain[0][0]: _on_top(ds0, chain, 0)}
+            cause = chain[0][0]
+            if alone and cause in alone:
+                return {cause: _judged(alone[cause], CAUSES[cause].candidate(ds0))}
+            return {cause: _on_top(ds0, chain, 0)}
         for r in results:
             progress(f"{r.cause} on top of the other causes: {r.parameters}, held-out gain {r.gain:.3f}")
         dropped = None
