@@ -40,8 +40,8 @@ class Row:
     report: dict | None = None
 
     def cells(self) -> list[str]:
-        read = _read(self.meta, self.report)
-        vehicle = _vehicle(self.meta)
+        read = _read(self.meta, self.report) if self.meta else ""
+        vehicle = _vehicle(self.meta) if self.meta else ""
         if self.status != "diagnosed":
             return [self.log, vehicle, read, "", "", "", "", _clean(self.reason)]
         r = self.report
@@ -125,9 +125,10 @@ def _jobs(folder: Path, files: list[Path]) -> tuple[list[Row], list[Row]]:
 
 
 def _reason(error: str, path: str) -> str:
-    """An InputError's line without the file's path (the row names the log)."""
-    for prefix in (f"{path}: ", f"{Path(path).name}: "):
-        error = error.replace(prefix, "")
+    """An InputError's line without the file's path (the row names the log), also as `PATH#k: `."""
+    import re
+    for p in (path, Path(path).name):
+        error = re.sub(rf"^{re.escape(p)}(#\d+)?: ", "", error)
     return error
 
 
