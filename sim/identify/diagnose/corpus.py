@@ -34,7 +34,7 @@ class Row:
     log: str                    # the path relative to the corpus, with #index for a file of many logs
     path: str
     index: int | None
-    status: str = "refused"     # "diagnosed" or "refused"
+    status: str = "refused"     # "diagnosed", "refused", or "failed" (a fault of diagnose's, said as such)
     reason: str = ""            # the refusal's one line
     meta: dict = field(default_factory=dict)
     report: dict | None = None
@@ -146,6 +146,9 @@ def run_one(row: Row) -> Row:
         row.status = "diagnosed"
     except InputError as e:
         row.reason = _reason(str(e), row.path)
+    except Exception as e:         # a fault of diagnose's on this log: said, and the other logs go on
+        row.status = "failed"
+        row.reason = f"diagnose failed on this log ({type(e).__name__}: {e}): a fault to report"
     return row
 
 
@@ -226,6 +229,8 @@ def main(args) -> int:
             indent=1, allow_nan=False) + "\n")
     print(text)
     done = sum(r.status == "diagnosed" for r in rows)
+    failed = sum(r.status == "failed" for r in rows)
     if not args.quiet:
-        print(f"diagnose --corpus: {done} of {len(rows)} logs diagnosed, {len(rows) - done} refused", file=sys.stderr)
+        print(f"diagnose --corpus: {done} of {len(rows)} logs diagnosed, {len(rows) - done - failed} refused"
+              + (f", {failed} failed (a fault of diagnose's)" if failed else ""), file=sys.stderr)
     return 0
