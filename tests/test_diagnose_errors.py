@@ -145,3 +145,17 @@ def test_an_error_after_a_good_log_is_the_only_line_on_stderr(tmp_path, capsys, 
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and str(bad) in err, err
     assert not out.exists()
+
+
+def test_progress_shows_each_stage_with_its_time_when_stderr_is_not_a_terminal(tmp_path, capsys, flight):
+    """capsys is not a terminal: the progress lines come all the same, each with the time elapsed, and
+    --quiet silences them."""
+    out = tmp_path / "out.json"
+    assert main(["diagnose", str(flight), "--json", str(out)]) == 0
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) > 10 and all(line.startswith("diagnose: [") and " s] " in line for line in lines), lines[:3]
+    assert any("airborne" in line for line in lines) and "done in" in lines[-1]
+    elapsed = [float(line.split("[", 1)[1].split(" s]", 1)[0]) for line in lines]
+    assert elapsed == sorted(elapsed)
+    assert main(["diagnose", str(flight), "--json", str(out), "--quiet"]) == 0
+    assert capsys.readouterr().err == ""

@@ -6,7 +6,8 @@ import math
 import numpy as np
 
 from flightctl.sim.causes.motor_lag import MotorLagFit
-from flightctl.sim.identify.diagnose.candidate import GridCandidate, too_short_to_time
+from flightctl.sim.identify.diagnose.candidate import (MAX_TIMING_S, TIMING_CHECK, GridCandidate, timing_not_physical,
+                                                       too_short_to_time)
 from flightctl.sim.world.model import Effect, Parameter
 
 
@@ -41,11 +42,14 @@ def _shift(F, m):
 
 class ActuationDelayFit(GridCandidate):
     """The thrust series shifted by the delay, linearly interpolated between periods (the average
-    over the period); a 49-point grid from 0 to 120 ms."""
+    over the period); a grid over the whole physical range, 0 to 300 ms (2.5 ms steps to 50 ms, 5 ms to
+    100 ms, then 10 ms), refined between the best point's neighbours."""
     effect = ActuationDelay
     changes_thrust = dynamic = True
     explains = MotorLagFit.explains
-    grid = np.linspace(0.0, 0.12, 49)
+    grid = np.concatenate([np.arange(0.0, 0.05, 0.0025), np.arange(0.05, 0.1, 0.005),
+                           np.arange(0.1, MAX_TIMING_S + 1e-9, 0.01)])
+    physical_check = TIMING_CHECK
 
     def thrusts(self, parameters):
         ds, d = self.ds, parameters["delay"]
@@ -57,3 +61,6 @@ class ActuationDelayFit(GridCandidate):
 
     def not_named(self, result):
         return too_short_to_time(result, self.ds)
+
+    def physical(self, result):
+        return timing_not_physical(result)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -25,10 +26,28 @@ class ComOffset(Effect):
         torque[1] += self.parameters["dx"] * total
 
 
+# The centre of mass must lie well inside the rotors: in hover the rotors on the heavy side carry
+# (h + d) / (h - d) times the thrust of the others, h the rotors' reach in the offset's direction (the
+# layout's support: the largest projection of a rotor's position on it). At d = h / 4 that is 1.67: a
+# vehicle hovering at 40-50 % of full thrust (a thrust-to-weight ratio of 2-2.5) then has its heavy
+# side at 67-83 % before any manoeuvre, about what it can fly with; farther out it could not hold
+# attitude in a manoeuvre. The offsets met in the tests are 0.02-0.08 of the arm.
+MAX_OFFSET = 0.25
+
+
+def reach(layout: Layout, ux: float, uy: float) -> float:
+    """How far the rotors reach from the centre in the direction (ux, ux) (unit vector): the layout's
+    support function, max_i (x_i ux + y_i uy), in the layout's units."""
+    return max(x * ux + y * uy for x, y in zip(layout.x, layout.y))
+
+
 class ComOffsetFit(AffineCandidate):
     """Torques (-dy, +dx) times the total thrust T: -dy T / Jxx on p_dot, +dx T / Jyy on q_dot."""
     effect = ComOffset
     explains = "total thrust (N)"
+    physical_check = (f"(dx, dy) well inside the rotors: at most {MAX_OFFSET:g} of the rotors' reach in its direction "
+                      f"(the heavy side then carries 1.67 times the other's thrust in hover: a vehicle hovering at "
+                      f"40-50 % of full thrust is near its limit)")
     changes_thrust = True    # folded as the rotors' positions from the centre of mass, not as an added term
 
     def columns(self):
@@ -60,6 +79,25 @@ class ComOffsetFit(AffineCandidate):
                          lay.source + f"; centre of mass at ({parameters['dx']:g}, {parameters['dy']:g})")
         ds.vehicle = dataclasses.replace(ds.vehicle, layout=shifted)
         ds.rebase()
+
+    def why_not(self):
+        if self.ds.vehicle.identified:
+            return ("the centre of mass is identified in the base model of this vehicle (base_model.com), apart "
+                    "from the rotors' gains")
+        return None
+
+    def physical(self, result):
+        dx, dy = result.parameters["dx"], result.parameters["dy"]
+        d = math.hypot(dx, dy)
+        if d == 0.0:
+            return None
+        lay = self.ds.vehicle.layout
+        h = reach(lay, dx / d, dy / d) * (1.0 if lay.unit == "m" or self.ds.vehicle.identified else self.ds.a.l)
+        if d > MAX_OFFSET * h:
+            unit = "m" if lay.unit == "m" else "arm lengths"
+            return (f"the centre of mass {d:.3g} {unit} off the thrust centre is {d / h:.2f} of the rotors' reach "
+                    f"({h:.3g} {unit}) in that direction, more than {MAX_OFFSET:g}: outside what the vehicle could hover with")
+        return None
 
     def explanatory(self):
         return self.ds.thrust.sum(axis=0)

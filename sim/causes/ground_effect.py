@@ -45,8 +45,8 @@ class GroundEffectFit(GridCandidate):
         if not np.isfinite(z).any():
             return "no range readings in flight: the altitude near the ground is unknown"
         low = np.isfinite(z) & (z < GE_MAX_Z)
-        if low.sum() / self.ds.fs < GE_MIN_S:
-            return (f"only {low.sum() / self.ds.fs:.1f} s airborne below {GE_MAX_Z:g} m "
+        if low.sum() / self.ds.fs_flat < GE_MIN_S:
+            return (f"only {low.sum() / self.ds.fs_flat:.1f} s airborne below {GE_MAX_Z:g} m "
                     f"({GE_MIN_S:g} s needed) to see the thrust rise near the ground")
         return None
 

@@ -23,6 +23,7 @@ class LinearYawDragFit(AffineCandidate):
     """-gamma0 r / Jzz on r_dot, by weighted least squares."""
     effect = LinearYawDrag
     explains = "yaw rate r (rad/s)"
+    needs_yaw = True
 
     def why_not(self):
         r95 = np.percentile(np.abs(self.ds.w[2]), 95)

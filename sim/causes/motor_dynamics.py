@@ -26,7 +26,7 @@ import numpy as np
 
 from flightctl.physics import rotor_speed, thrust_from_speed
 from flightctl.sim.causes.motor_lag import MotorLagFit, lag_held
-from flightctl.sim.identify.diagnose.candidate import GridCandidate, too_short_to_time
+from flightctl.sim.identify.diagnose.candidate import TIMING_CHECK, GridCandidate, timing_not_physical, too_short_to_time
 from flightctl.sim.identify.diagnose.dataset import C, Change
 from flightctl.sim.world.model import Effect, Parameter
 
@@ -95,9 +95,10 @@ class MotorDynamicsFit(GridCandidate):
     Jp / Jzz is not known, that reaction is a free column of the fit (its coefficient is reported
     in the identification)."""
     effect = MotorDynamics
-    changes_thrust = dynamic = True
+    changes_thrust = dynamic = needs_yaw = True
     explains = "rotor spin-up sum s_i dOmega_i/dt (rad/s^2)"
     grid = MotorLagFit.grid
+    physical_check = TIMING_CHECK
 
     def _speeds(self, i, tau):
         """(the drive (K, 4, n) of the lagged speeds, sum s_i dOmega_i/dt (n,)) of file i."""
@@ -152,6 +153,9 @@ class MotorDynamicsFit(GridCandidate):
 
     def not_named(self, result):
         return too_short_to_time(result, self.ds)
+
+    def physical(self, result):
+        return timing_not_physical(result)
 
     def explanatory(self):
         return self.ds.flat([self._speeds(i, self._tau)[1] for i in range(len(self.ds.files))])

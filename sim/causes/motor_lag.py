@@ -5,7 +5,8 @@ import math
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.candidate import GridCandidate, too_short_to_time
+from flightctl.sim.identify.diagnose.candidate import (MAX_TIMING_S, TIMING_CHECK, GridCandidate, timing_not_physical,
+                                                       too_short_to_time)
 from flightctl.sim.world.model import Effect, Parameter
 
 
@@ -39,11 +40,13 @@ def lag_held(U: np.ndarray, tau: float, fs: float) -> tuple[np.ndarray, np.ndarr
 
 class MotorLagFit(GridCandidate):
     """Each rotor's eq. 26 thrust through the exact lag of the held command, averaged over the
-    period; a 41-point grid over tau (0 and 2 ms to 0.3 s, geometric)."""
+    period; a 41-point grid over tau (0 and 2 ms to 0.3 s, geometric: the whole physical range),
+    refined between the best point's neighbours."""
     effect = MotorLag
     changes_thrust = dynamic = True
     explains = "rate of change of the commanded total |thrust differences| (N/s)"
-    grid = np.concatenate([[0.0], np.geomspace(0.002, 0.3, 40)])
+    grid = np.concatenate([[0.0], np.geomspace(0.002, MAX_TIMING_S, 40)])
+    physical_check = TIMING_CHECK
 
     def thrusts(self, parameters):
         ds, tau = self.ds, parameters["tau"]
@@ -55,3 +58,6 @@ class MotorLagFit(GridCandidate):
 
     def not_named(self, result):
         return too_short_to_time(result, self.ds)
+
+    def physical(self, result):
+        return timing_not_physical(result)

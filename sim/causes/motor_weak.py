@@ -25,6 +25,13 @@ class MotorWeak(Effect):
         s[self._i] *= self.parameters["scale"]
 
 
+# A motor's thrust and torque against the model's: half to one and a half. A motor at half its siblings'
+# thrust for the same command needs twice their command's thrust to hold the vehicle level: at a hover
+# at 50 % of full thrust (thrust-to-weight 2) it is then at its limit; beyond, the fit stands for a
+# wrong motor order or scaling (which the base model's checks catch) rather than a motor.
+SCALE_RANGE = (0.5, 1.5)
+
+
 class MotorWeakFit(AffineCandidate):
     """Rotor m's thrust and torque times `scale`. The change is linear in the scale but for the
     rotor's momentum of eq. 9 (its speed goes as the square root of the thrust), which a fit of the
@@ -35,6 +42,9 @@ class MotorWeakFit(AffineCandidate):
     effect = MotorWeak
     changes_thrust = True
     explains = "thrust of the weak motor (N)"
+    physical_check = (f"scale within {SCALE_RANGE[0]:g}-{SCALE_RANGE[1]:g} (a motor at half its siblings' thrust holds a "
+                      "vehicle hovering at half its full thrust only at its limit); where the log has rotor speeds, "
+                      "the motor turns slower for its command than the others (rotor_gain_check)")
 
     def why_not(self):
         if self.ds.vehicle.identified:
@@ -92,6 +102,20 @@ class MotorWeakFit(AffineCandidate):
         self._m = m
         return Result(self.cause, {"motor": m + 1, "scale": round(1.0 + float(th[0]), 4)}, score,
                       fitted(e, designs[m], th), explains=self.explains, folds=folds)
+
+    def physical(self, result):
+        from flightctl.sim.identify.diagnose.rotorspeed import CURVE_TOL, GAIN_TOL   # it imports the causes
+        m, s = int(result.parameters["motor"]), result.parameters["scale"]
+        if not SCALE_RANGE[0] <= s <= SCALE_RANGE[1]:
+            return f"motor {m} at {s:.2f} of its modelled thrust is outside {SCALE_RANGE[0]:g}-{SCALE_RANGE[1]:g}"
+        speeds = self.ds.rotor_speeds
+        if s < 1.0 - GAIN_TOL and speeds is not None and speeds.get("speed_gain") is not None:
+            q = np.asarray(speeds["speed_gain"]) ** 2
+            q = q / q.mean()
+            if q[m - 1] >= 1.0 - CURVE_TOL:
+                return (f"the log's rotor speeds put motor {m} on the others' speed-per-command curve (its speed gives "
+                        f"{q[m - 1]:.3f} of the mean thrust): a weak motor turns slower for its command")
+        return None
 
     def explanatory(self):
         return self.ds.thrust[getattr(self, "_m", 0)]

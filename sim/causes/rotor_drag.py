@@ -57,6 +57,13 @@ class RotorDrag(Effect):
         torque[2] += tz   # each rotor's drag at r l, arm l
 
 
+# Rotor drag per unit mass, k / M (1/s): measured quadrotors give 0.3-0.6 (docs/as-flown.md, the as-flown
+# model's review); momentum theory's ram drag, an upper estimate, is g / (2 v_h), 1.03 1/s for the paper's
+# vehicle (Table 2's mass on 12-inch rotors, v_h = 4.75 m/s: scripts/as_flown.py). A vehicle whose rotors
+# are half as loaded has v_h 1/sqrt(2) of it: twice the paper's ram drag bounds the physical range.
+MAX_K_OVER_M = 2.0
+
+
 class RotorDragFit(GridCandidate):
     """Horizontal drag -k (u, v) in the body frame. The body velocity is not logged; it is
     reconstructed by the model itself: the horizontal inertial acceleration is the horizontal part
@@ -69,6 +76,8 @@ class RotorDragFit(GridCandidate):
     free columns fitted with the offsets for each k on the training blocks."""
     effect = RotorDrag
     explains = "reconstructed body velocity u (m/s)"
+    physical_check = (f"k / M at most {MAX_K_OVER_M:g} 1/s: measured quadrotors 0.3-0.6 1/s, momentum theory's ram "
+                      "drag g / (2 v_h) 1.03 1/s for the paper's vehicle, an upper estimate (docs/as-flown.md)")
     grid = np.concatenate([[0.0], np.geomspace(0.01, 3.0, 36)])
     round_to = 3
 
@@ -123,6 +132,13 @@ class RotorDragFit(GridCandidate):
         if result.parameters["k"] <= 0:   # the folds chose some drag, the whole flight none: the held-out
             return ("rotor_drag: the fit on all the data finds no drag (k = 0); the held-out gain is its "
                     "nuisance biases': not named")    # gain came from the biases riding on the folds' k
+        return None
+
+    def physical(self, result):
+        k_m = result.parameters["k"] / self.ds.a.M
+        if k_m > MAX_K_OVER_M:
+            return (f"k / M = {k_m:.2f} 1/s is above {MAX_K_OVER_M:g} 1/s, twice the ram drag of momentum theory for "
+                    "the paper's vehicle (measured quadrotors: 0.3-0.6 1/s)")
         return None
 
     def explanatory(self):

@@ -15,6 +15,12 @@ from flightctl.sim.identify.diagnose.scoring import (Score, Significance, fitted
 from flightctl.sim.world.model import Effect
 
 MIN_TIMING_PERIODS = 1.5  # lag or delay shorter than this many loop periods is not named
+REFINE_XATOL = 3e-3       # a grid fit's refinement stops within this share of the neighbours' interval
+# The physical range of a rotor's timing (lag or delay): docs/as-flown.md's motor time constants run from
+# 20 ms (INDIflight's 3-inch rotors, bench) to 192 ms (the open-loop estimate with Table 2's rotor inertia;
+# 170 ms measured for a 920 KV motor with a 9.4-inch propeller on an open-loop ESC); ESC and loop delays
+# are a few ms to tens of ms. The search covers 0-300 ms; a fit at its end is no timing of a rotor.
+MAX_TIMING_S = 0.3
 
 
 @dataclass
@@ -29,6 +35,7 @@ class Result:
     folds: list = field(default_factory=list)
     significance: Significance | None = None
     note: str | None = None                # why a significant-looking result is not named, if it is not
+    not_physical: str | None = None        # why its size cannot be this vehicle's (`Candidate.physical`)
 
     @property
     def gain(self) -> float:
@@ -57,6 +64,10 @@ class Candidate:
       `not_named(result) -> str | None`  asked only when its score is significant: a reason not
                   to name it all the same (written as a note), such as a size the data cannot
                   tell from nothing or a sign the physics excludes;
+      `physical(result) -> str | None`  why the fitted size cannot be this vehicle's, checked against
+                  the log's own data or a published range (`physical_check` says which, with its
+                  source): a significant candidate that fails it "fits, but is not physical" and is
+                  not named;
       `explanatory() -> (n,) array`  the explaining variable per sample, for the figure;
       `predict(parameters) -> (C, n)`  the filtered change of the prediction at given parameters
                   (the carried effect of a parameter file in the base model; `GridCandidate` and
@@ -78,6 +89,9 @@ class Candidate:
     changes_thrust = False   # its `fold` changes the base model (the thrusts, their scales, the rotors'
                              # positions) rather than adding a term to it: folded first
     dynamic = False          # it needs the commands logged faster than the dynamics it times (verdict.DYNAMIC_MIN_HZ)
+    physical_check = ""      # what size is physical, and its source (docs/diagnose.md, "Physical checks")
+    needs_yaw = False        # it is told from the others by the yaw channel alone: not judged on a vehicle
+                             # whose yaw effectiveness the log cannot identify (base.yaw_identified)
 
     def __init__(self, ds: DataSet):
         self.ds = ds
@@ -99,6 +113,10 @@ class Candidate:
 
     def not_named(self, result: Result) -> str | None:
         """A reason not to name this candidate although it is significant, or None."""
+        return None
+
+    def physical(self, result: Result) -> str | None:
+        """Why the fitted size cannot be this vehicle's, or None (`physical_check`)."""
         return None
 
     def run(self) -> Result:
@@ -143,6 +161,20 @@ def too_short_to_time(result: Result, ds: DataSet) -> str | None:
     if v < MIN_TIMING_PERIODS / ds.fs:
         return (f"{result.cause}: {v * 1e3:.1f} ms is within {MIN_TIMING_PERIODS:g} loop periods, the timing "
                 f"uncertainty of a log (sensor filters, when in the period the sample is taken): not named")
+    return None
+
+
+TIMING_CHECK = (f"a lag or delay of 0-{1e3 * MAX_TIMING_S:.0f} ms: motor time constants of 20-192 ms "
+                "(docs/as-flown.md: INDIflight's bench, the open-loop estimate with Table 2's rotor inertia, a "
+                "measured 9.4-inch rotor) and ESC delays of a few ms")
+
+
+def timing_not_physical(result: Result) -> str | None:
+    """`physical` of a lag or delay: one at or beyond MAX_TIMING_S (the end of the search)."""
+    v = next(iter(result.parameters.values()))
+    if v >= MAX_TIMING_S * 0.995:
+        return (f"{v * 1e3:.0f} ms is at the end of the 0-{1e3 * MAX_TIMING_S:.0f} ms search: no rotor's lag or "
+                "delay is that long (the commands and the motion the log shows do not match in time)")
     return None
 
 
@@ -194,7 +226,7 @@ class GridCandidate(Candidate):
             lo, hi = g[j - 1], g[j + 1]
             try:
                 res = optimize.minimize_scalar(self.objective, bounds=(lo, hi), method="bounded",
-                                               options={"xatol": (hi - lo) * 1e-3})
+                                               options={"xatol": (hi - lo) * REFINE_XATOL})
                 return float(res.x)
             except ValueError:
                 return float(g[j])
@@ -206,23 +238,21 @@ class GridCandidate(Candidate):
         for th in self.grid:
             e, A = self.design(th)
             stats.append(linear_stats(ds, e, A))
-        cache: dict[int, tuple] = {}
-        folds = []
         blocks = np.arange(N_BLOCKS)
-
-        def fold(b):
-            keep = blocks != b
-            fits = [solve(st, keep, ds.block_counts) for st in stats]
+        chosen = []                       # each fold's grid point and fit on its training blocks
+        for b in blocks:
+            fits = [solve(st, blocks != b, ds.block_counts) for st in stats]
             j = int(np.argmin([f[0] for f in fits]))
-            folds.append(float(self.grid[j]))
-            if j not in cache:
-                cache.clear()
-                cache[j] = self.design(self.grid[j])
-            e, A = cache[j]
-            i0, i1 = ds.block_edges[b]
-            return fitted(e[:, i0:i1], None if A is None else A[:, i0:i1], fits[j][1]), fits[j][2]
-
-        score = heldout(ds, fold)
+            chosen.append((j, fits[j]))
+        folds = [float(self.grid[j]) for j, _ in chosen]
+        pieces = {}                       # each grid point's design computed once, for every fold that chose it
+        for j in sorted({j for j, _ in chosen}):
+            e, A = self.design(self.grid[j])
+            for b, (jb, fit) in enumerate(chosen):
+                if jb == j:
+                    i0, i1 = ds.block_edges[b]
+                    pieces[b] = fitted(e[:, i0:i1], None if A is None else A[:, i0:i1], fit[1]), fit[2]
+        score = heldout(ds, pieces.__getitem__)
         allb = np.ones(N_BLOCKS, bool)
         theta = self._best([solve(st, allb, ds.block_counts)[0] for st in stats])
         e, A = self.design(theta)

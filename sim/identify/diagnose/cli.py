@@ -2,6 +2,7 @@
 
     flightctl diagnose FLIGHT.csv|F.ulg|F.bin|F.bbl|F.bfl|F.txt [...] [--index N] [--params PARAMS.toml]
                        --json REPORT.json [--validate OTHER ...] [--plot PREFIX] [--quiet]
+    flightctl diagnose --corpus DIR [--table OUT.md] [--json OUT.json] [--jobs N] [--quiet]
 
 Logs of other autopilots (PX4's ULog, ArduPilot's DataFlash, the blackbox of Betaflight and INAV) are
 read by `flightctl.sim.logs` into the same table as `flightctl log import` writes; their vehicle's
@@ -44,7 +45,7 @@ def _parser() -> argparse.ArgumentParser:
                 description="Fit every candidate extension of the model to part of the flight logs, score "
                             "it on the rest, and name the one that explains the discrepancy, or none "
                             "(measured-data.md; method: docs/diagnose.md).")
-    p.add_argument("logs", nargs="+", metavar="FLIGHT",
+    p.add_argument("logs", nargs="*", metavar="FLIGHT",
                    help="flight logs of one vehicle: this project's CSV (measured-data.md), PX4's .ulg, "
                         "ArduPilot's .bin or a Betaflight/INAV .bbl/.bfl/.txt (the `logs` extra); one file of "
                         "many logs is diagnosed log by log")
@@ -57,7 +58,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--params", metavar="PARAMS.toml",
                    help="the base model: its airframe and its [[effect]] tables (default: the reference "
                         "airframe, no effects)")
-    p.add_argument("--json", required=True, metavar="REPORT.json", help="the report (measured-data.md, diagnose)")
+    p.add_argument("--json", metavar="REPORT.json",
+                   help="the report (measured-data.md, diagnose); with --corpus, every log's report and refusal")
+    p.add_argument("--corpus", metavar="DIR",
+                   help="diagnose every log in DIR and its folders (every log of a file of many), in parallel, "
+                        "one row per log (docs/real-flights.md)")
+    p.add_argument("--table", metavar="OUT.md",
+                   help="with --corpus: the table, written between OUT.md's corpus markers if it has them")
+    p.add_argument("--jobs", type=int, metavar="N", help="with --corpus: processes (default: the cores, at most)")
     p.add_argument("--plot", metavar="PREFIX",
                    help="write PREFIX-residuals.png (residual vs time, base and after each cause), "
                         "PREFIX-explained.png (residual vs the variable that explains it) and, per log, "
@@ -89,13 +97,42 @@ def _per_log(path: str, index: int | None) -> bool:
     return kind(path) is not None and count_logs(path) > 1
 
 
+class Progress:
+    """Progress lines on stderr, one per stage, each with the time elapsed. On a terminal they are
+    live; otherwise (scripts, checks, `2> log`) they are held until the logs are read and accepted
+    (`release`: the base model stands), then live, so that bad input is the only line on stderr, as
+    measured-data.md requires, and a long diagnosis still shows where it is."""
+
+    def __init__(self, quiet: bool = False):
+        self.t0 = time.perf_counter()
+        self.quiet = quiet
+        self.held: list[str] | None = None if sys.stderr.isatty() else []
+
+    def __call__(self, *args) -> None:
+        if self.quiet:
+            return
+        line = f"[{time.perf_counter() - self.t0:6.1f} s] " + " ".join(map(str, args))
+        if self.held is None:
+            say(line)
+        else:
+            self.held.append(line)
+
+    def release(self) -> None:
+        for line in self.held or ():
+            say(line)
+        self.held = None
+
+
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
-    # On a terminal, progress is live. Otherwise (scripts, checks) it is held until the run succeeds,
-    # so that an error is the only line on stderr, as measured-data.md requires.
-    held: list[tuple] = []
-    progress = ((lambda *a: None) if args.quiet else say if sys.stderr.isatty()
-                else (lambda *a: held.append(a)))
+    if args.corpus is not None:
+        from flightctl.sim.identify.diagnose.corpus import main as corpus
+        return corpus(args)
+    if not args.logs:
+        raise InputError("name the flight logs to diagnose, or a folder of them with --corpus DIR")
+    if args.json is None:
+        raise InputError("--json REPORT.json is required (measured-data.md)")
+    progress = Progress(args.quiet)
     t0 = time.perf_counter()
     params = paramfile.load(args.params)
     out_json = Path(args.json)
@@ -103,7 +140,7 @@ def main(argv: list[str]) -> int:
         raise InputError(f"--index {args.index}: logs are counted from 1")
     output_file(out_json, "--json")
     if len(args.logs) == 1 and _per_log(args.logs[0], args.index):
-        return _each(args, params, progress, held, t0)
+        return _each(args, params, progress, t0)
     tables = read_logs(args.logs, args.index, progress)
     others = read_logs(args.validate, None, progress) if args.validate else []
     plots = _plot_paths(args.plot, len(tables))
@@ -115,8 +152,7 @@ def main(argv: list[str]) -> int:
     _write(out_json, report, plots, images)
     print(text, end="")
     progress(f"done in {time.perf_counter() - t0:.1f} s: {d.cause} {d.parameters}")
-    for a in held:
-        say(*a)
+    progress.release()
     return 0
 
 
@@ -131,7 +167,7 @@ def _plot_paths(prefix: str | None, n_tables: int, tag: str = "") -> dict[str, P
 
 
 def _judge(tables, others, params, given: bool, progress):
-    d = diagnose(tables, params.airframe, progress, params.effects, params_given=given)
+    d = diagnose(tables, params.airframe, progress, params.effects, params_given=given, accepted=progress.release)
     if others:
         d.validation = validate(d, others, params.airframe, progress)
     return d
@@ -153,7 +189,7 @@ def _write(out_json: Path, report: dict, plots: dict, images: dict) -> None:
         path.write_bytes(images[k])
 
 
-def _each(args, params, progress, held, t0) -> int:
+def _each(args, params, progress, t0) -> int:
     """A file of many logs: each log that holds a flight diagnosed on its own; the others named."""
     from flightctl.sim.logs import each_log, skipped
     path = args.logs[0]
@@ -194,6 +230,5 @@ def _each(args, params, progress, held, t0) -> int:
     if any(e.table is None for e in entries):
         print(f"skipped: {skipped(entries)}")
     progress(f"done in {time.perf_counter() - t0:.1f} s: {len(judged)} of {len(entries)} logs judged")
-    for a in held:
-        say(*a)
+    progress.release()
     return 0

@@ -100,6 +100,7 @@ class FileData:
     gyro_filter: tuple = ()  # the causal filters between the sensor and the logged gyro (parse_filters)
     acc_filter: tuple = ()
     omega: np.ndarray | None = None   # (4, n) measured rotor speed (rad/s) when logged
+    battery_cells: int | None = None  # the pack's cell count when the log says it (`# battery_cells:`)
     notes: list[str] = field(default_factory=list)
 
 
@@ -221,6 +222,16 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, notes: list[str]):
     return layout, up, z, omega
 
 
+def _cells(table: Table) -> int | None:
+    """The pack's cell count of a `# battery_cells:` line (a positive integer), else None."""
+    text = table.meta.get("battery_cells", "").strip()
+    try:
+        n = int(text)
+    except ValueError:
+        return None
+    return n if 1 <= n <= 24 else None
+
+
 def load_file(table: Table, a: Airframe) -> FileData:
     """The arrays of one flight log (already read and checked by `flightctl.logfile`). A log of this
     project's vehicle has the paper's + layout with the arm of `a`; a foreign one (`# vehicle:
@@ -280,4 +291,4 @@ def load_file(table: Table, a: Airframe) -> FileData:
         if (i1 - i0) * dt_nom >= MIN_STRETCH_S:
             keep[i0:i1] = True
     return FileData(table.path, t, P, gyro, acc, bv, z, Rm, keep, on, layout, foreign, gyro_filter, acc_filter,
-                    omega, notes)
+                    omega, _cells(table), notes)

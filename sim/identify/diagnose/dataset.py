@@ -21,7 +21,7 @@ import numpy as np
 
 from flightctl.params import Airframe
 from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, yaw_drag
-from flightctl.sim.identify.diagnose.data import FileData, Layout, stretches
+from flightctl.sim.identify.diagnose.data import EDGE_S, FileData, Layout, stretches
 
 CHANNELS = ("p_dot", "q_dot", "r_dot", "acc_x", "acc_y", "acc_z")
 UNITS = ("rad/s^2", "rad/s^2", "rad/s^2", "m/s^2", "m/s^2", "m/s^2")
@@ -31,6 +31,10 @@ GYRO, ACC = slice(0, 3), slice(3, 6)
 THRUST_CHANNELS = (0, 1, 2, 5)   # the channels the rotors' thrust drives (roll, pitch, yaw torque; thrust)
 
 LOWPASS_HZ = 12.0        # zero-phase low-pass applied to every residual (2nd-order Butterworth, twice)
+# After the low-pass the channels are kept at FLAT_PER_BAND times its bandwidth (every `step`-th row):
+# the filter's response there is (1/8)^4 = 2.4e-4 of the pass band's, so nothing is aliased, and the
+# fits, scores and tests see the same signal at a tenth of the samples of a 1 kHz log.
+FLAT_PER_BAND = 8.0
 N_BLOCKS = 8             # blocked cross-validation
 
 
@@ -56,9 +60,11 @@ class Vehicle:
 
 class Pred(NamedTuple):
     """A per-file prediction (C, n), and for an identified vehicle the thrust channels of each
-    component of the drive at unit effectiveness (K, C, n), whose coefficients the fits refine."""
+    component of the drive at unit effectiveness (K, C, n), whose coefficients the fits refine, and
+    the rest of the prediction (C, n): value = unit[0] + rest (the coupling, the yaw drag, a wrench)."""
     value: np.ndarray
     unit: np.ndarray | None = None
+    rest: np.ndarray | None = None
 
 
 class Change(NamedTuple):
@@ -92,6 +98,17 @@ def sensor_filters(chain, fs: float) -> list[tuple[list, list]]:
     return out
 
 
+def _sos(stages) -> np.ndarray | None:
+    """The (b, a) stages of `sensor_filters` as one cascade of second-order sections, or None."""
+    if not stages:
+        return None
+    rows = []
+    for b, a in stages:
+        b, a = list(b) + [0.0] * (3 - len(b)), list(a) + [0.0] * (3 - len(a))
+        rows.append(b + a)
+    return np.array(rows, float)
+
+
 class DataSet:
     """`r_base` (C, n) is the low-passed base residual over the airborne samples; `block` gives each
     sample's block, `block_edges` the (start, stop) of each; `base_free` (K, C, n) the identified
@@ -104,12 +121,21 @@ class DataSet:
         self.fs = 1.0 / float(np.median(np.concatenate([np.diff(f.t) for f in files])))
         self.lowpass_hz = lowpass_hz
         self.sos = signal.butter(2, lowpass_hz, fs=self.fs, output="sos")
-        self._sensor = [(sensor_filters(f.gyro_filter, self.fs), sensor_filters(f.acc_filter, self.fs))
+        self._zi = signal.sosfilt_zi(self.sos)          # (sections, 2): once, not per stretch
+        self._sensor = [(_sos(sensor_filters(f.gyro_filter, self.fs)), _sos(sensor_filters(f.acc_filter, self.fs)))
                         for f in files]
         # the stretches: (file index, start, stop) of input rows
         self.stretches = [(i, s0, s1) for i, f in enumerate(files) for s0, s1 in stretches(f.airborne)]
-        self.n = sum(s1 - s0 for _, s0, s1 in self.stretches)
-        self.seconds = self.n / self.fs
+        self.step = max(1, int(self.fs / (FLAT_PER_BAND * lowpass_hz)))
+        self.fs_flat = self.fs / self.step                # the rate of the flat (kept) samples
+        self.n = sum(len(range(s0, s1, self.step)) for _, s0, s1 in self.stretches)
+        # each stretch with the trimmed edges of its flight (data.EDGE_S) on either side, for the filter
+        pads = [int(round(EDGE_S / float(np.median(np.diff(f.t))))) for f in files]
+        self._padded = [(max(0, s0 - pads[i]), min(files[i].t.size - 1, s1 + pads[i])) for i, s0, s1 in self.stretches]
+        self._last_row = {}
+        for (i, _, _), (_, p1) in zip(self.stretches, self._padded):
+            self._last_row[i] = max(self._last_row.get(i, 0), p1)
+        self.seconds = sum(s1 - s0 for _, s0, s1 in self.stretches) / self.fs
         a = self.a
         self.D = [self.drive(thrust_from_command(f.P, a.h1, a.h2)) for f in files]   # eq. 26
         # each rotor's thrust and torque scale: an identified vehicle's rotor gains, then the chain's causes
@@ -130,7 +156,7 @@ class DataSet:
         self.z = self.flat([f.z for f in files])
         self.w = self.flat(self.wmid)
         self.time = self.flat([f.t for f in files])
-        self.file_index = np.concatenate([np.full(s1 - s0, i) for i, s0, s1 in self.stretches])
+        self.file_index = np.concatenate([np.full(len(range(s0, s1, self.step)), i) for i, s0, s1 in self.stretches])
         edges = np.linspace(0, self.n, N_BLOCKS + 1).round().astype(int)
         self.block = np.zeros(self.n, int)
         for b in range(N_BLOCKS):
@@ -141,6 +167,7 @@ class DataSet:
         self.carried: dict[str, np.ndarray] = {}     # cause -> its filtered term in the base prediction
         self.carried_parameters: dict[str, dict] = {}
         self.extra_free: list[np.ndarray] = []       # free columns a cause of the chain brought (C, n)
+        self.rotor_speeds: dict | None = None        # the log's own rotor speeds' check (rotorspeed.py), if any
         self.rebase()
 
     def drive(self, F: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
@@ -171,8 +198,15 @@ class DataSet:
         self.thrust = self.flat([F * s for F, s in zip(self.F, self.S)])
         preds = [self.predict_file(i, self.D[i]) for i in range(len(self.files))]
         self.base_pred = [p.value for p in preds]
+        self.base_rest = [p.rest for p in preds]
         self.r_base = self.measured - self.flat_filtered(self.base_pred) - sum(self.carried.values())
-        self.base_free = self.free_columns(preds)
+        self._base_unit0 = None
+        if self.vehicle.identified:
+            U = self.flat_filtered([p.unit for p in preds])
+            self._base_unit0 = U[0]
+            self.base_free = self._free(U)
+        else:
+            self.base_free = self._free(None)
 
     def carry(self, cause: str, parameters: dict, delta: np.ndarray) -> None:
         """Add a carried effect's filtered prediction change `delta` (C, n) at `parameters` to the
@@ -189,42 +223,69 @@ class DataSet:
 
     # -- helpers over stretches
     def flat(self, per_file):
-        return np.concatenate([per_file[i][..., s0:s1] for i, s0, s1 in self.stretches], axis=-1)
+        """The kept samples (every `step`-th row of each stretch) of per-file (..., n) arrays."""
+        return np.concatenate([per_file[i][..., s0:s1:self.step] for i, s0, s1 in self.stretches], axis=-1)
 
     def _sense(self, i, x):
         """What the sensors show of model-side (..., C, n) arrays of file i: the log's declared gyro
-        and accelerometer filters, causal, over the whole file."""
+        and accelerometer filters, causal, over the whole file (the rows that are not all zero)."""
         from scipy import signal
         gyro, acc = self._sensor[i]
-        if not (gyro or acc):
+        if gyro is None and acc is None:
             return x
         x = np.array(x, dtype=float)
-        for rows, stages in ((GYRO, gyro), (ACC, acc)):
-            for b, a in stages:
-                x[..., rows, :] = signal.lfilter(b, a, x[..., rows, :], axis=-1)
+        for rows, sos in ((GYRO, gyro), (ACC, acc)):
+            if sos is None:
+                continue
+            part = x[..., rows, :]
+            flat = part.reshape(-1, part.shape[-1])
+            live = np.flatnonzero(np.any(flat != 0.0, axis=1))
+            if live.size:
+                flat[live] = signal.sosfilt(sos, flat[live], axis=-1)
+                x[..., rows, :] = flat.reshape(part.shape)
         return x
 
     def flat_filtered(self, per_file, sensor: bool = True):
-        """The stretches of per-file (..., n) arrays, each stretch low-passed forward and backward.
-        `sensor`: the arrays are the model's channels (..., C, n), so they first go through the log's
-        sensor filters (the measurements went through them on the vehicle)."""
-        from scipy import signal
+        """The stretches of per-file (..., n) arrays, each stretch low-passed forward and backward, at
+        the kept samples (`flat`).
+        Each is filtered with the EDGE_S of flight on either side that the airborne mask trimmed off
+        (`_padded`): the filter's start-up transient falls there, not on the data. `sensor`: the arrays
+        are the model's channels (..., C, n), so they first go through the log's sensor filters (the
+        measurements went through them on the vehicle)."""
         parts = []
-        for i, s0, s1 in self.stretches:
+        sensed = {}        # the sensor filters run once over each file, not once per stretch
+        for (i, s0, s1), (p0, p1) in zip(self.stretches, self._padded):
             x = per_file[i]
             if sensor and x.ndim >= 2:
-                x = self._sense(i, x)
-            x = x[..., s0:s1]
+                if i not in sensed:
+                    sensed[i] = self._sense(i, x[..., :self._last_row[i]])
+                x = sensed[i]
+            x = x[..., p0:p1]
+            inner = slice(s0 - p0, s1 - p0, self.step)
+            m = len(range(s0, s1, self.step))
             if x.ndim >= 2:      # rows that are zero stay zero: filter only the others (speed)
                 flat = x.reshape(-1, x.shape[-1])
-                y = np.zeros_like(flat)
+                y = np.zeros((flat.shape[0], m))
                 rows = np.flatnonzero(np.any(flat != 0.0, axis=1))
                 if rows.size:
-                    y[rows] = signal.sosfiltfilt(self.sos, flat[rows], axis=-1)
-                parts.append(y.reshape(x.shape))
+                    y[rows] = self._filtfilt(flat[rows])[:, inner]
+                parts.append(y.reshape(x.shape[:-1] + (m,)))
             else:
-                parts.append(signal.sosfiltfilt(self.sos, x, axis=-1))
+                parts.append(self._filtfilt(x[None])[0, inner])
         return np.concatenate(parts, axis=-1)
+
+    def _filtfilt(self, x: np.ndarray) -> np.ndarray:
+        """scipy.signal.sosfiltfilt(self.sos, x, axis=-1) of rows x (m, L), its odd extension and
+        start-up states, with the states' shape computed once for the data set."""
+        from scipy import signal
+        pad = 3 * (2 * len(self.sos) + 1 - min((self.sos[:, 2] == 0).sum(), (self.sos[:, 5] == 0).sum()))
+        if x.shape[-1] <= pad:
+            return signal.sosfiltfilt(self.sos, x, axis=-1)
+        ext = np.concatenate([2.0 * x[:, :1] - x[:, pad:0:-1], x, 2.0 * x[:, -1:] - x[:, -2:-pad - 2:-1]], axis=1)
+        zi = self._zi[:, None, :]
+        y, _ = signal.sosfilt(self.sos, ext, axis=-1, zi=zi * ext[None, :, :1])
+        y, _ = signal.sosfilt(self.sos, y[:, ::-1], axis=-1, zi=zi * y[None, :, -1:])
+        return y[:, ::-1][:, pad:-pad]
 
     def predict_file(self, i, D, scale=None, torque_extra=None, force_extra=None) -> Pred:
         """The model's channels for file i from the rotors' drive D (K, 4, n) (`drive`): eq. 7 with the
@@ -262,12 +323,15 @@ class DataSet:
         out[5] = F.sum(axis=0) / a.M
         if force_extra is not None:
             out[3], out[4] = force_extra[0] / a.M, force_extra[1] / a.M
-        return Pred(out, unit)
-
-    def free_columns(self, preds: list[Pred]) -> np.ndarray:
-        """(K, C, n): an identified vehicle's free columns at the drives of `preds` (each thrust
-        channel's coefficients on each drive component), then those the chain's causes brought."""
-        return self._free(self.flat_filtered([p.unit for p in preds]) if self.vehicle.identified else None)
+        rest = None
+        if v.identified:     # the same terms without the drive's thrust part (Jp = 0: no rotor momentum)
+            te = np.zeros((3, 1)) if torque_extra is None else torque_extra
+            rest = np.zeros_like(out)
+            rest[0] = te[0] / a.Jxx + cp * q * r
+            rest[1] = te[1] / a.Jyy + cq * p * r
+            rest[2] = (te[2] - tau_d) / a.Jzz + cr * p * q
+            rest[3:5] = out[3:5]
+        return Pred(out, unit, rest)
 
     def _free(self, U: np.ndarray | None) -> np.ndarray:
         """The free columns from the filtered unit channels U (K, C, n) of the drive's components: each
@@ -289,9 +353,11 @@ class DataSet:
         if not self.vehicle.identified:
             return Change(self.flat_filtered([p.value - b for p, b in zip(per_file_pred, self.base_pred)]),
                           self._free(None))
-        both = self.flat_filtered([np.concatenate([(p.value - b)[None], p.unit])
-                                   for p, b in zip(per_file_pred, self.base_pred)])
-        return Change(both[0], self._free(both[1:]))
+        # value = unit[0] + rest: the thrust part is filtered once, as a free column; what else changed
+        # (a wrench, mostly nothing: zero rows are not filtered) is filtered on its own
+        both = self.flat_filtered([np.concatenate([(p.rest - b)[None], p.unit])
+                                   for p, b in zip(per_file_pred, self.base_rest)])
+        return Change(both[0] + both[1] - self._base_unit0, self._free(both[1:]))
 
     def thrust_columns(self, i, F=None):
         """Per-file (4, C, n): the part of the channels proportional to each rotor's thrust and torque."""

@@ -16,7 +16,7 @@ XCORR_MAX_S = 0.25    # cross-correlations are searched over lags within +-this
 
 
 def _decimate_step(d: Diagnosis) -> int:
-    return max(1, int(d.ds.fs / (2.0 * d.report()["data"]["lowpass_hz"])))
+    return max(1, int(d.ds.fs_flat / (2.0 * d.report()["data"]["lowpass_hz"])))
 
 
 def whiteness(x: np.ndarray, step: int) -> tuple[float, float]:
@@ -45,7 +45,9 @@ def inputs(d: Diagnosis) -> dict[str, np.ndarray]:
 
 
 def xcorr(res: np.ndarray, x: np.ndarray, max_lag: int, step: int) -> float:
-    """Largest |normalised cross-correlation| of res with x over lags within +-max_lag samples."""
+    """Largest |normalised cross-correlation| of res with x over lags within +-max_lag samples (every
+    `step`-th lag), all lags at once by FFT."""
+    from scipy import signal
     ok = np.isfinite(x)
     if ok.sum() < 10:
         return float("nan")
@@ -55,14 +57,10 @@ def xcorr(res: np.ndarray, x: np.ndarray, max_lag: int, step: int) -> float:
     na, nb = np.sqrt(a @ a), np.sqrt(b @ b)
     if na == 0 or nb == 0:
         return float("nan")
-    best = 0.0
-    for lag in range(-max_lag, max_lag + 1, step):
-        if lag >= 0:
-            c = float(a[lag:] @ b[:b.size - lag])
-        else:
-            c = float(a[:lag] @ b[-lag:])
-        best = max(best, abs(c) / (na * nb))
-    return best
+    full = signal.correlate(a, b, mode="full", method="fft")       # index n - 1 + lag: sum_k a[k + lag] b[k]
+    lags = np.arange(-max_lag, max_lag + 1, step)
+    lags = lags[np.abs(lags) < a.size]
+    return float(np.max(np.abs(full[a.size - 1 + lags])) / (na * nb))
 
 
 def text(d: Diagnosis) -> str:
@@ -70,14 +68,14 @@ def text(d: Diagnosis) -> str:
     ds = d.ds
     L = []
     L.append(f"flightctl diagnose: {', '.join(rep['data']['files'])}")
-    L.append(f"  {ds.seconds:.1f} s airborne, {ds.n} samples at {ds.fs:.0f} Hz, {len(ds.stretches)} stretch(es)")
+    L.append(f"  {ds.seconds:.1f} s airborne, {ds.n} samples kept at {ds.fs_flat:.0f} Hz of the log's {ds.fs:.0f} Hz, {len(ds.stretches)} stretch(es)")
     L.append(f"  metric: {rep['metric']}")
     base = ", ".join(f"{e['cause']} {e['parameters']}" for e in d.carried)
     if ds.vehicle.identified:
         L.append("  base model: identified from the flight (another vehicle; docs/real-flights.md), per unit mass "
                  "and inertia, arm lengths as unit:")
         for name, v in rep["base_model"].items():
-            if isinstance(v, dict) and "stderr" in v and not isinstance(v["value"], list):
+            if isinstance(v, dict) and "value" in v and "stderr" in v and not isinstance(v["value"], list):
                 L.append(f"    {name:<7} {v['value']:>11.5g} +- {v['stderr']:<9.2g} {v['unit']:<22} {v['what']}")
         g = rep["base_model"]["rotor_gain"]
         L.append("    rotor gains (each rotor's thrust against the mean of the four): "
@@ -117,11 +115,21 @@ def text(d: Diagnosis) -> str:
         L.append(f"  verdict: {d.cause} {d.parameters}: held-out RMSE {d.rmse_base:.4g} -> {d.rmse_extended:.4g}, "
                  f"gain {d.gain:.3f} (significant in {d.significant[d.cause]})")
     best = next((r for r in d.results if r.cause == d.cause), None)
+    for r in rep["not_physical"]:
+        params = ", ".join(f"{k}={v:.4g}" if isinstance(v, (int, float)) else f"{k}={v}" for k, v in r["parameters"].items())
+        L.append(f"  fits, but not physical: {r['cause']} {params} (gain {r['gain']:+.3f}): {r['why']}")
     check = rep.get("rotor_speed_check")
     if check:
         L.append(f"  check against the log's rotor speeds: commanded speed -> measured, lag {1e3 * check['tau']:.1f} ms "
                  f"(per motor {', '.join(f'{1e3 * t:.0f}' for t in check['per_motor_tau'])} ms) and delay "
-                 f"{1e3 * check['delay']:.1f} ms")
+                 f"{1e3 * check['delay']:.1f} ms; {check['agreement']['what']}")
+    gains = rep.get("rotor_gain_check")
+    if gains:
+        L.append(f"  rotor gains: {gains['verdict']}: {gains['why']}")
+    com = rep["base_model"].get("com")
+    if com:
+        L.append(f"  centre of mass (base model): dx {com['dx']:+.4f} +- {com['stderr'][0]:.2g}, dy {com['dy']:+.4f} "
+                 f"+- {com['stderr'][1]:.2g} {com['unit']} from the thrust centre")
     val = rep.get("validation")
     if val:
         L.append(f"  validation on {', '.join(val['files'])} ({val['airborne_s']} s airborne), the model as fitted here: "
@@ -137,7 +145,7 @@ def text(d: Diagnosis) -> str:
 def _residual_table(d: Diagnosis, best: Result | None) -> str:
     step = _decimate_step(d)
     ins = inputs(d)
-    max_lag = int(XCORR_MAX_S * d.ds.fs)
+    max_lag = int(XCORR_MAX_S * d.ds.fs_flat)
     base = d.base.score.residual
     ext = best.score.residual if best is not None else base
     L = ["  held-out residual per channel, base -> extended"

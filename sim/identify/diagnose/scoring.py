@@ -60,7 +60,7 @@ def linear_stats(ds: DataSet, e: np.ndarray, A: np.ndarray | None = None) -> Lin
     st = LinearStats(np.zeros((N_BLOCKS, C)), np.zeros((N_BLOCKS, C, P)), np.zeros((N_BLOCKS, C)),
                      np.zeros((N_BLOCKS, C, P)), np.zeros((N_BLOCKS, C, P, P)))
     # most columns act in one channel or two: the products are taken per channel over its own columns
-    active = [np.flatnonzero(np.any(A[c] != 0.0, axis=0)) for c in range(C)] if P else [np.arange(0)] * C
+    active = [np.flatnonzero(A[c].any(axis=0)) for c in range(C)] if P else [np.arange(0)] * C
     for b, (i0, i1) in enumerate(ds.block_edges):
         eb = e[:, i0:i1]
         st.se[b] = eb.sum(axis=1)

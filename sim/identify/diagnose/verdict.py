@@ -17,12 +17,13 @@ from flightctl.errors import InputError
 from flightctl.logfile import Table
 from flightctl.params import Airframe, EffectSpec
 from flightctl.sim.causes import CAUSES, make
-from flightctl.sim.identify.diagnose.base import identify
+from flightctl.sim.causes.battery_sag import pack_range
+from flightctl.sim.identify.diagnose.base import YAW_UNKNOWN, identify, yaw_identified
 from flightctl.sim.identify.diagnose.candidate import Result, columns_of
 from flightctl.sim.identify.diagnose.data import MIN_STRETCH_S, Layout, load_file
 from flightctl.sim.identify.diagnose.dataset import (CHANNELS, LOWPASS_HZ, N_BLOCKS, OFFSET, UNITS, Change,
                                                      DataSet, Vehicle)
-from flightctl.sim.identify.diagnose.rotorspeed import rotor_speed_lag
+from flightctl.sim.identify.diagnose.rotorspeed import rotor_gain_check, rotor_speed_lag, timing_agreement
 from flightctl.sim.identify.diagnose.scoring import (DM_CHANNEL_WINDOW_S, DM_WINDOW_S, MIN_CHANNEL_GAIN, MIN_GAIN,
                                                      T_CHANNEL, T_CRIT, geomean, heldout_linear, significance)
 
@@ -33,6 +34,7 @@ MIN_AIRBORNE_S = 1.0     # s of airborne data needed in total to judge anything
 DYNAMIC_MIN_HZ = 4.0 * LOWPASS_HZ
 # Causes that are one physical effect modelled two ways: once one is in the chain the other is not tried.
 TWINS = {"motor_lag": "motor_dynamics", "motor_dynamics": "motor_lag"}
+TIMING = ("actuation_delay", "motor_lag", "motor_dynamics")     # the causes that time the actuation
 
 METRIC = ("geometric mean over 6 channels of the held-out RMSE of the one-loop-period equation error: "
           "angular acceleration p, q, r (rad/s^2, differenced gyro) and specific force x, y, z (m/s^2, "
@@ -59,6 +61,11 @@ class Round:
     significant: dict[str, str]            # cause -> why significant: "all channels" or the one channel
     named: Result | None = None
 
+    @property
+    def not_physical(self) -> list[Result]:
+        """The candidates that fit significantly but whose size is not physical (not named)."""
+        return [r for r in self.results if r.not_physical and r.note is None and r.significance.named_by()]
+
     def candidates(self) -> list[dict]:
         out = []
         for r in self.results:
@@ -67,6 +74,7 @@ class Round:
                         "rmse_extended": _num(geomean(r.score.rmse()), 6),
                         "t_stat": _num(r.t_stat, 2), "significant": r.cause in self.significant,
                         "significant_in": self.significant.get(r.cause),
+                        "not_physical": r.not_physical,
                         "channels": {c: {"gain": _num(g), "t": _num(t, 2)}
                                      for c, g, t in zip(CHANNELS, s.channel_gain, s.channel_t)},
                         "block_gains": [_num(g, 4) for g in s.block_gain]})
@@ -82,6 +90,7 @@ class Diagnosis:
     lowpass_hz: float = LOWPASS_HZ
     final: dict[str, Result] = field(default_factory=dict)   # the chain's causes, each refitted on top of the others
     rotor_speed_check: dict | None = None
+    rotor_gain_check: dict | None = None
     validation: dict | None = field(default=None)
 
     # the first round is the contract's top level: the strongest cause and every candidate
@@ -135,6 +144,18 @@ class Diagnosis:
     def gain(self) -> float:
         return self.chain[0].gain if self.chain else 0.0
 
+    def gyro_timing(self) -> tuple[str, float] | None:
+        """(cause, s): the timing the gyro gives: the chain's timing cause, else the timing candidate
+        with the best held-out gain."""
+        for c, r in self.final.items():
+            if c in TIMING:
+                return c, float(next(iter(r.parameters.values())))
+        timing = [r for r in self.results if r.cause in TIMING]
+        if not timing:
+            return None
+        r = max(timing, key=lambda r: r.gain)
+        return r.cause, float(next(iter(r.parameters.values())))
+
     def report(self) -> dict:
         """The JSON report: the keys of measured-data.md, then the project's extras."""
         base_rmse = self.base.score.rmse()
@@ -171,11 +192,24 @@ class Diagnosis:
                             **v.identification} if v.identified else
                            {"identified": False, "what": "this project's airframe (conventions.md or --params)"}),
             "data": {"files": [f.path for f in self.ds.files], "airborne_s": round(self.ds.seconds, 2),
-                     "lowpass_hz": self.lowpass_hz, "base_effects": self.carried},
+                     "lowpass_hz": self.lowpass_hz, "base_effects": self.carried,
+                     "battery_v": (None if (v := pack_range(self.ds.files)) is None else [round(x, 2) for x in v])},
             "notes": list(dict.fromkeys(self.notes)),   # a note said twice (two passes) once
         }
+        seen = set()
+        out["not_physical"] = []
+        for rnd in self.rounds:
+            for r in rnd.not_physical:
+                if r.cause not in seen:
+                    seen.add(r.cause)
+                    out["not_physical"].append({"cause": r.cause, "parameters": r.parameters, "gain": _num(r.gain),
+                                                "why": r.not_physical})
+        out["physical_checks"] = {c.name: c.candidate.physical_check for c in CAUSES.values() if c.candidate.physical_check}
         if self.rotor_speed_check is not None:
-            out["rotor_speed_check"] = self.rotor_speed_check
+            out["rotor_speed_check"] = {**self.rotor_speed_check,
+                                        "agreement": timing_agreement(self.rotor_speed_check, self.gyro_timing())}
+        if self.rotor_gain_check is not None:
+            out["rotor_gain_check"] = self.rotor_gain_check
         if self.validation is not None:
             out["validation"] = self.validation
         return out
@@ -214,7 +248,8 @@ def _motor_rate(tables: list[Table]) -> float | None:
     return min(rates) if rates else None
 
 
-def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, speeds, notes: list[str], progress) -> Vehicle:
+def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, speeds, notes: list[str], progress,
+             timed: bool = True) -> Vehicle:
     """The base model: a foreign vehicle's identified from the flight unless a parameter file is
     given; this project's airframe otherwise."""
     foreign = [f.foreign for f in files]
@@ -228,7 +263,7 @@ def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, speeds, notes: 
         layout = Layout(tuple(v * scale for v in lay.x), tuple(v * scale for v in lay.y), lay.spin, "m", lay.source)
         notes.append("base model: the parameter file's airframe with the log's rotor layout (arm = l)")
         return Vehicle.known(a, layout)
-    vehicle, more = identify(files, lowpass_hz, progress, speeds)
+    vehicle, more = identify(files, lowpass_hz, progress, speeds, timed)
     notes += [f"base model: {n}" for n in more]
     return vehicle
 
@@ -261,18 +296,22 @@ def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str
             continue
         cand = c.candidate(ds)
         why = cand.why_not()
-        if why is None and static_only and getattr(cand, "dynamic", False):
+        if why is None and static_only and cand.dynamic:
             why = static_only
+        if why is None and cand.needs_yaw and ds.vehicle.identified and not yaw_identified(ds.vehicle):
+            why = f"{YAW_UNKNOWN}: too little yaw in the flight to tell its effectiveness from zero"
         if why is not None:
             not_judged.append({"cause": cand.cause, "why": why})
             progress(f"{label}{cand.cause}: not judged ({why})")
             continue
         r = cand.run()
-        r.significance = significance(r.score, base.score, ds.fs)
+        r.significance = significance(r.score, base.score, ds.fs_flat)
         r.explanatory = cand.explanatory()
+        r.not_physical = cand.physical(r)
         results.append(r)
         judged[r.cause] = cand
-        progress(f"{label}{cand.cause}: {r.parameters} held-out gain {r.gain:+.4f} (t = {r.t_stat:.1f})")
+        progress(f"{label}{cand.cause}: {r.parameters} held-out gain {r.gain:+.4f} (t = {r.t_stat:.1f})"
+                 + (f"; not physical: {r.not_physical}" if r.not_physical else ""))
     results.sort(key=lambda r: -r.gain)
     significant = {}
     for r in results:
@@ -280,6 +319,9 @@ def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str
         why = judged[r.cause].not_named(r) if by else None
         if why:
             notes.append(why)
+        elif by and r.not_physical:
+            r.note = None
+            notes.append(f"{r.cause} {r.parameters} fits (held-out gain {r.gain:.3f}), but not physical: {r.not_physical}")
         elif by:
             significant[r.cause] = by
     rnd = Round(base, results, not_judged, significant)
@@ -288,9 +330,11 @@ def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str
 
 
 def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[EffectSpec, ...] = (),
-             params_given: bool = False) -> Diagnosis:
+             params_given: bool = False, accepted=None) -> Diagnosis:
     """Every candidate of `flightctl.sim.causes` fitted and scored on the logs, on top of the base
-    model (with `effects`, a parameter file's `[[effect]]` tables), and the chain of causes."""
+    model (with `effects`, a parameter file's `[[effect]]` tables), and the chain of causes.
+    `accepted()` is called once the logs are judged usable and the base model stands (what can
+    refuse the logs has been asked)."""
     for e in effects:
         make(e.cause, **dict(e.parameters))     # the registry's checks (known cause, names, ranges) first
     notes: list[str] = []
@@ -303,9 +347,17 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
                        f"them at {DYNAMIC_MIN_HZ:g} Hz or more")
         notes.append(f"{static_only}; only static effects are judged, on data low-passed at {lowpass:.2g} Hz")
     speeds = rotor_speed_lag(files)
-    vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, speeds, notes, progress)
+    vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, speeds, notes, progress, static_only is None)
     ds = DataSet(files, vehicle, lowpass)
-    progress(f"{ds.n} samples airborne ({ds.seconds:.1f} s), {N_BLOCKS} blocks")
+    ds.rotor_speeds = speeds
+    gain_check = None
+    if vehicle.identified:
+        hover = vehicle.identification["hover_gain"]
+        gain_check = rotor_gain_check(hover["value"], hover["stderr"], files[0].layout, speeds)
+        progress(f"rotor gains: {gain_check['verdict']}: {gain_check['why']}")
+    progress(f"{ds.seconds:.1f} s airborne ({ds.n} samples kept at {ds.fs_flat:.0f} Hz), {N_BLOCKS} blocks")
+    if accepted is not None:
+        accepted()
     carried = carry(ds, effects, notes, progress)
     rounds, skip = [], set()
     first = ds
@@ -320,8 +372,9 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
         skip |= {r.cause, TWINS.get(r.cause, r.cause)}
         ds = _folded(first, [(r.named.cause, r.named.parameters) for r in rounds])
     final = _backfit(first, [(r.named.cause, r.named.parameters) for r in rounds if r.named is not None],
-                     notes, progress)
-    return Diagnosis(rounds, first, notes, carried, lowpass, final=final, rotor_speed_check=speeds)
+                     notes, progress, alone={r.cause: r for r in rounds[0].results})
+    return Diagnosis(rounds, first, notes, carried, lowpass, final=final, rotor_speed_check=speeds,
+                     rotor_gain_check=gain_check)
 
 
 def validate(d: Diagnosis, tables: list[Table], a: Airframe, progress=say) -> dict:
@@ -371,9 +424,18 @@ def _on_top(ds0: DataSet, chain: list[tuple[str, dict]], i: int) -> Result:
     cand = CAUSES[chain[i][0]].candidate(ds)
     base = heldout_linear(ds, ds.r_base, columns_of(Change(None, ds.base_free)))
     r = cand.run()
-    r.significance = significance(r.score, base, ds.fs)
+    r.significance = significance(r.score, base, ds.fs_flat)
     r.explanatory = cand.explanatory()
-    r.note = cand.not_named(r) if r.significance.named_by() else "not significant"
+    return _judged(r, cand)
+
+
+def _judged(r: Result, cand) -> Result:
+    """A copy of `r` with its note of the backfit: why it is not named (not significant, the
+    candidate's own reason, not physical), or None."""
+    r = copy.copy(r)
+    r.not_physical = cand.physical(r)
+    r.note = ((cand.not_named(r) or (f"not physical: {r.not_physical}" if r.not_physical else None))
+              if r.significance.named_by() else "not significant")
     return r
 
 
@@ -388,17 +450,22 @@ def _refit(ds0: DataSet, chain: list[tuple[str, dict]], passes: int) -> tuple[li
     return chain, results
 
 
-def _backfit(ds0: DataSet, chain: list[tuple[str, dict]], notes: list[str], progress) -> dict[str, Result]:
+def _backfit(ds0: DataSet, chain: list[tuple[str, dict]], notes: list[str], progress,
+             alone: dict[str, Result] | None = None) -> dict[str, Result]:
     """The chain refitted jointly (each cause on top of all the others, twice over), then each cause
     tested on top of the others refitted without it: one that is then not significant is dropped (a
     cause named early can take up part of one named later, and a small one can stand in for the
-    bias that leaves). Returns {cause: its Result on top of the others}, in chain order."""
+    bias that leaves). Returns {cause: its Result on top of the others}, in chain order. `alone`: each
+    cause's Result on the base model alone (the first round), which is a chain of one's, not run again."""
     if not chain:
         return {}
     while True:
         chain, results = _refit(ds0, chain, 2 if len(chain) > 1 else 0)
         if len(chain) == 1:
-            return {chain[0][0]: _on_top(ds0, chain, 0)}
+            cause = chain[0][0]
+            if alone and cause in alone:
+                return {cause: _judged(alone[cause], CAUSES[cause].candidate(ds0))}
+            return {cause: _on_top(ds0, chain, 0)}
         for r in results:
             progress(f"{r.cause} on top of the other causes: {r.parameters}, held-out gain {r.gain:.3f}")
         dropped = None

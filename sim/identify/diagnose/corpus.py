@@ -1,0 +1,236 @@
+"""`flightctl diagnose --corpus DIR`: every flight log in a folder (and its folders; every log of a file
+of many) diagnosed or refused, in parallel, one row per log, so that a person can look at fifty logs at
+once (docs/real-flights.md, whose table it writes).
+
+    flightctl diagnose --corpus DIR [--table OUT.md] [--json OUT.json] [--jobs N] [--quiet]
+
+Each log is read (`flightctl.sim.logs.count_logs`, `read_foreign(path, index)`, or this project's CSV)
+and diagnosed in a process of its own (at most the machine's cores, one BLAS thread each); a log that
+cannot be read, never flew, or whose data contradict its layout is that log's refusal, with its one
+line. The rows are a function of the logs and the code only: sorted by path and index, paths relative
+to DIR. `--table` writes the table between OUT.md's markers (`TABLE_BEGIN`, `TABLE_END`) when it has
+them, else OUT.md is the table; `--json` every log's report or refusal.
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from flightctl.errors import InputError, output_file
+
+TABLE_BEGIN = "<!-- diagnose --corpus table: begin -->"
+TABLE_END = "<!-- diagnose --corpus table: end -->"
+CSV_SUFFIXES = (".csv",)
+COLUMNS = ("log", "vehicle", "what was read", "airborne", "causes (each on top of the ones before)",
+           "fits, but not physical", "base model: effectiveness (t = value / its jackknife error)", "refused")
+
+
+@dataclass
+class Row:
+    log: str                    # the path relative to the corpus, with #index for a file of many logs
+    path: str
+    index: int | None
+    status: str = "refused"     # "diagnosed", "refused", or "failed" (a fault of diagnose's, said as such)
+    reason: str = ""            # the refusal's one line
+    meta: dict = field(default_factory=dict)
+    report: dict | None = None
+
+    def cells(self) -> list[str]:
+        read = _read(self.meta, self.report) if self.meta else ""
+        vehicle = _vehicle(self.meta) if self.meta else ""
+        if self.status != "diagnosed":
+            return [self.log, vehicle, read, "", "", "", "", _clean(self.reason)]
+        r = self.report
+        causes = "; ".join(f"{c['cause']} {_params(c['parameters'])} (gain {c['gain']:.3f})" for c in r["causes"]) or "none"
+        unphysical = "; ".join(f"{c['cause']} {_params(c['parameters'])}: {c['why']}" for c in r["not_physical"])
+        return [self.log, vehicle, read, f"{r['data']['airborne_s']:.1f} s", _clean(causes), _clean(unphysical),
+                _base(r), ""]
+
+
+def _clean(text: str) -> str:
+    return text.replace("|", "/").replace("\n", " ")
+
+
+def _params(p: dict) -> str:
+    return ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in p.items())
+
+
+def _vehicle(meta: dict) -> str:
+    parts = [meta.get("craft", "").strip(), meta.get("firmware", "").strip() or meta.get("format", "").strip()]
+    return _clean(", ".join(p for p in parts if p)) or "this project's log"
+
+
+def _read(meta: dict, report: dict | None) -> str:
+    """What was read: rates, rotor speeds, battery."""
+    out = []
+    if meta.get("rate_hz"):
+        out.append(f"{float(meta['rate_hz']):.0f} Hz")
+    if meta.get("motor_rate_hz"):
+        out.append(f"motors {float(meta['motor_rate_hz']):.0f} Hz")
+    out.append("rotor speeds" if meta.get("omega_source") else "no rotor speeds")
+    if meta.get("battery_cells"):
+        out.append(f"{meta['battery_cells']}S")
+    if report is not None:
+        v = report["data"].get("battery_v")
+        out.append(f"battery {v[0]:.1f}-{v[1]:.1f} V" if v else "no battery")
+    return ", ".join(out)
+
+
+def _base(r: dict) -> str:
+    b = r["base_model"]
+    if not b.get("identified"):
+        return "this project's airframe"
+    axes = []
+    for name, axis in (("k_p", "roll"), ("k_q", "pitch"), ("k_r", "yaw"), ("k_z", "thrust")):
+        v, e = b[name]["value"], b[name]["stderr"]
+        axes.append(f"{axis} {v / e:.0f}" if e > 0 else f"{axis} {v:.3g}")
+    extra = "; spins reversed by the data" if "spins reversed" in b["layout"]["source"] else ""
+    gains = r.get("rotor_gain_check")
+    if gains and gains["verdict"] not in ("none",):
+        extra += f"; rotor gains: {gains['verdict']}"
+    return f"t: {', '.join(axes)}{extra}"
+
+
+def find_logs(folder: Path) -> list[Path]:
+    """Every file under `folder` whose suffix is a flight log's (`flightctl.sim.logs.FOREIGN_SUFFIXES`,
+    and this project's CSV), sorted."""
+    from flightctl.sim.logs import FOREIGN_SUFFIXES
+    suffixes = tuple(FOREIGN_SUFFIXES) + CSV_SUFFIXES
+    return sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix.lower() in suffixes)
+
+
+def _jobs(folder: Path, files: list[Path]) -> tuple[list[Row], list[Row]]:
+    """(rows to diagnose, one per log, and rows already refused: files that cannot be read)."""
+    from flightctl.sim.logs import count_logs
+    todo, refused = [], []
+    for p in files:
+        rel = p.relative_to(folder).as_posix()
+        if p.suffix.lower() in CSV_SUFFIXES:
+            todo.append(Row(rel, str(p), None))
+            continue
+        try:
+            n = count_logs(str(p))
+        except InputError as e:
+            refused.append(Row(rel, str(p), None, reason=_reason(str(e), str(p))))
+            continue
+        if n == 0:
+            refused.append(Row(rel, str(p), None, reason="no log in this file"))
+        for k in range(1, n + 1):
+            todo.append(Row(rel if n == 1 else f"{rel} #{k}", str(p), k if n > 1 else None))
+    return todo, refused
+
+
+def _reason(error: str, path: str) -> str:
+    """An InputError's line without the file's path (the row names the log), also as `PATH#k: `."""
+    import re
+    for p in (path, Path(path).name):
+        error = re.sub(rf"^{re.escape(p)}(#\d+)?: ", "", error)
+    return error
+
+
+def run_one(row: Row) -> Row:
+    """Read and diagnose one log, quietly: the row with its report, or its refusal."""
+    from flightctl.params import load
+    from flightctl.sim.identify.diagnose.cli import read_logs
+    from flightctl.sim.identify.diagnose.verdict import diagnose
+    quiet = lambda *a: None   # noqa: E731
+    try:
+        tables = read_logs([row.path], row.index, quiet)
+        row.meta = dict(tables[0].meta) if tables else {}
+        d = diagnose(tables, load(None).airframe, quiet)
+        row.report = d.report()
+        row.status = "diagnosed"
+    except InputError as e:
+        row.reason = _reason(str(e), row.path)
+    except Exception as e:         # a fault of diagnose's on this log: said, and the other logs go on
+        row.status = "failed"
+        row.reason = f"diagnose failed on this log ({type(e).__name__}: {e}): a fault to report"
+    return row
+
+
+def table(rows: list[Row]) -> str:
+    lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    lines += ["| " + " | ".join(r.cells()) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def write_table(path: Path, text: str) -> None:
+    """The table between the file's markers, or the whole file."""
+    if path.exists():
+        doc = path.read_text()
+        if TABLE_BEGIN in doc and TABLE_END in doc:
+            head, _, rest = doc.partition(TABLE_BEGIN)
+            _, _, tail = rest.partition(TABLE_END)
+            path.write_text(f"{head}{TABLE_BEGIN}\n{text}\n{TABLE_END}{tail}")
+            return
+    path.write_text(f"{TABLE_BEGIN}\n{text}\n{TABLE_END}\n")
+
+
+def corpus(folder: Path, jobs: int | None = None, progress=None) -> list[Row]:
+    """Every log under `folder` diagnosed or refused, rows sorted by path and index."""
+    if not folder.is_dir():
+        raise InputError(f"--corpus {folder}: not a folder")
+    files = find_logs(folder)
+    if not files:
+        raise InputError(f"--corpus {folder}: no flight logs in it (.csv, {', '.join(_suffixes())})")
+    todo, rows = _jobs(folder, files)
+    workers = max(1, min(jobs or os.cpu_count() or 1, os.cpu_count() or 1, len(todo) or 1))
+    from flightctl.sim.progress import Progress
+    bar = Progress(len(todo), "diagnose --corpus ", out=sys.stderr) if progress else None
+    if todo:
+        import multiprocessing
+        saved = os.environ.get("OPENBLAS_NUM_THREADS")
+        os.environ["OPENBLAS_NUM_THREADS"] = "1"       # the processes share the cores: one BLAS thread each
+        try:
+            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+                for row in pool.map(run_one, todo):
+                    rows.append(row)
+                    if bar is not None:
+                        bar.step(f"{row.log}: {row.status}")
+        finally:
+            if saved is None:
+                os.environ.pop("OPENBLAS_NUM_THREADS", None)
+            else:
+                os.environ["OPENBLAS_NUM_THREADS"] = saved
+    return sorted(rows, key=lambda r: (r.path, r.index or 0))
+
+
+def _suffixes() -> tuple[str, ...]:
+    from flightctl.sim.logs import FOREIGN_SUFFIXES
+    return tuple(FOREIGN_SUFFIXES)
+
+
+def main(args) -> int:
+    if args.logs:
+        raise InputError("--corpus DIR takes no other logs: put them in the folder")
+    if args.table is None and args.json is None:
+        raise InputError("--corpus: say where the rows go: --table OUT.md and/or --json OUT.json")
+    for flag in ("index", "validate", "params", "plot"):
+        if getattr(args, flag, None):
+            raise InputError(f"--corpus: --{flag} applies to one diagnosis, not to a folder of logs")
+    if args.jobs is not None and args.jobs < 1:
+        raise InputError(f"--jobs {args.jobs}: at least 1")
+    out_table = Path(args.table) if args.table else None
+    out_json = Path(args.json) if args.json else None
+    for path, flag in ((out_table, "--table"), (out_json, "--json")):
+        if path is not None:
+            output_file(path, flag)
+    rows = corpus(Path(args.corpus), args.jobs, progress=not args.quiet)
+    text = table(rows)
+    if out_table is not None:
+        write_table(out_table, text)
+    if out_json is not None:
+        out_json.write_text(json.dumps({"corpus": str(args.corpus), "logs": [
+            {"log": r.log, "status": r.status, "refused": r.reason or None, "report": r.report} for r in rows]},
+            indent=1, allow_nan=False) + "\n")
+    print(text)
+    done = sum(r.status == "diagnosed" for r in rows)
+    failed = sum(r.status == "failed" for r in rows)
+    if not args.quiet:
+        print(f"diagnose --corpus: {done} of {len(rows)} logs diagnosed, {len(rows) - done - failed} refused"
+              + (f", {failed} failed (a fault of diagnose's)" if failed else ""), file=sys.stderr)
+    return 0
