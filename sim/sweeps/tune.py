@@ -147,7 +147,8 @@ def scaled(gains: Gains, kp: float, kd: float) -> Gains:
 def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str = "paper", workers=None,
            progress=None) -> list[dict]:
     """Per candidate, the shares of n draws of the file's ranges that fly and that settle, on the
-    batched simulator (every candidate on the same draws)."""
+    batched simulator (every candidate on the same draws). `progress`: a sim/progress.py Progress,
+    one step a candidate, the vehicle-steps in between."""
     import os
 
     from flightctl.sim.sweeps.batch import simulate
@@ -166,8 +167,10 @@ def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str
     out = []
     for i in range(0, len(candidates), per):
         group = candidates[i:i + per]
+        under_way = f"candidates {i + 1}-{i + len(group)} of {len(candidates)}: {n * len(group)} vehicles"
+        frac = (lambda f: progress.update(f, under_way, len(group))) if progress else None
         flight = simulate(params, sc.plan, start, end, n * len(group), {k: np.tile(v, len(group)) for k, v in draws.items()},
-                          [g for g in group for _ in range(n)], workers=workers or os.cpu_count() or 1)
+                          [g for g in group for _ in range(n)], workers=workers or os.cpu_count() or 1, progress=frac)
         st = flight.states
         log = {"t": flight.t, "true_roll": st[:, PHI], "true_pitch": st[:, THETA],
                "true_yaw": (st[:, PSI] + np.pi) % (2 * np.pi) - np.pi}
@@ -176,7 +179,7 @@ def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str
         for j in range(len(group)):
             out.append({"flies": float(flies[j * n:(j + 1) * n].mean()), "settles": float(ok[j * n:(j + 1) * n].mean())})
             if progress:
-                progress(f"candidate {len(out)}/{len(candidates)}: settles {100 * out[-1]['settles']:.0f} %")
+                progress.step(f"candidate {len(out)}/{len(candidates)}: settles {100 * out[-1]['settles']:.0f} %")
     return out
 
 
@@ -289,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.robust is not None and not ranged(params):
         raise InputError(f"--robust: {args.params or 'the reference airframe'} carries no ranges "
                          "(range.NAME = [lo, hi]; --params paper-as-flown has them)")
-    bar = Progress(len(ORDER) * 2 + (len(COARSE) ** 2 + 2 + len(FINE) ** 2 - 1 if args.robust else 0), "tune")
+    bar = Progress(len(ORDER) * 2, "tune: the procedure ")
     if args.robust and params.effects:   # the procedure on the paper's model, then robust over the ranges
         print("flightctl tune --robust: the procedure runs on the base model (the paper's), the robust "
               "search over the file's ranges", file=sys.stderr)
@@ -302,7 +305,8 @@ def main(argv: list[str] | None = None) -> int:
            for ch in ORDER for k in ("kp", "ki", "kd")}
     if args.robust:
         procedure = gains
-        gains, rob = robust(params, procedure, args.robust, args.seed, progress=bar.step, scenario=args.scenario)
+        bar = Progress(len(COARSE) ** 2 + 2 + len(FINE) ** 2 - 1, f"tune --robust {args.robust}: ")
+        gains, rob = robust(params, procedure, args.robust, args.seed, progress=bar, scenario=args.scenario)
         found["robust"] = rob
         for k in ("kp", "kd"):
             for ax in ("phi", "theta"):
