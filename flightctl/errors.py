@@ -33,18 +33,18 @@ def output_file(path, what: str = "", suffix: str | None = None) -> Path:
 
 
 def output_dir(path, what: str = "") -> Path:
-    """A directory a command will write into, checked before any work: it exists (or can be made)
-    and this process may create files in it."""
+    """A directory a command will write into, checked before any work (and not made yet): it is a
+    directory this process may create files in, or its nearest existing parent is one."""
     p = Path(path)
     name = f"{what} {p}" if what else str(p)
-    try:
-        p.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputError(f"{name}: cannot create the directory ({e.strerror})") from None
-    if not p.is_dir():
-        raise InputError(f"{name}: not a directory")
-    if not os.access(p, os.W_OK | os.X_OK):
-        raise InputError(f"{name}: the directory is not writable by this user")
+    first = p.resolve()
+    while not first.exists() and first != first.parent:
+        first = first.parent
+    if not first.is_dir():
+        raise InputError(f"{name}: {first} is not a directory")
+    if not os.access(first, os.W_OK | os.X_OK):
+        where = "the directory" if first == p.resolve() else f"{first}, where it would be made,"
+        raise InputError(f"{name}: {where} is not writable by this user")
     return p
 
 

@@ -264,6 +264,7 @@ def faults_main(argv: list[str]) -> int:
     logs = output_dir(args.logs, "--logs") if args.logs else output_dir(out.resolve().parent, "--json")
     if args.doc and not Path(args.doc).is_file():
         raise InputError(f"--doc {args.doc}: no such file")
+    logs.mkdir(parents=True, exist_ok=True)
     rows = faultmatrix.run_matrix(causes.load_vehicle(args.params, GAIN_SETS["table6"]), logs, seed=args.seed)
     write_atomic(out, json.dumps(rows, indent=1) + "\n")
     table = faultmatrix.markdown(rows)

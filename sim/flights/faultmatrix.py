@@ -25,6 +25,7 @@ FAULT_AFTER_S = 6.0   # s after arming: in a steady hover at 1 m
 # The loop's event that names each fault (flightctl/loop.py, the drivers' reasons)
 NAMED_BY = {"imu_frozen": "IMU frame refused (frozen", "imu_garbage": "IMU frame refused",
             "imu_intermittent": "IMU frame refused", "gyro_saturation": "IMU saturated",
+            "accel_zero": "IMU frame refused (accelerometer reads zero",
             "sonar_silent": "altitude lost", "sonar_stuck": "altitude lost",
             "battery_critical": "battery low", "motor_stop": "lost (its thrust missing",
             "cpu_stall": "loop stalled", "log_full": "log write failed"}

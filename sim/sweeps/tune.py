@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flightctl.errors import InputError, output_file
+from flightctl.errors import InputError, output_file, seed, write_atomic
 from flightctl.params import TABLE4, TABLE6, Gains, dumps
 
 SETTLE_S = 3.0
@@ -271,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--robust", type=int, metavar="N",
                    help="then scale the roll and pitch gains for the largest share of N draws of the file's ranges "
                         "that flies and settles (batched simulator; --plot also draws the grid)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the --robust draws")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the --robust draws (a whole number from 0)")
     p.add_argument("--scenario", default="paper", help="the scenario whose attitude steps --robust flies (default: paper)")
     args = p.parse_args(argv)
     if args.robust is not None and not 1 <= args.robust <= 10000:
@@ -315,15 +315,16 @@ def main(argv: list[str] | None = None) -> int:
                              f"x {rob[k + '_factor']:.3g}, settles in {100 * rob['settles']:.0f} % of the draws of "
                              f"{args.params}'s ranges (the procedure's {100 * rob['procedure']['settles']:.0f} %, "
                              f"Table 4 {100 * rob['table4']['settles']:.0f} %); Table 4: {getattr(TABLE4, name):g}")
-    out.write_text("# Gains tuned by flightctl tune on " + (args.params or "the reference airframe") + "\n"
-                   + dumps(dataclasses.replace(params, gains=gains), src, tables=("gains",)))
+    write_atomic(out, "# Gains tuned by flightctl tune on " + (args.params or "the reference airframe") + "\n"
+                 + dumps(dataclasses.replace(params, gains=gains), src, tables=("gains",)))
     print("channel   kp (tuned / Table 4)    kd (tuned / Table 4)")
     for ch in ORDER:
         kp, kd = f"kp_{NAME[ch]}", f"kd_{NAME[ch]}"
         print(f"{ch:<8} {getattr(gains, kp):8.3f} / {getattr(TABLE4, kp):<8g}    {getattr(gains, kd):8.3f} / {getattr(TABLE4, kd):<8g}")
-    print(f"  -> {out}")
+    print(f"  gains -> {out}")
     if args.json:
-        Path(args.json).write_text(json.dumps(found, indent=1) + "\n")
+        write_atomic(args.json, json.dumps(found, indent=1) + "\n")
+        print(f"  what was found -> {args.json}")
     if args.robust:
         r = found["robust"]
         print(f"robust over {r['draws']} draws: roll and pitch kp x {r['kp_factor']:.3g}, kd x {r['kd_factor']:.3g} "
