@@ -249,7 +249,7 @@ def _effects(items) -> tuple[EffectSpec, ...]:
         item = dict(item)
         cause, source, ranges = item.pop("cause", None), item.pop("source", ""), item.pop("range", {})
         if not isinstance(cause, str) or not cause:
-            raise InputError(f"{where}: cause: a cause name is needed (measured-data.md)")
+            raise InputError(f"{where}: cause: a cause name is needed (docs/diagnose.md lists them)")
         if not isinstance(source, str):
             raise InputError(f"{where}: source: expected text")
         for key, value in item.items():

@@ -155,10 +155,10 @@ def main() -> None:
           + ("compiled by numba (sim/world/compiled.py)" if compiled.model_period() is not None
              else "plain Python (numba absent or FLIGHTCTL_JIT=0: the `fast` extra)")
           + "; the onboard code: plain Python; the flight log: formatted in a child process")
-    for label, name, kw, target in (("full onboard path", None, {}, ">= 30x; issue 17: 100x"),
+    for label, name, kw, target in (("full onboard path", None, {}, ">= 30x (goal 100x)"),
                                     ("perfect state feedback", None, {"truth": True}, ">= 30x"),
                                     ("full onboard path, --params paper-as-flown", "paper-as-flown", {},
-                                     ">= 30x; issue 17: 60x")):
+                                     ">= 30x (goal 60x)")):
         ratios = []
         for _ in range(args.repeat):
             start = time.perf_counter()
@@ -177,7 +177,7 @@ def main() -> None:
     us = min(costs)
     print(f"control iteration (decode -> PWM counts): {us:.1f} us = {100 * us / period_us:.2f} % of the "
           f"{period_us:.0f} us loop period (fastest of {100 * args.repeat} runs of 1000), targets < 3 % "
-          f"and < 8 us (issue 17)")
+          f"and < 8 us")
     import os
     for workers in sorted({1, os.cpu_count() or 1}):
         rate = max(batch_rate(workers=workers) for _ in range(args.repeat))

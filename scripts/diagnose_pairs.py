@@ -27,8 +27,7 @@ BEGIN, END = "<!-- diagnose_pairs: begin -->", "<!-- diagnose_pairs: end -->"
 
 def judge(seed: int) -> dict:
     """One pair: {seed, hidden, named, verdict} where verdict is 'ok' or what went wrong."""
-    from test_diagnose_cases import close_enough
-    from test_diagnose_chain import fly_pair
+    from test_diagnose_cases import close_enough, fly_pair   # (no pytest: the base install runs this)
 
     with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
         truth, report = fly_pair(Path(tmp), np.random.default_rng(seed))   # the flights' own printing aside

@@ -36,7 +36,7 @@ def parser() -> argparse.ArgumentParser:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", choices=sorted(SCENARIOS), help="the named plan to fly")
     p.add_argument("--plan", metavar="PLAN.toml", help="fly this plan file instead (as `flightctl run --plan`)")
-    p.add_argument("--log", help="the flight log to write (CSV: docs/api.md, the columns); required but with --monte-carlo")
+    p.add_argument("--log", help="the flight log to write (CSV; its columns: docs/formats.md); required but with --monte-carlo")
     p.add_argument("--effect", action="append", default=[], metavar="CAUSE:name=value,...",
                    help=f"add an extension to the simulated plant ({', '.join(causes.CAUSES)}); repeatable")
     p.add_argument("--fault", action="append", default=[], metavar="NAME[:at=S,k=v]",

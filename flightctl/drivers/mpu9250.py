@@ -4,7 +4,7 @@ Frames: the chip is mounted with its x toward motor 1 and z up, so accelerometer
 the body axes. The AK8963 axes are (x_mpu = y_ak, y_mpu = x_ak, z_mpu = -z_ak); the driver converts
 once, here, and reports the field in the body frame (x forward, y left, z up) in tesla.
 
-Frame checks (issue 10, defect 4; docs/safety.md). `read` refuses a frame, leaving the sample as it
+Frame checks (docs/safety.md). `read` refuses a frame, leaving the sample as it
 was (the loop flies on the last good sample), when it is
 - a bus-error pattern: the 14 data bytes all 0x00 or all 0xFF (MISO stuck low or high);
 - frozen: the same 14 bytes as the FROZEN_FRAMES frames before it. A live chip never repeats a

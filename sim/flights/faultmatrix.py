@@ -1,4 +1,4 @@
-"""`flightctl sim faults --json M.json`: fly every fault of flightctl/sim/world/faults.py in a
+"""`flightctl sim faults --json M.json`: fly every fault `flightctl sim --fault` takes (docs/safety.md) in a
 short hover and report, per fault, whether the onboard loop named it (`detected`, `detect_ms` from the
 injection to the loop's first event naming it), what it did (`action`: hold, land or stop, from its
 events), the outcome on the true state (flightctl/safety.py's crash definition, through

@@ -39,9 +39,9 @@ def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="flightctl diagnose",
                 description="Fit every candidate extension of the model to part of the flight logs, score "
                             "it on the rest, and name the one that explains the discrepancy, or none "
-                            "(measured-data.md; method: docs/diagnose.md).")
+                            "(the method: docs/diagnose.md in the flightctl checkout).")
     p.add_argument("logs", nargs="+", metavar="FLIGHT",
-                   help="flight logs of one vehicle: this project's CSV (measured-data.md), PX4's .ulg or "
+                   help="flight logs of one vehicle: this project's CSV (docs/formats.md), PX4's .ulg or "
                         "Betaflight's .bbl/.bfl (the `logs` extra)")
     p.add_argument("--index", type=int, metavar="N",
                    help="of a blackbox file holding several logs, only log N (counted from 1; default: every log)")
@@ -51,7 +51,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--params", metavar="PARAMS.toml",
                    help="the base model: its airframe and its [[effect]] tables (default: the reference "
                         "airframe, no effects)")
-    p.add_argument("--json", required=True, metavar="REPORT.json", help="the report (measured-data.md, diagnose)")
+    p.add_argument("--json", required=True, metavar="REPORT.json", help="the report (its keys: docs/diagnose.md)")
     p.add_argument("--plot", metavar="PREFIX",
                    help="write PREFIX-residuals.png (residual vs time, base and after each cause), "
                         "PREFIX-explained.png (residual vs the variable that explains it) and, per log, "
