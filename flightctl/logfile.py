@@ -368,7 +368,7 @@ class FlightLogWriter:
         rows = self._kept
         k = self.columns.index("range")
         ranges = np.array([float(r[k]) if r[k] else math.nan for r in rows])
-        data = np.array([r[:k] + (0.0,) + r[k + 1:] for r in rows], dtype=float).reshape(len(rows), -1)
+        data = np.array([r[:k] + (0.0,) + r[k + 1:] for r in rows], dtype=float).reshape(len(rows), len(self.columns))
         columns = {name: data[:, i] for i, name in enumerate(self.columns)}
         columns["range"] = ranges
         return Table(self.path, columns, dict(self.meta), np.arange(len(rows)) + 2 + self._meta_lines)

@@ -92,7 +92,8 @@ class FlightLoop:
             hal.motors.stop()
             if self.log is not None:
                 if cut is not None and self.log.partial is None:
-                    self.log.partial = f"{cut} at t = {hal.clock.now() - self.t_arm:.3f} s"
+                    t = hal.clock.now() - self.t_arm
+                    self.log.partial = f"{cut} at t = {t:.3f} s" if t >= 0.0 else f"{cut} before arming"
                 self.log.close()
                 if self.log.dropped:
                     self._event(hal.clock.now(), f"log: {self.log.dropped} rows dropped ({self.log.error})")

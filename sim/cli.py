@@ -181,7 +181,8 @@ def main(argv: list[str]) -> int:
     log = flight.log
     duration = log["t"][-1] if len(log) else 0.0
     if interrupt.is_set():
-        print(f"flightctl sim: interrupted at t = {duration:.2f} s; the log {log_path} is kept, marked partial "
+        when = f"at t = {duration:.2f} s" if len(log) else "before arming"
+        print(f"flightctl sim: interrupted {when}; the log {log_path} is kept, marked partial "
               "(no metrics, no figure)", file=sys.stderr)
         return EXIT_INTERRUPTED
     loop_reason = "" if flight.result.reason == "plan complete" else f" ({flight.result.reason})"

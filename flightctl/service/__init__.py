@@ -66,6 +66,7 @@ EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_REFUSED = 0, 1, 2, 3
 PLAN_POLL_S = 0.5
 OUTPUT_CHECK_S = 2.0           # while disarmed, the ESC output is read back this often (drivers/esc.py)
 REST_ACCEL = (0.8, 1.2)        # |a| / g at rest, for the pre-arm IMU check
+DEAD_ACCEL = 0.05              # |a| / g at rest below which the accelerometer is dead, not the vehicle moving
 
 log = logging.getLogger("flightctl.run")
 
@@ -104,7 +105,9 @@ def prearm(hal: Hal, params: Params, min_battery_v: float) -> list[str]:
         reasons.append(f"IMU: every frame refused ({why})" + (": no IMU on the bus" if "bus" in why else ""))
     else:
         a = math.sqrt(sample.ax ** 2 + sample.ay ** 2 + sample.az ** 2) / params.airframe.g
-        if not REST_ACCEL[0] <= a <= REST_ACCEL[1]:
+        if a < DEAD_ACCEL or getattr(hal.imu, "why", None) == "accelerometer reads zero":
+            reasons.append(f"IMU: the accelerometer reads {a:.2f} g at rest: accelerometer faulty")
+        elif not REST_ACCEL[0] <= a <= REST_ACCEL[1]:
             reasons.append(f"IMU: |a| = {a:.2f} g at rest (expected 1 g): vehicle moving or IMU faulty")
     v, _ = hal.power.read()
     if not v >= min_battery_v:
@@ -257,6 +260,8 @@ def describe(e: BaseException) -> str:
     text = " ".join(str(e).split()) or "(no message)"
     if isinstance(e, struct.error):          # pigpio unpacks a reply that never came
         return f"a device's reply cut short ({text}): its daemon (pigpiod) gone?"
+    if isinstance(e, ConnectionError):
+        return f"{type(e).__name__}: {text}: a device's daemon (pigpiod) gone?"
     return f"{type(e).__name__}: {text}"
 
 
