@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 from flightctl.cli import main as flightctl
+from flightctl.sim.docs import write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN, END = "<!-- real-flights table: written by scripts/real_flights.py -->", "<!-- end of the table -->"
@@ -67,11 +68,8 @@ def main() -> None:
             reports[name] = report
     table = "\n".join(["| log | airborne | causes (each on top of the ones before) | base model | "
                        "the log's own rotor speeds |", "|---|---|---|---|---|"] + rows)
-    doc = Path(args.doc)
-    text = doc.read_text()
-    head, _, rest = text.partition(BEGIN)
-    _, _, tail = rest.partition(END)
-    doc.write_text(f"{head}{BEGIN}\n{table}\n{END}{tail}")
+    if not write_block(args.doc, BEGIN, END, table):
+        raise SystemExit(f"{args.doc}: no {BEGIN} ... {END} markers")
     if args.json:
         Path(args.json).write_text(json.dumps(reports, indent=1))
     print(table)

@@ -114,10 +114,6 @@ BEGIN, END = "<!-- fault matrix: begin (written by `flightctl sim faults`) -->",
 
 def write_doc(doc: Path, table: str) -> bool:
     """Replace the table between BEGIN and END in `doc`; False when the markers are absent."""
-    text = doc.read_text(encoding="utf-8")
-    head, sep, rest = text.partition(BEGIN)
-    _, sep2, tail = rest.partition(END)
-    if not (sep and sep2):
-        return False
-    doc.write_text(f"{head}{BEGIN}\n{table}{END}{tail}", encoding="utf-8")
+    from flightctl.sim.docs import write_block
+    return write_block(doc, BEGIN, END, table)
     return True
