@@ -21,7 +21,7 @@ import numpy as np
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError, output_file
+from flightctl.errors import InputError, output_file, write_atomic
 from flightctl.params import GAIN_SETS, Params
 from flightctl.plans import HOVER_ALT
 from flightctl.sim import causes
@@ -194,7 +194,7 @@ def main(argv: list[str]) -> int:
           + (", ".join(map(repr, an.effects)) or "base model"))
     print(table(an))
     if args.json:
-        Path(args.json).write_text(json.dumps(report(an, args.gains), indent=2) + "\n")
+        write_atomic(args.json, json.dumps(report(an, args.gains), indent=2) + "\n")
         print(f"\nfigures -> {args.json}")
     if args.plot:
         for path in plot(an, args.plot, f"flightctl analyze: {title}"):

@@ -212,4 +212,5 @@ def plot(result: dict, path: str | Path) -> None:
 
 
 def write_json(result: dict, path: str | Path) -> None:
-    Path(path).write_text(json.dumps(result, indent=1) + "\n")
+    from flightctl.errors import write_atomic
+    write_atomic(path, json.dumps(result, indent=1) + "\n")
