@@ -5,8 +5,8 @@ quadcopter, write the contract flight log, a PNG of the responses, and print the
 takes) in simulated time, the same way.
 
 `flightctl sim SCENARIO --fault NAME[:k=v,...]` (repeatable) injects a fault at the simulated devices
-(the faults and their keys: docs/safety.md); `flightctl sim faults --json M.json` flies every fault
-and writes the matrix.
+(what each fault does: docs/safety.md; their keys: docs/formats.md); `flightctl sim faults --json
+M.json` flies every fault and writes the matrix.
 
 Exit status: 0 the vehicle flew and landed upright, 1 it crashed or never flew, 2 bad input, 130
 interrupted (Ctrl-C: the flight ends at once, its log is kept with a `# partial:` line)."""
@@ -41,7 +41,7 @@ def parser() -> argparse.ArgumentParser:
                    help=f"add an extension to the simulated plant ({', '.join(causes.CAUSES)}); repeatable")
     p.add_argument("--fault", action="append", default=[], metavar="NAME[:at=S,k=v]",
                    help="inject a fault at the simulated devices (at: s after arming, the log's time, before the "
-                        "plan's end; faults: " + ", ".join(faults.FAULTS) + "; their keys: docs/safety.md); repeatable")
+                        "plan's end; faults: " + ", ".join(faults.FAULTS) + "; their keys: docs/formats.md); repeatable")
     p.add_argument("--params", metavar="P.toml|NAME",
                    help=f"parameter file (TOML) or a shipped vehicle ({', '.join(shipped())}); default: the reference airframe")
     p.add_argument("--gains", choices=sorted(GAIN_SETS),

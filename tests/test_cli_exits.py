@@ -110,14 +110,20 @@ def test_two_runs_writing_one_log_leave_one_whole_log(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["same.csv"]
 
 
+def on_a_full_disk(room: int, code: str, cwd: Path) -> subprocess.CompletedProcess:
+    """Python `code` in a process whose files cannot grow past `room` bytes (RLIMIT_FSIZE): a write
+    stops part way, then fails, as on a full card."""
+    head = ("import resource, signal, sys\n"
+            "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+            f"resource.setrlimit(resource.RLIMIT_FSIZE, ({room}, {room}))\n")
+    return subprocess.run([sys.executable, "-P", "-c", head + code], cwd=cwd, capture_output=True, text=True,
+                          timeout=300)
+
+
 def test_a_full_disk_leaves_whole_rows_marked_partial(tmp_path):
     """The file size limit (RLIMIT_FSIZE) stands for a full card: a write stops part way."""
-    code = ("import resource, signal, sys\n"
-            "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
-            "resource.setrlimit(resource.RLIMIT_FSIZE, (400000, 400000))\n"
-            "from flightctl.cli import main\n"
-            "sys.exit(main(['sim', 'hover', '--log', 'f.csv', '--no-plot', '--quiet']))\n")
-    r = subprocess.run([sys.executable, "-P", "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    r = on_a_full_disk(400000, "from flightctl.cli import main\n"
+                               "sys.exit(main(['sim', 'hover', '--log', 'f.csv', '--no-plot', '--quiet']))\n", tmp_path)
     assert "Traceback" not in r.stderr, r.stderr
     assert r.returncode in (0, 1) and "log write failed" in r.stdout
     log = read_flight_log(tmp_path / "f.csv", extra=MAG_COLUMNS + TRUTH_COLUMNS)   # every row whole
@@ -126,12 +132,8 @@ def test_a_full_disk_leaves_whole_rows_marked_partial(tmp_path):
 
 
 def test_an_output_that_cannot_be_written_whole_leaves_nothing(tmp_path):
-    code = ("import resource, signal, sys\n"
-            "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
-            "resource.setrlimit(resource.RLIMIT_FSIZE, (50, 50))\n"
-            "from flightctl.errors import InputError, write_atomic\n"
-            "try:\n    write_atomic('s.json', 'x' * 100)\nexcept InputError as e:\n    print(e)\n")
-    r = subprocess.run([sys.executable, "-P", "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    r = on_a_full_disk(50, "from flightctl.errors import InputError, write_atomic\n"
+                           "try:\n    write_atomic('s.json', 'x' * 100)\nexcept InputError as e:\n    print(e)\n", tmp_path)
     assert "s.json: cannot write" in r.stdout, r.stderr
     assert list(tmp_path.iterdir()) == []                          # neither the file nor its temporary name
     write_atomic(tmp_path / "s.json", "whole\n")
