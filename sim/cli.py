@@ -217,7 +217,7 @@ def main(argv: list[str]) -> int:
     if not args.no_plot:
         png = Path(args.plot) if args.plot else log_path.with_suffix(".png")
         from flightctl.sim.plots import plot_flight
-        plot_flight(log, png, f"flightctl sim {flown.name}: {args.gains}, {path}")
+        plot_flight(log, png, f"flightctl sim {flown.name}: {gains_label(args, params)}, {path}")
         print(f"  plot -> {png}")
     return 1 if flight.crashed or not flight.flew else 0
 

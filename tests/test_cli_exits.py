@@ -146,6 +146,7 @@ def test_an_output_that_cannot_be_written_whole_leaves_nothing(tmp_path):
     ["bench", "--board", "sim", "--out", "{tmp}/b.csv", "--seed", "-1"],
     ["tune", "--out", "{tmp}/t.toml", "--seed", "-1"],
     ["hil", "demo", "--seed", "-1"],
+    ["run", "--board", "sim", "--plan", "hover", "--log", "{tmp}/logs", "--seed", "-1"],
 ])
 def test_a_negative_seed_is_one_line(tmp_path, capsys, argv):
     assert main([a.format(tmp=tmp_path) for a in argv]) == 2

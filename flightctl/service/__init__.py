@@ -52,7 +52,7 @@ from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, o
 from flightctl.clock import freeze_gc
 from flightctl.control.controller import FlightController
 from flightctl.control.spin import SpinController
-from flightctl.errors import InputError, output_dir, write_atomic
+from flightctl.errors import InputError, output_dir, seed, write_atomic
 from flightctl.hal import ArmingRefused, Hal, ImuSample
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter
 from flightctl.loop import FlightLoop, FlightResult
@@ -293,7 +293,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--calibrate", type=float, metavar="S",
                    help="seconds sitting still before arming (default: the board's, 60 s on the quadcopter)")
     p.add_argument("--min-battery-v", type=float, metavar="V", help="refuse to arm below this battery voltage")
-    p.add_argument("--seed", type=int, default=0, help="simulator seed (--board sim)")
+    p.add_argument("--seed", type=seed, default=0, help="simulator seed (--board sim; a whole number from 0)")
     p.add_argument("--link", help="--board hil: serial:/dev/serial0,921600 or tcp:HOST:PORT (docs/hil.md)")
     p.add_argument("--stop-motors", action="store_true", help="only put the stop pulse on the ESCs and exit")
     p.add_argument("--mavlink", metavar="URL",
