@@ -321,9 +321,9 @@ def load(path: str | Path | None, gains: Gains | None = None) -> Params:
     spec, path = path, resolve(path)
     if not path.exists():
         raise InputError(f"{spec}: neither a parameter file nor a shipped vehicle (shipped: {', '.join(shipped())})")
-    if path.suffix.lower() != ".toml" and not path.is_dir():
+    text = read_text(path)                  # a regular file, UTF-8 (a pipe or a device refused unread)
+    if path.suffix.lower() != ".toml":
         raise InputError(f"{spec}: a parameter file is TOML and named .toml (shipped vehicles: {', '.join(shipped())})")
-    text = read_text(path)
     data = read_toml(path, text)
     try:
         params = from_dict(data, gains)

@@ -19,7 +19,7 @@ was (the loop flies on the last good sample), when it is
   frame, and JUMP_ACCEL 30 m/s^2, forty times the rotors' vibration (sim/world/devices.py).
 - a dead accelerometer: the three accelerometer words exactly 0 in ZERO_ACCEL_FRAMES frames in a row
   (its ~20 LSB of noise make one such frame about 1 in 10^5 even in free fall, three never), while
-  the rest of the frame lives.
+  the rest of the frame lives; off with the frozen check (`frozen_frames` = 0: a noise-free chip).
 `rejected` counts the refused frames by reason; `why` names the last one. A saturated frame (an
 accelerometer or gyro word at the int16 limit, -32768 or 32767: the true value is beyond the full
 scale) is not refused, since a real manoeuvre can saturate it too: it is decoded as the full scale,
@@ -167,7 +167,7 @@ class Mpu9250:
         ax, ay, az, temp, gx, gy, gz = words
         if not self._temp_lsb[0] <= temp <= self._temp_lsb[1]:
             return self._refuse("temperature out of range")
-        if ax == 0 and ay == 0 and az == 0:
+        if ax == 0 and ay == 0 and az == 0 and self.frozen_frames:   # (a noise-free chip reads 0 in free fall)
             self._zero_accel += 1
             if self._zero_accel >= ZERO_ACCEL_FRAMES:
                 return self._refuse("accelerometer reads zero")
