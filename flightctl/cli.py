@@ -1,10 +1,21 @@
-"""`flightctl COMMAND ...`: one small module with a `main(argv)` per command."""
+"""`flightctl COMMAND ...`: one small module with a `main(argv)` per command.
+
+Every command ends the same way: bad input is one line on stderr and exit 2 (`InputError`); Ctrl-C
+is one line and exit 130 (worker processes are ended at once, a flight log is closed with a
+`# partial:` line); output piped into a reader that stops early (`| head`) is dropped quietly and the
+command finishes its work and exits with its own status."""
 from __future__ import annotations
 
 import importlib
+import os
+import signal
 import sys
+import threading
+from contextlib import contextmanager
 
 from flightctl.errors import InputError
+
+EXIT_INTERRUPTED = 130          # 128 + SIGINT, what a shell reports for a command ended by Ctrl-C
 
 COMMANDS = {
     "sim": ("flightctl.sim.cli", "fly the onboard control code against the simulated quadcopter"),
@@ -16,7 +27,8 @@ COMMANDS = {
     "analyze": ("flightctl.sim.analysis.cli", "linear analysis of each loop about hover: margins, damping, steps"),
     "tune": ("flightctl.sim.sweeps.tune", "the paper's PID tuning procedure (sec. 3.3), automated on the model"),
     "params": ("flightctl.sim.paramscli", "parameter files: params show [NAME|FILE], params diff A B"),
-    "log": ("flightctl.sim.logs.export", "flight log tools: log export F.csv F.ulg (PX4's ULog)"),
+    "log": ("flightctl.sim.logs.export", "flight logs: log export F.csv F.ulg (PX4's ULog), "
+                                         "log import FOREIGN_LOG OUT.csv (a PX4 or Betaflight log)"),
 }
 
 
@@ -24,6 +36,73 @@ def usage() -> str:
     lines = ["usage: flightctl COMMAND [ARGS]  (flightctl COMMAND --help for more)", "", "commands:"]
     lines += [f"  {name:<9} {doc}" for name, (_, doc) in COMMANDS.items()]
     return "\n".join(lines)
+
+
+def interrupted(e: BaseException) -> bool:
+    """Whether `e` is Ctrl-C: a KeyboardInterrupt, or an error raised because one arrived inside a
+    compiled function (numba reports it as a SystemError caused by the KeyboardInterrupt)."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
+@contextmanager
+def ctrl_c_sets(event: threading.Event):
+    """While the block runs, Ctrl-C sets `event` (a flight ends at its next loop period and closes its
+    log); a second Ctrl-C interrupts at once. Outside the main thread, nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield event
+        return
+
+    def handler(signum, frame):
+        if event.is_set():
+            raise KeyboardInterrupt
+        event.set()
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield event
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+class PipeSafe:
+    """stdout or stderr, where a reader that went away (`flightctl sim ... | head`) ends the output,
+    not the command: the rest is written to /dev/null and the command finishes its work."""
+
+    def __init__(self, stream):
+        self._stream = stream
+        self.broken = False
+
+    def _gone(self) -> None:
+        self.broken = True
+        try:                             # what the stream still buffers goes nowhere, now and at exit
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, self._stream.fileno())
+            os.close(null)
+        except (OSError, ValueError, AttributeError):
+            pass
+
+    def write(self, text):
+        if not self.broken:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._gone()
+        return len(text)
+
+    def flush(self):
+        if not self.broken:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._gone()
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -38,12 +117,24 @@ def main(argv: list[str] | None = None) -> int:
     if argv[0] not in COMMANDS:
         print(f"flightctl: unknown command {argv[0]!r}\n{usage()}", file=sys.stderr)
         return 2
-    module = importlib.import_module(COMMANDS[argv[0]][0])
+    saved = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = PipeSafe(sys.stdout), PipeSafe(sys.stderr)
     try:
+        module = importlib.import_module(COMMANDS[argv[0]][0])
         return int(module.main(argv[1:]) or 0)
     except InputError as e:
         print(f"flightctl {argv[0]}: error: {e}", file=sys.stderr)
         return 2
+    except (KeyboardInterrupt, SystemError) as e:
+        if not interrupted(e):
+            raise
+        print(f"flightctl {argv[0]}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            if isinstance(stream, PipeSafe):
+                stream.flush()
+        sys.stdout, sys.stderr = saved
 
 
 if __name__ == "__main__":

@@ -1,9 +1,13 @@
 """The one error type that reaches the user as a single line and exit status 2, and the checked
 readers every input file goes through: regular files only (a FIFO is never opened blocking), UTF-8
-text (a byte-order mark is dropped, UTF-16 and binary are refused), bounded line length, TOML."""
+text (a byte-order mark is dropped, UTF-16 and binary are refused), bounded line length, TOML, and
+numbers written as numbers (`parse_number`). The outputs: checked before any work (`output_file`),
+written whole or not at all (`write_atomic`: a temporary name in the same folder, then a rename)."""
 import math
 import os
+import re
 import stat
+import secrets
 import tomllib
 from pathlib import Path
 
@@ -26,6 +30,85 @@ def output_file(path, what: str = "", suffix: str | None = None) -> Path:
     if not p.resolve().parent.is_dir():
         raise InputError(f"{name}: the directory {p.resolve().parent} does not exist")
     return p
+
+
+def output_dir(path, what: str = "") -> Path:
+    """A directory a command will write into, checked before any work (and not made yet): it is a
+    directory this process may create files in, or its nearest existing parent is one."""
+    p = Path(path)
+    name = f"{what} {p}" if what else str(p)
+    first = p.resolve()
+    while not first.exists() and first != first.parent:
+        first = first.parent
+    if not first.is_dir():
+        raise InputError(f"{name}: {first} is not a directory")
+    if not os.access(first, os.W_OK | os.X_OK):
+        where = "the directory" if first == p.resolve() else f"{first}, where it would be made,"
+        raise InputError(f"{name}: {where} is not writable by this user")
+    return p
+
+
+def temporary_beside(path) -> Path:
+    """A new, empty file in `path`'s folder (so that a rename onto `path` is atomic), named after it,
+    with the permissions a plain new file gets (the umask's)."""
+    p = Path(path)
+    folder = p.resolve().parent
+    for _ in range(100):
+        tmp = folder / f".{p.name}.{secrets.token_hex(4)}.part"
+        try:
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            return tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"{folder}: no free temporary name for {p.name}")
+
+
+def write_atomic(path, data: str | bytes) -> Path:
+    """Write a whole output file: into a temporary name in the same folder, then renamed onto `path`,
+    so that a reader (or a second run writing the same file) never sees it half-written, and a full
+    disk leaves the old file (or none), never a truncated one. OSError is raised as an InputError."""
+    p = Path(path)
+    tmp = None
+    try:
+        tmp = temporary_beside(p)
+        with open(tmp, "wb") as f:
+            f.write(data.encode() if isinstance(data, str) else data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, p)
+        tmp = None
+    except OSError as e:
+        raise InputError(f"{p}: cannot write ({e.strerror or e})") from None
+    finally:
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+    return p
+
+
+def seed(text: str) -> int:
+    """`--seed`: a whole number from 0 (numpy's generators take no negative seed)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise InputError(f"--seed {text}: a whole number from 0 is needed") from None
+    if not 0 <= value < 2 ** 63:
+        raise InputError(f"--seed {text}: a whole number from 0 to 2^63 - 1 is needed")
+    return value
+
+
+# A number as measured data writes it: digits with an optional point and exponent, or nan / inf.
+# Python's float() also takes '1_0' (10), ' 5 ' (5) and other digits than 0-9: a cell meant as
+# something else is refused instead of read as a number.
+NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:nan|inf|infinity)", re.IGNORECASE | re.ASCII)
+NUMBER_CHARS = frozenset("0123456789.eE+-nNaAiIfFtTyY")   # every character NUMBER can match
+
+
+def parse_number(cell: str) -> float | None:
+    """The value of a cell written as a number (NUMBER), else None. nan and inf are returned as such."""
+    return float(cell) if NUMBER.fullmatch(cell) else None
 
 
 def _kind(mode: int) -> str:

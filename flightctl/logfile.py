@@ -9,7 +9,9 @@ import csv
 import io
 import math
 import multiprocessing
+import os
 import queue
+import signal
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,7 +19,7 @@ from typing import IO
 
 import numpy as np
 
-from flightctl.errors import InputError, read_text
+from flightctl.errors import NUMBER_CHARS, InputError, parse_number, read_text, temporary_beside
 
 FLIGHT_COLUMNS = ("t", "P1", "P2", "P3", "P4", "gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z",
                   "range", "battery_v", "roll", "pitch", "yaw", "alt",
@@ -123,6 +125,8 @@ def _fast_columns(rows, index, wanted, allow_missing):
             cells = [r[i] for r in rows]
             if name in allow_missing:
                 cells = [c if c.strip() else "nan" for c in cells]
+            if not set("".join(cells)) <= NUMBER_CHARS:   # '1_0', ' 5 ': numpy would read them (10, 5)
+                return None
             values = np.array(cells, dtype=float)
             if not np.isfinite(values).all() and (name not in allow_missing or np.isinf(values).any()):
                 return None
@@ -141,16 +145,19 @@ def _checked_columns(path, rows, lines, index, wanted, text_columns, allow_missi
             continue
         values = np.empty(len(rows))
         for k, r in enumerate(rows):
-            cell = r[i].strip() if i < len(r) else ""
-            if cell == "" or cell.lower() == "nan":
+            cell = r[i] if i < len(r) else ""
+            if cell.strip() == "" or cell.strip().lower() == "nan":
                 if name not in allow_missing:
                     raise InputError(f"{path}: row {lines[k]}: column {name!r} is empty")
                 values[k] = math.nan
                 continue
-            try:
-                v = float(cell)
-            except ValueError:
-                raise InputError(f"{path}: row {lines[k]}: column {name!r}: {cell!r} is not a number") from None
+            v = parse_number(cell)
+            if v is None:
+                why = ("spaces around a number" if parse_number(cell.strip()) is not None else
+                       "digits, a point and an exponent only" if "_" in cell and parse_number(cell.replace("_", "")) is not None
+                       else "")
+                raise InputError(f"{path}: row {lines[k]}: column {name!r}: {cell!r} is not a number"
+                                 + (f" ({why})" if why else ""))
             if not math.isfinite(v):
                 raise InputError(f"{path}: row {lines[k]}: column {name!r}: {cell!r} is not finite")
             values[k] = v
@@ -209,9 +216,18 @@ class FlightLogWriter:
 
     def __init__(self, out: str | Path | IO[str], meta: dict[str, str], extra: tuple[str, ...] = (),
                  chunk: int = 450, keep: bool = False, background: bool = False, queue_chunks: int = 8,
-                 process: bool = False):
+                 process: bool = False, atomic: bool = True):
         self._own = not hasattr(out, "write")
-        self._f = open(out, "w") if self._own else out
+        self._final = self._tmp = None
+        if self._own:
+            # atomic: written under a temporary name in the same folder and renamed at close, so that
+            # two runs writing one log never interleave (the last to close wins, whole)
+            if atomic and (not os.path.exists(out) or os.path.isfile(out)):
+                self._final, self._tmp = Path(out), temporary_beside(out)
+            self._f = _RawFile(self._tmp or out)
+        else:
+            self._f = out
+        self.partial: str | None = None   # set before close (an interrupted flight): a `# partial:` line
         self.columns = FLIGHT_COLUMNS + tuple(extra)
         self._head = "".join(f"# {key}: {line}\n" for key, value in meta.items()
                              for line in str(value).splitlines() or [""]) + ",".join(self.columns) + "\n"
@@ -219,7 +235,7 @@ class FlightLogWriter:
                    and "fork" in multiprocessing.get_all_start_methods()
                    and not multiprocessing.current_process().daemon)   # (a daemon may not have children)
         if not process:
-            self._f.write(self._head)
+            self._write_head()
         fmts = {"t": "%.6f", "range": "%s"}
         self._fmt = ",".join(fmts.get(c, "%.6g") for c in self.columns) + "\n"
         self._rows: list[tuple] = []
@@ -287,6 +303,13 @@ class FlightLogWriter:
         if self.error is None:
             self.error = f"{self.path}: {why}"
 
+    def _write_head(self) -> None:
+        try:
+            self._f.write(self._head)             # (a caller's buffered file: flushed with the first chunk)
+        except (OSError, ValueError) as e:
+            self.error = f"{self.path}: {getattr(e, 'strerror', None) or e}"
+            self.failed = True
+
     def _write(self, rows: list[tuple]) -> None:
         if self.failed:
             self.dropped += len(rows)
@@ -299,15 +322,24 @@ class FlightLogWriter:
             self.dropped += len(rows)
             self.error = f"{self.path}: {getattr(e, 'strerror', None) or e}"
             self.failed = True
+            if isinstance(self._f, _RawFile):       # a chunk written in part: the file ends at a whole row
+                self._f.cut()
             return
         self.count += len(rows)
 
     def _serve(self, rows_in, status_out) -> None:
         """The child process of `process=True`: write each chunk and report (rows written, failed,
-        error) after it."""
-        self._f.write(self._head)                      # (buffered: a full card fails at the first chunk)
+        error) after it. Ctrl-C reaches the whole process group: the child leaves it to the parent,
+        which ends the flight and closes the log, and writes every row it was sent."""
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        self._pipe.close()            # the parent's end: its death (killed with its pool) ends the child
+        self._write_head()
         while True:
-            rows = rows_in.recv()
+            try:
+                rows = rows_in.recv()
+            except (EOFError, OSError):   # the parent is gone without closing the log
+                self.partial = self.partial or "the flight's process ended without closing the log"
+                rows = None
             if rows is None:
                 return
             self._write(rows)
@@ -336,7 +368,7 @@ class FlightLogWriter:
         rows = self._kept
         k = self.columns.index("range")
         ranges = np.array([float(r[k]) if r[k] else math.nan for r in rows])
-        data = np.array([r[:k] + (0.0,) + r[k + 1:] for r in rows], dtype=float).reshape(len(rows), -1)
+        data = np.array([r[:k] + (0.0,) + r[k + 1:] for r in rows], dtype=float).reshape(len(rows), len(self.columns))
         columns = {name: data[:, i] for i, name in enumerate(self.columns)}
         columns["range"] = ranges
         return Table(self.path, columns, dict(self.meta), np.arange(len(rows)) + 2 + self._meta_lines)
@@ -379,9 +411,14 @@ class FlightLogWriter:
                 return
         else:
             self.flush()
+        tail = ""
+        if self.dropped:
+            tail += f"# dropped_rows: {self.dropped} ({self.error})\n"
+        if self.partial or self.failed:
+            tail += f"# partial: {self.partial or self.error}, after {self.count} rows\n"
         try:
-            if self.dropped and not self.failed:
-                self._f.write(f"# dropped_rows: {self.dropped} ({self.error})\n")
+            if tail:                               # (on a full card this may not fit: the rows stay whole)
+                self._f.write(tail)
             if self._own:
                 self._f.close()
             else:
@@ -390,9 +427,51 @@ class FlightLogWriter:
             self.failed = True
             self.error = self.error or f"{self.path}: {getattr(e, 'strerror', None) or e}"
         self._f = None
+        if self._tmp is not None:
+            try:
+                os.replace(self._tmp, self._final)
+            except OSError as e:
+                self.failed = True
+                self.error = self.error or f"{self.path}: {e.strerror}"
 
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
         self.close()
+
+
+class _RawFile:
+    """The log's file, unbuffered: each chunk is one write to the descriptor, and after a write that
+    failed half-way (a full card) `cut()` takes the file back to its last whole chunk, so that the log
+    never ends in the middle of a row. The descriptor is shared with a forked writer process."""
+
+    def __init__(self, path):
+        self.fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self.good = 0                     # bytes of whole chunks written
+
+    def write(self, text: str) -> int:
+        data = memoryview(text.encode())
+        while data:
+            n = os.write(self.fd, data)
+            data = data[n:]
+        self.good = os.lseek(self.fd, 0, os.SEEK_CUR)
+        return len(text)
+
+    def cut(self) -> None:
+        try:
+            os.ftruncate(self.fd, self.good)
+            os.lseek(self.fd, self.good, os.SEEK_SET)
+        except OSError:
+            pass
+
+    def fileno(self) -> int:
+        return self.fd
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            fd, self.fd = self.fd, -1
+            os.close(fd)

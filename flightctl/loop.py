@@ -71,18 +71,30 @@ class FlightLoop:
         self.result = FlightResult()
         self.t_arm = 0.0                # clock time of arming (event times are since then)
         self._why = ""                  # why the loop began a landing the plan did not ask for
+        self.stop_reason = "stop requested"   # what `stop` means here (the simulator: Ctrl-C)
 
     def _event(self, t: float, what: str) -> None:
         self.result.events.append((t - self.t_arm, what))
 
     def run(self) -> FlightResult:
+        """Fly; whatever ends it, the motors are stopped and the log closed, with a `# partial:` line
+        when the flight was cut short (a stop request, Ctrl-C, an error)."""
         hal = self.hal
+        cut = None
         try:
             hal.motors.stop()
             self._fly()
+            if self.stop.is_set():
+                cut = self.result.reason
+        except BaseException as e:
+            cut = "interrupted" if isinstance(e, KeyboardInterrupt) else f"ended by an error ({type(e).__name__})"
+            raise
         finally:
             hal.motors.stop()
             if self.log is not None:
+                if cut is not None and self.log.partial is None:
+                    t = hal.clock.now() - self.t_arm
+                    self.log.partial = f"{cut} at t = {t:.3f} s" if t >= 0.0 else f"{cut} before arming"
                 self.log.close()
                 if self.log.dropped:
                     self._event(hal.clock.now(), f"log: {self.log.dropped} rows dropped ({self.log.error})")
@@ -305,7 +317,7 @@ class FlightLoop:
         res.iterations = i
         res.max_alt = max_alt
         if self.stop.is_set():
-            res.reason = "stopped: stop requested"
+            res.reason = f"stopped: {self.stop_reason}"
             self._event(clock.now(), res.reason)
 
     def _spin(self, t: float, lost: int, giving: float, fast: bool, spin: SpinController, alt: float) -> None:

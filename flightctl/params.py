@@ -6,16 +6,24 @@ tables, ``[gains]`` and ``[filters]``, and any number of ``[[effect]]`` tables: 
 (measured-data.md) that the simulator and diagnose carry into the base model. ``--params NAME``
 also takes the name of a shipped vehicle file (``flightctl/vehicles/NAME.toml``). Anything unknown, mistyped or out of range is refused with
 one line that names the key: the program never flies with a bad file.
+
+Where each value comes from (`Params.sources`, written beside it by `dumps`, in every log header): the
+schema's source for a default; for a value the file sets, the file, with the file's own comment on
+that line when it has one (``M = 1.2  # kg; weighed``); for gains chosen by name, that table of the
+paper. A gain set chosen by name (``--gains table4``) replaces the file's ``[gains]`` whole: the flag
+wins, and the gains' sources say so.
 """
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from flightctl.errors import InputError, number, read_toml
+from flightctl.errors import InputError, number, read_text, read_toml
 
 
 INERTIA_TOLERANCE = 0.10  # accepted excess of one principal inertia over the sum of the others
@@ -96,6 +104,7 @@ TABLE6 = Gains()
 TABLE4 = Gains(kp_z=1.9, ki_z=0.0, kd_z=1.6, kp_phi=17.1, ki_phi=0.0, kd_phi=1.3,
                kp_theta=17.2, ki_theta=0.0, kd_theta=1.3, kp_psi=7.7, ki_psi=0.0, kd_psi=2.7)
 GAIN_SETS = {"table6": TABLE6, "table4": TABLE4}
+GAIN_SOURCES = {"table6": "paper, Table 6", "table4": "paper, Table 4"}
 
 
 @dataclass(frozen=True)
@@ -161,6 +170,26 @@ class Params:
     sensors: Sensors = Sensors()
     # (table, value, lo, hi) of [filters] and [sensors]: `range.NAME = [lo, hi]` inside the table
     table_ranges: tuple[tuple[str, str, float, float], ...] = ()
+    # where the values come from (not part of their equality): "" the defaults, "vehicle NAME" or
+    # "file PATH"; and (name, source) of every value whose source is not its schema's
+    origin: str = field(default="", compare=False)
+    sources: tuple[tuple[str, str], ...] = field(default=(), compare=False)
+
+    def source(self, name: str) -> str:
+        """Where the value `name` (of the airframe, [gains] or [filters]) comes from."""
+        for key, text in self.sources:
+            if key == name:
+                return text
+        for t in (Airframe, Gains, Filters, Sensors):
+            for f in dataclasses.fields(t):
+                if f.name == name:
+                    return f.metadata["source"]
+        raise KeyError(name)
+
+    def digest(self) -> str:
+        """A short hash of the values (sha256 of `dumps`, sources left out): two runs with the same
+        digest flew the same parameters."""
+        return hashlib.sha256(dumps(dataclasses.replace(self, sources=()), plain=True).encode()).hexdigest()[:16]
 
 
 VEHICLES = Path(__file__).parent / "vehicles"   # shipped parameter files, by name (`--params NAME`)
@@ -198,7 +227,8 @@ def _short(value) -> str:
 
 
 def from_dict(data: dict, gains: Gains | None = None) -> Params:
-    """Validate a parsed TOML document. `gains` picks the base gain set that [gains] overrides."""
+    """Validate a parsed TOML document. `gains`: a gain set chosen by name, which replaces the
+    document's [gains] (validated all the same); None: the document's [gains] over Table 6."""
     data = {k: dict(v) if isinstance(v, dict) else v for k, v in data.items()}  # never mutate the caller's tables
     tables = {"gains": (Gains, gains or TABLE6), "filters": (Filters, Filters()), "sensors": (Sensors, Sensors())}
     built, table_ranges = {}, []
@@ -215,6 +245,8 @@ def from_dict(data: dict, gains: Gains | None = None) -> Params:
         spans = table.pop("range", {}) if cls is not Gains else {}
         built[name] = _build(cls, table, f"{name}.", base)
         table_ranges += [(name, *span) for span in _spans(spans, dataclasses.asdict(built[name]), f"{name}.", cls)]
+    if gains is not None:
+        built["gains"] = gains
     effects = _effects(data.pop("effect", []))
     ranges = data.pop("range", {})
     airframe = _build(Airframe, data, "")
@@ -254,7 +286,7 @@ def _effects(items) -> tuple[EffectSpec, ...]:
         item = dict(item)
         cause, source, ranges = item.pop("cause", None), item.pop("source", ""), item.pop("range", {})
         if not isinstance(cause, str) or not cause:
-            raise InputError(f"{where}: cause: a cause name is needed (measured-data.md)")
+            raise InputError(f"{where}: cause: a cause name is needed (docs/diagnose.md lists them)")
         if not isinstance(source, str):
             raise InputError(f"{where}: source: expected text")
         for key, value in item.items():
@@ -273,30 +305,93 @@ def resolve(spec: str | Path) -> Path:
     return path
 
 
+def shipped() -> list[str]:
+    """The names of the shipped vehicles (`--params NAME`)."""
+    return sorted(f.stem for f in VEHICLES.glob("*.toml"))
+
+
+def gain_set_name(gains: Gains) -> str | None:
+    return next((name for name, g in GAIN_SETS.items() if g == gains), None)
+
+
+_SOURCE_LINE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*=[^#]*#\s*(.*)$")
+
+
+def _file_sources(text: str, data: dict, origin: str) -> dict[str, str]:
+    """The source of each airframe, [gains] and [filters] value the file sets: the origin, and the
+    comment on its line after the unit (`dumps` writes `# unit; source`) when there is one."""
+    known = {f.name for t in (Airframe, Gains, Filters) for f in dataclasses.fields(t)}
+    keys = {k for k, v in data.items() if not isinstance(v, (dict, list))}
+    for table in ("gains", "filters"):
+        if isinstance(data.get(table), dict):
+            keys |= set(data[table]) - {"preset"}
+    out = {}
+    section = ""
+    for line in text.splitlines():
+        head = line.strip()
+        if head.startswith("["):
+            section = head.strip("[] ")
+            continue
+        m = _SOURCE_LINE.match(line)
+        if m and m.group(1) in keys & known and section in ("", "gains", "filters"):
+            note = m.group(2).split(";", 1)[-1].strip()
+            out[m.group(1)] = f"{origin}: {note}" if note else origin
+    for key in (keys & known) - set(out):
+        out[key] = origin
+    preset = data.get("gains", {}).get("preset") if isinstance(data.get("gains"), dict) else None
+    if preset in GAIN_SOURCES:
+        for f in dataclasses.fields(Gains):
+            out.setdefault(f.name, f"{GAIN_SOURCES[preset]} ({origin}: gains.preset)")
+    return out
+
+
 def load(path: str | Path | None, gains: Gains | None = None) -> Params:
-    """Load and validate a parameter file; None gives the shipped reference airframe."""
+    """Load and validate a parameter file; None gives the shipped reference airframe. `gains`: a gain
+    set chosen by name (`--gains`), which replaces the file's [gains]."""
+    chosen = {}
+    name = gain_set_name(gains) if gains is not None else None
+    if gains is not None and gains != TABLE6:
+        what = f"{GAIN_SOURCES[name]} (--gains {name})" if name else "the gains given"
+        chosen = {f.name: what for f in dataclasses.fields(Gains)}
     if path is None:
-        return from_dict({}, gains)
+        return dataclasses.replace(from_dict({}, gains), sources=tuple(chosen.items()))
     spec, path = path, resolve(path)
     if not path.exists():
-        shipped = ", ".join(sorted(f.stem for f in VEHICLES.glob("*.toml")))
-        raise InputError(f"{spec}: neither a parameter file nor a shipped vehicle (shipped: {shipped})")
-    data = read_toml(path)
+        raise InputError(f"{spec}: neither a parameter file nor a shipped vehicle (shipped: {', '.join(shipped())})")
+    text = read_text(path)                  # a regular file, UTF-8 (a pipe or a device refused unread)
+    if path.suffix.lower() != ".toml":
+        raise InputError(f"{spec}: a parameter file is TOML and named .toml (shipped vehicles: {', '.join(shipped())})")
+    data = read_toml(path, text)
     try:
-        return from_dict(data, gains)
+        params = from_dict(data, gains)
     except InputError as e:
         raise InputError(f"{path}: {e}") from None
+    origin = f"vehicle {path.stem}" if path.parent == VEHICLES else f"file {path}"
+    sources = _file_sources(text, data, origin)
+    if gains is not None:
+        gain_names = {f.name for f in dataclasses.fields(Gains)}
+        sources = {k: v for k, v in sources.items() if k not in gain_names}
+        file_gains = isinstance(data.get("gains"), dict) and data["gains"]
+        what = f"{GAIN_SOURCES[name]} (--gains {name}" if name else "the gains given ("
+        for f in dataclasses.fields(Gains):
+            sources[f.name] = what + (f", replacing the [gains] of {origin})" if file_gains else ")")
+    return dataclasses.replace(params, origin=origin, sources=tuple(sources.items()))
 
 
-def dumps(params: Params, sources: dict[str, str] | None = None, tables=("gains", "filters", "sensors")) -> str:
-    """TOML text of a parameter set, with unit and source of each value as comments. A vehicle file
-    leaves out [gains] so that `--gains` chooses them."""
+def dumps(params: Params, sources: dict[str, str] | None = None, tables=("gains", "filters", "sensors"),
+          plain: bool = False) -> str:
+    """TOML text of a parameter set, with unit and source of each value as comments (`sources` over
+    the parameters' own, `Params.source`). A vehicle file leaves out [gains] so that `--gains` chooses
+    them. `plain`: the values only, no comments."""
     sources = sources or {}
-    lines = ["# flightctl parameter file (SI units; see conventions.md)"]
+    lines = [] if plain else ["# flightctl parameter file (SI units; see conventions.md)"]
 
     def emit(obj):
         for f in dataclasses.fields(obj):
-            source = sources.get(f.name, f.metadata["source"])
+            if plain:
+                lines.append(f"{f.name} = {getattr(obj, f.name)!r}")
+                continue
+            source = sources.get(f.name) or params.source(f.name)
             lines.append(f"{f.name} = {getattr(obj, f.name)!r}  # {f.metadata['unit']}; {source}")
 
     emit(params.airframe)
@@ -310,7 +405,7 @@ def dumps(params: Params, sources: dict[str, str] | None = None, tables=("gains"
         lines.append(f"cause = {json.dumps(e.cause)}")
         lines += [f"{k} = {v!r}" for k, v in e.parameters]
         lines += [f"range.{k} = [{lo!r}, {hi!r}]" for k, lo, hi in e.ranges]
-        if e.source:
+        if e.source and not plain:
             lines.append(f"source = {json.dumps(e.source)}")
     return "\n".join(lines) + "\n"
 

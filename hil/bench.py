@@ -43,8 +43,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from flightctl import __version__
+from flightctl.cli import interrupted
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, open_board
-from flightctl.errors import InputError
+from flightctl.errors import InputError, output_file, seed
 from flightctl.hal import PWM_RANGE
 from flightctl.hil import instruments as ins
 from flightctl.logfile import BENCH_COLUMNS
@@ -342,7 +343,7 @@ def confirm_clamped(args, board: Board, read=input) -> None:
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="flightctl bench", description=__doc__.split("\n\n")[0])
-    p.add_argument("--board", default="pi", help=f"the board (default pi): {described()}")
+    p.add_argument("--board", default="pi", help=f"the board (default pi): {described('hil')}")
     p.add_argument("--instruments", help="pty (simulated; the default on --board sim), serial:PATH[,BAUD] "
                    "(the line protocol; the default on hardware: serial:/dev/ttyACM0,115200), rcbenchmark:PATH[,BAUD]")
     p.add_argument("--motors", "--motor", default="1,2,3,4", help="motors in turn, e.g. 1,2,3,4 (the default) or 3")
@@ -367,8 +368,11 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--params", help="parameter file (TOML) or a vehicle name")
     p.add_argument("--board-file", help="pi board wiring (TOML)")
     p.add_argument("--realtime", action="store_true", help="on a simulated board: pace it in real time")
-    p.add_argument("--seed", type=int, default=0, help="on a simulated board: seed of the sensor noise")
+    p.add_argument("--seed", type=seed, default=0, help="on a simulated board: seed of the sensor noise (from 0)")
     args = p.parse_args(argv)
+    if args.board == "hil":
+        p.error("--board hil: the bench spins motors on a thrust stand (pi) or a simulated one (sim); "
+                "the hil board's motors drive a model on a PC")
     if not 0 < args.ramp <= 500:
         p.error("--ramp: 0 < P/s <= 500")
     if args.settle < 0 or args.hold <= 0 or args.record <= 0 or args.step_timeout <= 0 or args.silent <= 0:
@@ -433,8 +437,13 @@ def main(argv: list[str] | None = None) -> int:
     params = load(args.params)
     limits = Limits(args.max, prop_limit(params) if args.max_rpm is None else args.max_rpm * ins.RPM,
                     args.step_timeout, args.silent)
-    out = Path(args.out)
-    raw_path = Path(args.raw) if args.raw else out.with_name(f"{out.stem}-raw{out.suffix or '.csv'}")
+    # every output checked before a motor turns: a run's measurements are never lost at the end
+    out = output_file(args.out, "--out")
+    raw_path = output_file(args.raw if args.raw else out.with_name(f"{out.stem}-raw{out.suffix or '.csv'}"), "--raw")
+    if not args.no_plot:
+        output_file(args.plot or out.with_suffix(".png"), "--plot", ".png")
+    if args.write_params:
+        output_file(args.write_params, "--write-params", ".toml")
 
     def on_term(signum, frame):
         raise KeyboardInterrupt
@@ -466,12 +475,20 @@ def main(argv: list[str] | None = None) -> int:
                 hal.motors.arm()
                 taus = run_profile(bench, args, motors, steps, step, writer,
                                    lambda: (f.flush(), fr.flush()), Progress(total, "bench "))
-            except KeyboardInterrupt:
+            except (KeyboardInterrupt, SystemError) as e:   # (numba reports Ctrl-C as a SystemError)
+                if not interrupted(e):
+                    raise
+                hal.motors.stop()
                 print(f"bench: interrupted: motor {bench.motor} at the stop pulse", file=sys.stderr)
                 status = EXIT_INTERRUPTED
+                for fh in (f, fr):
+                    fh.write(f"# partial: interrupted on motor {bench.motor}\n")
             except BenchStop as e:
+                hal.motors.stop()
                 print(f"bench: stopped: {e}; motor {bench.motor} at the stop pulse", file=sys.stderr)
                 status = EXIT_STOPPED
+                for fh in (f, fr):
+                    fh.write(f"# partial: stopped: {' '.join(str(e).split())}\n")
             finally:
                 hal.motors.stop()
     finally:
@@ -485,7 +502,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bench: motor_dynamics tau = {tau * 1e3:.1f} ms written to {args.write_params}", file=sys.stderr)
     if not args.no_plot and out.exists():
         from flightctl.hil.benchplot import plot_bench
-        plot_bench(out, raw_path, getattr(bench, "step_fits", []), args.plot or out.with_suffix(".png"))
+        try:
+            plot_bench(out, raw_path, getattr(bench, "step_fits", []), args.plot or out.with_suffix(".png"))
+        except InputError as e:                  # stopped before the first row
+            print(f"bench: no figure ({e})", file=sys.stderr)
     print(f"bench: {out} (raw samples: {raw_path})", file=sys.stderr)
     return status
 

@@ -10,6 +10,11 @@ pseudo-terminal pair (the flight side through pyserial) or loopback TCP, flying 
 Latency, jitter and loss are printed at the end; `--json` holds frames_sent, frames_lost,
 latency_p50_ms, latency_p99_ms and outcome, the PC side's part of the latency (pc_turnaround_*), each
 end's CPU time per tick and the machine's CPU over the flight (busy, stolen by a virtual machine's host).
+
+`demo` exits 0 when the vehicle flew and landed upright, 1 when it did not (not armed, crashed, the
+link lost), 3 when the hil board could not be opened, 130 on Ctrl-C (the loop stops the motors and
+says goodbye to the PC side first). The motor-loss gain schedule (flightctl/control/spin.py) is
+computed before the link opens, never between a live link and its first frame.
 """
 from __future__ import annotations
 
@@ -24,14 +29,17 @@ import tempfile
 import threading
 from pathlib import Path
 
+from flightctl.cli import EXIT_INTERRUPTED, ctrl_c_sets
 from flightctl.comms import link as lk
 from flightctl.boards import BoardOptions, BoardUnavailable, open_board
-from flightctl.errors import InputError
+from flightctl.control.spin import SpinController
+from flightctl.errors import InputError, output_file, seed, write_atomic
 from flightctl.hal import ArmingRefused
 from flightctl.loop import FlightLoop
 from flightctl.params import load
 from flightctl.plans.plan import Move, Plan
 from flightctl.plans import TAKEOFF
+from flightctl.safety import LEFT_GROUND_ALT
 from flightctl.service import prearm
 from flightctl.hil.serve import Cut, HilPlant, serve
 
@@ -53,7 +61,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="lockstep (default): the plant steps one period per command; "
                         "free: on the PC's wall clock")
     s.add_argument("--params", help="parameter file (TOML) of the simulated vehicle")
-    s.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
+    s.add_argument("--seed", type=seed, default=0, help="seed of the sensor noise (a whole number from 0)")
     s.add_argument("--seconds", type=float, help="end after this much simulated time")
     s.add_argument("--json", help="write the PC side's figures here")
     s.add_argument("--cut", nargs=2, type=float, metavar=("AT", "FOR"),
@@ -65,7 +73,7 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--mode", choices=MODES, default="lockstep", help="as serve --mode")
     d.add_argument("--calibrate", type=float, default=1.0, help="seconds sitting still before arming")
     d.add_argument("--params", help="parameter file (TOML)")
-    d.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
+    d.add_argument("--seed", type=seed, default=0, help="seed of the sensor noise (a whole number from 0)")
     d.add_argument("--json", help="write the figures here")
     d.add_argument("--cut", nargs=2, type=float, metavar=("AT", "FOR"), help="as serve --cut")
     return p
@@ -87,6 +95,8 @@ def serve_main(args) -> int:
         kind, where, n = lk.parse_link(args.link)
     except ValueError as e:
         raise InputError(str(e)) from None
+    if args.json:
+        output_file(args.json, "--json")
     params = load(args.params)
     plant = HilPlant(params, args.seed)
     if kind == "tcp":
@@ -113,7 +123,7 @@ def serve_main(args) -> int:
           f"{res.rx['out_of_order']} out of order; {res.sim_s:.2f} s simulated, max altitude {res.max_alt:.2f} m",
           file=sys.stderr)
     if args.json:
-        Path(args.json).write_text(json.dumps(figures, indent=2) + "\n")
+        write_atomic(args.json, json.dumps(figures, indent=2) + "\n")
     return 0
 
 
@@ -134,13 +144,15 @@ def _spawn_serve(args, tmp: Path):
         cmd += ["--params", args.params]
     if args.cut:
         cmd += ["--cut", *map(str, args.cut)]
+    # its own session: Ctrl-C reaches the flight side alone, which stops and says goodbye over the link
     if args.link == "pty":
         master, slave = os.openpty()
-        proc = subprocess.Popen(cmd + ["--link", f"fd:{master}"], pass_fds=(master,), stdin=subprocess.DEVNULL)
+        proc = subprocess.Popen(cmd + ["--link", f"fd:{master}"], pass_fds=(master,), stdin=subprocess.DEVNULL,
+                                start_new_session=True)
         os.close(master)
         return proc, f"serial:{os.ttyname(slave)},{lk.DEFAULT_BAUD}", [slave]
     proc = subprocess.Popen(cmd + ["--link", "tcp:127.0.0.1:0"], stdout=subprocess.PIPE, stdin=subprocess.DEVNULL,
-                            text=True)
+                            text=True, start_new_session=True)
     line = proc.stdout.readline()
     if not line.startswith("hil serve: listening on port "):
         proc.kill()
@@ -177,7 +189,13 @@ def _load_figures(before: tuple, after: tuple, ticks: int) -> dict:
 def demo_main(args) -> int:
     if not 0 < args.seconds <= 3600:
         raise InputError("--seconds: 0 < S <= 3600")
+    if args.json:
+        output_file(args.json, "--json")
     params = load(args.params)
+    # The motor-loss gain schedule, solved once per vehicle and process (control/spin.py), before the link
+    # opens: the PC side gives up on a flight side silent for IDLE_S once the first command has come.
+    SpinController(params)
+    stop = threading.Event()
     with tempfile.TemporaryDirectory(prefix="flightctl-hil-") as tmpdir:
         tmp = Path(tmpdir)
         before = _machine()
@@ -190,23 +208,26 @@ def demo_main(args) -> int:
                 return 3
             link = board.hal.clock.link
             try:
-                reasons = prearm(board.hal, params, board.min_battery_v)
-                if reasons:
-                    raise InputError("hil demo: not flying: " + "; ".join(reasons))
-                stop = threading.Event()
                 loop = FlightLoop(board.hal, params, demo_plan(args.seconds), calibrate_s=args.calibrate, stop=stop)
+                loop.stop_reason = "interrupted (Ctrl-C)"
+                reasons = prearm(board.hal, params, board.min_battery_v)
 
                 def end_on_touchdown(i: int) -> None:   # the loop idles out a landing's margin: not here
                     events = loop.result.events
                     if events and events[-1][1].startswith("landed"):
                         stop.set()
                 loop.on_tick = end_on_touchdown
-                try:
-                    result = loop.run()
-                    outcome = next((w for _, w in reversed(result.events) if w.startswith("landed")), result.reason)
-                except ArmingRefused as e:           # the link went down on the ground: stay stopped
-                    result = loop.result
-                    outcome = f"not armed: {e}"
+                result = loop.result
+                if reasons:
+                    outcome = "not armed: " + "; ".join(reasons)
+                else:
+                    try:
+                        with ctrl_c_sets(stop):
+                            result = loop.run()
+                        outcome = next((w for _, w in reversed(result.events) if w.startswith("landed")), result.reason)
+                    except ArmingRefused as e:           # the link went down on the ground: stay stopped
+                        result = loop.result
+                        outcome = f"not armed: {e}"
             finally:
                 board.close()
             proc.wait(timeout=10)
@@ -241,8 +262,14 @@ def demo_main(args) -> int:
           + (f"; machine CPU {figures['machine_busy_pct']:.0f} % busy, {steal:.0f} % stolen by the host"
              if steal is not None else ""))
     if args.json:
-        Path(args.json).write_text(json.dumps(figures, indent=2) + "\n")
-    return 0
+        write_atomic(args.json, json.dumps(figures, indent=2) + "\n")
+    if result.reason.startswith("stopped: interrupted"):
+        print("flightctl hil demo: interrupted; the motors were stopped", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    flew = outcome.startswith("landed") and not pc["crashed"] and pc["max_alt_m"] >= LEFT_GROUND_ALT
+    if not flew:
+        print(f"flightctl hil demo: the vehicle did not fly: {outcome}", file=sys.stderr)
+    return 0 if flew else 1
 
 
 def main(argv: list[str]) -> int:

@@ -90,15 +90,16 @@ def facts(result: dict) -> str:
 
 
 def _between(path: Path, begin: str, end: str, block: str) -> None:
-    text = path.read_text()
-    head, rest = text.split(begin, 1)
-    _, tail = rest.split(end, 1)
-    path.write_text(f"{head}{begin}\n{block}\n{end}{tail}")
+    from flightctl.sim.docs import write_block
+    if not write_block(path, begin, end, block):
+        raise SystemExit(f"{path}: the markers {begin} ... {end} are not there")
 
 
-def write_doc(result: dict, doc: Path = DOC, readme: Path = README) -> None:
-    _between(doc, BEGIN, END, render(result))
-    _between(readme, FACTS_BEGIN, FACTS_END, facts(result))
+def write_doc(result: dict, doc: Path | None = DOC, readme: Path | None = README) -> None:
+    if doc is not None:
+        _between(doc, BEGIN, END, render(result))
+    if readme is not None:
+        _between(readme, FACTS_BEGIN, FACTS_END, facts(result))
 
 
 def main() -> None:
@@ -106,12 +107,20 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=200)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--from", dest="source", help="render this Monte Carlo JSON instead of flying the draws")
+    ap.add_argument("--doc", help="write only docs/as-flown.md's block, into this copy of it (scripts/docs.py)")
+    ap.add_argument("--readme", help="write only the README's block of the paper's facts, into this copy of it")
     args = ap.parse_args()
+    if args.doc or args.readme:
+        if not args.source:
+            ap.error("--doc/--readme render a Monte Carlo's JSON: give it with --from")
+        result = json.loads(Path(args.source).read_text())
+        write_doc(result, Path(args.doc) if args.doc else None, Path(args.readme) if args.readme else None)
+        return
     if args.source:
         result = json.loads(Path(args.source).read_text())
     else:
         bar = Progress(2 * args.n, "monte carlo")
-        result = montecarlo.run("paper-as-flown", "paper", args.n, args.seed, progress=bar.step)
+        result = montecarlo.run("paper-as-flown", "paper", args.n, args.seed, progress=bar)
     if Path(args.source or "").resolve() != JSON:
         montecarlo.write_json(result, JSON)
     montecarlo.plot(result, DOC.parent / "as-flown-monte-carlo.png")

@@ -3,7 +3,11 @@ on the base model and on the as-flown one (`--params paper-as-flown`: its effect
 state-dependent), and what one control-loop iteration costs, decode to PWM counts, against the
 2222 us loop period.
 
-    python scripts/benchmark.py [--repeat N]
+    python scripts/benchmark.py [--repeat N] [--markdown]
+
+`--markdown` prints the README's block (scripts/docs.py writes it there): the date and the machine,
+then one row per figure. The figures are this machine's on that day: tests/test_docs.py checks the
+block's form, never its numbers.
 
 The iteration is timed on the onboard code only (the fastest of many short runs): `Mpu9250.read` decoding a 22-byte burst (from a
 fixed frame, so the simulated chip's cost is not counted), the calibration, the motor-loss check, the
@@ -195,59 +199,97 @@ def diagnose_cost(name: str) -> tuple[float, float, float] | None:
     return float(table["t"][-1] - table["t"][0]), read, total
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--repeat", type=int, default=3)
-    args = ap.parse_args()
+HEADER = ("| what | figure | target |", "|---|---|---|")
+STAMP = "Measured by `python scripts/benchmark.py --markdown` on {date}: {machine}."
+
+
+def machine() -> str:
+    """This machine, as the figures need it said: OS, CPU count, Python, whether numba compiles."""
+    import os
+    import platform
+    from flightctl.sim.world import compiled
+    world = ("the simulated world compiled by numba" if compiled.model_period() is not None
+             else "the simulated world in plain Python (numba absent or FLIGHTCTL_JIT=0)")
+    load = f", load average {os.getloadavg()[0]:.1f} when it began" if hasattr(os, "getloadavg") else ""
+    return (f"{platform.system()} {platform.machine()}, {os.cpu_count()} cores{load}, Python "
+            f"{platform.python_version()}, {world}")
+
+
+def figures(repeat: int) -> list[tuple[str, str, str]]:
+    """(what, figure, target) rows: every figure this script measures."""
+    import os
     params = load(None)
     out = Path(tempfile.mkdtemp())
-    from flightctl.sim.world import compiled
-    print("the simulated world (the plant's step, the IMU chip's registers): "
-          + ("compiled by numba (sim/world/compiled.py)" if compiled.model_period() is not None
-             else "plain Python (numba absent or FLIGHTCTL_JIT=0: the `fast` extra)")
-          + "; the onboard code: plain Python; the flight log: formatted in a child process")
-    for label, name, kw, target in (("full onboard path", None, {}, ">= 30x; issue 17: 100x"),
+    rows = []
+    for label, name, kw, target in (("full onboard path", None, {}, ">= 30x (goal 100x)"),
                                     ("perfect state feedback", None, {"truth": True}, ">= 30x"),
                                     ("full onboard path, --params paper-as-flown", "paper-as-flown", {},
-                                     ">= 30x; issue 17: 60x")):
+                                     ">= 30x (goal 60x)")):
         ratios = []
-        for _ in range(args.repeat):
+        for _ in range(repeat):
             start = time.perf_counter()
             flight = fly(SCENARIOS["paper"](), load(name), out / "paper.csv", **kw)
             wall = time.perf_counter() - start
             ratios.append(flight.log["t"][-1] / wall)
-        print(f"flightctl sim paper, {label}: {statistics.median(ratios):.1f}x real time "
-              f"(median of {args.repeat}; {min(ratios):.1f}x to {max(ratios):.1f}x), target {target}")
+        rows.append((f"`flightctl sim paper`, {label}", f"{statistics.median(ratios):.1f}x real time (median of "
+                     f"{repeat}; {min(ratios):.1f}x to {max(ratios):.1f}x)", target))
     period_us = 1e6 * params.airframe.dt
     for label, name in (("base model", None), ("paper-as-flown", "paper-as-flown")):
-        world, onboard = min((split_us(name) for _ in range(args.repeat)), key=sum)
-        print(f"  per loop period, {label}: {world:.0f} us in the simulated world (plant, chip, sonar, battery), "
-              f"{onboard:.0f} us in the onboard loop and the log: the loop alone caps the simulator at "
-              f"{period_us / onboard:.0f}x real time")
-    costs = [iteration_us() for _ in range(args.repeat)]
-    us = min(costs)
-    print(f"control iteration (decode -> PWM counts): {us:.1f} us = {100 * us / period_us:.2f} % of the "
-          f"{period_us:.0f} us loop period (fastest of {100 * args.repeat} runs of 1000), targets < 3 % "
-          f"and < 8 us (issue 17)")
+        world, onboard = min((split_us(name) for _ in range(repeat)), key=sum)
+        rows.append((f"one loop period of `flightctl sim paper`, {label}",
+                     f"{world:.0f} us in the simulated world, {onboard:.0f} us in the onboard loop and the log "
+                     f"(which alone caps the simulator at {period_us / onboard:.0f}x)", "-"))
+    us = min(iteration_us() for _ in range(repeat))
+    rows.append(("one control iteration (decode to PWM counts, the motor-loss check included)",
+                 f"{us:.1f} us = {100 * us / period_us:.2f} % of the {period_us:.0f} us period "
+                 f"(fastest of {100 * repeat} runs of 1000)", "< 3 % and < 8 us"))
     cold, warm, us_spin = spin_costs()
-    print(f"motor-loss gain schedule (as-flown, judged over its Jp range): {cold:.1f} s of CPU to build, "
-          f"{1e3 * warm:.0f} ms to read back from the disk cache; the two-rotor controller: {us_spin:.1f} us a loop")
+    rows.append(("the motor-loss gain schedule (as-flown, judged over its ranges)",
+                 f"{cold:.1f} s of CPU to build, {1e3 * warm:.0f} ms to read back from the disk cache", "-"))
+    rows.append(("one loop of the two-rotor controller (after a lost motor)", f"{us_spin:.1f} us", "-"))
     for sensors in (False, True):
         for workers in sorted({1, os.cpu_count() or 1}):
-            rate = max(batch_rate(workers=workers, sensors=sensors) for _ in range(args.repeat))
-            print(f"batched simulator, 10,000 as-flown vehicles on {workers} core{'s' if workers > 1 else ''}, "
-                  f"sensors {'on (the chip, the sonar)' if sensors else 'off (ideal)'}: {rate / 1e6:.2f} M "
-                  f"vehicle-steps/s (best of {args.repeat}; per core {rate / workers / 1e6:.2f} M), target >= 2.0 M "
-                  f"per core with the sensors on")
+            rate = max(batch_rate(workers=workers, sensors=sensors) for _ in range(repeat))
+            rows.append((f"batched simulator, 10,000 as-flown vehicles on {workers} core{'s' if workers > 1 else ''}, "
+                         f"sensors {'on (the chip, the sonar)' if sensors else 'off (ideal)'}",
+                         f"{rate / 1e6:.2f} M vehicle-steps/s (best of {repeat}; {rate / workers / 1e6:.2f} M per core)",
+                         ">= 2.0 M per core with the sensors on" if sensors else "-"))
     for name, rate in DIAGNOSED:
         cost = diagnose_cost(name)
         if cost is None:
-            print("flightctl diagnose on a real log: ../shared/data/real/flights is not here")
+            rows.append(("`flightctl diagnose` of a real log", "not measured: ../shared/data/real/flights is not here",
+                         "< 60 s for 150 s at 1 kHz"))
             break
         span, read, total = cost
-        print(f"flightctl diagnose {Path(name).name} ({span:.0f} s at {rate}, real): {total:.1f} s of CPU on one core, "
-              f"{read:.1f} s of it reading the log: {total / span:.2f} s per second of log"
-              + (f"; a 150 s log at 1 kHz: about {150 * total / span:.0f} s, target < 60 s" if rate == "1 kHz" else ""))
+        rows.append((f"`flightctl diagnose` of {Path(name).name} ({span:.0f} s at {rate}, real)",
+                     f"{total:.1f} s of CPU on one core, {read:.1f} s of it reading the log: {total / span:.2f} s per "
+                     "second of log" + (f"; a 150 s log at 1 kHz: about {150 * total / span:.0f} s" if rate == "1 kHz" else ""),
+                     "< 60 s for 150 s at 1 kHz" if rate == "1 kHz" else "-"))
+    return rows
+
+
+def markdown(rows: list[tuple[str, str, str]], date: str, where: str) -> str:
+    """The README's speed block: when and where it was measured, then the table."""
+    return "\n".join([STAMP.format(date=date, machine=where), "", *HEADER,
+                      *(f"| {what} | {figure} | {target} |" for what, figure, target in rows)])
+
+
+def main() -> None:
+    import datetime
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--repeat", type=int, default=3, help="runs of each figure (default 3)")
+    ap.add_argument("--markdown", action="store_true", help="print the README's block: the date, the machine, a table")
+    args = ap.parse_args()
+    if args.repeat < 1:
+        ap.error("--repeat: at least 1")
+    where = machine()
+    rows = figures(args.repeat)
+    if args.markdown:
+        print(markdown(rows, datetime.date.today().isoformat(), where))
+        return
+    print(where)
+    for what, figure, target in rows:
+        print(f"{what}: {figure}" + (f", target {target}" if target != "-" else ""))
 
 
 if __name__ == "__main__":

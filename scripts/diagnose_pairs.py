@@ -14,10 +14,13 @@ import io
 import sys
 import tempfile
 from collections import Counter
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+
+from flightctl.sim.docs import write_block
+from flightctl.sim.pool import run_all
+from flightctl.sim.progress import Progress
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))       # the tests' drawing and tolerances: one definition
@@ -27,8 +30,7 @@ BEGIN, END = "<!-- diagnose_pairs: begin -->", "<!-- diagnose_pairs: end -->"
 
 def judge(seed: int) -> dict:
     """One pair: {seed, hidden, named, verdict} where verdict is 'ok' or what went wrong."""
-    from test_diagnose_cases import close_enough
-    from test_diagnose_chain import fly_pair
+    from test_diagnose_cases import close_enough, fly_pair   # (no pytest: the base install runs this)
 
     with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
         truth, report = fly_pair(Path(tmp), np.random.default_rng(seed))   # the flights' own printing aside
@@ -47,8 +49,13 @@ def _short(parameters: dict) -> str:
 def summary(rows: list[dict], first: int) -> str:
     ok = sum(r["verdict"] == "ok" for r in rows)
     kinds = Counter(part.strip() for r in rows if r["verdict"] != "ok" for part in r["verdict"].split(";"))
+    extra = sum("(not hidden)" in r["verdict"] for r in rows)
+    sized = sum("mis-sized" in r["verdict"] for r in rows)
     lines = [f"{ok} of {len(rows)} pairs (seeds {first}-{first + len(rows) - 1}) had both causes named and "
-             "sized within their single-effect tolerances and nothing else.", ""]
+             "sized within their single-effect tolerances and nothing else.",
+             "",
+             f"A cause named that was not hidden: in {extra} of {len(rows)} pairs; a named cause sized outside "
+             f"its tolerance: in {sized}.", ""]
     if kinds:
         lines += ["| what went wrong | pairs |", "|---|---|"]
         lines += [f"| {k} | {n} |" for k, n in kinds.most_common()]
@@ -59,14 +66,6 @@ def summary(rows: list[dict], first: int) -> str:
     return "\n".join(lines)
 
 
-def write_doc(doc: Path, text: str) -> None:
-    body = doc.read_text()
-    if BEGIN not in body or END not in body:
-        raise SystemExit(f"{doc}: no {BEGIN} ... {END} markers")
-    head, rest = body.split(BEGIN, 1)
-    doc.write_text(f"{head}{BEGIN}\n{text}\n{END}{rest.split(END, 1)[1]}")
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
     ap.add_argument("--pairs", type=int, default=30, help="how many pairs (default 30)")
@@ -74,18 +73,23 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="pairs flown at once (default 2)")
     ap.add_argument("--doc", type=Path, help="write the summary between the markers of this Markdown file")
     args = ap.parse_args(argv)
-    seeds = range(args.first, args.first + args.pairs)
-    rows = []
-    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for k, row in enumerate(pool.map(judge, seeds), start=1):
-            rows.append(row)
-            print(f"[{k}/{args.pairs}] seed {row['seed']}: hidden {', '.join(row['hidden'])} -> named "
-                  f"{', '.join(row['named']) or 'nothing'} ({row['airborne_s']:.0f} s airborne): {row['verdict']}",
-                  file=sys.stderr, flush=True)
+    if args.pairs < 1 or args.first < 0 or args.jobs < 1:
+        ap.error("--pairs and --jobs: at least 1; --first: a seed from 0")
+    seeds = list(range(args.first, args.first + args.pairs))
+    bar = Progress(len(seeds), "diagnose_pairs ")
+
+    def done(k: int, row: dict) -> None:
+        bar.step(f"seed {row['seed']}: hidden {', '.join(row['hidden'])} -> named "
+                 f"{', '.join(row['named']) or 'nothing'} ({row['airborne_s']:.0f} s airborne): {row['verdict']}")
+    try:
+        rows = run_all(judge, seeds, args.jobs, done)
+    except KeyboardInterrupt:
+        print("diagnose_pairs: interrupted; nothing written", file=sys.stderr)
+        return 130
     text = summary(rows, args.first)
     print(text)
-    if args.doc:
-        write_doc(args.doc, text)
+    if args.doc and not write_block(args.doc, BEGIN, END, text):
+        raise SystemExit(f"{args.doc}: no {BEGIN} ... {END} markers")
     return 0
 
 

@@ -280,9 +280,9 @@ def draw_figure(m: dict, out: str) -> None:
 
 
 def block_of(text: str) -> str:
-    head, sep, rest = text.partition(BEGIN)
-    body, sep2, _ = rest.partition(END)
-    if not (sep and sep2):
+    from flightctl.sim.docs import block
+    body = block(text, BEGIN, END)
+    if body is None:
         raise SystemExit(f"the markers {BEGIN} ... {END} are not in the document")
     return body.strip("\n") + "\n"
 
@@ -309,11 +309,9 @@ def main(argv=None) -> int:
     draw_figure(m, args.out)
     print(f"figure -> {args.out}")
     if args.doc:
-        path = Path(args.doc)
-        doc = path.read_text(encoding="utf-8")
-        head, _, rest = doc.partition(BEGIN)
-        _, _, tail = rest.partition(END)
-        path.write_text(f"{head}{BEGIN}\n{text}{END}{tail}", encoding="utf-8")
+        from flightctl.sim.docs import write_block
+        if not write_block(args.doc, BEGIN, END, text):
+            raise SystemExit(f"the markers {BEGIN} ... {END} are not in {args.doc}")
         print(f"{args.doc}: the motor-loss block rewritten")
     return 0
 

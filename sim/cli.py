@@ -5,23 +5,28 @@ quadcopter, write the contract flight log, a PNG of the responses, and print the
 takes) in simulated time, the same way.
 
 `flightctl sim SCENARIO --fault NAME[:k=v,...]` (repeatable) injects a fault at the simulated devices
-(flightctl/sim/world/faults.py); `flightctl sim faults --json M.json` flies every fault and writes the
-matrix (docs/safety.md)."""
+(what each fault does: docs/safety.md; their keys: docs/formats.md); `flightctl sim faults --json
+M.json` flies every fault and writes the matrix.
+
+Exit status: 0 the vehicle flew and landed upright, 1 it crashed or never flew, 2 bad input, 130
+interrupted (Ctrl-C: the flight ends at once, its log is kept with a `# partial:` line)."""
 from __future__ import annotations
 
 import argparse
 import json
 import math
 import sys
+import threading
 import time
 from pathlib import Path
 
+from flightctl.cli import EXIT_INTERRUPTED, ctrl_c_sets
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError, output_file
-from flightctl.params import GAIN_SETS
+from flightctl.errors import InputError, output_dir, output_file, seed, write_atomic
+from flightctl.params import GAIN_SETS, shipped
 from flightctl.sim import causes
 from flightctl.sim.world import faults
-from flightctl.sim.flights.metrics import LEGEND, hold_metrics, step_metrics
+from flightctl.sim.flights.metrics import LEGEND, SETTLE_AFTER_S, SETTLED_DEG, hold_metrics, settled_errors, step_metrics
 from flightctl.plans import load_plan
 from flightctl.sim.flights.scenarios import SCENARIOS, scenario
 
@@ -31,22 +36,24 @@ def parser() -> argparse.ArgumentParser:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", choices=sorted(SCENARIOS), help="the named plan to fly")
     p.add_argument("--plan", metavar="PLAN.toml", help="fly this plan file instead (as `flightctl run --plan`)")
-    p.add_argument("--log", help="the flight log to write (CSV, measured-data.md); required but with --monte-carlo")
+    p.add_argument("--log", help="the flight log to write (CSV; its columns: docs/formats.md); required but with --monte-carlo")
     p.add_argument("--effect", action="append", default=[], metavar="CAUSE:name=value,...",
                    help=f"add an extension to the simulated plant ({', '.join(causes.CAUSES)}); repeatable")
     p.add_argument("--fault", action="append", default=[], metavar="NAME[:at=S,k=v]",
-                   help="inject a fault at the simulated devices (at: s after arming, the log's time; "
-                        "faults: " + ", ".join(faults.FAULTS) + "); repeatable")
-    p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
-    p.add_argument("--gains", choices=sorted(GAIN_SETS), default="table6",
-                   help="gain set: table6 (flight, default) or table4 (the paper's simulation)")
+                   help="inject a fault at the simulated devices (at: s after arming, the log's time, before the "
+                        "plan's end; faults: " + ", ".join(faults.FAULTS) + "; their keys: docs/formats.md); repeatable")
+    p.add_argument("--params", metavar="P.toml|NAME",
+                   help=f"parameter file (TOML) or a shipped vehicle ({', '.join(shipped())}); default: the reference airframe")
+    p.add_argument("--gains", choices=sorted(GAIN_SETS),
+                   help="gain set by name: table6 (flight) or table4 (the paper's simulation); it replaces the "
+                        "parameter file's [gains]; default: the file's [gains], else table6")
     p.add_argument("--truth", action="store_true",
                    help="perfect state feedback (the paper's simulation) instead of the full onboard path")
     p.add_argument("--estimator", choices=ESTIMATORS, default="flight",
                    help="onboard estimator structure (docs/estimator.md); default: flight")
     p.add_argument("--no-noise", action="store_true", help="switch sensor noise and bias off")
-    p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
-    p.add_argument("--substeps", type=int, help="plant RK4 steps per loop period (default: sim/world/plant.py SUBSTEPS, 1)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the sensor noise (a whole number from 0)")
+    p.add_argument("--substeps", type=int, help=f"plant RK4 steps per loop period, 1 to {MAX_SUBSTEPS} (default 1)")
     p.add_argument("--plot", help="PNG of the responses (default: beside the log, .png)")
     p.add_argument("--no-plot", action="store_true", help="write no PNG")
     p.add_argument("--quiet", action="store_true",
@@ -65,9 +72,34 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+# One RK4 step a loop period (2.2 ms) already resolves the fastest term of the model (the motors' 20-40 ms);
+# 100 steps of 22 us are far below every time constant, and the flight then runs slower than real time.
+MAX_SUBSTEPS = 100
+
+
 def _finite(v: float) -> float | None:
     """JSON has no infinity or NaN: a step never settled, or a value not measured, is null."""
     return v if math.isfinite(v) else None
+
+
+def gains_label(args, params) -> str:
+    """The gain set flown, as the announcement and the JSON name it."""
+    if args.gains:
+        return args.gains
+    file_gains = any(name.startswith(("kp_", "ki_", "kd_")) for name, _ in params.sources)
+    return f"the [gains] of {params.origin}" if file_gains else "table6"
+
+
+def run_json(args, params) -> dict:
+    """What was flown, so that a metrics file says how to fly it again: the parameters (file or
+    name, and a hash of their values), the gains, the path and estimator, the seed, effects and faults."""
+    import dataclasses
+    return {"params": {"file": args.params, "origin": params.origin or "reference airframe",
+                       "sha256_16": params.digest()},
+            "gains": {"set": gains_label(args, params), **dataclasses.asdict(params.gains)},
+            "path": "perfect state feedback" if args.truth else "full onboard path",
+            "estimator": None if args.truth else args.estimator, "seed": args.seed, "noise": not args.no_noise,
+            "substeps": args.substeps or 1, "effects": args.effect, "faults": args.fault}
 
 
 def metrics_json(flown, flight, wall_s: float) -> dict:
@@ -105,12 +137,17 @@ def main(argv: list[str]) -> int:
         p.error("--batch goes with --monte-carlo N")
     if args.log is None:
         p.error("the following arguments are required: --log")
-    if args.substeps is not None and args.substeps < 1:
-        raise InputError("--substeps: at least 1")
-    params = causes.load_vehicle(args.params, GAIN_SETS[args.gains])
+    if args.substeps is not None and not 1 <= args.substeps <= MAX_SUBSTEPS:
+        raise InputError(f"--substeps {args.substeps}: 1 to {MAX_SUBSTEPS} (one RK4 step a loop period already "
+                         f"resolves the model's fastest term; {MAX_SUBSTEPS} runs slower than real time)")
+    params = causes.load_vehicle(args.params, GAIN_SETS[args.gains] if args.gains else None)
     effects = tuple(causes.parse(e) for e in args.effect)
     injected = tuple(faults.parse(f) for f in args.fault)
     flown = SCENARIOS[args.scenario]() if args.scenario else scenario(load_plan(args.plan))
+    for f in injected:
+        if f.at >= flown.plan.duration:
+            raise InputError(f"--fault {f.name}: at = {f.at:g} s, but {flown.name}'s plan ends "
+                             f"{flown.plan.duration:g} s after arming: the fault would never be injected")
     log_path = output_file(args.log, "--log")
     if args.json:
         output_file(args.json, "--json")
@@ -118,7 +155,7 @@ def main(argv: list[str]) -> int:
         output_file(args.plot or log_path.with_suffix(".png"), "--plot", ".png")
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     path = "perfect state feedback" if args.truth else f"full onboard path, {args.estimator} estimator"
-    say(f"flying {flown.name} ({flown.doc}); {args.gains}, {path}"
+    say(f"flying {flown.name} ({flown.doc}); {gains_label(args, params)}, {path}"
         + (f"; plant with {', '.join(map(repr, effects))}" if effects else ""))
     for e in params.effects:
         if e.cause in {x.cause for x in effects}:
@@ -131,16 +168,23 @@ def main(argv: list[str]) -> int:
         link = open_link(args.mavlink, params)
     if link is not None:
         link.ready(flown.name)
+    interrupt = threading.Event()
     try:
-        flight = fly(flown, params, log_path, effects, noise=not args.no_noise, seed=args.seed,
-                     truth=args.truth, substeps=args.substeps, estimator=args.estimator, telemetry=link,
-                     faults=injected)
+        with ctrl_c_sets(interrupt):
+            flight = fly(flown, params, log_path, effects, noise=not args.no_noise, seed=args.seed,
+                         truth=args.truth, substeps=args.substeps, estimator=args.estimator, telemetry=link,
+                         faults=injected, interrupt=interrupt)
     finally:
         if link is not None:
             link.close()
     wall = time.perf_counter() - start
     log = flight.log
-    duration = log["t"][-1]
+    duration = log["t"][-1] if len(log) else 0.0
+    if interrupt.is_set():
+        when = f"at t = {duration:.2f} s" if len(log) else "before arming"
+        print(f"flightctl sim: interrupted {when}; the log {log_path} is kept, marked partial "
+              "(no metrics, no figure)", file=sys.stderr)
+        return EXIT_INTERRUPTED
     loop_reason = "" if flight.result.reason == "plan complete" else f" ({flight.result.reason})"
     print(f"{flown.name}: {flight.outcome}{loop_reason}; {duration:.1f} s flown in {wall:.1f} s "
           f"({duration / wall:.0f}x real time), {len(log)} rows -> {log_path}")
@@ -153,17 +197,27 @@ def main(argv: list[str]) -> int:
         print(f"  last 10 s: altitude within {100 * h['alt_error']:.1f} cm of 1.5 m, tilt within "
               f"{h['tilt'] * 57.2958:.2f} deg" if h else
               f"  the hover was cut short at t = {duration:.1f} s, before the plan's {flown.plan.duration:g} s")
+    held = iter(settled_errors(log, flown.steps, flight.t_arm))
     for step in flown.steps:
-        print("  " + step_metrics(log, step, flight.t_arm, events=flight.result.events).row())
+        row = "  " + step_metrics(log, step, flight.t_arm, events=flight.result.events).row()
+        if step.channel != "alt":
+            err = next(held)[1]
+            row += (f"; from {SETTLE_AFTER_S:g} s: within {err:.2f} deg" if math.isfinite(err)
+                    else f"; from {SETTLE_AFTER_S:g} s: not flown that long")
+        print(row)
     if flown.steps:
         print(LEGEND)
+        print(f"  (from {SETTLE_AFTER_S:g} s: the largest true error from {SETTLE_AFTER_S:g} s after the step to the next "
+              f"step; the paper's real flights settle within {SETTLED_DEG['roll']:g} deg for a bank and "
+              f"{SETTLED_DEG['yaw']:g} deg for a turn, README)")
     if args.json:
-        Path(args.json).write_text(json.dumps(metrics_json(flown, flight, wall), indent=1) + "\n")
+        write_atomic(args.json, json.dumps({**metrics_json(flown, flight, wall), "run": run_json(args, params)},
+                                           indent=1) + "\n")
         print(f"  metrics -> {args.json}")
     if not args.no_plot:
         png = Path(args.plot) if args.plot else log_path.with_suffix(".png")
         from flightctl.sim.plots import plot_flight
-        plot_flight(log, png, f"flightctl sim {flown.name}: {args.gains}, {path}")
+        plot_flight(log, png, f"flightctl sim {flown.name}: {gains_label(args, params)}, {path}")
         print(f"  plot -> {png}")
     return 1 if flight.crashed or not flight.flew else 0
 
@@ -181,13 +235,13 @@ def monte_carlo_main(args) -> int:
         output_file(args.json, "--json")
     if args.plot:
         output_file(args.plot, "--plot", ".png")
-    bar = Progress(2 if args.batch else 2 * args.monte_carlo, "monte carlo") if not args.quiet else None
+    bar = Progress(2 if args.batch else 2 * args.monte_carlo, "monte carlo ") if not args.quiet else None
     run = montecarlo.run_batch if args.batch else montecarlo.run
-    result = run(args.params, args.scenario, args.monte_carlo, args.seed, progress=bar.step if bar is not None else None)
+    result = run(args.params, args.scenario, args.monte_carlo, args.seed, progress=bar)
     print(montecarlo.summary(result))
     if args.json:
         montecarlo.write_json(result, args.json)
-        print(f"  -> {args.json}")
+        print(f"  metrics -> {args.json}")
     if args.plot:
         montecarlo.plot(result, args.plot)
         print(f"  plot -> {args.plot}")
@@ -203,18 +257,17 @@ def faults_main(argv: list[str]) -> int:
     p.add_argument("--logs", metavar="DIR", help="where the flights' logs go (default: beside --json)")
     p.add_argument("--doc", metavar="safety.md", help="also write the table into this Markdown file, "
                    "between its fault-matrix markers (docs/safety.md)")
-    p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
-    p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
+    p.add_argument("--params", help=f"parameter file (TOML) or a shipped vehicle ({', '.join(shipped())}); "
+                                    "default: the reference airframe")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the sensor noise (a whole number from 0)")
     args = p.parse_args(argv)
-    out = Path(args.json)
-    logs = Path(args.logs) if args.logs else out.parent
-    for what, d in (("--json", out.parent), ("--logs", logs)):
-        if not d.is_dir():
-            raise InputError(f"{what}: the directory {d} does not exist")
+    out = output_file(args.json, "--json")
+    logs = output_dir(args.logs, "--logs") if args.logs else output_dir(out.resolve().parent, "--json")
     if args.doc and not Path(args.doc).is_file():
         raise InputError(f"--doc {args.doc}: no such file")
+    logs.mkdir(parents=True, exist_ok=True)
     rows = faultmatrix.run_matrix(causes.load_vehicle(args.params, GAIN_SETS["table6"]), logs, seed=args.seed)
-    out.write_text(json.dumps(rows, indent=1) + "\n")
+    write_atomic(out, json.dumps(rows, indent=1) + "\n")
     table = faultmatrix.markdown(rows)
     print(table, end="")
     if args.doc and not faultmatrix.write_doc(Path(args.doc), table):

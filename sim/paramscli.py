@@ -1,6 +1,6 @@
 """`flightctl params`: read parameter files (flightctl/params.py) as a person would.
 
-    flightctl params show [NAME|FILE] [--gains table6|table4]
+    flightctl params show [NAME|FILE] [--gains table6|table4]     (shipped NAMEs: flightctl params show --help)
     flightctl params diff A B [--gains ...]
 
 `show` prints the full parameter file, every key with its unit and where its value comes from: the
@@ -14,16 +14,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import re
 from pathlib import Path
 
-from flightctl.errors import InputError, read_text, read_toml
-from flightctl.params import GAIN_SETS, VEHICLES, Params, dumps, load, resolve
+from flightctl.errors import InputError
+from flightctl.params import GAIN_SETS, Params, dumps, load, resolve, shipped
 from flightctl.sim.causes import load_vehicle
 
 DEFAULTS = "defaults"
 TABLES = ("airframe", "gains", "filters", "sensors")
-_LINE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*=[^#]*#\s*(.*)$")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -31,42 +29,26 @@ class _Parser(argparse.ArgumentParser):
         raise InputError(message)
 
 
-def _read(spec: str | None, gains: str) -> tuple[Params, dict[str, str], str]:
-    """The parameters, the source of each key the file sets, and how to name where they came from."""
+def _read(spec: str | None, gains: str | None) -> Params:
+    """The parameters with the source of each value (flightctl/params.py: `Params.sources`)."""
+    chosen = GAIN_SETS[gains] if gains else None
     if spec is None or spec == DEFAULTS:
-        return load(None, GAIN_SETS[gains]), {}, "defaults"
-    path = resolve(spec)
-    params = load_vehicle(path, GAIN_SETS[gains])
-    origin = f"vehicle {path.stem}" if path.parent == VEHICLES else f"file {path}"
-    keys = {f.name for t in TABLES for f in dataclasses.fields(getattr(params, t))}
-    sources = {}
-    for line in read_text(path).splitlines():
-        m = _LINE.match(line)
-        if m and m.group(1) in keys:
-            note = m.group(2).split(";", 1)[-1].strip()
-            sources[m.group(1)] = f"{origin}: {note}" if note else origin
-    for key in _keys_set(path) - set(sources):
-        sources[key] = origin
-    return params, sources, origin
+        return load(None, chosen)
+    return load_vehicle(resolve(spec), chosen)
 
 
-def _keys_set(path: Path) -> set[str]:
-    data = read_toml(path)
-    out = {k for k, v in data.items() if not isinstance(v, (dict, list))}
-    for table in ("gains", "filters", "sensors"):
-        out |= set(data.get(table, {})) - {"preset", "range"}
-    return out
+def _origin(params: Params) -> str:
+    return params.origin or DEFAULTS
 
 
-def show(spec: str | None, gains: str = "table6") -> str:
-    params, sources, origin = _read(spec, gains)
-    unset = "default" if origin == "defaults" else "default (not in the file)"
-    full = {}
-    for t in TABLES:
-        for f in dataclasses.fields(getattr(params, t)):
-            default = f.metadata["source"] if (t, gains) != ("gains", "table4") else "paper, Table 4 (--gains table4)"
-            full[f.name] = sources.get(f.name, f"{unset}: {default}")
-    head = f"# flightctl params show: {origin}; gains {gains} where the file sets none\n"
+def show(spec: str | None, gains: str | None = None) -> str:
+    params = _read(spec, gains)
+    given = dict(params.sources)
+    unset = "default" if not params.origin else "default (not in the file)"
+    full = {f.name: given.get(f.name) or f"{unset}: {params.source(f.name)}"
+            for t in TABLES for f in dataclasses.fields(getattr(params, t))}
+    which = f"gains {gains} (--gains)" if gains else "gains: the file's [gains], else table6"
+    head = f"# flightctl params show: {_origin(params)}; {which}\n"
     return head + dumps(params, full)
 
 
@@ -79,10 +61,10 @@ def _flat(params: Params) -> dict[str, tuple[float, str]]:
     return out
 
 
-def diff(a: str, b: str, gains: str = "table6") -> list[str]:
+def diff(a: str, b: str, gains: str | None = None) -> list[str]:
     """One line per difference; empty when A and B are the same parameter set."""
-    pa, _, oa = _read(a, gains)
-    pb, _, ob = _read(b, gains)
+    pa, pb = _read(a, gains), _read(b, gains)
+    oa, ob = _origin(pa), _origin(pb)
     fa, fb = _flat(pa), _flat(pb)
     lines = []
     for key, (va, unit) in fa.items():
@@ -103,13 +85,14 @@ def main(argv: list[str]) -> int:
                 epilog=__doc__.split("\n\n", 2)[2], formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="action", required=True)
     s = sub.add_parser("show", help="print a full parameter file with units and sources")
-    s.add_argument("spec", nargs="?", metavar="NAME|FILE", help="a shipped vehicle or a file (default: the defaults)")
+    s.add_argument("spec", nargs="?", metavar="NAME|FILE",
+                   help=f"a shipped vehicle ({', '.join(shipped())}) or a file (default: the defaults)")
     d = sub.add_parser("diff", help="the differences between two parameter sets")
     d.add_argument("a", metavar="A", help="a parameter file or a shipped name")
     d.add_argument("b", metavar="B", help="the other")
     for q in (s, d):
-        q.add_argument("--gains", choices=sorted(GAIN_SETS), default="table6",
-                       help="the gain set a file without [gains] uses (default table6)")
+        q.add_argument("--gains", choices=sorted(GAIN_SETS),
+                       help="a gain set by name, which replaces the file's [gains] (default: the file's, else table6)")
     args = p.parse_args(argv)
     if args.action == "show":
         print(show(args.spec, args.gains), end="")

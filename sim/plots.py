@@ -56,7 +56,9 @@ def png(fig: Figure, dpi: int = DPI) -> bytes:
 
 
 def save(fig: Figure, path: str | Path, dpi: int = DPI) -> None:
-    Path(path).write_bytes(png(fig, dpi))
+    """The figure as a PNG, written whole (a reader never sees half an image)."""
+    from flightctl.errors import write_atomic
+    write_atomic(path, png(fig, dpi))
 
 
 def crash_times(log: Table, crash_tilt: float = CRASH_TILT, hard_touchdown: float = CRASH_TOUCHDOWN_SPEED) -> list[tuple[float, str]]:

@@ -122,3 +122,32 @@ def run_case(tmp: Path, cause: str, parameters: dict, seed: int, quick: bool = F
     out = tmp / f"report_{cause}_{seed}.json"
     assert main(["diagnose", str(log), "--json", str(out), "--quiet"]) == 0
     return json.loads(out.read_text())
+
+
+# Two effects at once (tests/test_diagnose_chain.py, scripts/diagnose_pairs.py: no pytest here, the
+# script imports this module)
+TWINS = {frozenset(("motor_lag", "motor_dynamics"))}
+MIN_AIRBORNE_S = 12.0
+
+
+def fly_pair(tmp: Path, rng: np.random.Generator) -> tuple[dict, Path]:
+    """Draw a pair and fly it until a flight stays long enough in the air: ({cause: parameters}, log)."""
+    while True:
+        a, b = (str(c) for c in rng.choice(CAUSES, 2, replace=False))
+        if frozenset((a, b)) in TWINS:
+            continue
+        truth = dict((draw(rng, a), draw(rng, b)))
+        seed = int(rng.integers(1000))
+        log = tmp / f"pair_{seed}.csv"
+        hidden = []
+        for cause, parameters in truth.items():
+            hidden += ["--effect", f"{cause}:" + ",".join(f"{k}={v!r}" for k, v in parameters.items())]
+        main(["sim", "--plan", str(quick_plan(tmp)), "--log", str(log), "--seed", str(seed), "--no-plot",
+              "--quiet", *hidden])
+        out = tmp / f"pair_{seed}.json"
+        status = main(["diagnose", str(log), "--json", str(out), "--quiet"])
+        assert status in (0, 2)        # 2: a crash at take-off, too short to judge at all
+        if status == 0:
+            report = json.loads(out.read_text())
+            if report["data"]["airborne_s"] >= MIN_AIRBORNE_S:
+                return truth, report

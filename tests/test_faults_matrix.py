@@ -39,7 +39,7 @@ def test_the_motors_stop_in_the_air_only_when_the_action_is_stop(matrix, name):
 
 
 def test_the_actions_are_the_stated_ones(matrix):
-    stated = {"imu_frozen": "stop", "imu_garbage": "stop", "imu_intermittent": "hold", "cpu_stall": "hold",
+    stated = {"imu_frozen": "stop", "imu_garbage": "stop", "accel_zero": "stop", "imu_intermittent": "hold", "cpu_stall": "hold",
               "battery_critical": "land", "log_full": "land", "sonar_silent": "land", "sonar_stuck": "land",
               "motor_stop": "land", "motor_partial": "land"}
     assert {n: matrix[n]["action"] for n in stated} == stated

@@ -17,9 +17,9 @@ pytestmark = pytest.mark.flaky(reruns=2)
 
 
 
-def demo(tmp_path, *args):
+def demo(tmp_path, *args, rc=0):
     out = tmp_path / "demo.json"
-    assert cli(["hil", "demo", "--calibrate", "0.3", "--json", str(out), *args]) == 0
+    assert cli(["hil", "demo", "--calibrate", "0.3", "--json", str(out), *args]) == rc
     return json.loads(out.read_text())
 
 
@@ -52,8 +52,8 @@ def test_link_loss_in_the_air_lands_over_tcp(tmp_path):
 
 def test_link_loss_on_the_ground_stops(tmp_path):
     """The cable is pulled while the vehicle sits calibrating: it refuses to arm, the motors stay stopped."""
-    d = demo(tmp_path, "--seconds", "3", "--link", "pty", "--calibrate", "1.5", "--cut", "0.3", "2")
-    assert d["outcome"].startswith("not armed: HIL link lost")
+    d = demo(tmp_path, "--seconds", "3", "--link", "pty", "--calibrate", "1.5", "--cut", "0.3", "2", rc=1)
+    assert d["outcome"].startswith("not armed: HIL link lost")      # a demo that did not fly: exit 1
     assert d["max_alt_m"] < 0.01 and d["pc_side"]["max_alt_m"] < 0.01
 
 
@@ -63,3 +63,46 @@ def test_the_hil_board_without_a_link_is_one_line(tmp_path, capsys, caplog):
         "not flying: the hil board needs --link serial:/dev/serial0,921600 or tcp:HOST:PORT"]
     assert cli(["hil", "serve", "--link", "udp:5"]) == 2
     assert "expected" in capsys.readouterr().err
+
+
+def _slow_schedule(monkeypatch, seconds: float, calls: list):
+    """The motor-loss gain schedule made as slow as on a loaded Pi (control/spin.py), solved afresh."""
+    import time
+
+    from flightctl.control import spin
+    inner = spin.SpinController._schedule
+
+    def slow(self, pair):
+        calls.append("schedule")
+        time.sleep(seconds)
+        return inner(self, pair)
+    monkeypatch.setattr(spin, "_GAINS", {})
+    monkeypatch.setattr(spin.SpinController, "_schedule", slow)
+
+
+def test_a_slow_motor_loss_schedule_is_solved_before_the_link_opens(tmp_path, monkeypatch):
+    """Each half of the schedule takes longer than the PC side waits for a silent flight side
+    (IDLE_S): solved between the link's first frame and the loop, the flight never armed."""
+    from flightctl.hil.serve import IDLE_S
+    calls = []
+    _slow_schedule(monkeypatch, IDLE_S + 0.5, calls)
+    d = demo(tmp_path, "--seconds", "1.5", "--link", "tcp")
+    assert calls == ["schedule", "schedule"]
+    assert d["outcome"].startswith("landed") and d["max_alt_m"] > 0.2
+
+
+def test_the_service_solves_the_schedule_before_it_opens_the_board(tmp_path, monkeypatch):
+    """`run --board hil`: the board's opening starts the link; the schedule is already solved."""
+    import flightctl.service as service
+    from flightctl.boards import BoardUnavailable
+    calls = []
+    _slow_schedule(monkeypatch, 0.0, calls)
+
+    def opener(name):
+        def open_board(params, options):
+            calls.append("board")
+            raise BoardUnavailable("no PC side in this test")
+        return open_board
+    monkeypatch.setattr(service, "opener", opener)
+    assert cli(["run", "--board", "hil", "--link", "tcp:127.0.0.1:9", "--plan", "hover", "--log", str(tmp_path)]) == 3
+    assert calls == ["schedule", "schedule", "board"]

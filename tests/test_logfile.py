@@ -134,11 +134,14 @@ def test_empty_and_missing_files(tmp_path):
 
 
 def test_read_table_text_columns_and_errors(tmp_path):
-    p = write(tmp_path, ["axis,pivot_distance,period", "x,0.30,1.12", "y, 0.31 ,1.13", "z,0.29,bad"])
+    p = write(tmp_path, ["axis,pivot_distance,period", "x,0.30,1.12", "y,0.31,1.13", "z,0.29,bad"])
     with pytest.raises(InputError) as e:
         read_table(p, ("axis", "pivot_distance", "period"), text_columns=("axis",))
     assert "row 4" in str(e.value) and "'period'" in str(e.value) and "'bad'" in str(e.value)
     p = write(tmp_path, ["axis,pivot_distance,period", "x,0.30,1.12", "y, 0.31 ,1.13"])
+    with pytest.raises(InputError, match=r"row 3: column 'pivot_distance': ' 0.31 ' is not a number \(spaces around"):
+        read_table(p, ("axis", "pivot_distance", "period"), text_columns=("axis",))
+    p = write(tmp_path, ["axis,pivot_distance,period", "x,0.30,1.12", " y ,0.31,1.13"])
     t = read_table(p, ("axis", "pivot_distance", "period"), text_columns=("axis",))
     assert list(t["axis"]) == ["x", "y"]
     np.testing.assert_array_equal(t["pivot_distance"], [0.30, 0.31])

@@ -6,7 +6,7 @@ import dataclasses
 import tomllib
 
 from flightctl.cli import main as cli
-from flightctl.params import TABLE4, Airframe, from_dict, load
+from flightctl.params import TABLE4, TABLE6, Airframe, from_dict, load
 
 
 def run(capsys, *argv):
@@ -43,13 +43,27 @@ def test_show_a_shipped_vehicle_names_it_and_keeps_its_effects(capsys):
 def test_show_a_file_marks_what_it_sets(tmp_path, capsys):
     f = tmp_path / "light.toml"
     f.write_text("M = 1.2  # kg; weighed on the kitchen scale\n[gains]\nkp_z = 3.0\n")
-    code, out, _ = run(capsys, "params", "show", str(f), "--gains", "table4")
+    code, out, _ = run(capsys, "params", "show", str(f))
     assert code == 0
     assert comment(out, "M") == f"kg; file {f}: weighed on the kitchen scale"
     assert comment(out, "kp_z") == f"N/m; file {f}"
+    assert comment(out, "kp_phi").startswith("N/rad; default (not in the file): paper, Table 6")
     assert comment(out, "l").startswith("m; default (not in the file)")
     parsed = from_dict(tomllib.loads(out))
-    assert parsed.airframe.M == 1.2 and parsed.gains.kp_z == 3.0 and parsed.gains.kp_phi == TABLE4.kp_phi
+    assert parsed.airframe.M == 1.2 and parsed.gains.kp_z == 3.0 and parsed.gains.kp_phi == TABLE6.kp_phi
+
+
+def test_gains_chosen_by_name_replace_the_files_and_say_so(tmp_path, capsys):
+    """`--gains table4` wins over the file's [gains] whole; each gain's source says which table, and
+    that it replaced the file's (a log header never labels Table 4's 17.1 as Table 6)."""
+    f = tmp_path / "light.toml"
+    f.write_text("M = 1.2\n[gains]\nkp_z = 3.0\n")
+    code, out, _ = run(capsys, "params", "show", str(f), "--gains", "table4")
+    assert code == 0
+    assert comment(out, "kp_z") == f"N/m; paper, Table 4 (--gains table4, replacing the [gains] of file {f})"
+    assert comment(out, "kp_phi").startswith("N/rad; paper, Table 4")
+    parsed = from_dict(tomllib.loads(out))
+    assert parsed.gains == TABLE4 and parsed.airframe.M == 1.2
 
 
 def test_diff(tmp_path, capsys):

@@ -132,7 +132,7 @@ def test_a_plan_file_error_names_the_move_in_the_files_order(tmp_path):
 
 
 @pytest.mark.parametrize("text, message", [
-    ('name = "../x"\nduration = 5\n', "name: a string without slashes"),
+    ('name = "../x"\nduration = 5\n', "name '../x' holds a slash"),
     ('duration = 5\nmove = 3\n', "expected \\[\\[move\\]\\] tables"),
     ('duration = 5\n[[move]]\nt = 0\nchannel = "alt"\nvalue_deg = 1\n', "alt is in metres"),
     ('duration = 5\n[[move]]\nt = 0\nchannel = "yaw"\nvalue = 1\nvalue_deg = 1\n', "exactly one of value"),

@@ -48,3 +48,38 @@ def test_json_into_a_missing_directory_is_one_line(tmp_path, capsys):
     code = cli(["sim", "hover", "--log", str(tmp_path / "f.csv"), "--json", str(tmp_path / "no" / "m.json")])
     assert code == 2
     assert capsys.readouterr().err.count("\n") == 1 and not (tmp_path / "f.csv").exists()
+
+
+def test_the_json_and_the_log_say_what_was_flown_and_where_each_value_comes_from(tmp_path, capsys):
+    """A parameter file with its own [gains], flown with `--gains table4`: the flag wins; the metrics
+    record the parameters (file, a hash of their values), the gains, the estimator and the seed; the
+    log's header gives each value its own source (Table 4's 17.1 is not labelled Table 6, the file's
+    rotor inertia not Table 2)."""
+    from flightctl.params import TABLE4, load
+    plan, params, log, out = (tmp_path / n for n in ("p.toml", "mine.toml", "f.csv", "m.json"))
+    plan.write_text(PLAN)
+    params.write_text("Jp = 0.0001  # kg m^2; weighed and measured on the bench\n[gains]\nkp_phi = 5.0\n")
+    assert cli(["sim", "--plan", str(plan), "--params", str(params), "--gains", "table4", "--seed", "7",
+                "--log", str(log), "--json", str(out), "--no-plot"]) == 0
+    assert "table4, full onboard path" in capsys.readouterr().err
+    run = json.loads(out.read_text())["run"]
+    assert run["params"] == {"file": str(params), "origin": f"file {params}",
+                             "sha256_16": load(params, TABLE4).digest()}
+    assert run["gains"]["set"] == "table4" and run["gains"]["kp_phi"] == TABLE4.kp_phi      # not the file's 5.0
+    assert (run["estimator"], run["seed"], run["path"]) == ("flight", 7, "full onboard path")
+    header = read_flight_log(log, extra=("true_z",)).meta["params"].splitlines()
+    line = {h.split(" = ")[0]: h for h in header if " = " in h}
+    assert line["kp_phi"] == (f"kp_phi = 17.1  # N/rad; paper, Table 4 (--gains table4, replacing the [gains] "
+                              f"of file {params})")
+    assert line["Jp"] == f"Jp = 0.0001  # kg m^2; file {params}: weighed and measured on the bench"
+    assert line["M"].endswith("# kg; paper, Table 2")                    # not in the file: the schema's
+
+
+def test_without_gains_the_files_own_fly_and_the_json_says_so(tmp_path, capsys):
+    plan, params, out = tmp_path / "p.toml", tmp_path / "mine.toml", tmp_path / "m.json"
+    plan.write_text(PLAN)
+    params.write_text("[gains]\nkp_phi = 5.0\n")
+    assert cli(["sim", "--plan", str(plan), "--params", str(params), "--log", str(tmp_path / "f.csv"),
+                "--json", str(out), "--no-plot", "--quiet"]) == 0
+    gains = json.loads(out.read_text())["run"]["gains"]
+    assert gains["set"] == f"the [gains] of file {params}" and gains["kp_phi"] == 5.0

@@ -109,9 +109,9 @@ def opener(name: str) -> Callable[[Params, BoardOptions], Board]:
     return _resolve(name, _entry(name).opener)
 
 
-def described() -> str:
-    """The boards for a --help text."""
-    return "; ".join(f"{name}: {entry.doc}" for name, entry in BOARDS.items())
+def described(*leave_out: str) -> str:
+    """The boards for a --help text (but those named)."""
+    return "; ".join(f"{name}: {entry.doc}" for name, entry in BOARDS.items() if name not in leave_out)
 
 
 def open_board(name: str, params: Params, options: BoardOptions = BoardOptions()) -> Board:

@@ -45,7 +45,7 @@ ExecStopPost) removes stale scripts left by a dead controller: pigpiod on the qu
 flightctl's own, so every script in its 32 slots is ours. The systemd unit's ExecStopPost and its
 watchdog are the second layer (docs/pi.md).
 
-Only the flight controller commands the motors (issue 10): the units keep every other process away
+Only the flight controller commands the motors: the units keep every other process away
 from pigpiod (systemd/, docs/pi.md), and the driver reads the output back in case something else got
 through. `output_problems()` names what differs from what this driver sent: a wave pigpiod transmits
 that is not ours (another client's), no wave at all, an ESC pin no longer an output, and with

@@ -4,7 +4,7 @@ Frames: the chip is mounted with its x toward motor 1 and z up, so accelerometer
 the body axes. The AK8963 axes are (x_mpu = y_ak, y_mpu = x_ak, z_mpu = -z_ak); the driver converts
 once, here, and reports the field in the body frame (x forward, y left, z up) in tesla.
 
-Frame checks (issue 10, defect 4; docs/safety.md). `read` refuses a frame, leaving the sample as it
+Frame checks (docs/safety.md). `read` refuses a frame, leaving the sample as it
 was (the loop flies on the last good sample), when it is
 - a bus-error pattern: the 14 data bytes all 0x00 or all 0xFF (MISO stuck low or high);
 - frozen: the same 14 bytes as the FROZEN_FRAMES frames before it. A live chip never repeats a
@@ -17,6 +17,9 @@ was (the loop flies on the last good sample), when it is
   Random bytes fail one of these at once (the die temperature alone moves ~0.01 degC a second);
   JUMP_GYRO is 3 rad/s in 2.2 ms, ~1400 rad/s^2, ten times what the rotors' torque can give the
   frame, and JUMP_ACCEL 30 m/s^2, forty times the rotors' vibration (sim/world/devices.py).
+- a dead accelerometer: the three accelerometer words exactly 0 in ZERO_ACCEL_FRAMES frames in a row
+  (its ~20 LSB of noise make one such frame about 1 in 10^5 even in free fall, three never), while
+  the rest of the frame lives; off with the frozen check (`frozen_frames` = 0: a noise-free chip).
 `rejected` counts the refused frames by reason; `why` names the last one. A saturated frame (an
 accelerometer or gyro word at the int16 limit, -32768 or 32767: the true value is beyond the full
 scale) is not refused, since a real manoeuvre can saturate it too: it is decoded as the full scale,
@@ -34,6 +37,7 @@ from flightctl.physics import G
 _HEAD = struct.Struct(">7h")    # accel x y z, temperature, gyro x y z: big-endian int16
 _MAG = struct.Struct("<3hB")     # then the AK8963 data, little-endian int16, and ST2
 FROZEN_FRAMES = 4                # identical frames accepted after a frame; the next one is refused
+ZERO_ACCEL_FRAMES = 3            # frames in a row with the accelerometer at exactly (0, 0, 0): a dead sensor
 TEMP_RANGE_C = (-40.0, 85.0)     # degC, the operating range (PS-MPU-9250A-01 section 3.4)
 JUMP_ACCEL = 30.0                # m/s^2 per frame and axis
 JUMP_GYRO = 3.0                  # rad/s per frame and axis
@@ -76,6 +80,7 @@ class Mpu9250:
         lo, hi = ((c - reg.TEMP_OFFSET_C) * reg.TEMP_LSB_PER_C for c in TEMP_RANGE_C)
         self._temp_lsb = (lo, hi)
         self._prev_head = b""     # the last frame read (refused or not), raw
+        self._zero_accel = 0      # frames in a row with the accelerometer words all 0
         self._prev = None         # its seven words
         self._good = None         # the words of the last accepted frame
         self._repeats = 0         # how many times the last frame repeated the one before it
@@ -162,6 +167,12 @@ class Mpu9250:
         ax, ay, az, temp, gx, gy, gz = words
         if not self._temp_lsb[0] <= temp <= self._temp_lsb[1]:
             return self._refuse("temperature out of range")
+        if ax == 0 and ay == 0 and az == 0 and self.frozen_frames:   # (a noise-free chip reads 0 in free fall)
+            self._zero_accel += 1
+            if self._zero_accel >= ZERO_ACCEL_FRAMES:
+                return self._refuse("accelerometer reads zero")
+        else:
+            self._zero_accel = 0
         good = self._good
         if good is not None and self._jumps(good, words) and (prev is None or self._jumps(prev, words)):
             return self._refuse("impossible jump")

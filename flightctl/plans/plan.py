@@ -162,6 +162,11 @@ def read_plan_file(path: str | Path) -> Plan:
             value = _number(where, "value", m["value"])
         moves.append(check_move(Move(t, channel, value, ramp), where))     # in the file's order
     name = data.get("name", path.stem)
-    if not isinstance(name, str) or not name or any(c in name for c in "/\\\0"):
-        raise InputError(f"{path}: name: a string without slashes is needed (it names the log), got {name!r}")
+    if not isinstance(name, str) or not name:
+        raise InputError(f"{path}: name: a text is needed (it names the log), got {name!r}")
+    bad = next((c for c in name if c in "/\\" or not c.isprintable()), None)
+    if bad is not None:
+        what = {"/": "a slash", "\\": "a backslash", "\0": "a NUL character (\\0)"}.get(bad, f"the control character {bad!r}")
+        raise InputError(f"{path}: name {name!r} holds {what}: it names the log files, so only printable "
+                         "characters without slashes")
     return Plan(moves, float(duration), name, f"plan file {path}")

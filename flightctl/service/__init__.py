@@ -26,8 +26,14 @@ from the loop (`on_tick`, every 0.5 s at most) and from the wait for a plan.
 
 SIGTERM or SIGINT set the stop flag: the loop ends at its next iteration, the motors get zero thrust
 (the loop's `finally`, then once more here), the log gets a last row with P1..P4 = 0 (the stop
-command that was sent), STOPPING=1, exit 0. Any exception: zero thrust, then exit 1. Nothing can fly
-(a device missing, a pre-arm check failed, arming refused): exit 3 (the unit does not restart on it).
+command that was sent) and a `# partial:` line, STOPPING=1, exit 0.
+
+Exit status: 0 stopped as asked; 1 stopped on an error, the motors stopped first: a device lost in
+operation (pigpiod gone, the pigpiod dead-man fired, a bus error) is one line in the journal, anything
+else (a bug) its traceback; the unit restarts, disarmed. 2 bad input (a flag, a parameter or plan
+file). 3 nothing can fly (a device missing, a pre-arm check failed, arming refused, the log directory
+not writable, $NOTIFY_SOCKET set but unusable: under systemd the watchdog would kill the flight):
+the unit does not restart on it. Each is decided before READY=1.
 """
 from __future__ import annotations
 
@@ -47,7 +53,7 @@ from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, o
 from flightctl.clock import freeze_gc
 from flightctl.control.controller import FlightController
 from flightctl.control.spin import SpinController
-from flightctl.errors import InputError
+from flightctl.errors import InputError, output_dir, seed, write_atomic
 from flightctl.hal import ArmingRefused, Hal, ImuSample
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter
 from flightctl.loop import FlightLoop, FlightResult
@@ -61,6 +67,7 @@ EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_REFUSED = 0, 1, 2, 3
 PLAN_POLL_S = 0.5
 OUTPUT_CHECK_S = 2.0           # while disarmed, the ESC output is read back this often (drivers/esc.py)
 REST_ACCEL = (0.8, 1.2)        # |a| / g at rest, for the pre-arm IMU check
+DEAD_ACCEL = 0.05              # |a| / g at rest below which the accelerometer is dead, not the vehicle moving
 
 log = logging.getLogger("flightctl.run")
 
@@ -95,10 +102,13 @@ def prearm(hal: Hal, params: Params, min_battery_v: float) -> list[str]:
     for _ in range(5):
         good += hal.imu.read(sample)
     if not good:
-        reasons.append("IMU: every frame bad (all 0x00 or 0xFF): no IMU on the bus")
+        why = getattr(hal.imu, "why", None) or "all 0x00 or 0xFF"
+        reasons.append(f"IMU: every frame refused ({why})" + (": no IMU on the bus" if "bus" in why else ""))
     else:
         a = math.sqrt(sample.ax ** 2 + sample.ay ** 2 + sample.az ** 2) / params.airframe.g
-        if not REST_ACCEL[0] <= a <= REST_ACCEL[1]:
+        if a < DEAD_ACCEL or getattr(hal.imu, "why", None) == "accelerometer reads zero":
+            reasons.append(f"IMU: the accelerometer reads {a:.2f} g at rest: accelerometer faulty")
+        elif not REST_ACCEL[0] <= a <= REST_ACCEL[1]:
             reasons.append(f"IMU: |a| = {a:.2f} g at rest (expected 1 g): vehicle moving or IMU faulty")
     v, _ = hal.power.read()
     if not v >= min_battery_v:
@@ -150,9 +160,6 @@ class Service:
             raise ArmingRefused("; ".join(reasons))
 
     def run(self, plan: Plan | None) -> None:
-        # The motor-loss gain schedule (control/spin.py: 200 LQR solves, 0.3 s here, seconds on a Pi)
-        # is solved now, before READY, and never between a plan's arrival and its take-off.
-        SpinController(self.params)
         self.check()
         self.notifier.ready(f"disarmed, {self.board.name} board, pre-arm checks passed")
         log.info("ready: disarmed, ESCs at the stop pulse")
@@ -224,15 +231,39 @@ class Service:
         summary["log_dropped_rows"], summary["log_error"] = flight_log.dropped, flight_log.error
         if flight_log.dropped:
             log.error("flight log %s: %d rows dropped (%s)", path, flight_log.dropped, flight_log.error)
-        try:
-            path.with_name(path.stem + "-summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-        except OSError as e:             # a full disk: the journal has the summary above
+        try:                             # whole or not at all: a full disk leaves no empty summary
+            write_atomic(path.with_name(path.stem + "-summary.json"), json.dumps(summary, indent=1) + "\n")
+        except InputError as e:          # the journal has the summary above
             log.error("flight summary not written: %s", e)
         self.notifier.status(f"disarmed after {plan.name}: {result.reason}")
         self.flights.append(result)
         if self.link is not None:
             self.link.end()
         return result
+
+
+# Errors of the devices and their libraries, raised in operation (pigpiod gone: its socket reset or a
+# short reply; the dead-man's EscError; a bus's OSError): one line, not a traceback.
+_DEVICE_MODULES = ("pigpio", "smbus2", "spidev", "serial", "gpiod", "flightctl.drivers", "flightctl.boards",
+                   "flightctl.comms", "flightctl.hal")
+
+
+def device_error(e: BaseException) -> bool:
+    import struct
+    module = type(e).__module__ or ""
+    return (isinstance(e, (OSError, EOFError, struct.error, ArmingRefused))
+            or any(module == m or module.startswith(m + ".") for m in _DEVICE_MODULES))
+
+
+def describe(e: BaseException) -> str:
+    """A device error in one line, its kind named."""
+    import struct
+    text = " ".join(str(e).split()) or "(no message)"
+    if isinstance(e, struct.error):          # pigpio unpacks a reply that never came
+        return f"a device's reply cut short ({text}): its daemon (pigpiod) gone?"
+    if isinstance(e, ConnectionError):
+        return f"{type(e).__name__}: {text}: a device's daemon (pigpiod) gone?"
+    return f"{type(e).__name__}: {text}"
 
 
 def stop_motors_main(args, params: Params, devices: dict | None = None) -> int:
@@ -265,7 +296,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--calibrate", type=float, metavar="S",
                    help="seconds sitting still before arming (default: the board's, 60 s on the quadcopter)")
     p.add_argument("--min-battery-v", type=float, metavar="V", help="refuse to arm below this battery voltage")
-    p.add_argument("--seed", type=int, default=0, help="simulator seed (--board sim)")
+    p.add_argument("--seed", type=seed, default=0, help="simulator seed (--board sim; a whole number from 0)")
     p.add_argument("--link", help="--board hil: serial:/dev/serial0,921600 or tcp:HOST:PORT (docs/hil.md)")
     p.add_argument("--stop-motors", action="store_true", help="only put the stop pulse on the ESCs and exit")
     p.add_argument("--mavlink", metavar="URL",
@@ -296,14 +327,28 @@ def main(argv: list[str] | None = None, devices: dict | None = None) -> int:
         log.error("not flying: %s", e)
         return EXIT_REFUSED
 
+    # The motor-loss gain schedule (control/spin.py: LQR solves, seconds on a loaded Pi) is solved now:
+    # before the board opens (a HIL link is live from then on, and its PC side gives up on a silent
+    # flight side), before READY, never between a plan's arrival and its take-off.
+    SpinController(params)
+    try:                                        # the flight logs' directory, before READY
+        output_dir(args.log, "--log")
+    except InputError as e:
+        log.error("not flying: %s", e)
+        return EXIT_REFUSED
     stop = threading.Event()
 
     def on_signal(signum, frame):
         log.info("%s: stopping", signal.Signals(signum).name)
         stop.set()
 
-    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
     notifier = Notifier.from_env()
+    if notifier.enabled and not notifier.status("starting: disarmed"):
+        log.error("not flying: NOTIFY_SOCKET=%s cannot be reached: under systemd, the watchdog pings would "
+                  "fail in flight", notifier.address)
+        notifier.close()
+        return EXIT_REFUSED
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
     board = link = None
     try:
         if args.mavlink:                        # imported only when asked for (pymavlink is an extra)
@@ -326,16 +371,22 @@ def main(argv: list[str] | None = None, devices: dict | None = None) -> int:
         return EXIT_OK
     except InputError:
         raise                                   # a bad board file: one line, exit 2 (flightctl.cli)
-    except Exception:
-        log.exception("stopping on an error")
+    except Exception as e:
+        if device_error(e):
+            log.error("stopping on a device error, the motors stopped: %s", describe(e))
+        else:
+            log.exception("stopping on an error")
         return EXIT_ERROR
     finally:
         if board is not None:
             try:
                 board.hal.motors.stop()
-            except Exception:
-                log.exception("zero thrust could not be sent")
-            board.close()
+            except Exception as e:              # pigpiod gone: the dead-man or ExecStopPost stops them
+                log.error("zero thrust could not be sent: %s", describe(e))
+            try:
+                board.close()
+            except Exception as e:
+                log.error("the board could not be closed: %s", describe(e))
         if link is not None:
             link.close()
         notifier.stopping()

@@ -21,7 +21,8 @@ import numpy as np
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError, output_file
+from flightctl.errors import InputError, output_file, write_atomic
+from flightctl.sim.cli import gains_label
 from flightctl.params import GAIN_SETS, Params
 from flightctl.plans import HOVER_ALT
 from flightctl.sim import causes
@@ -162,8 +163,8 @@ def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="flightctl analyze", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
-    p.add_argument("--gains", choices=sorted(GAIN_SETS), default="table6",
-                   help="gain set: table6 (flight, default) or table4 (the paper's simulation)")
+    p.add_argument("--gains", choices=sorted(GAIN_SETS),
+                   help="gain set by name, which replaces the parameter file's [gains] (default: the file's, else table6)")
     p.add_argument("--estimator", action="append", choices=(TRUTH,) + tuple(ESTIMATORS),
                    help=f"the measurement the PIDs read: {TRUTH} (perfect state feedback) or an onboard "
                         f"estimator structure; repeatable (default: {TRUTH} and {DEFAULT_ESTIMATOR})")
@@ -184,17 +185,18 @@ def main(argv: list[str]) -> int:
     if args.plot:
         for kind in ("bode", "step"):
             output_file(f"{args.plot}-{kind}.png", "--plot")
-    params = causes.load_vehicle(args.params, GAIN_SETS[args.gains])
+    params = causes.load_vehicle(args.params, GAIN_SETS[args.gains] if args.gains else None)
+    gains = gains_label(args, params)
     effects = tuple(causes.parse(e) for e in args.effect)
     estimators = tuple(dict.fromkeys(args.estimator or (TRUTH, DEFAULT_ESTIMATOR)))
     an = analyse(params, effects, estimators, args.alt)
     P = an.plant.u0[:4]
-    title = f"{args.gains} gains, {args.params or 'reference airframe'}, hover at {args.alt:g} m"
+    title = f"{gains} gains, {args.params or 'reference airframe'}, hover at {args.alt:g} m"
     print(f"flightctl analyze: {title} (P = {np.mean(P):.2f}); plant: "
           + (", ".join(map(repr, an.effects)) or "base model"))
     print(table(an))
     if args.json:
-        Path(args.json).write_text(json.dumps(report(an, args.gains), indent=2) + "\n")
+        write_atomic(args.json, json.dumps(report(an, gains), indent=2) + "\n")
         print(f"\nfigures -> {args.json}")
     if args.plot:
         for path in plot(an, args.plot, f"flightctl analyze: {title}"):

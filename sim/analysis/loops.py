@@ -253,7 +253,7 @@ def least_damped(s, share, period: float) -> tuple[float, float]:
     """Damping ratio and natural frequency (rad/s) of the least damped closed-loop mode that the step
     response sees (its share at least SEEN_SHARE of the largest), drift modes aside: the figure a
     phase margin speaks of. The largest share alone can be a real pole (damping 1) while a small,
-    barely damped or growing oscillation rides on it (issue 17: 1.000 printed at a 4 degree margin).
+    barely damped or growing oscillation rides on it (1.000 was once printed at a 4 degree margin).
     Negative for a growing mode."""
     live = np.abs(s) >= DRIFT_RATE
     size = np.where(np.isfinite(np.abs(share)), np.abs(share), np.inf)

@@ -1,4 +1,4 @@
-"""`flightctl sim faults --json M.json`: fly every fault of flightctl/sim/world/faults.py in a
+"""`flightctl sim faults --json M.json`: fly every fault `flightctl sim --fault` takes (docs/safety.md) in a
 short hover and report, per fault, whether the onboard loop named it (`detected`, `detect_ms` from the
 injection to the loop's first event naming it), what it did (`action`: hold, land or stop, from its
 events), the outcome on the true state (flightctl/safety.py's crash definition, through
@@ -25,6 +25,7 @@ FAULT_AFTER_S = 6.0   # s after arming: in a steady hover at 1 m
 # The loop's event that names each fault (flightctl/loop.py, the drivers' reasons)
 NAMED_BY = {"imu_frozen": "IMU frame refused (frozen", "imu_garbage": "IMU frame refused",
             "imu_intermittent": "IMU frame refused", "gyro_saturation": "IMU saturated",
+            "accel_zero": "IMU frame refused (accelerometer reads zero",
             "sonar_silent": "altitude lost", "sonar_stuck": "altitude lost",
             "battery_critical": "battery low", "motor_stop": " of its ", "motor_partial": " of its ",
             "cpu_stall": "loop stalled", "log_full": "log write failed"}
@@ -113,10 +114,6 @@ BEGIN, END = "<!-- fault matrix: begin (written by `flightctl sim faults`) -->",
 
 def write_doc(doc: Path, table: str) -> bool:
     """Replace the table between BEGIN and END in `doc`; False when the markers are absent."""
-    text = doc.read_text(encoding="utf-8")
-    head, sep, rest = text.partition(BEGIN)
-    _, sep2, tail = rest.partition(END)
-    if not (sep and sep2):
-        return False
-    doc.write_text(f"{head}{BEGIN}\n{table}{END}{tail}", encoding="utf-8")
+    from flightctl.sim.docs import write_block
+    return write_block(doc, BEGIN, END, table)
     return True

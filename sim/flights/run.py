@@ -78,13 +78,15 @@ def unstable_axis(params: Params) -> str:
 
 def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), noise: bool = True,
         seed: int = 0, truth: bool = False, substeps: int | None = None, calibrate_s: float = SIM_CALIBRATE_S,
-        estimator: str = "flight", telemetry=None, faults=(), plant_airframe=None) -> Flight:
+        estimator: str = "flight", telemetry=None, faults=(), plant_airframe=None, interrupt=None) -> Flight:
     """`truth=True` is perfect state feedback: the controller sees the true attitude and altitude at
     every loop (the paper's own simulation); otherwise the full onboard path. `telemetry`: a ground
     station link (flightctl/comms/mavlink.py) the loop streams to and takes commands from. `faults`:
     `flightctl.sim.world.faults.Fault`s, applied to the board's devices and the log; their `at` counts
     from arming, as the log's time does. `plant_airframe`: the simulated vehicle's airframe where
-    it is not the one the controller is given (a Monte Carlo draw)."""
+    it is not the one the controller is given (a Monte Carlo draw). `interrupt`: a threading.Event set
+    by Ctrl-C (flightctl/cli.py): the loop ends at its next period, the log closed with a `# partial:`
+    line."""
     # With a ground station the simulated world runs in real time, as SITL does: the station's
     # clock (heartbeats, commands) and the flight's then agree.
     board = open_board(params, BoardOptions(seed=seed, effects=tuple(effects), substeps=substeps,
@@ -111,7 +113,8 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
         replace(fault, at=fault.at + armed_at).apply(hal, world, log)
     scenario.plan.restart()
     loop = FlightLoop(hal, params, scenario.plan, log, FlightController(params, truth_est, estimator),
-                      calibrate_s=calibrate_s, extra_row=board.extra_row, telemetry=telemetry)
+                      calibrate_s=calibrate_s, extra_row=board.extra_row, telemetry=telemetry, stop=interrupt)
+    loop.stop_reason = "interrupted (Ctrl-C)"
     diverged = None
     try:
         result = loop.run()

@@ -11,13 +11,14 @@ bad input writes nothing (one line on stderr, exit status 2, see flightctl.cli).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 
 import numpy as np
 
 from flightctl import params as paramfile
-from flightctl.errors import InputError, output_file, read_toml
+from flightctl.errors import InputError, output_file, read_toml, write_atomic
 from flightctl.logfile import BENCH_COLUMNS, PENDULUM_COLUMNS, YAW_DRAG_COLUMNS, read_table
 from flightctl.sim.identify import inertia, propeller, yaw_drag
 from flightctl.sim.identify.fits import FitError, Identified, check_result
@@ -39,11 +40,11 @@ class _Parser(argparse.ArgumentParser):
 
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="flightctl identify", description="Fit the paper's models to measured data "
-                     "(formats: measured-data.md; the rotor format: docs/identification.md).")
+                     "(the files' columns and units: docs/identification.md in the flightctl checkout).")
     sub = parser.add_subparsers(dest="kind", required=True, metavar="KIND")
     for kind, (doc, *_rest) in KINDS.items():
         p = sub.add_parser(kind, help=doc, description=doc)
-        p.add_argument("file", metavar="FILE.csv", help="the measured data (measured-data.md)")
+        p.add_argument("file", metavar="FILE.csv", help="the measured data (its columns: docs/identification.md)")
         p.add_argument("--json", required=True, metavar="OUT.json", help="the fitted parameters with stderr")
         p.add_argument("--params", metavar="P.toml", help="parameter file (the pendulum takes M and g from it)")
         p.add_argument("--write-params", metavar="P.toml", help="write the fitted values into this parameter file")
@@ -91,12 +92,15 @@ def identify(args) -> Identified:
         from flightctl.sim.identify.plots import FIGURES
         from flightctl.sim.plots import png
         image = png(FIGURES[args.kind](*result.figure_data))
-    Path(args.json).write_text(json.dumps(result.report, indent=2, allow_nan=False) + "\n")
+    write_atomic(args.json, json.dumps(result.report, indent=2, allow_nan=False) + "\n")
+    written = [f"  fit -> {args.json}"]
     if args.write_params:
         paramfile.update_file(args.write_params, result.values, f"flightctl identify {args.kind} {args.file}")
+        written.append(f"  parameters -> {args.write_params}")
     if image is not None:
-        Path(args.plot).write_bytes(image)
-    return result
+        write_atomic(args.plot, image)
+        written.append(f"  plot -> {args.plot}")
+    return dataclasses.replace(result, summary=list(result.summary) + written)
 
 
 def main(argv: list[str]) -> int:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flightctl.errors import InputError
+from flightctl.errors import InputError, write_atomic
 from flightctl.logfile import BENCH_COLUMNS, read_table
 from flightctl.params import Airframe
 from flightctl.physics import G
@@ -245,12 +245,11 @@ def write_report(res: dict, images: dict[str, bytes], data: str | None, out_dir:
     for name, image in images.items():
         (out_dir / name).write_bytes(image)
     doc = out_dir / "identification.md"
+    from flightctl.sim.docs import replace
     text = doc.read_text() if doc.exists() else ""
-    if BEGIN in text and END in text:
-        text = text[:text.index(BEGIN)] + block + text[text.index(END) + len(END):]
-    else:
-        text += ("\n" if text else "") + block + "\n"
-    doc.write_text(text)
+    inner = block.removeprefix(BEGIN).removesuffix(END).strip("\n")
+    new = replace(text, BEGIN, END, inner)
+    write_atomic(doc, new if new is not None else text + ("\n" if text else "") + block + "\n")
     return [f"wrote {out_dir / n} ({len(b) // 1024} kB)" for n, b in images.items()] + \
            [f"wrote the real-data block of {doc}", *summary(res)]
 

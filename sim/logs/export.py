@@ -341,12 +341,12 @@ def _import(args) -> int:
 def main(argv: list[str]) -> int:
     p = _Parser(prog="flightctl log", description="Flight log tools.")
     sub = p.add_subparsers(dest="action", required=True)
-    e = sub.add_parser("export", help="write a flight log (CSV, measured-data.md) as PX4's ULog",
+    e = sub.add_parser("export", help="write a flight log (CSV, docs/formats.md) as PX4's ULog",
                        description=__doc__.split("\n\n")[0])
     e.add_argument("csv", metavar="FLIGHT.csv", help="a flightctl flight log")
     e.add_argument("ulg", metavar="FLIGHT.ulg", help="the ULog to write")
     i = sub.add_parser("import", help="write another autopilot's log (PX4 .ulg, ArduPilot .bin, Betaflight/INAV "
-                                      ".bbl/.bfl/.txt) as a flight log (CSV, measured-data.md); needs the logs extra",
+                                      ".bbl/.bfl/.txt) as a flight log (CSV, docs/formats.md); needs the logs extra",
                        description="Read a PX4 ULog, an ArduPilot DataFlash log or a Betaflight/INAV blackbox log and "
                                    "write it as this project's flight log, on the gyro's time base, with the rotor "
                                    "layout, the command scale and the sensor filters in '# key: value' lines "

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import wait
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -38,6 +38,7 @@ from flightctl.sim.world.model import N_RIGID, PHI, THETA, Z, Effect, Model, P, 
 from flightctl.sim.world.plant import delayed
 
 TWO_PI = 2.0 * math.pi
+TICK_STEPS = 45                 # loop periods between progress counts (0.1 s of flight)
 GAINS = ("z", "phi", "theta", "psi")
 
 
@@ -294,13 +295,14 @@ class BatchFlight:
 
 def fly(plant: BatchPlant, controller: BatchController, setpoints: Callable[[float], tuple], duration: float,
         record_every: int = 9, t0: float = 0.0, imu=None, sonar: Sonar | None = None,
-        powered: float = SIM_CALIBRATE_S) -> BatchFlight:
+        powered: float = SIM_CALIBRATE_S, tick: Callable[[int], None] | None = None) -> BatchFlight:
     """Fly N vehicles from hover: each loop period the IMU (`imu`, a calibrated
     sim/sweeps/batch_imu.py `BatchImu`: the simulated chip's readings; None: the true rates and
     specific force) and the sonar's echoes (`sonar`: each echo after its flight time, jittered, or
     lost; None: the true range along -z_b at each trigger) go to the controller; its counts drive
     the plant. `setpoints(t) -> (roll, pitch, yaw, alt)`, scalars or (N,) arrays; t runs from t0
-    (since arming), the chip's clock from `powered` s before arming (the calibration's)."""
+    (since arming), the chip's clock from `powered` s before arming (the calibration's). `tick(steps)`:
+    the vehicle-steps flown since the last call, every TICK_STEPS loop periods (progress)."""
     a = plant.a
     dt = a.dt
     controller.in_flight[:] = True
@@ -335,6 +337,8 @@ def fly(plant: BatchPlant, controller: BatchController, setpoints: Callable[[flo
         if k % record_every == 0:
             ts.append(t)
             states.append(np.concatenate([x[:N_RIGID], [controller.roll, controller.pitch, controller.yaw]]))
+        if tick is not None and (k + 1) % TICK_STEPS == 0:
+            tick(TICK_STEPS * plant.n)
     return BatchFlight(np.array(ts), np.array(states), plant.crashed.copy(), plant.crash_t.copy(), steps * plant.n)
 
 
@@ -386,7 +390,20 @@ def with_draws(params: Params, draws: dict[tuple[str, str], np.ndarray] | None =
     return effects
 
 
-def _chunk(job) -> BatchFlight:
+_FLOWN = None        # a worker's shared count of vehicle-steps flown (`simulate`'s progress)
+
+
+def _count_in(counter) -> None:
+    global _FLOWN
+    _FLOWN = counter
+
+
+def _add_flown(steps: int) -> None:
+    with _FLOWN.get_lock():
+        _FLOWN.value += steps
+
+
+def _chunk(job, tick=None) -> BatchFlight:
     """One worker's share of `simulate`."""
     params, n, draws, gains, plan, start, end, record_every, sensors, seed = job
     from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params
@@ -406,27 +423,45 @@ def _chunk(job) -> BatchFlight:
         imu.calibrate(SIM_CALIBRATE_S, a.dt, a.g)
         ctl.tilt_bias = imu.tilt_bias
         sonar = Sonar(n, noise.sonar_sigma_us, noise.sonar_dropout, seed)
-    return fly(plant, ctl, plan.at, end - start, record_every, t0=start, imu=imu, sonar=sonar)
+    return fly(plant, ctl, plan.at, end - start, record_every, t0=start, imu=imu, sonar=sonar,
+               tick=tick if tick is not None else _add_flown if _FLOWN is not None else None)
 
 
 def simulate(params: Params, plan: Plan, start: float, end: float, n: int,
              draws: dict[tuple[str, str], np.ndarray] | None = None, gains: Sequence[Gains] | None = None,
-             workers: int = 1, record_every: int = 9, sensors: bool = True, seed: int = 0) -> BatchFlight:
+             workers: int = 1, record_every: int = 9, sensors: bool = True, seed: int = 0,
+             progress: Callable[[float], None] | None = None) -> BatchFlight:
     """Fly `plan` from `start` to `end` (s since arming) with n vehicles, each started hovering at the
     plan's altitude at `start`, each with its own draws of the parameters ((N,) arrays) and its own
     gains (None: the file's). `sensors`: the simulated chip and sonar (`fly`), each vehicle's chip
-    calibrated on the floor first; else ideal. `workers` processes share the vehicles."""
+    calibrated on the floor first; else ideal. `workers` processes share the vehicles.
+    `progress(fraction)`: the share of the vehicle-steps flown, called here about once a second of
+    wall time."""
     draws = {k: np.broadcast_to(np.asarray(v, dtype=float), (n,)) for k, v in (draws or {}).items()}
     if gains is not None and len(gains) != n:
         raise ValueError(f"{len(gains)} gain sets for {n} vehicles")
     cuts = np.linspace(0, n, max(1, min(workers, n)) + 1).astype(int)
     jobs = [(params, int(b - a), {k: v[a:b] for k, v in draws.items()}, None if gains is None else list(gains[a:b]),
              plan, start, end, record_every, sensors, seed * 1000 + j) for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:]))]
+    total = max(1, int(round((end - start) / params.airframe.dt)) * n)
     if len(jobs) == 1:
-        parts = [_chunk(jobs[0])]
+        flown = [0]
+
+        def tick(steps: int) -> None:
+            flown[0] += steps
+            progress(flown[0] / total)
+        parts = [_chunk(jobs[0], tick if progress is not None else None)]
     else:
-        with ProcessPoolExecutor(max_workers=len(jobs)) as pool:
-            parts = list(pool.map(_chunk, jobs))
+        import multiprocessing
+
+        from flightctl.sim.pool import workers as pool_of
+        counter = multiprocessing.Value("q", 0)
+        with pool_of(len(jobs), _count_in, (counter,)) as pool:
+            futures = [pool.submit(_chunk, job) for job in jobs]
+            while wait(futures, timeout=1.0).not_done:
+                if progress is not None:
+                    progress(counter.value / total)
+            parts = [f.result() for f in futures]
     return BatchFlight(parts[0].t, np.concatenate([p.states for p in parts], axis=2),
                        np.concatenate([p.crashed for p in parts]), np.concatenate([p.crash_t for p in parts]),
                        sum(p.vehicle_steps for p in parts))

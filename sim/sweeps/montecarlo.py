@@ -30,11 +30,11 @@ import dataclasses
 import json
 import math
 import os
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from flightctl.errors import InputError
 from flightctl.params import GAIN_SETS
+from flightctl.sim.pool import run_all
 
 GAINS = ("table4", "table6")
 
@@ -123,6 +123,7 @@ def _fly(job: tuple) -> dict:
 
 
 def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, jobs: int | None = None) -> dict:
+    """The module docstring's Monte Carlo; `progress`: a sim/progress.py Progress, one step a flight."""
     from flightctl.sim import causes
     params = causes.load_vehicle(spec)
     spans = ranged(params)
@@ -132,13 +133,13 @@ def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, j
     drawn = draw(params, n, seed)
     draws = [{k: float(v[i]) for k, v in drawn.items()} for i in range(n)]
     jobs_list = [(spec, scenario, g, d, seed + k) for k, d in enumerate(draws) for g in GAINS]
-    results = []
-    with ProcessPoolExecutor(max_workers=jobs or os.cpu_count() or 1) as pool:
-        for job, r in zip(jobs_list, pool.map(_fly, jobs_list)):
-            results.append(r)
-            if progress is not None:
-                progress(f"{job[2]}: {r['outcome']}{', settles' if r['settles'] else ''}"
-                         + (f", score {r['score']:.2f}" if r.get("score") is not None else ""))
+
+    def done(k: int, r: dict) -> None:          # as each flight finishes (sim/pool.py)
+        job = jobs_list[k]
+        progress.step(f"{job[2]}: " + ", ".join(f"{c}.{n} {v:.4g}" for (c, n), v in job[3].items())
+                 + f": {r['outcome']}{', settles' if r['settles'] else ''}"
+                 + (f", score {r['score']:.2f}" if r.get("score") is not None else ""))
+    results = run_all(_fly, jobs_list, jobs or os.cpu_count() or 1, done if progress is not None else None)
     rows = [{"draw": {f"{c}.{name}": v for (c, name), v in d.items()},
              **{g: results[2 * k + j] for j, g in enumerate(GAINS)}} for k, d in enumerate(draws)]
     return _result(spec, scenario, n, seed, spans, rows, ("flies", "lands", "settles"))
@@ -171,7 +172,8 @@ def _batch_window(sc) -> tuple[float, float, list]:
 
 
 def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, workers: int | None = None) -> dict:
-    """The draws flown on the batched simulator (module docstring), both gain sets on the same draws."""
+    """The draws flown on the batched simulator (module docstring), both gain sets on the same draws;
+    `progress`: a sim/progress.py Progress, one step a gain set, the vehicle-steps in between."""
     import numpy as np
 
     from flightctl.sim import causes
@@ -189,8 +191,9 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
     draws = draw(params, n, seed)
     out = {}
     for g in GAINS:
+        frac = (lambda f, g=g: progress.update(f, f"{g}: {n} vehicles")) if progress is not None else None
         flight = simulate(causes.load_vehicle(spec, GAIN_SETS[g]), sc.plan, start, end, n, draws,
-                          workers=workers or os.cpu_count() or 1, record_every=9, seed=seed)
+                          workers=workers or os.cpu_count() or 1, record_every=9, seed=seed, progress=frac)
         st = flight.states
         log = {"t": flight.t, "true_roll": st[:, PHI], "true_pitch": st[:, THETA],
                "true_yaw": (st[:, PSI] + np.pi) % (2 * np.pi) - np.pi,
@@ -198,7 +201,7 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
         flies = ~flight.crashed
         out[g] = (flies, settles(log, steps, 0.0) & flies, flight.crash_t, judge.score(judge.step_figures(log, steps, 0.0)))
         if progress is not None:
-            progress(f"{g}: {n} vehicles, {flight.vehicle_steps / 1e6:.1f} M vehicle-steps")
+            progress.step(f"{g}: {n} vehicles, {flight.vehicle_steps / 1e6:.1f} M vehicle-steps")
     rows = [{"draw": {f"{c}.{name}": float(v[k]) for (c, name), v in draws.items()},
              **{g: {"gains": g, "flies": bool(out[g][0][k]), "settles": bool(out[g][1][k]),
                     "score": judge._num(out[g][3][k]) if out[g][0][k] else None,
@@ -256,7 +259,8 @@ def plot(result: dict, path: str | Path) -> None:
 
 
 def write_json(result: dict, path: str | Path) -> None:
-    Path(path).write_text(json.dumps(result, indent=1) + "\n")
+    from flightctl.errors import write_atomic
+    write_atomic(path, json.dumps(result, indent=1) + "\n")
 
 
 VERDICTS = ("paper's account", "table6 beats table4")

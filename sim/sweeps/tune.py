@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flightctl.errors import InputError, output_file
+from flightctl.errors import InputError, output_file, seed, write_atomic
 from flightctl.params import TABLE4, TABLE6, Gains, dumps
 
 SETTLE_S = 3.0
@@ -147,7 +147,8 @@ def scaled(gains: Gains, kp: float, kd: float) -> Gains:
 def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str = "paper", workers=None,
            progress=None) -> list[dict]:
     """Per candidate, the shares of n draws of the file's ranges that fly and that settle, on the
-    batched simulator (every candidate on the same draws)."""
+    batched simulator (every candidate on the same draws). `progress`: a sim/progress.py Progress,
+    one step a candidate, the vehicle-steps in between."""
     import os
 
     from flightctl.sim.sweeps.batch import simulate
@@ -166,9 +167,11 @@ def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str
     out = []
     for i in range(0, len(candidates), per):
         group = candidates[i:i + per]
+        under_way = f"candidates {i + 1}-{i + len(group)} of {len(candidates)}: {n * len(group)} vehicles"
+        frac = (lambda f: progress.update(f, under_way, len(group))) if progress else None
         flight = simulate(params, sc.plan, start, end, n * len(group), {k: np.tile(v, len(group)) for k, v in draws.items()},
                           [g for g in group for _ in range(n)], workers=workers or os.cpu_count() or 1,
-                          sensors=False)   # the control law over the ranges, ideal sensors: the search's speed
+                          sensors=False, progress=frac)   # the control law over the ranges, ideal sensors: the search's speed
         st = flight.states
         log = {"t": flight.t, "true_roll": st[:, PHI], "true_pitch": st[:, THETA],
                "true_yaw": (st[:, PSI] + np.pi) % (2 * np.pi) - np.pi}
@@ -177,7 +180,7 @@ def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str
         for j in range(len(group)):
             out.append({"flies": float(flies[j * n:(j + 1) * n].mean()), "settles": float(ok[j * n:(j + 1) * n].mean())})
             if progress:
-                progress(f"candidate {len(out)}/{len(candidates)}: settles {100 * out[-1]['settles']:.0f} %")
+                progress.step(f"candidate {len(out)}/{len(candidates)}: settles {100 * out[-1]['settles']:.0f} %")
     return out
 
 
@@ -269,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--robust", type=int, metavar="N",
                    help="then scale the roll and pitch gains for the largest share of N draws of the file's ranges "
                         "that flies and settles (batched simulator; --plot also draws the grid)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the --robust draws")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the --robust draws (a whole number from 0)")
     p.add_argument("--scenario", default="paper", help="the scenario whose attitude steps --robust flies (default: paper)")
     args = p.parse_args(argv)
     if args.robust is not None and not 1 <= args.robust <= 10000:
@@ -290,7 +293,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.robust is not None and not ranged(params):
         raise InputError(f"--robust: {args.params or 'the reference airframe'} carries no ranges "
                          "(range.NAME = [lo, hi]; --params paper-as-flown has them)")
-    bar = Progress(len(ORDER) * 2 + (len(COARSE) ** 2 + 2 + len(FINE) ** 2 - 1 if args.robust else 0), "tune")
+    bar = Progress(len(ORDER) * 2, "tune: the procedure ")
     if args.robust and params.effects:   # the procedure on the paper's model, then robust over the ranges
         print("flightctl tune --robust: the procedure runs on the base model (the paper's), the robust "
               "search over the file's ranges", file=sys.stderr)
@@ -303,7 +306,8 @@ def main(argv: list[str] | None = None) -> int:
            for ch in ORDER for k in ("kp", "ki", "kd")}
     if args.robust:
         procedure = gains
-        gains, rob = robust(params, procedure, args.robust, args.seed, progress=bar.step, scenario=args.scenario)
+        bar = Progress(len(COARSE) ** 2 + 2 + len(FINE) ** 2 - 1, f"tune --robust {args.robust}: ")
+        gains, rob = robust(params, procedure, args.robust, args.seed, progress=bar, scenario=args.scenario)
         found["robust"] = rob
         for k in ("kp", "kd"):
             for ax in ("phi", "theta"):
@@ -312,15 +316,16 @@ def main(argv: list[str] | None = None) -> int:
                              f"x {rob[k + '_factor']:.3g}, settles in {100 * rob['settles']:.0f} % of the draws of "
                              f"{args.params}'s ranges (the procedure's {100 * rob['procedure']['settles']:.0f} %, "
                              f"Table 4 {100 * rob['table4']['settles']:.0f} %); Table 4: {getattr(TABLE4, name):g}")
-    out.write_text("# Gains tuned by flightctl tune on " + (args.params or "the reference airframe") + "\n"
-                   + dumps(dataclasses.replace(params, gains=gains), src, tables=("gains",)))
+    write_atomic(out, "# Gains tuned by flightctl tune on " + (args.params or "the reference airframe") + "\n"
+                 + dumps(dataclasses.replace(params, gains=gains), src, tables=("gains",)))
     print("channel   kp (tuned / Table 4)    kd (tuned / Table 4)")
     for ch in ORDER:
         kp, kd = f"kp_{NAME[ch]}", f"kd_{NAME[ch]}"
         print(f"{ch:<8} {getattr(gains, kp):8.3f} / {getattr(TABLE4, kp):<8g}    {getattr(gains, kd):8.3f} / {getattr(TABLE4, kd):<8g}")
-    print(f"  -> {out}")
+    print(f"  gains -> {out}")
     if args.json:
-        Path(args.json).write_text(json.dumps(found, indent=1) + "\n")
+        write_atomic(args.json, json.dumps(found, indent=1) + "\n")
+        print(f"  what was found -> {args.json}")
     if args.robust:
         r = found["robust"]
         print(f"robust over {r['draws']} draws: roll and pitch kp x {r['kp_factor']:.3g}, kd x {r['kd_factor']:.3g} "

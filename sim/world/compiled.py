@@ -10,7 +10,10 @@ misbehaves); `enabled()` says whether it is on. Compiled code is cached (numba's
 first flight of a fresh install compiles for a few seconds, later ones load it. numba's cache checks
 only each function's own file, not the files of the functions it calls or of the constants it reads:
 the cache's folder (sim/__pycache__/numba-<hash>, unless NUMBA_CACHE_DIR is set) is named by a hash
-of every such file, so that a change to any of them compiles afresh.
+of every such file, so that a change to any of them compiles afresh. Where that folder cannot be
+written (a package installed for another user, a service user without a home), the cache goes to the
+user's cache folder, else to the temporary folder, else nowhere (every process compiles afresh),
+each said once on stderr.
 """
 from __future__ import annotations
 
@@ -18,6 +21,7 @@ import functools
 import hashlib
 import os
 import sys
+import tempfile
 import types
 from pathlib import Path
 from math import cos, sin
@@ -45,12 +49,44 @@ def enabled() -> bool:
         compiled_files += [here.parent / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
         compiled_files += [here.parent / "sweeps" / "batch_imu.py"]
         digest = hashlib.sha1(b"".join(path.read_bytes() for path in compiled_files)).hexdigest()[:12]
-        os.environ.setdefault("NUMBA_CACHE_DIR", str(here / "__pycache__" / f"numba-{digest}"))
+        given = os.environ.get("NUMBA_CACHE_DIR")
+        user = Path(os.environ.get("XDG_CACHE_HOME") or Path(os.path.expanduser("~")) / ".cache")
+        candidates = ([given] if given else []) + [here / "__pycache__" / f"numba-{digest}",
+                                                   user / "flightctl" / f"numba-{digest}",
+                                                   Path(tempfile.gettempdir()) / f"flightctl-numba-{os.getuid() if hasattr(os, 'getuid') else 0}-{digest}"]
+        folder = writable_folder(candidates)
+        global CACHE
+        if folder is None:
+            CACHE = False
+            print(f"flightctl: no writable folder for the compiled simulator's cache ({candidates[0]} and the "
+                  "others): it compiles afresh in this process", file=sys.stderr)
+        else:
+            if str(folder) != str(candidates[0]):
+                print(f"flightctl: the compiled simulator's cache is in {folder} ({candidates[0]} cannot be written)",
+                      file=sys.stderr)
+            os.environ["NUMBA_CACHE_DIR"] = str(folder)
     try:
         import numba  # noqa: F401
     except ImportError:
         return False
     return True
+
+
+CACHE = True        # numba's cache=True, unless no folder for it can be written
+
+
+def writable_folder(candidates) -> Path | None:
+    """The first folder of `candidates` that exists or can be made, and takes a new file."""
+    for c in candidates:
+        try:
+            folder = Path(c)
+            folder.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryFile(dir=folder):
+                pass
+            return folder
+        except OSError:
+            continue
+    return None
 
 
 def compiled_copy(fn, **dependencies):
@@ -63,7 +99,7 @@ def compiled_copy(fn, **dependencies):
     g.update(dependencies)
     copy = types.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__)
     copy.__qualname__, copy.__module__, copy.__doc__ = fn.__qualname__, fn.__module__, fn.__doc__
-    return numba.njit(cache=True, nogil=True)(copy)
+    return numba.njit(cache=CACHE, nogil=True)(copy)
 
 
 # The effects the compiled plant carries, by their wrench hooks' codes (`layout`); a model with any other

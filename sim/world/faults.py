@@ -7,6 +7,7 @@ meet them exactly as on the quadcopter. `parse("imu_frozen:at=5")` -> a Fault;
   transfer, `SimMpu9250.xfer2`);
 - imu_garbage: random bytes; imu_intermittent: one burst in `every` (20) is random bytes;
 - gyro_saturation: the gyro x word stuck at +32767 (full scale);
+- accel_zero: the three accelerometer words read 0 (a dead accelerometer; the gyro lives on);
 - sonar_silent: the HC-SR04 gives no echo edges at all (`SimGpio.gpio_trigger` schedules none; the
   driver's pigpio watchdog reports the quiet line);
 - sonar_stuck: the echo line goes high and stays there (`SimGpio.stick_echo_high`);
@@ -81,7 +82,7 @@ class Fault:
             log._f = _FullDisk(log._f, world, self.at)
 
 
-_IMU = ("imu_frozen", "imu_garbage", "imu_intermittent", "gyro_saturation")
+_IMU = ("imu_frozen", "imu_garbage", "imu_intermittent", "gyro_saturation", "accel_zero")
 
 
 def _imu(fault: Fault, hal, world) -> None:
@@ -108,6 +109,8 @@ def _imu(fault: Fault, hal, world) -> None:
         if name == "gyro_saturation":
             rx = list(rx)
             rx[_GYRO_X], rx[_GYRO_X + 1] = 0x7F, 0xFF
+        if name == "accel_zero":
+            rx = [rx[0]] + [0] * 6 + list(rx[7:])
         return rx
     chip.xfer2 = xfer2
 
@@ -158,6 +161,9 @@ class _FullDisk:
 FAULTS = _IMU + ("sonar_silent", "sonar_stuck", "battery_critical", "motor_stop", "motor_partial", "cpu_stall",
                    "log_full")
 _LIMITS = {"cell": (2.5, 4.2), "motor": (1, 4), "ms": (20.0, 100.0), "every": (2, 1e6), "share": (0.0, 1.0)}   # the brief's 20-100 ms
+# the keys each fault takes besides `at` (an unknown key is refused, never ignored)
+_KEYS = {"imu_garbage": ("seed",), "imu_intermittent": ("every", "seed"), "battery_critical": ("cell",),
+         "motor_stop": ("motor",), "motor_partial": ("motor", "share"), "cpu_stall": ("ms",)}
 
 
 def parse(text: str) -> Fault:
@@ -167,10 +173,16 @@ def parse(text: str) -> Fault:
     if name not in FAULTS:
         raise InputError(f"--fault {text}: unknown fault {name!r} (known: {', '.join(FAULTS)})")
     opts = {}
+    allowed = ("at",) + _KEYS.get(name, ())
     for kv in filter(None, rest.split(",")):
         k, sep, v = kv.partition("=")
+        k = k.strip()
+        if k not in allowed:
+            raise InputError(f"--fault {text}: unknown key {k!r} for {name} (known: {', '.join(allowed)})")
+        if k in opts:
+            raise InputError(f"--fault {text}: {k} given twice")
         try:
-            opts[k.strip()] = float(v) if sep else None
+            opts[k] = float(v) if sep else None
         except ValueError:
             raise InputError(f"--fault {text}: {k}={v} is not a number") from None
     at = opts.pop("at", 5.0)

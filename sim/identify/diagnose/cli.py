@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 from flightctl import params as paramfile
-from flightctl.errors import InputError, output_file
+from flightctl.errors import InputError, output_file, write_atomic
 from flightctl.logfile import read_flight_log
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
 from flightctl.sim.identify.diagnose import report as diagnose_report
@@ -44,9 +44,9 @@ def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="flightctl diagnose",
                 description="Fit every candidate extension of the model to part of the flight logs, score "
                             "it on the rest, and name the one that explains the discrepancy, or none "
-                            "(measured-data.md; method: docs/diagnose.md).")
+                            "(the method: docs/diagnose.md in the flightctl checkout).")
     p.add_argument("logs", nargs="*", metavar="FLIGHT",
-                   help="flight logs of one vehicle: this project's CSV (measured-data.md), PX4's .ulg, "
+                   help="flight logs of one vehicle: this project's CSV (docs/formats.md), PX4's .ulg, "
                         "ArduPilot's .bin or a Betaflight/INAV .bbl/.bfl/.txt (the `logs` extra); one file of "
                         "many logs is diagnosed log by log")
     p.add_argument("--index", type=int, metavar="N",
@@ -59,7 +59,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="the base model: its airframe and its [[effect]] tables (default: the reference "
                         "airframe, no effects)")
     p.add_argument("--json", metavar="REPORT.json",
-                   help="the report (measured-data.md, diagnose); with --corpus, every log's report and refusal")
+                   help="the report (its keys: docs/diagnose.md); with --corpus, every log's report and refusal")
     p.add_argument("--corpus", metavar="DIR",
                    help="diagnose every log in DIR and its folders (every log of a file of many), in parallel, "
                         "one row per log (docs/real-flights.md)")
@@ -184,9 +184,9 @@ def _images(d, tables, plots) -> dict[str, bytes]:
 
 
 def _write(out_json: Path, report: dict, plots: dict, images: dict) -> None:
-    out_json.write_text(json.dumps(report, indent=2, allow_nan=False) + "\n")
+    write_atomic(out_json, json.dumps(report, indent=2, allow_nan=False) + "\n")
     for k, path in plots.items():
-        path.write_bytes(images[k])
+        write_atomic(path, images[k])
 
 
 def _each(args, params, progress, t0) -> int:

@@ -4,7 +4,8 @@ once (docs/real-flights.md, whose table it writes).
 
     flightctl diagnose --corpus DIR [--table OUT.md] [--json OUT.json] [--jobs N] [--quiet]
 
-Each log is read (`flightctl.sim.logs.count_logs`, `read_foreign(path, index)`, or this project's CSV)
+Each log is read (`flightctl.sim.logs.count_logs`, then each log on its own as `each_log` reads it, or
+this project's CSV)
 and diagnosed in a process of its own (at most the machine's cores, one BLAS thread each); a log that
 cannot be read, never flew, or whose data contradict its layout is that log's refusal, with its one
 line. The rows are a function of the logs and the code only: sorted by path and index, paths relative
@@ -20,7 +21,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from flightctl.errors import InputError, output_file
+from flightctl.errors import InputError, output_file, write_atomic
 
 TABLE_BEGIN = "<!-- diagnose --corpus table: begin -->"
 TABLE_END = "<!-- diagnose --corpus table: end -->"
@@ -96,11 +97,26 @@ def _base(r: dict) -> str:
 
 
 def find_logs(folder: Path) -> list[Path]:
-    """Every file under `folder` whose suffix is a flight log's (`flightctl.sim.logs.FOREIGN_SUFFIXES`,
-    and this project's CSV), sorted."""
-    from flightctl.sim.logs import FOREIGN_SUFFIXES
-    suffixes = tuple(FOREIGN_SUFFIXES) + CSV_SUFFIXES
-    return sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix.lower() in suffixes)
+    """Every file under `folder` that is a flight log, sorted: this project's CSV, and a file whose suffix
+    is another autopilot's (`flightctl.sim.logs.FOREIGN_SUFFIXES`) unless it is plain text of no log
+    format (a `.txt` licence beside the logs); a file that claims a format and is damaged stays, to be
+    refused with its reason."""
+    from flightctl.sim.logs import FOREIGN_SUFFIXES, kind
+    out = []
+    for p in sorted(folder.rglob("*")):
+        if not p.is_file():
+            continue
+        suffix = p.suffix.lower()
+        if suffix in CSV_SUFFIXES:
+            out.append(p)
+        elif suffix in FOREIGN_SUFFIXES:
+            try:
+                if kind(str(p)) is None:
+                    continue
+            except InputError:
+                pass
+            out.append(p)
+    return out
 
 
 def _jobs(folder: Path, files: list[Path]) -> tuple[list[Row], list[Row]]:
@@ -160,14 +176,9 @@ def table(rows: list[Row]) -> str:
 
 def write_table(path: Path, text: str) -> None:
     """The table between the file's markers, or the whole file."""
-    if path.exists():
-        doc = path.read_text()
-        if TABLE_BEGIN in doc and TABLE_END in doc:
-            head, _, rest = doc.partition(TABLE_BEGIN)
-            _, _, tail = rest.partition(TABLE_END)
-            path.write_text(f"{head}{TABLE_BEGIN}\n{text}\n{TABLE_END}{tail}")
-            return
-    path.write_text(f"{TABLE_BEGIN}\n{text}\n{TABLE_END}\n")
+    from flightctl.sim.docs import write_block
+    if not (path.exists() and write_block(path, TABLE_BEGIN, TABLE_END, text)):
+        write_atomic(path, f"{TABLE_BEGIN}\n{text}\n{TABLE_END}\n")
 
 
 def corpus(folder: Path, jobs: int | None = None, progress=None) -> list[Row]:
@@ -224,7 +235,7 @@ def main(args) -> int:
     if out_table is not None:
         write_table(out_table, text)
     if out_json is not None:
-        out_json.write_text(json.dumps({"corpus": str(args.corpus), "logs": [
+        write_atomic(out_json, json.dumps({"corpus": str(args.corpus), "logs": [
             {"log": r.log, "status": r.status, "refused": r.reason or None, "report": r.report} for r in rows]},
             indent=1, allow_nan=False) + "\n")
     print(text)

@@ -1,0 +1,260 @@
+"""Every generated block and figure of the README and docs/, and the command that writes it.
+
+    python scripts/docs.py --list                       the blocks and figures, their commands
+    python scripts/docs.py --write [ID ...] [--quick]   run the commands and rewrite them (all by default;
+                                                        --quick leaves out the long ones)
+    python scripts/docs.py --check [ID ...] [--quick]   run the commands into a temporary folder and say
+                                                        which differ from what the files hold (exit 1)
+
+A number in the README or docs/ is a claim, written by the command that measures it between two
+markers (`<!-- NAME: begin -->` ... `<!-- NAME: end -->`, invisible on GitHub; flightctl/sim/docs.py
+reads and replaces them), never by hand. A block is one of:
+- printed: the command's standard output is the block (in a code fence where `fence`);
+- written: the command rewrites the block in the file itself (`{doc}`: the file, `{dir}`: its folder);
+  checked on a copy of the file in a temporary folder;
+- measured on a machine: the speed figures of scripts/benchmark.py vary with the machine and its
+  load; the block says when and where they were measured, and the check holds only its form (the
+  stamp line, the table's header and rows), never its numbers.
+A figure is a PNG its command draws; checked against a fresh drawing (the same size, at most 1 % of
+its pixels different: the fonts of another machine's matplotlib move a few).
+tests/test_docs.py re-runs every block and figure (the long ones under `-m slow`) and fails when
+one differs. Prose around a block states no number of its own (docs/analyze.md, docs/diagnose.md).
+"""
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "scripts"))
+
+FLIGHTCTL = ("{python}", "-P", "-m", "flightctl.cli")
+SCRIPT = ("{python}",)
+
+
+@dataclass(frozen=True)
+class Block:
+    id: str
+    file: str                     # relative to the checkout
+    begin: str
+    end: str
+    command: tuple[str, ...]      # {python}, {doc}, {dir}, {tmp} are filled in
+    minutes: float = 0.1          # about, on a 2-core machine: over 1 is long (--quick leaves it out)
+    fence: bool = False           # printed into a ``` code fence
+    measured: bool = False        # machine-dependent figures: the form is checked, not the numbers
+
+    @property
+    def written(self) -> bool:
+        return any("{doc}" in a or "{dir}" in a for a in self.command)
+
+
+@dataclass(frozen=True)
+class Figure:
+    id: str
+    files: tuple[str, ...]        # the PNGs the command draws, relative to the checkout
+    command: tuple[str, ...]      # {out} is the first file's path, {tmp} a scratch folder
+    minutes: float = 0.1
+
+
+def marked(name: str) -> tuple[str, str]:
+    return f"<!-- {name}: begin -->", f"<!-- {name}: end -->"
+
+
+def analyze(id_: str, name: str, *args: str) -> Block:
+    return Block(id_, "docs/analyze.md", *marked(name), FLIGHTCTL + ("analyze", *args), fence=True)
+
+
+BLOCKS = (
+    Block("paper-table", "README.md", *marked("paper_comparison"), SCRIPT + ("scripts/paper_comparison.py",),
+          minutes=6),
+    Block("benchmark", "README.md", *marked("benchmark"), SCRIPT + ("scripts/benchmark.py", "--markdown"),
+          minutes=5, measured=True),
+    Block("fault-matrix", "docs/safety.md", "<!-- fault matrix: begin (written by `flightctl sim faults`) -->",
+          "<!-- fault matrix: end -->", FLIGHTCTL + ("sim", "faults", "--json", "{tmp}/faults.json", "--doc", "{doc}"),
+          minutes=3),
+    Block("real-flights", "docs/real-flights.md", "<!-- diagnose --corpus table: begin -->",
+          "<!-- diagnose --corpus table: end -->",
+          FLIGHTCTL + ("diagnose", "--corpus", "../shared/data/real/flights", "--table", "{doc}", "--quiet"), minutes=8),
+    Block("motor-loss", "docs/safety.md", "<!-- motor loss: begin (written by scripts/motor_loss.py) -->",
+          "<!-- motor loss: end -->", SCRIPT + ("scripts/motor_loss.py", "--doc", "{doc}", "--out", "{tmp}/m.png"),
+          minutes=5),
+    Block("as-flown-monte-carlo", "docs/as-flown.md", "<!-- as-flown monte carlo begin -->",
+          "<!-- as-flown monte carlo end -->",
+          SCRIPT + ("scripts/as_flown_mc.py", "--from", "docs/as-flown-mc.json", "--doc", "{doc}")),
+    Block("paper-facts", "README.md", "<!-- paper facts begin -->", "<!-- paper facts end -->",
+          SCRIPT + ("scripts/as_flown_mc.py", "--from", "docs/as-flown-mc.json", "--readme", "{doc}")),
+    Block("real-data", "docs/identification.md", "<!-- real-data:begin -->", "<!-- real-data:end -->",
+          FLIGHTCTL + ("identify", "real-data", "--out", "{dir}"), minutes=1),
+    Block("diagnose-pairs", "docs/diagnose.md", *marked("diagnose_pairs"),
+          SCRIPT + ("scripts/diagnose_pairs.py", "--pairs", "30", "--doc", "{doc}"), minutes=40),
+    analyze("analyze-base-table4", "analyze base table4", "--gains", "table4", "--estimator", "truth",
+            "--estimator", "flight", "--estimator", "paper"),
+    analyze("analyze-base-table6", "analyze base table6", "--gains", "table6", "--estimator", "truth",
+            "--estimator", "flight", "--estimator", "paper"),
+    analyze("analyze-80ms", "analyze 80 ms lag", "--params", "paper-as-flown", "--gains", "table4",
+            "--effect", "motor_dynamics:tau=0.08", "--estimator", "truth"),
+    analyze("analyze-as-flown", "analyze as-flown table6", "--params", "paper-as-flown", "--gains", "table6",
+            "--estimator", "truth", "--estimator", "flight"),
+)
+
+FIGURES = (
+    Figure("paper-base", ("docs/paper-base.png",),
+           FLIGHTCTL + ("sim", "paper", "--log", "{tmp}/f.csv", "--plot", "{out}", "--quiet")),
+    Figure("paper-as-flown", ("docs/paper-as-flown.png",),
+           FLIGHTCTL + ("sim", "paper", "--params", "paper-as-flown", "--log", "{tmp}/f.csv", "--plot", "{out}",
+                        "--quiet")),
+    Figure("motor-loss", ("docs/motor-loss.png",), SCRIPT + ("scripts/motor_loss.py", "--out", "{out}")),
+    Figure("tune", ("docs/tune.png",), FLIGHTCTL + ("tune", "--out", "{tmp}/t.toml", "--plot", "{out}"), minutes=1),
+    Figure("tune-robust", ("docs/tune-robust.png", "docs/tune-robust-grid.png"),
+           FLIGHTCTL + ("tune", "--params", "paper-as-flown", "--robust", "40", "--seed", "1", "--out",
+                        "{tmp}/r.toml", "--plot", "{out}"), minutes=8),
+    Figure("open-question", ("docs/open-question.png",),
+           SCRIPT + ("scripts/open_question.py", "--out", "{out}"), minutes=15),
+    Figure("open-question-as-flown", ("docs/open-question-as-flown.png",),
+           SCRIPT + ("scripts/open_question.py", "--params", "paper-as-flown", "--out", "{out}", "--seeds", "1"),
+           minutes=10),
+)
+
+
+def _args(command, **fill) -> list[str]:
+    return [a.format(python=sys.executable, **fill) for a in command]
+
+
+def run(command, **fill) -> str:
+    """Run a command in the checkout; its standard output (its progress goes to the terminal)."""
+    r = subprocess.run(_args(command, **fill), cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    if r.returncode not in (0, 1):     # 1: a command's verdict (a fault not detected); its output stands
+        raise RuntimeError(f"{' '.join(command)}: exit status {r.returncode}")
+    return r.stdout
+
+
+def generate(b: Block, doc: Path, tmp: Path) -> str:
+    """The block's text as its command writes it now, into `doc` (a copy of the file, or the file)."""
+    from flightctl.sim.docs import block
+    if b.written:
+        run(b.command, doc=str(doc), dir=str(doc.parent), tmp=str(tmp))
+        text = block(doc.read_text(), b.begin, b.end)
+        if text is None:
+            raise RuntimeError(f"{b.id}: {doc} lost its markers")
+        return text
+    out = run(b.command, tmp=str(tmp)).rstrip("\n")
+    return f"```\n{out}\n```" if b.fence else out
+
+
+def current(b: Block) -> str:
+    from flightctl.sim.docs import block
+    text = block((ROOT / b.file).read_text(), b.begin, b.end)
+    if text is None:
+        raise RuntimeError(f"{b.file}: no block {b.begin} ... {b.end} (once each, in that order)")
+    return text
+
+
+def fresh(b: Block) -> str:
+    """What the block's command writes now, without touching the checkout."""
+    with tempfile.TemporaryDirectory(prefix="flightctl-docs-") as tmp:
+        doc = Path(tmp) / Path(b.file).name
+        shutil.copyfile(ROOT / b.file, doc)
+        return generate(b, doc, Path(tmp))
+
+
+def write(b: Block) -> None:
+    from flightctl.sim.docs import write_block
+    with tempfile.TemporaryDirectory(prefix="flightctl-docs-") as tmp:
+        if b.written:
+            generate(b, ROOT / b.file, Path(tmp))
+        elif not write_block(ROOT / b.file, b.begin, b.end, generate(b, ROOT / b.file, Path(tmp))):
+            raise RuntimeError(f"{b.file}: no block {b.begin} ... {b.end}")
+
+
+def draw(f: Figure, folder: Path) -> list[Path]:
+    """Draw the figure's PNGs into `folder`; their paths, in the order of `f.files`."""
+    folder.mkdir(parents=True, exist_ok=True)
+    first = folder / Path(f.files[0]).name
+    with tempfile.TemporaryDirectory(prefix="flightctl-docs-") as tmp:
+        run(f.command, out=str(first), tmp=tmp)
+    return [folder / Path(name).name for name in f.files]
+
+
+def same_picture(a: Path, b: Path, share: float = 0.01) -> bool:
+    """The same size, and at most `share` of the pixels different."""
+    import numpy as np
+    from PIL import Image
+    x, y = (np.asarray(Image.open(p).convert("RGB"), dtype=np.int16) for p in (a, b))
+    return x.shape == y.shape and float(np.mean(np.any(np.abs(x - y) > 8, axis=2))) <= share
+
+
+def benchmark_form(text: str) -> list[str]:
+    """What is wrong with the form of a measured block (empty: it is the benchmark's output)."""
+    import re
+
+    import benchmark
+    lines = text.strip("\n").splitlines()
+    problems = []
+    stamp = re.escape(benchmark.STAMP).replace(r"\{date\}", r"\d{4}-\d\d-\d\d").replace(r"\{machine\}", r".+")
+    if not lines or not re.fullmatch(stamp, lines[0]):
+        problems.append(f"the first line is not the benchmark's stamp: {lines[:1]}")
+    if tuple(lines[2:4]) != benchmark.HEADER:
+        problems.append("no benchmark table header")
+    rows = lines[4:]
+    if not rows or not all(re.fullmatch(r"\| [^|]+ \| [^|]+ \| [^|]+ \|", r) for r in rows):
+        problems.append("rows that are not (what | figure | target)")
+    return problems
+
+
+def pick(ids, quick: bool):
+    items = {x.id: x for x in BLOCKS + FIGURES}
+    unknown = [i for i in ids if i not in items]
+    if unknown:
+        raise SystemExit(f"docs.py: unknown {', '.join(unknown)} (known: {', '.join(items)})")
+    chosen = [items[i] for i in ids] if ids else list(items.values())
+    return [x for x in chosen if not (quick and x.minutes > 1)]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    what = ap.add_mutually_exclusive_group(required=True)
+    what.add_argument("--list", action="store_true", help="the blocks and figures, and their commands")
+    what.add_argument("--write", action="store_true", help="rewrite them in the checkout")
+    what.add_argument("--check", action="store_true", help="say which differ from their commands' output now")
+    ap.add_argument("ids", nargs="*", metavar="ID", help="only these (default: every one)")
+    ap.add_argument("--quick", action="store_true", help="leave out the ones that take over a minute")
+    args = ap.parse_args(argv)
+    chosen = pick(args.ids, args.quick)
+    if args.list:
+        for x in chosen:
+            where = x.file if isinstance(x, Block) else ", ".join(x.files)
+            print(f"{x.id:<24} {where:<26} ~{x.minutes:g} min  {' '.join(x.command).replace('{python}', 'python')}")
+        return 0
+    from flightctl.sim.progress import Progress
+    bar = Progress(len(chosen), "docs ")
+    differ = []
+    for x in chosen:
+        if isinstance(x, Block):
+            if args.write:
+                write(x)
+            elif x.measured:
+                differ += [f"{x.id}: {p}" for p in benchmark_form(current(x))]
+            elif fresh(x) != current(x):
+                differ.append(f"{x.id}: {x.file} differs from what `{' '.join(x.command)}` writes now")
+        elif args.write:
+            folder = ROOT / Path(x.files[0]).parent
+            draw(x, folder)
+        else:
+            with tempfile.TemporaryDirectory(prefix="flightctl-docs-") as tmp:
+                for new, old in zip(draw(x, Path(tmp)), x.files):
+                    if not same_picture(new, ROOT / old):
+                        differ.append(f"{x.id}: {old} differs from what its command draws now")
+        bar.step(x.id)
+    for line in differ:
+        print(line)
+    return 1 if differ else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
