@@ -65,29 +65,31 @@ def test_the_hil_board_without_a_link_is_one_line(tmp_path, capsys, caplog):
     assert "expected" in capsys.readouterr().err
 
 
-def _slow_schedule(monkeypatch, seconds: float, calls: list):
-    """The motor-loss gain schedule made as slow as on a loaded Pi (control/spin.py), solved afresh."""
+def _slow_schedule(monkeypatch, seconds: float, calls: list, cache):
+    """The motor-loss gain schedule made as slow as on a loaded Pi (control/spin_design.py), solved
+    afresh: nothing in this process' memory, an empty cache folder."""
     import time
 
-    from flightctl.control import spin
-    inner = spin.SpinController._schedule
+    from flightctl.control import spin_design
+    inner = spin_design.schedule
 
-    def slow(self, pair):
+    def slow(d):
         calls.append("schedule")
         time.sleep(seconds)
-        return inner(self, pair)
-    monkeypatch.setattr(spin, "_GAINS", {})
-    monkeypatch.setattr(spin.SpinController, "_schedule", slow)
+        return inner(d)
+    monkeypatch.setenv("FLIGHTCTL_CACHE", str(cache))
+    monkeypatch.setattr(spin_design, "_MEMORY", {})
+    monkeypatch.setattr(spin_design, "schedule", slow)
 
 
 def test_a_slow_motor_loss_schedule_is_solved_before_the_link_opens(tmp_path, monkeypatch):
-    """Each half of the schedule takes longer than the PC side waits for a silent flight side
+    """The schedule takes longer than the PC side waits for a silent flight side
     (IDLE_S): solved between the link's first frame and the loop, the flight never armed."""
     from flightctl.hil.serve import IDLE_S
     calls = []
-    _slow_schedule(monkeypatch, IDLE_S + 0.5, calls)
+    _slow_schedule(monkeypatch, 2 * IDLE_S + 0.5, calls, tmp_path / "cache")
     d = demo(tmp_path, "--seconds", "1.5", "--link", "tcp")
-    assert calls == ["schedule", "schedule"]
+    assert calls == ["schedule"]
     assert d["outcome"].startswith("landed") and d["max_alt_m"] > 0.2
 
 
@@ -96,7 +98,7 @@ def test_the_service_solves_the_schedule_before_it_opens_the_board(tmp_path, mon
     import flightctl.service as service
     from flightctl.boards import BoardUnavailable
     calls = []
-    _slow_schedule(monkeypatch, 0.0, calls)
+    _slow_schedule(monkeypatch, 0.0, calls, tmp_path / "cache")
 
     def opener(name):
         def open_board(params, options):
@@ -105,4 +107,4 @@ def test_the_service_solves_the_schedule_before_it_opens_the_board(tmp_path, mon
         return open_board
     monkeypatch.setattr(service, "opener", opener)
     assert cli(["run", "--board", "hil", "--link", "tcp:127.0.0.1:9", "--plan", "hover", "--log", str(tmp_path)]) == 3
-    assert calls == ["schedule", "schedule", "board"]
+    assert calls == ["schedule", "board"]
