@@ -47,6 +47,7 @@ class Block:
     minutes: float = 0.1          # about, on a 2-core machine: over 1 is long (--quick leaves it out)
     fence: bool = False           # printed into a ``` code fence
     measured: bool = False        # machine-dependent figures: the form is checked, not the numbers
+    verdict: bool = False         # exit status 1 is the command's verdict (a fault not detected), not a failure
 
     @property
     def written(self) -> bool:
@@ -76,7 +77,7 @@ BLOCKS = (
           minutes=5, measured=True),
     Block("fault-matrix", "docs/safety.md", "<!-- fault matrix: begin (written by `flightctl sim faults`) -->",
           "<!-- fault matrix: end -->", FLIGHTCTL + ("sim", "faults", "--json", "{tmp}/faults.json", "--doc", "{doc}"),
-          minutes=3),
+          minutes=3, verdict=True),
     Block("real-flights", "docs/real-flights.md", "<!-- diagnose --corpus table: begin -->",
           "<!-- diagnose --corpus table: end -->",
           FLIGHTCTL + ("diagnose", "--corpus", "../shared/data/real/flights", "--table", "{doc}", "--quiet"), minutes=8),
@@ -125,10 +126,11 @@ def _args(command, **fill) -> list[str]:
     return [a.format(python=sys.executable, **fill) for a in command]
 
 
-def run(command, **fill) -> str:
-    """Run a command in the checkout; its standard output (its progress goes to the terminal)."""
+def run(command, verdict: bool = False, **fill) -> str:
+    """Run a command in the checkout; its standard output (its progress goes to the terminal). Any exit
+    status but 0 is a failure, except 1 for a command whose 1 is its verdict (`Block.verdict`)."""
     r = subprocess.run(_args(command, **fill), cwd=ROOT, stdout=subprocess.PIPE, text=True)
-    if r.returncode not in (0, 1):     # 1: a command's verdict (a fault not detected); its output stands
+    if r.returncode not in ((0, 1) if verdict else (0,)):
         raise RuntimeError(f"{' '.join(command)}: exit status {r.returncode}")
     return r.stdout
 
@@ -137,12 +139,12 @@ def generate(b: Block, doc: Path, tmp: Path) -> str:
     """The block's text as its command writes it now, into `doc` (a copy of the file, or the file)."""
     from flightctl.sim.docs import block
     if b.written:
-        run(b.command, doc=str(doc), dir=str(doc.parent), tmp=str(tmp))
+        run(b.command, b.verdict, doc=str(doc), dir=str(doc.parent), tmp=str(tmp))
         text = block(doc.read_text(), b.begin, b.end)
         if text is None:
             raise RuntimeError(f"{b.id}: {doc} lost its markers")
         return text
-    out = run(b.command, tmp=str(tmp)).rstrip("\n")
+    out = run(b.command, b.verdict, tmp=str(tmp)).rstrip("\n")
     return f"```\n{out}\n```" if b.fence else out
 
 
