@@ -343,7 +343,7 @@ def confirm_clamped(args, board: Board, read=input) -> None:
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="flightctl bench", description=__doc__.split("\n\n")[0])
-    p.add_argument("--board", default="pi", help=f"the board (default pi): {described('hil')}")
+    p.add_argument("--board", default="auto", help=f"the board (default auto: pi5 on a Raspberry Pi 5, else pi): {described('hil')}")
     p.add_argument("--instruments", help="pty (simulated; the default on --board sim), serial:PATH[,BAUD] "
                    "(the line protocol; the default on hardware: serial:/dev/ttyACM0,115200), rcbenchmark:PATH[,BAUD]")
     p.add_argument("--motors", "--motor", default="1,2,3,4", help="motors in turn, e.g. 1,2,3,4 (the default) or 3")

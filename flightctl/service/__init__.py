@@ -327,7 +327,8 @@ def main(argv: list[str] | None = None, devices: dict | None = None) -> int:
         log.error("not flying: %s", e)
         return EXIT_REFUSED
 
-    # The motor-loss gain schedule (control/spin.py: LQR solves, seconds on a loaded Pi) is solved now:
+    # The motor-loss gain schedule (control/spin_design.py: LQR solves, about 0.5 s of CPU, or read from its
+    # disk cache keyed by the parameters) is solved now:
     # before the board opens (a HIL link is live from then on, and its PC side gives up on a silent
     # flight side), before READY, never between a plan's arrival and its take-off.
     SpinController(params)
