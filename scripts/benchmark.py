@@ -34,7 +34,8 @@ from flightctl.control.motor_loss import MotorLossDetector
 from flightctl.drivers.mpu9250 import Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.params import load
-from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, World
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import SCENARIOS
 
@@ -137,7 +138,7 @@ def split_us(name: str | None) -> tuple[float, float]:
     """Per loop period of `sim paper` (full onboard path): (us in the simulated world: the plant, the
     chip's SPI answers, the sonar's edges, the battery; us in the onboard loop and the log). The second
     bounds the simulator's speed whatever the plant costs: at most period / it times real time."""
-    from flightctl.sim.world import devices
+    from flightctl.sim.world import devices, imu
     spent = [0.0]
 
     def timed(cls, name):
@@ -149,7 +150,7 @@ def split_us(name: str | None) -> tuple[float, float]:
             spent[0] += time.perf_counter() - t
             return r
         return inner, wrapper
-    patches = [(cls, attr, *timed(cls, attr)) for cls, attr in ((devices.World, "advance"), (devices.SimMpu9250, "xfer2"))]
+    patches = [(cls, attr, *timed(cls, attr)) for cls, attr in ((devices.World, "advance"), (imu.SimMpu9250, "xfer2"))]
     for cls, attr, _, wrapper in patches:
         setattr(cls, attr, wrapper)
     try:

@@ -16,7 +16,7 @@ was (the loop flies on the last good sample), when it is
   before it (refused or not) is within those limits of it, i.e. a real step confirmed by the next frame.
   Random bytes fail one of these at once (the die temperature alone moves ~0.01 degC a second);
   JUMP_GYRO is 3 rad/s in 2.2 ms, ~1400 rad/s^2, ten times what the rotors' torque can give the
-  frame, and JUMP_ACCEL 30 m/s^2, forty times the rotors' vibration (sim/world/devices.py).
+  frame, and JUMP_ACCEL 30 m/s^2, forty times the rotors' vibration (sim/world/imu.py).
 `rejected` counts the refused frames by reason; `why` names the last one. A saturated frame (an
 accelerometer or gyro word at the int16 limit, -32768 or 32767: the true value is beyond the full
 scale) is not refused, since a real manoeuvre can saturate it too: it is decoded as the full scale,

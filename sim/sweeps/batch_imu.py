@@ -1,5 +1,5 @@
 """The batched simulator's IMU: one simulated MPU-9250 per vehicle, each the single simulator's own chip
-(`sim/world/devices.py`: `chip_die` builds it, `chip_frame` writes its burst registers: the DLPF stage,
+(`sim/world/imu.py`: `chip_die` builds it, `chip_frame` writes its burst registers: the DLPF stage,
 the bias walk, the offsets and their temperature slopes, the white and broadband noise, the rotors'
 vibration lines, aliased at the chip's output rate), configured by the real driver's register writes
 (a template chip), read as the driver decodes a burst (each int16 word times its LSB), and the
@@ -19,14 +19,14 @@ import numpy as np
 
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.drivers.mpu9250 import Mpu9250
-from flightctl.sim.world import devices
-from flightctl.sim.world.devices import (N_CHIP_CONST, N_CHIP_STATE, SensorNoise, SimMpu9250, World, chip_die,
-                                         chip_frame, vehicle_noise)
+from flightctl.sim.world import imu
+from flightctl.sim.world.devices import SensorNoise, World, vehicle_noise
+from flightctl.sim.world.imu import N_CHIP_CONST, N_CHIP_STATE, SimMpu9250, chip_die, chip_frame
 
 _BURST = reg.ACCEL_XOUT_H
 # the constants the driver's register writes set (`SimMpu9250._configure`): taken from the template chip
-_REGISTERED = (devices._C_A_LSB, devices._C_G_LSB, devices._C_SA, devices._C_SG, devices._C_TC2, devices._C_PERIOD,
-               devices._C_A_DELAY, devices._C_TCG2, devices._C_G_DELAY)
+_REGISTERED = (imu._C_A_LSB, imu._C_G_LSB, imu._C_SA, imu._C_SG, imu._C_TC2, imu._C_PERIOD,
+               imu._C_A_DELAY, imu._C_TCG2, imu._C_G_DELAY)
 
 
 def _word(regs, at: int) -> float:
@@ -43,7 +43,7 @@ def read_all(regs, s, c, e, fx, fy, fz, p, q, r, f, w, t, dt, temp, started, out
         chip_frame(regs[k], s[k], c[k], e[k], 0, fx[k], fy[k], fz[k], p[k], q[k], r[k], f[0, k], f[1, k], f[2, k],
                    f[3, k], w[0, k], w[1, k], w[2, k], w[3, k], t, dt, temp, started)
         ck, rk = c[k], regs[k]
-        a_lsb, g_lsb = ck[devices._C_A_LSB], ck[devices._C_G_LSB]
+        a_lsb, g_lsb = ck[imu._C_A_LSB], ck[imu._C_G_LSB]
         out[0, k] = _word(rk, _BURST) / a_lsb
         out[1, k] = _word(rk, _BURST + 2) / a_lsb
         out[2, k] = _word(rk, _BURST + 4) / a_lsb
@@ -56,7 +56,7 @@ def read_all(regs, s, c, e, fx, fy, fz, p, q, r, f, w, t, dt, temp, started, out
 def _compiled_read_all():
     """`read_all` compiled with `chip_frame`'s compiled copy, or None without numba."""
     from flightctl.sim.world import compiled
-    frame = devices.chip_frame_compiled()
+    frame = imu.chip_frame_compiled()
     if frame is None:
         return None
     return compiled.compiled_copy(read_all, chip_frame=frame, _word=compiled.compiled_copy(_word))
@@ -104,8 +104,8 @@ class BatchImu:
         c = self.c
         if dt > 0.0 and dt != self._dt:   # the DLPF stage's gains for this read interval
             self._dt = dt
-            c[:, devices._C_KA] = 1.0 - np.exp(-dt / c[:, devices._C_A_DELAY])
-            c[:, devices._C_KG] = 1.0 - np.exp(-dt / c[:, devices._C_G_DELAY])
+            c[:, imu._C_KA] = 1.0 - np.exp(-dt / c[:, imu._C_A_DELAY])
+            c[:, imu._C_KG] = 1.0 - np.exp(-dt / c[:, imu._C_G_DELAY])
         e = self.rng.standard_normal((self.n, 9))
         col = lambda v: np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float), (self.n,)))   # noqa: E731
         self._read(self.regs, self.s, c, e, col(fx), col(fy), col(fz), col(p), col(q), col(r),

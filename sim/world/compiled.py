@@ -1,6 +1,6 @@
 """The simulated world compiled by numba where it is installed (the `fast` extra): the plant's step
 and forces (here; `period` is the plant's one call a period) and the MPU-9250's burst registers
-(`sim.devices.chip_frame`), each function from its one plain-Python source: `compiled_copy(fn,
+(`sim.world.imu.chip_frame`), each function from its one plain-Python source: `compiled_copy(fn,
 name=dependency, ...)` compiles a copy of `fn` whose global names of other plain functions are bound
 to their compiled copies, so that the plain function stays plain (arrays in the batched simulator,
 and everywhere without numba). Nothing on the vehicle imports this: the onboard code is plain Python.
@@ -41,7 +41,7 @@ def enabled() -> bool:
         import flightctl.physics
         here = Path(__file__).parent
         compiled_files = [Path(flightctl.physics.__file__), Path(flightctl.drivers.mpu9250_regs.__file__)]
-        compiled_files += [here / name for name in ("model.py", "compiled.py", "devices.py")]
+        compiled_files += [here / name for name in ("model.py", "compiled.py", "imu.py")]
         compiled_files += [here.parent / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
         compiled_files += [here.parent / "sweeps" / "batch_imu.py"]
         digest = hashlib.sha1(b"".join(path.read_bytes() for path in compiled_files)).hexdigest()[:12]
