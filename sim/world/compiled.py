@@ -43,7 +43,11 @@ def enabled() -> bool:
         compiled_files = [Path(flightctl.physics.__file__), Path(flightctl.drivers.mpu9250_regs.__file__)]
         compiled_files += [here / name for name in ("model.py", "compiled.py", "imu.py")]
         compiled_files += [here.parent / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
-        compiled_files += [here.parent / "sweeps" / "batch_imu.py"]
+        compiled_files += [here.parent / "sweeps" / f"{name}.py" for name in ("onboard", "flight")]
+        compiled_files += [Path(sys.modules["flightctl"].__file__).parent / name for name in (
+            "control/estimator.py", "control/mixer.py", "control/landing.py", "control/controller.py", "loop.py",
+            "safety.py", "drivers/hcsr04.py")]
+        compiled_files += [here / name for name in ("devices.py", "plant.py")]
         digest = hashlib.sha1(b"".join(path.read_bytes() for path in compiled_files)).hexdigest()[:12]
         os.environ.setdefault("NUMBA_CACHE_DIR", str(here / "__pycache__" / f"numba-{digest}"))
     try:
@@ -78,6 +82,21 @@ N_OUT = 18   # `period`'s output: the fields of `Forces` (f, tau, force, torque,
 def layout(model):
     """(the wrench codes in the model's order, the parameters q) of a model whose effects the compiled
     plant carries (COMPILED_CAUSES, each at most once; the base model has none), else None."""
+    laid = _layout(model)
+    return None if laid is None else (laid[0], np.array(laid[1], dtype=float))
+
+
+def layout_rows(model, n: int):
+    """`layout` of a model whose parameters (its airframe's, its effects') may be (n,) arrays, one value
+    per vehicle (the batched simulator, sim/sweeps/flight.py): q as (n, len(q)), a row per vehicle."""
+    laid = _layout(model)
+    if laid is None:
+        return None
+    return laid[0], np.stack([np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in laid[1]], axis=1)
+
+
+def _layout(model):
+    """(codes, q as a list of values) of `layout`."""
     causes = [e.cause for e in model.effects]
     if (model.vector or len(set(causes)) < len(causes)
             or not set(causes) <= set(COMPILED_CAUSES)):
@@ -98,7 +117,7 @@ def layout(model):
         elif e.cause == "rotor_drag":
             q[_K_DRAG], q[_YAW] = p["k"], p.get("yaw", 0.0)
             codes.append(DRAG)
-    return np.array(codes, dtype=np.int64), np.array(q + list(model.rigid_constants))
+    return np.array(codes, dtype=np.int64), q + list(model.rigid_constants)
 
 
 def rotors(x, cmd, codes, q, Rm, xdot):
@@ -204,20 +223,21 @@ def period(x, P1, P2, P3, P4, codes, q, h, ground, out):
 @functools.cache
 def model_period():
     """`period` compiled, with every function it calls (eq. 6-9 and 26-28 and the three effects'), or None."""
-    return _compiled()[2]
+    return functions().get("period")
 
 
 @functools.cache
 def model_forces():
     """`forces` compiled, or None."""
-    return _compiled()[1]
+    return functions().get("forces")
 
 
 @functools.cache
-def _compiled():
-    """(rk4, forces, period) compiled, each call bound to a compiled copy, or (None, None, None)."""
+def functions() -> dict:
+    """The plant's functions compiled, each call bound to a compiled copy: `rk4`, `forces`, `period`,
+    `commanded` (and the batched simulator's `rotation_from_trig`); empty when compilation is off."""
     if not enabled():
-        return None, None, None
+        return {}
     from flightctl import physics
     from flightctl.sim.world import model
     from flightctl.sim.causes import motor_dynamics, rotor_drag, rotor_inflow
@@ -245,4 +265,4 @@ def _compiled():
     once(x, 0.0, 0.0, 0.0, 0.0, codes, q, 1e-3, False, np.empty(N_OUT))
     at(x, 0.0, 0.0, 0.0, 0.0, codes, q)
     step(x, np.zeros(8), codes, q, 1e-3)
-    return step, at, once
+    return {"rk4": step, "forces": at, "period": once, "commanded": command, "rotation_from_trig": m["rotation_from_trig"]}
