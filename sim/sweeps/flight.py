@@ -45,7 +45,7 @@ from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
 from flightctl.sim.sweeps import onboard as ob
 from flightctl.sim.world.devices import EARTH_FIELD_T, SimGpio
 from flightctl.sim.world.imu import _BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, AMBIENT_C, SimMpu9250, _i16, chip_frame
-from flightctl.sim.world.compiled import commanded, forces, rk4
+from flightctl.sim.world.compiled import commanded, forces, rk4, work
 from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VX, VY, VZ, Z, rotation_from_trig
 from flightctl.sim.world.plant import CONTACT_S
 
@@ -159,7 +159,7 @@ def sonar_trigger(w, x, uni, k, t: float) -> None:
     w[W_FALL_T] = te + width
 
 
-def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k) -> bool:
+def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -> bool:
     """`Plant.advance` over the loop period ending at i dt: the delayed command, the floor, one RK4 step,
     a touchdown. False if the state is no longer finite (`Diverged`)."""
     head = (int(w[W_HEAD]) + 1) % nring
@@ -179,10 +179,10 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k) -> bo
     t_end = (i - 1) * dt + 1 * (dt / 1)
     ground = False
     if w[W_GROUND] != 0.0:
-        f, _, force, _, _ = forces(x, u1, u2, u3, u4, codes, q)
+        f, _, force, _, _ = forces(x, u1, u2, u3, u4, codes, q, wk)
         ground = not (force[2] + f[0] + f[1] + f[2] + f[3]) / k[M_] > k[G_]
     if not (ground and x.shape[0] == N_RIGID):
-        y = rk4(x, commanded(u1, u2, u3, u4, q), codes, q, dt / 1)
+        y = rk4(x, commanded(u1, u2, u3, u4, q, wk[12:20]), codes, q, dt / 1, wk)
         for j in range(N_RIGID if ground else 0, x.shape[0]):
             x[j] = y[j]
         if not ground:
@@ -203,10 +203,10 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k) -> bo
     return True
 
 
-def chip_read(x, w, q, codes, regs, cs, cc, e, jump, k, t: float) -> bool:
+def chip_read(x, w, q, codes, regs, cs, cc, e, jump, k, t: float, wk) -> bool:
     """`SimMpu9250._sample` at t (the plant's specific force, rates, rotors) and `Mpu9250.read` of the
     burst; the sample in w[W_S:], the gyro less the calibration's bias. False: the frame is refused."""
-    f, _, force, _, rw = forces(x, w[W_UAPP], w[W_UAPP + 1], w[W_UAPP + 2], w[W_UAPP + 3], codes, q)
+    f, _, force, _, rw = forces(x, w[W_UAPP], w[W_UAPP + 1], w[W_UAPP + 2], w[W_UAPP + 3], codes, q, wk)
     t_stop, vz = w[W_T_STOP], w[W_VZ_STOP]
     stopping = -vz / CONTACT_S if 0.0 <= t - t_stop < CONTACT_S else 0.0
     if w[W_GROUND] != 0.0:
@@ -315,6 +315,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, NORM, UNI, SP, R
     driver's limits per word. The loop arms at period i_arm."""
     dt, t_arm = k[DT], k[T_ARM]
     cnt = np.zeros(4, dtype=np.int64)
+    wk = work(X.shape[1])
     for v in range(X.shape[0]):
         x, w, e, kc, q, ring, regs, cs, cc = X[v], W[v], E[v], KC[v], Q[v], RING[v], REGS[v], CS[v], CC[v]
         uni = UNI[v]
@@ -324,11 +325,11 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, NORM, UNI, SP, R
                 break
             i = i0 + step + 1
             t = i * dt
-            if not plant_period(x, w, ring, q, codes, nring, frac, i, k):
+            if not plant_period(x, w, ring, q, codes, nring, frac, i, k, wk):
                 w[W_REASON], w[W_DONE] = DIVERGED, 1.0
                 break
             sonar_edges(w, t)
-            if chip_read(x, w, q, codes, regs, cs, cc, NORM[v, step], jump, k, t):
+            if chip_read(x, w, q, codes, regs, cs, cc, NORM[v, step], jump, k, t, wk):
                 w[W_BAD] = 0.0
             else:
                 w[W_BAD] += 1.0
@@ -471,7 +472,7 @@ def compiled_fly():
     u = cc(uniform)
     g = cc(gauss, uniform=u)
     at = plant["forces"]
-    return cc(fly, plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"]),
+    return cc(fly, work=plant["work"], plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"]),
               sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
               chip_read=cc(chip_read, forces=at, chip_frame=imu.chip_frame_compiled(), word=cc(word),
                            rotation_from_trig=plant["rotation_from_trig"], i16=cc(i16, _i16=cc(imu._i16))),

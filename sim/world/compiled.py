@@ -120,16 +120,26 @@ def _layout(model):
     return np.array(codes, dtype=np.int64), q + list(model.rigid_constants)
 
 
-def rotors(x, cmd, codes, q, Rm, xdot):
+def work(n: int) -> np.ndarray:
+    """The scratch array of the functions below for a state of n entries: the rotors' f, tau, w, the
+    commanded thrusts and speeds, then a derivative, RK4's four stages and its trial state (n each)."""
+    return np.zeros(_WK_X + 6 * n)
+
+
+_WK_CMD, _WK_X = 12, 20   # where `work` holds the commands and the state-sized arrays
+
+
+def rotors(x, cmd, codes, q, Rm, xdot, wk):
     """`Model._forces` of a model laid out by `layout` (the same functions in the same order): the
     rotors' thrusts f and torques tau, the effects' body force F and torque T, the rotors' speeds w (the
     order of `Forces`), at the state x with the rotation Rm (`rotation_from_trig`), cmd the commanded
-    thrusts (eq. 26) and speeds (eq. 27); the rotor states' derivatives are written into xdot."""
+    thrusts (eq. 26) and speeds (eq. 27); the rotor states' derivatives are written into xdot. f, tau
+    and w are views of the scratch array wk (`work`): no allocation in the batch's inner loop."""
     c1 = q[_C1]
     motor = q[_TAU] > 0.0
-    f = np.empty(4)
-    tau = np.empty(4)
-    w = np.empty(4)
+    f = wk[0:4]
+    tau = wk[4:8]
+    w = wk[8:12]
     spin_up = 0.0
     for i in range(4):
         if motor:              # motor_dynamics: the rotor's speed is a state
@@ -163,9 +173,9 @@ def rotors(x, cmd, codes, q, Rm, xdot):
     return f, tau, (Fx, Fy, Fz), (Tx, Ty, Tz), w
 
 
-def commanded(P1, P2, P3, P4, q):
-    """The commanded thrusts (eq. 26) and speeds (eq. 27) of the command values P1..P4: `rotors`' cmd."""
-    cmd = np.empty(8)
+def commanded(P1, P2, P3, P4, q, cmd):
+    """The commanded thrusts (eq. 26) and speeds (eq. 27) of the command values P1..P4 into cmd (8):
+    `rotors`' cmd."""
     P = (P1, P2, P3, P4)
     for i in range(4):
         cmd[i] = thrust_from_command(P[i], q[_H1], q[_H2])
@@ -173,18 +183,22 @@ def commanded(P1, P2, P3, P4, q):
     return cmd
 
 
-def forces(x, P1, P2, P3, P4, codes, q):
-    """`rotors` at the state x for the command values P1..P4 (`Model.forces`)."""
+def forces(x, P1, P2, P3, P4, codes, q, wk):
+    """`rotors` at the state x for the command values P1..P4 (`Model.forces`); wk: `work`."""
     Rm = rotation_from_trig(sin(x[6]), cos(x[6]), sin(x[7]), cos(x[7]), sin(x[8]), cos(x[8]))
-    return rotors(x, commanded(P1, P2, P3, P4, q), codes, q, Rm, np.zeros(x.shape[0]))
+    n = x.shape[0]
+    xdot = wk[_WK_X:_WK_X + n]
+    for i in range(n):
+        xdot[i] = 0.0
+    return rotors(x, commanded(P1, P2, P3, P4, q, wk[_WK_CMD:_WK_X]), codes, q, Rm, xdot, wk)
 
 
-def stage(x, cmd, codes, q):
-    """`Model.f` of a model laid out by `layout`: `rotors`, `aggregate` and `rigid_derivative`.
-    Arrays in and out."""
-    xdot = np.zeros(x.shape[0])
+def stage(x, cmd, codes, q, xdot, wk):
+    """`Model.f` of a model laid out by `layout`: `rotors`, `aggregate` and `rigid_derivative`, into xdot."""
+    for i in range(xdot.shape[0]):
+        xdot[i] = 0.0
     sf, cf, st, ct, sp, cp = sin(x[6]), cos(x[6]), sin(x[7]), cos(x[7]), sin(x[8]), cos(x[8])
-    f, tau, F, T, w = rotors(x, cmd, codes, q, rotation_from_trig(sf, cf, st, ct, sp, cp), xdot)
+    f, tau, F, T, w = rotors(x, cmd, codes, q, rotation_from_trig(sf, cf, st, ct, sp, cp), xdot, wk)
     agg = aggregate(f[0], f[1], f[2], f[3], tau[0], tau[1], tau[2], tau[3], w[0], w[1], w[2], w[3],
                     F[0], F[1], F[2], T[0], T[1], T[2], q[_L])
     r = _RIGID
@@ -196,28 +210,49 @@ def stage(x, cmd, codes, q):
     return xdot
 
 
-def rk4(x, cmd, codes, q, h):
-    """One classical RK4 step of `stage` with the input held (`Plant._rk4`'s scheme)."""
+def rk4(x, cmd, codes, q, h, wk):
+    """One classical RK4 step of `stage` with the input held (`Plant._rk4`'s scheme, element by
+    element as numpy evaluates it): the new state in a view of wk (`work`)."""
+    n = x.shape[0]
+    o = _WK_X + n
+    k1, k2, k3, k4, y = wk[o:o + n], wk[o + n:o + 2 * n], wk[o + 2 * n:o + 3 * n], wk[o + 3 * n:o + 4 * n], \
+        wk[o + 4 * n:o + 5 * n]
     hh = 0.5 * h
-    k1 = stage(x, cmd, codes, q)
-    k2 = stage(x + hh * k1, cmd, codes, q)
-    k3 = stage(x + hh * k2, cmd, codes, q)
-    k4 = stage(x + h * k3, cmd, codes, q)
-    return x + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
+    stage(x, cmd, codes, q, k1, wk)
+    for i in range(n):
+        y[i] = x[i] + hh * k1[i]
+    stage(y, cmd, codes, q, k2, wk)
+    for i in range(n):
+        y[i] = x[i] + hh * k2[i]
+    stage(y, cmd, codes, q, k3, wk)
+    for i in range(n):
+        y[i] = x[i] + h * k3[i]
+    stage(y, cmd, codes, q, k4, wk)
+    h6 = h / 6.0
+    for i in range(n):
+        y[i] = x[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+    return y
 
 
 def period(x, P1, P2, P3, P4, codes, q, h, ground, out):
     """The plant's step (`Plant.advance`) in one call: the commanded thrusts (eq. 26) and speeds
     (eq. 27) of the command values P1..P4, one `rk4` step of h on x in place (on the floor, `ground`,
     the extensions' states only), then the forces at the new state into out (`N_OUT`)."""
-    y = rk4(x, commanded(P1, P2, P3, P4, q), codes, q, h)
+    wk = work(x.shape[0])
+    y = rk4(x, commanded(P1, P2, P3, P4, q, wk[_WK_CMD:_WK_X]), codes, q, h, wk)
     for i in range(N_RIGID if ground else 0, x.shape[0]):
         x[i] = y[i]
-    f, tau, F, T, w = forces(x, P1, P2, P3, P4, codes, q)
+    f, tau, F, T, w = forces(x, P1, P2, P3, P4, codes, q, wk)
     for i in range(4):
         out[i], out[4 + i], out[14 + i] = f[i], tau[i], w[i]
     for i in range(3):
         out[8 + i], out[11 + i] = F[i], T[i]
+
+
+def forces_of(x, P1, P2, P3, P4, codes, q):
+    """`forces` with its own scratch: (f, tau, F, T, w), f, tau and w new arrays (the single plant's)."""
+    f, tau, F, T, w = forces(x, P1, P2, P3, P4, codes, q, work(x.shape[0]))
+    return f.copy(), tau.copy(), F, T, w.copy()
 
 
 @functools.cache
@@ -228,8 +263,8 @@ def model_period():
 
 @functools.cache
 def model_forces():
-    """`forces` compiled, or None."""
-    return functions().get("forces")
+    """`forces_of` compiled, or None."""
+    return functions().get("forces_of")
 
 
 @functools.cache
@@ -258,11 +293,13 @@ def functions() -> dict:
     step = c(rk4, stage=one)
     command = c(commanded, thrust_from_command=c(physics.thrust_from_command), rotor_speed=eq["rotor_speed"])
     at = c(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"], commanded=command)
-    once = c(period, rk4=step, forces=at, commanded=command)
+    scratch = c(work)
+    once = c(period, rk4=step, forces=at, commanded=command, work=scratch)
+    alone = c(forces_of, forces=at, work=scratch)
     # compiled (or loaded from the cache) now, with the flight's argument types, not at a first step
     # that a simulation paced by the wall clock (`run --board sim`, `hil serve`) would see as a stall
     x, codes, q = np.zeros(N_RIGID + 4), np.array([INFLOW, REACTION, DRAG], dtype=np.int64), np.ones(_RIGID + 8)
     once(x, 0.0, 0.0, 0.0, 0.0, codes, q, 1e-3, False, np.empty(N_OUT))
-    at(x, 0.0, 0.0, 0.0, 0.0, codes, q)
-    step(x, np.zeros(8), codes, q, 1e-3)
-    return {"rk4": step, "forces": at, "period": once, "commanded": command, "rotation_from_trig": m["rotation_from_trig"]}
+    alone(x, 0.0, 0.0, 0.0, 0.0, codes, q)
+    return {"rk4": step, "forces": at, "forces_of": alone, "period": once, "commanded": command, "work": scratch,
+            "rotation_from_trig": m["rotation_from_trig"]}
