@@ -138,6 +138,7 @@ def test_the_batched_monte_carlo_judges_each_draw_as_the_full_path():
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600)   # 80 paper flights through the full path: minutes on two cores
 def test_forty_paired_draws_give_the_full_paths_shares():
     """The paper flight on 40 draws of every range of paper-as-flown, both gain sets, by the full onboard
     path and by the batch: each share (flies, lands, settles, and the paired verdicts) within 3 points."""
