@@ -24,7 +24,8 @@ from flightctl.hal import PWM_RANGE
 from flightctl.boards.hil import SONAR_TRIGGER_PIN
 from flightctl.params import Params
 from flightctl.sim import causes
-from flightctl.sim.world.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, SimClock, SimMotors, World
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.world.power import SimIna219, SimSMBus
 
 IDLE_S = 3.0            # no frame for this long once flying: the flight side is gone

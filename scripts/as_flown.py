@@ -155,7 +155,7 @@ def as_flown(d: dict) -> Params:
                  f"IMU first and sends the PWM last; the simulated loop applies its command at once); the ESC's "
                  f"unsynchronised {ESC_HZ:g} Hz input, 0 to {period * 1e3:.2f} ms for the next frame; the ESC's "
                  f"own input handling, 0 to one frame (not measured); range: 0 to their sum. The gyro's and accelerometer's DLPF delays "
-                 f"(2.9 and 1.9 ms) are the simulated chip's (sim/world/devices.py), declared in its logs for diagnose")
+                 f"(2.9 and 1.9 ms) are the simulated chip's (sim/world/imu.py), declared in its logs for diagnose")
     dt = d["dt"]
     filters = dataclasses.replace(Filters(), tau_tilt_air=TAU_TILT_AIR, tau_rate=8 * dt)
     k_in, k_dr, hub = round(d["k_inflow"], 4), round(d["k_drag"], 3), round(d["hub"], 4)

@@ -67,8 +67,8 @@ def parser() -> argparse.ArgumentParser:
                    help="fly N draws of the parameter file's plausible ranges with both gain sets, in parallel; "
                         "report the shares that fly, land and settle (--json, --plot: a map); sim/sweeps/montecarlo.py")
     p.add_argument("--batch", action="store_true",
-                   help="with --monte-carlo: fly the draws on the batched simulator (sim/sweeps/batch.py: ideal sensors, "
-                        "in the air from after the take-off; thousands of draws in minutes)")
+                   help="with --monte-carlo: fly the draws on the batched simulator (sim/sweeps/batch.py: compiled, "
+                        "each draw flown as the full onboard path flies it, take-off to landing)")
     return p
 
 

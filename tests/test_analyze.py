@@ -14,7 +14,7 @@ on the log's 450 Hz grid; what the linearisation leaves out at these step sizes:
   the 5 taken at 1.5 m; one period is 0.3 deg of phase at Table 6's 2.4 rad/s crossover, about
   0.7 points of overshoot on its zeta of 0.04).
 Hence 1.5 percentage points on overshoot; 3.5 through the full path, where the gyro's DLPF stage
-(2.9 ms, sim/world/devices.py) leaves the bank estimate integrated from lagged rates 0.1-0.2 degrees off
+(2.9 ms, sim/world/imu.py) leaves the bank estimate integrated from lagged rates 0.1-0.2 degrees off
 the truth several seconds after the step (the Euler-rate kinematics of rates 2.9 ms late): a slow
 drift within the step's 8 s window that the linear loop, about hover, does not have, and that the
 metric counts as overshoot (3.3 % at Table 4, the step's transient itself peaking at 0.1 %). Rise times: each crossing is found on the same grid in
@@ -156,7 +156,7 @@ def sampled_roll_margin(gains, ema: bool) -> float:
     on the angle, kd on the rate."""
     b, dt, alpha = 2 * A.l / A.Jxx, DT, load(None).filters.alpha_ema
     kp, ki, kd = gains.kp_phi, gains.ki_phi, gains.kd_phi
-    # the gyro reads the rate through its DLPF's stage (sim/world/devices.py): (1 - c) z / (z - c) p,
+    # the gyro reads the rate through its DLPF's stage (sim/world/imu.py): (1 - c) z / (z - c) p,
     # c = exp(-dt / tau)
     c = math.exp(-dt / imu_delays()["gx"])
 

@@ -1,10 +1,13 @@
-"""The batched simulator (sim/sweeps/batch.py) against the single one: the vectorised controller gives the
-onboard controller's PWM counts step for step, the vector model the scalar model's derivatives, the
-batched plant the single plant's states."""
+"""The batched simulator (sim/sweeps/batch.py, flight.py, onboard.py) against the single one: its copy
+of the onboard controller gives the onboard controller's PWM counts count for count, and a vehicle it
+flies is the vehicle `flightctl sim` flies with the same draw and seed, to the bit, take-off to
+landing; its Monte Carlo judges each draw as the full path's does."""
 from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import types
 
 import numpy as np
 import pytest
@@ -12,10 +15,13 @@ import pytest
 from flightctl.control.controller import FlightController
 from flightctl.hal import ImuSample
 from flightctl.params import Filters, Gains, Params, load
-from flightctl.sim import causes
-from flightctl.sim.sweeps.batch import BatchController, BatchPlant, fly
-from flightctl.sim.world.model import N_RIGID, PHI, Z, Model, P
-from flightctl.sim.world.plant import Plant
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import SCENARIOS
+from flightctl.sim.sweeps import montecarlo
+from flightctl.sim.sweeps import onboard
+from flightctl.sim.sweeps.batch import simulate
+from flightctl.sim.sweeps.montecarlo import draw, drawn_params
+from flightctl.sim.world import compiled
 
 
 def _random_params(rng, n: int) -> list[Params]:
@@ -32,159 +38,115 @@ def _random_params(rng, n: int) -> list[Params]:
     return out
 
 
+def _copy():
+    """The controller's functions as the batch runs them: compiled where numba is, else plain."""
+    if compiled.enabled():
+        return types.SimpleNamespace(**onboard.compiled_functions(compiled.compiled_copy))
+    return types.SimpleNamespace(step=onboard.step, on_range=onboard.on_range, set_reference=onboard.set_reference,
+                                 arm=onboard.arm, landing_start=onboard.landing_start)
+
+
 @pytest.mark.parametrize("structure", ["flight", "paper"])
-def test_batch_controller_gives_the_onboard_counts(structure):
-    """Same IMU samples, echoes and setpoints: the same PWM counts within one count of rounding, at
-    every step, for vehicles with their own gains, on the ground and in flight."""
+def test_the_batch_controller_gives_the_onboard_counts(structure):
+    """Same IMU samples (with the magnetometer), echoes (some lost) and setpoints: the same PWM counts
+    and estimates at every step, for vehicles with their own gains and filters, on the floor, in
+    flight, and landing (the loop's own landing: the vertical estimate and the touchdown test)."""
     rng = np.random.default_rng(17)
-    n, steps = 6, 1500
+    fn = _copy()
+    n, steps = 4, 1500
     params = _random_params(rng, n)
-    onboard = [FlightController(p, structure=structure) for p in params]
-    batch = BatchController(params, structure=structure)
     dt = params[0].airframe.dt
     s = ImuSample()
-    gyro = np.zeros((3, n))
-    tilt = np.zeros((2, n))
-    sp = np.zeros((4, n))
-    worst = 0
     same = 0
-    for k in range(steps):
-        t = k * dt
-        if k == 300:   # lift-off: the in-flight correction from here on
-            batch.in_flight[:] = True
-            for c in onboard:
+    for p in params:
+        c = FlightController(p, structure=structure)
+        e = np.zeros(onboard.N_E)
+        e[onboard.ALT_T] = -1.0
+        k = np.array(onboard.constants(p, structure))
+        counts = np.zeros(4, dtype=np.int64)
+        bias = (float(rng.normal(0, 0.02)), float(rng.normal(0, 0.02)), float(rng.uniform(-3, 3)))
+        c.est.set_reference(bias[:2], bias[2], True)
+        fn.set_reference(e, *bias, True)
+        gyro, tilt = np.zeros(3), np.zeros(2)
+        for i in range(steps):
+            t = i * dt
+            if i == 300:                     # lift-off: the in-flight correction from here on
                 c.est.in_flight = True
-        gyro += rng.normal(0.0, 0.05, gyro.shape)
-        gyro *= 0.995
-        tilt += gyro[:2] * dt
-        acc = np.array([-9.8 * np.sin(tilt[1]), 9.8 * np.sin(tilt[0]), 9.8 * np.cos(tilt[0]) * np.cos(tilt[1])])
-        acc += rng.normal(0.0, 0.3, acc.shape)
-        if k % 150 == 0:
-            sp = np.array([rng.uniform(-0.2, 0.2, n), rng.uniform(-0.2, 0.2, n), rng.uniform(-3.0, 3.0, n),
-                           rng.uniform(0.5, 2.0, n)])
-        if k % 10 == 0:
-            d = rng.uniform(0.2, 2.5, n)   # (a lost echo in the air: the batch holds the altitude, onboard
-            #                                 the vertical estimate stands in; sim/sweeps/batch.py)
-            batch.on_range(d, t)
-            for i, c in enumerate(onboard):
-                c.on_range(float(d[i]), t)
-        counts = batch.step(gyro[0], gyro[1], gyro[2], acc[0], acc[1], acc[2], dt, sp[0], sp[1], sp[2], sp[3])
-        for i, c in enumerate(onboard):
-            s.gx, s.gy, s.gz = gyro[:, i].tolist()
-            s.ax, s.ay, s.az = acc[:, i].tolist()
-            expected = c.step(s, dt, *sp[:, i].tolist())
-            diff = max(abs(int(counts[j, i]) - expected[j]) for j in range(4))
-            worst = max(worst, diff)
-            same += diff == 0
-            assert c.est.roll == pytest.approx(batch.roll[i], abs=1e-9)
-            assert c.est.yaw == pytest.approx(batch.yaw[i], abs=1e-9)
-    assert worst <= 1
-    assert same >= 0.99 * n * steps
-    assert len(set(map(tuple, counts.T))) > 1      # the vehicles did differ
+                e[onboard.IN_FLIGHT] = 1.0
+                s.ax, s.ay, s.az = 0.1, -0.2, 9.7
+                c.arm(s)
+                fn.arm(e, s.az)
+            if i == 1100:                    # the loop's own landing
+                c.land(0.3)
+                fn.landing_start(e, 0.3)
+            gyro = 0.995 * gyro + rng.normal(0.0, 0.05, 3)
+            tilt += gyro[:2] * dt
+            acc = np.array([-9.8 * math.sin(tilt[1]), 9.8 * math.sin(tilt[0]), 9.8 * math.cos(tilt[0]) * math.cos(tilt[1])])
+            acc += rng.normal(0.0, 0.3, 3)
+            mag = np.array([2e-5, 0.0, -4e-5]) + rng.normal(0.0, 3e-7, 3)
+            s.gx, s.gy, s.gz = gyro.tolist()
+            s.ax, s.ay, s.az = acc.tolist()
+            s.mx, s.my, s.mz = mag.tolist()
+            s.mag_fresh = True
+            if i % 10 == 0:
+                d = float(rng.uniform(0.2, 2.5)) if rng.random() < 0.8 else math.nan
+                c.on_range(d, t)
+                fn.on_range(e, k, d, t)
+            sp = (float(rng.uniform(-0.2, 0.2)), float(rng.uniform(-0.2, 0.2)), 0.5, 1.0) if i % 150 < 75 else \
+                (0.0, 0.0, -0.5, 1.5)
+            expected = c.step(s, dt, *sp)
+            fn.step(e, k, *gyro, *acc, *mag, True, dt, *sp, counts)
+            assert counts.tolist() == expected, (i, counts, expected)
+            assert (e[onboard.ROLL], e[onboard.PITCH], e[onboard.YAW]) == (c.est.roll, c.est.pitch, c.est.yaw)
+            assert (e[onboard.UZ], e[onboard.VZ]) == (c.uz, c.vert.z)
+            same += 1
+        assert c.landing.integral != 0.0 and c.est.yaw != 0.0     # the landing and the magnetometer did act
+    assert same == n * steps
 
 
-def _states(rng, n, model: Model):
-    x = np.zeros((model.n, n))
-    x[:N_RIGID] = rng.normal(0.0, 0.3, (N_RIGID, n))
-    x[Z] = rng.uniform(0.1, 2.0, n)
-    x[N_RIGID:] = rng.uniform(300.0, 700.0, (model.n - N_RIGID, n))   # rotor speeds or thrusts
-    if model.n > N_RIGID and model.effects[0].cause == "motor_lag":
-        x[N_RIGID:] = rng.uniform(1.0, 7.0, (4, n))
-    return x
-
-
-@pytest.mark.parametrize("cause", [c for c in causes.CAUSES if c != "actuation_delay"])
-def test_vector_model_is_the_scalar_model(cause):
-    """`Model(vector=True)` evaluates the same f and specific force as the scalar model, column by
-    column, for the base model with each effect (the hooks run unchanged on arrays)."""
-    rng = np.random.default_rng(3)
-    spec = causes.CAUSES[cause].parameters
-    values = {k: (2.0 if k == "motor" else p.lo + 0.3 * (p.hi - p.lo)) for k, p in spec.items()}
-    if cause == "battery_sag":
-        values = {"v_nominal": 14.8}
-    a = Params().airframe
-    n = 5
-    vec = Model(a, (causes.make(cause, **values),), vector=True)
-    x = _states(rng, n, vec)
-    u = tuple(rng.uniform(150.0, 230.0, n) for _ in range(4)) + (rng.uniform(13.0, 16.0, n),)
-    xd = np.array(vec.f(0.0, x, u))
-    sf = np.array(np.broadcast_arrays(*vec.specific_force(0.0, x, u)))   # 0.0 where no effect adds a force
-    for i in range(n):
-        one = Model(a, (causes.make(cause, **values),))
-        ui = [float(v[i]) for v in u]
-        assert one.f(0.0, x[:, i].tolist(), ui) == pytest.approx(xd[:, i].tolist(), rel=1e-12, abs=1e-12)
-        assert one.specific_force(0.0, x[:, i].tolist(), ui) == pytest.approx(sf[:, i].tolist(), rel=1e-12, abs=1e-12)
-
-
-def test_batch_plant_is_the_single_plant_with_a_parameter_per_vehicle():
-    """The batched plant with one motor time constant, one actuation delay and one rotor inertia per
-    vehicle (arrays in the effects' parameters and in the airframe) follows the single plant flown
-    with each value, command for command."""
-    from flightctl.sim.sweeps.batch import with_draws
-    from flightctl.sim.sweeps.montecarlo import drawn_airframe
+@pytest.mark.skipif(not compiled.enabled(), reason="the batch's speed needs numba (the fast extra)")
+def test_a_batch_vehicle_flies_the_full_paths_flight():
+    """Two draws of paper-as-flown's ranges, each with its seed: the batch's record of the true and
+    estimated attitude is the full onboard path's log, to the bit, and its outcome is the same."""
     params = load("paper-as-flown")
-    a = params.airframe
-    taus = np.array([0.02, 0.035, 0.08, 0.15])
-    delays = np.array([0.0, 0.0011, 0.0044, 0.0071])      # none, a fraction, whole periods and a fraction
-    jps = np.array([0.8e-4, 1.0e-4, 2.0e-4, 2.67e-4])
-    n = taus.size
-    draws = {("motor_dynamics", "tau"): taus, ("actuation_delay", "delay"): delays, ("airframe", "Jp"): jps}
-    batch = BatchPlant(drawn_airframe(a, draws), with_draws(params, draws), n, substeps=2)
-    batch.hover(3.0)
-    singles = []
-    for i, (tau, delay) in enumerate(zip(taus, delays)):
-        tau_down = dict(next(e for e in params.effects if e.cause == "motor_dynamics").parameters)["tau_down"]
-        drawn = (causes.make("motor_dynamics", tau=float(tau), tau_down=tau_down),
-                 causes.make("actuation_delay", delay=float(delay)))
-        plant = Plant(Model(drawn_airframe(a, draws, i), causes.combined(params, drawn)), a.dt, 2, a.battery_nominal_v)
-        hover = tuple(float(v[i]) for v in batch.u)
-        plant._queue.extend([hover] * len(plant._queue))   # hovering: the hover input held before
-        plant.x = batch.x[:, i].tolist()
-        plant.on_ground = False
-        singles.append(plant)
-    rng = np.random.default_rng(5)
-    for k in range(400):
-        if k % 20 == 0:
-            counts = np.round(rng.uniform(26300, 27700, (4, n))).astype(int)
-        batch.advance(counts)
-        for i, plant in enumerate(singles):
-            plant.command(*(counts[:, i] * 255.0 / 40000.0).tolist(), a.battery_nominal_v)
-            plant.advance(a.dt)
-    for i, plant in enumerate(singles):
-        assert plant.x == pytest.approx(batch.x[:, i].tolist(), rel=1e-9, abs=1e-9)
-    assert np.ptp(batch.x[PHI]) > 1e-3   # the time constants made a difference
+    sc = SCENARIOS["step_roll"]()
+    draws = draw(params, 2, seed=8)
+    seeds = [11, 12]
+    batch = simulate(params, sc.plan, 2, draws, seeds=seeds, record=(0.0, sc.plan.duration - 1.0))
+    for v, seed in enumerate(seeds):
+        vehicle = drawn_params(params, {key: float(val[v]) for key, val in draws.items()})
+        full = fly(sc, vehicle, os.devnull, seed=seed)
+        assert batch.outcome[v] == full.outcome
+        rows = min(len(batch.log["t"]), len(full.log))   # (a crash ends the full path's log early)
+        np.testing.assert_array_equal(batch.log["t"][:rows], full.log["t"][:rows])
+        for column in ("true_roll", "true_pitch", "true_yaw", "roll", "pitch", "yaw"):
+            np.testing.assert_array_equal(batch.log[column][:rows, v], full.log[column][:rows])
+        assert np.isnan(batch.log["true_roll"][rows:, v]).all()
+        assert rows > 4000                                # it flew past the step (at 10 s)
 
 
-def test_batch_flight_freezes_a_vehicle_that_tips_over():
-    """A vehicle without roll and pitch gains, started rolling at 5 rad/s, tips past 60 degrees and is
-    counted as crashed and frozen; one with gains recovers and holds its setpoint."""
-    p = load("paper-as-flown")
-    zero = dataclasses.replace(p, gains=dataclasses.replace(p.gains, kp_phi=0.0, kd_phi=0.0, ki_phi=0.0,
-                                                            kp_theta=0.0, kd_theta=0.0, ki_theta=0.0))
-    plant = BatchPlant(p.airframe, causes.combined(p, ()), 2)
-    plant.hover(1.0)
-    plant.x[P] = 5.0   # the rotors' inflow damps a roll rate in Jxx / (2 k l^2) = 0.36 s: 5 rad/s tips past 60 deg
-    flight = fly(plant, BatchController([p, zero]), lambda t: (0.0, 0.0, 0.0, 1.0), 4.0)
-    assert flight.crashed.tolist() == [False, True]
-    assert 0.1 < flight.crash_t[1] < 1.0
-    # its plant frozen at its last state before 60 deg (the record's rows after N_RIGID: the estimates)
-    assert (flight.states[-1][:N_RIGID, 1] == flight.states[-2][:N_RIGID, 1]).all()
-    assert math.radians(50) < abs(flight.states[-1][PHI][1]) <= math.radians(60)
-    assert abs(flight.states[-1][PHI][0]) < 0.01 and abs(flight.states[-1][Z][0] - 1.0) < 0.1
+@pytest.mark.skipif(not compiled.enabled(), reason="the batch's speed needs numba (the fast extra)")
+def test_the_batched_monte_carlo_judges_each_draw_as_the_full_path():
+    """`--batch` against the full path on the same three draws of step_roll: per draw and gain set, the
+    same outcome, the same settle verdict and the same score (the paper's figures)."""
+    batch = montecarlo.run_batch("paper-as-flown", "step_roll", 3, seed=5, workers=1)
+    full = montecarlo.run("paper-as-flown", "step_roll", 3, seed=5)
+    for b, f in zip(batch["draws"], full["draws"]):
+        for g in montecarlo.GAINS:
+            assert (b[g]["outcome"], b[g]["settles"], b[g].get("score")) == (f[g]["outcome"], f[g]["settles"], f[g].get("score"))
+    assert batch["share"] == full["share"] and batch["paired"] == full["paired"]
 
 
-def test_one_substep_keeps_the_closed_loop_of_two():
-    """The batch's default, one RK4 step per loop period, against two: a stepped flight of the
-    as-flown model differs by under 1 mm and 0.01 degree (the fastest pole, 1/tau = 50 1/s, is
-    0.11 of RK4's stability bound at that step)."""
-    p = load("paper-as-flown")
-    out = []
-    for sub in (1, 2):
-        plant = BatchPlant(p.airframe, causes.combined(p, ()), 1, substeps=sub)
-        plant.hover(1.0)
-        out.append(fly(plant, BatchController(p, 1), lambda t: (0.1 * (t > 0.5), -0.1 * (t > 1.5), 0.3, 1.0 + 0.3 * (t > 1.0)),
-                       4.0).states)
-    one, two = out
-    assert np.max(np.abs(one[:, Z] - two[:, Z])) < 1e-3
-    assert np.max(np.abs(one[:, PHI:PHI + 3] - two[:, PHI:PHI + 3])) < math.radians(0.01)
-    assert np.max(np.abs(two[:, PHI])) > 0.05   # it did move
+@pytest.mark.slow
+@pytest.mark.timeout(3600)   # 80 paper flights through the full path: minutes on two cores
+def test_forty_paired_draws_give_the_full_paths_shares():
+    """The paper flight on 40 draws of every range of paper-as-flown, both gain sets, by the full onboard
+    path and by the batch: each share (flies, lands, settles, and the paired verdicts) within 3 points."""
+    batch = montecarlo.run_batch("paper-as-flown", "paper", 40, seed=2)
+    full = montecarlo.run("paper-as-flown", "paper", 40, seed=2)
+    for g in montecarlo.GAINS:
+        for what in ("flies", "lands", "settles"):
+            assert abs(batch["share"][g][what] - full["share"][g][what]) <= 0.03, (g, what)
+    for what in montecarlo.VERDICTS:
+        assert abs(batch["paired"][what] - full["paired"][what]) <= 0.03, what
+    assert 0.0 < full["share"]["table6"]["flies"] < 1.0 or 0.0 < full["share"]["table4"]["flies"] < 1.0   # draws differ

@@ -22,7 +22,8 @@ from flightctl.hil import bench
 from flightctl.hil import instruments as ins
 from flightctl.params import load
 from flightctl.boards.pi import open_pi_board
-from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, World
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.world.power import SimIna219, SimSMBus
 
 RCB_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / "rcbenchmark"

@@ -12,7 +12,7 @@ from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe, load
 from flightctl.physics import rotor_speed
 from flightctl.sim import causes
-from flightctl.sim.world import compiled, devices
+from flightctl.sim.world import compiled, imu
 from flightctl.sim.world.model import N_RIGID, Model
 from flightctl.sim.world.plant import Plant
 from flightctl.sim.flights.run import fly
@@ -52,7 +52,7 @@ def test_the_compiled_step_and_forces_equal_the_plain_ones():
             want = plain._rk4(list(x), 0.0, u, h)
             f = model._commanded(u)
             cmd = np.array(f + [rotor_speed(v, model.a.c1) for v in f])
-            np.testing.assert_allclose(compiled.rk4(x, cmd, codes, q, h), want, rtol=1e-12, atol=1e-12)   # (plain)
+            np.testing.assert_allclose(compiled.rk4(x, cmd, codes, q, h, compiled.work(len(x))), want, rtol=1e-12, atol=1e-12)   # (plain)
             rotors = model.forces(0.0, list(x), u)             # what the battery and the chip ask for
             for plain_part, fast_part in zip(rotors, compiled.model_forces()(x, *u[:4], codes, q)):
                 np.testing.assert_allclose(fast_part, plain_part, rtol=1e-12, atol=1e-12)
@@ -73,22 +73,22 @@ def test_the_compiled_step_and_forces_equal_the_plain_ones():
 
 @needs_numba
 def test_the_compiled_chip_writes_the_plain_ones_registers():
-    """`devices.chip_frame` compiled and plain, from the same state, constants and noise: the same
+    """`imu.chip_frame` compiled and plain, from the same state, constants and noise: the same
     register bytes and the same state after, over random truths, rotors and read intervals, with a
     value beyond the int16 range (and beyond int64: clipped, never wrapped) now and then."""
     rng = np.random.default_rng(5)
-    fast = devices.chip_frame_compiled()
+    fast = imu.chip_frame_compiled()
     noise = rng.standard_normal(64)
     for k in range(300):
-        s = rng.uniform(-3.0, 3.0, devices.N_CHIP_STATE)
-        c = rng.uniform(-0.5, 0.5, devices.N_CHIP_CONST)
-        c[[devices._C_A_LSB, devices._C_G_LSB]] = rng.uniform(1e3, 2e4, 2)
-        c[[devices._C_KA, devices._C_KG]] = rng.uniform(0.0, 1.0, 2)
-        c[[devices._C_TC2, devices._C_PERIOD, devices._C_A_DELAY, devices._C_TCG2, devices._C_G_DELAY]] = \
+        s = rng.uniform(-3.0, 3.0, imu.N_CHIP_STATE)
+        c = rng.uniform(-0.5, 0.5, imu.N_CHIP_CONST)
+        c[[imu._C_A_LSB, imu._C_G_LSB]] = rng.uniform(1e3, 2e4, 2)
+        c[[imu._C_KA, imu._C_KG]] = rng.uniform(0.0, 1.0, 2)
+        c[[imu._C_TC2, imu._C_PERIOD, imu._C_A_DELAY, imu._C_TCG2, imu._C_G_DELAY]] = \
             rng.uniform(1e-6, 5e-3, 5)
-        c[devices._C_KV] = rng.choice([0.0, rng.uniform(0.0, 0.01)])
-        c[devices._C_KVG] = rng.choice([0.0, rng.uniform(0.0, 0.01)])
-        c[[devices._C_BB, devices._C_H2, devices._C_H3, devices._C_YAW]] = rng.uniform(0.0, 1.0, 4)
+        c[imu._C_KV] = rng.choice([0.0, rng.uniform(0.0, 0.01)])
+        c[imu._C_KVG] = rng.choice([0.0, rng.uniform(0.0, 0.01)])
+        c[[imu._C_BB, imu._C_H2, imu._C_H3, imu._C_YAW]] = rng.uniform(0.0, 1.0, 4)
         truth = list(rng.uniform(-20.0, 20.0, 6))
         if k % 10 == 0:
             truth[k % 6] = rng.choice([1e5, -1e5, 1e30, -1e30, np.inf])
@@ -97,13 +97,13 @@ def test_the_compiled_chip_writes_the_plain_ones_registers():
                 bool(k % 7)]
         regs_plain, regs_fast = bytearray(128), np.zeros(128, dtype=np.uint8)
         s_plain = s.tolist()
-        devices.chip_frame(regs_plain, s_plain, c.tolist(), noise.tolist(), 3, *truth, *rotors, *rest)
+        imu.chip_frame(regs_plain, s_plain, c.tolist(), noise.tolist(), 3, *truth, *rotors, *rest)
         fast(regs_fast, s, c, noise, 3, *truth, *rotors, *rest)
         assert bytes(regs_fast) == bytes(regs_plain), k
         np.testing.assert_allclose(s, s_plain, rtol=1e-13, atol=1e-13)
-    assert devices._i16(1e30) == 32767 and devices._i16(-np.inf) == -32768 and devices._i16(-2.5) == -3
+    assert imu._i16(1e30) == 32767 and imu._i16(-np.inf) == -32768 and imu._i16(-2.5) == -3
     with pytest.raises(ValueError):
-        devices._i16(float("nan"))
+        imu._i16(float("nan"))
 
 
 def test_a_model_with_another_effect_stays_plain():
@@ -123,7 +123,7 @@ def test_a_flight_is_the_same_compiled_or_plain(tmp_path, monkeypatch, name):
     flown = fly(SCENARIOS["step_roll"](), params, tmp_path / "fast.csv", seed=4)
     for attr in ("model_period", "model_forces"):
         monkeypatch.setattr(compiled, attr, lambda: None)
-    monkeypatch.setattr(devices, "chip_frame_compiled", lambda: None)
+    monkeypatch.setattr(imu, "chip_frame_compiled", lambda: None)
     plain = fly(SCENARIOS["step_roll"](), params, tmp_path / "plain.csv", seed=4)
     assert flown.outcome == plain.outcome == "landed upright"
     for column in ("true_z", "true_roll", "roll", "P1", "gyro_x", "acc_z"):

@@ -14,7 +14,8 @@ from flightctl.drivers.ina219 import Ina219
 from flightctl.drivers.mpu9250 import ImuError, Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.params import Airframe, load
-from flightctl.sim.world.devices import SensorNoise, SimGpio, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, SimGpio, World
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.causes import make
 from hand import R_hand
 

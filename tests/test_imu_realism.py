@@ -13,7 +13,8 @@ from flightctl.drivers import mpu9250_regs as reg
 from flightctl.drivers.mpu9250 import Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.params import Airframe
-from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, World
+from flightctl.sim.world.imu import SimMpu9250
 
 OFF = SensorNoise.off()
 A = Airframe()

@@ -23,7 +23,8 @@ from flightctl.errors import InputError
 from flightctl.hal import ImuSample
 from flightctl.params import load
 from flightctl.service import main
-from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, World
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.world.power import SimIna219, SimSMBus
 from without import run_without
 

@@ -18,7 +18,8 @@ from flightctl.errors import InputError
 from flightctl.hal import ImuSample
 from flightctl.params import load
 from flightctl.boards.pi import SECTIONS, load_board, open_pi_board
-from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, World
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.world.power import SimIna219, SimSMBus
 
 

@@ -1,4 +1,4 @@
-"""The MPU-9250 driver against the register-level fake chip (sim.devices.SimMpu9250 behind xfer2):
+"""The MPU-9250 driver against the register-level fake chip (sim.world.imu.SimMpu9250 behind xfer2):
 wrong chip, bus-error frames of all 0x00 / 0xFF, and the loop stopping the motors when frames go bad."""
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ from flightctl.drivers.mpu9250 import ImuError, Mpu9250
 from flightctl.hal import ImuSample
 from flightctl.loop import MAX_BAD_IMU_FRAMES, FlightLoop
 from flightctl.params import load
-from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, World
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.flights.scenarios import SCENARIOS
 
 

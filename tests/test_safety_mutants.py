@@ -19,7 +19,8 @@ from flightctl.service.sdnotify import Notifier
 from flightctl.service import Service
 from flightctl.sim.world.board import SIM_CALIBRATE_S, TRUTH_COLUMNS, open_board, sim_board, truth_row
 from flightctl.boards import BoardOptions
-from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, World
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.world.power import SimIna219, SimSMBus
 
 PARAMS = load(None)

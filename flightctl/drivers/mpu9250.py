@@ -16,7 +16,7 @@ was (the loop flies on the last good sample), when it is
   before it (refused or not) is within those limits of it, i.e. a real step confirmed by the next frame.
   Random bytes fail one of these at once (the die temperature alone moves ~0.01 degC a second);
   JUMP_GYRO is 3 rad/s in 2.2 ms, ~1400 rad/s^2, ten times what the rotors' torque can give the
-  frame, and JUMP_ACCEL 30 m/s^2, forty times the rotors' vibration (sim/world/devices.py).
+  frame, and JUMP_ACCEL 30 m/s^2, forty times the rotors' vibration (sim/world/imu.py).
 - a dead accelerometer: the three accelerometer words exactly 0 in ZERO_ACCEL_FRAMES frames in a row
   (its ~20 LSB of noise make one such frame about 1 in 10^5 even in free fall, three never), while
   the rest of the frame lives; off with the frozen check (`frozen_frames` = 0: a noise-free chip).

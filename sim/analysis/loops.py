@@ -93,7 +93,7 @@ def to_control(sys, T: float) -> control.StateSpace:
 
 def imu_delays() -> dict[str, float]:
     """s, per IMU field: the time constant of the chip's DLPF stage, the register map's delay of the
-    filter the onboard driver configures (the simulated chip's, sim/world/devices.py); the magnetometer
+    filter the onboard driver configures (the simulated chip's, sim/world/imu.py); the magnetometer
     has none."""
     g, a = dlpf_delays()
     return {"gx": g, "gy": g, "gz": g, "ax": a, "ay": a, "az": a, "mx": 0.0, "my": 0.0, "mz": 0.0}

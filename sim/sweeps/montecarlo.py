@@ -18,11 +18,9 @@ paired, draw by draw, the share where Table 6 beats Table 4 and the share where 
 holds (Table 4 flies, Table 6 flies and beats it), and a figure of which ranges decide it
 (`plot_deciding`). Flights run in parallel processes, one per core.
 
-`--batch` flies the draws on the batched simulator instead (sim/sweeps/batch.py: thousands of vehicles at
-once, the vectorised copy of the controller, ideal sensors, no floor): from a hover after the
-take-off to the end of the scenario's last attitude step, the same settle criterion; it answers
-whether the control law holds over the ranges, without the estimator's and the sensors' share, and
-reports no landing.
+`--batch` flies the draws on the batched simulator instead (sim/sweeps/batch.py: the compiled per-vehicle
+loop, thousands of vehicles a minute): draw k's vehicle with seed + k, as the full path flies it (the
+same chip, noise, sonar, take-off, controller and landing: the same flight to rounding), judged the same way.
 """
 from __future__ import annotations
 
@@ -161,8 +159,8 @@ def _result(spec, scenario, n, seed, spans, rows, whats, **extra) -> dict:
 
 
 def _batch_window(sc) -> tuple[float, float, list]:
-    """(start, end, attitude steps) of a scenario for the batched flight: from 1 s after its take-off
-    ramp to the end of its last attitude step's window."""
+    """(start, end, attitude steps) of a scenario's judged span: from 1 s after its take-off ramp to the
+    end of its last attitude step's window."""
     steps = [st for st in sc.steps if st.channel != "alt"]
     if not steps:
         raise InputError(f"--batch: the scenario {sc.name} has no attitude steps to judge")
@@ -172,14 +170,14 @@ def _batch_window(sc) -> tuple[float, float, list]:
 
 
 def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, workers: int | None = None) -> dict:
-    """The draws flown on the batched simulator (module docstring), both gain sets on the same draws;
-    `progress`: a sim/progress.py Progress, one step a gain set, the vehicle-steps in between."""
+    """The draws flown on the batched simulator (sim/sweeps/batch.py): draw k with seed + k, the vehicle
+    `run` flies, both gain sets, judged as `_fly` judges (flies, lands, settles, the paper's figures). `progress`: a
+    sim/progress.py Progress, one step a gain set, the vehicles in between."""
     import numpy as np
 
     from flightctl.sim import causes
     from flightctl.sim.sweeps.batch import simulate
     from flightctl.sim.flights.metrics import settles
-    from flightctl.sim.world.model import N_RIGID, PHI, PSI, THETA
     from flightctl.sim.flights.scenarios import SCENARIOS
     from flightctl.sim.sweeps import judge
     params = causes.load_vehicle(spec)
@@ -187,29 +185,33 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
     if not spans:
         raise InputError(f"--monte-carlo: {spec or 'the reference airframe'} carries no ranges")
     sc = SCENARIOS[scenario]()
-    start, end, steps = _batch_window(sc)
+    steps = [st for st in sc.steps if st.channel != "alt"]
+    record = (min(st.t for st in steps) - 0.05, max(st.t + st.window for st in steps) + 0.05) if steps else None
     draws = draw(params, n, seed)
     out = {}
     for g in GAINS:
         frac = (lambda f, g=g: progress.update(f, f"{g}: {n} vehicles")) if progress is not None else None
-        flight = simulate(causes.load_vehicle(spec, GAIN_SETS[g]), sc.plan, start, end, n, draws,
-                          workers=workers or os.cpu_count() or 1, record_every=9, seed=seed, progress=frac)
-        st = flight.states
-        log = {"t": flight.t, "true_roll": st[:, PHI], "true_pitch": st[:, THETA],
-               "true_yaw": (st[:, PSI] + np.pi) % (2 * np.pi) - np.pi,
-               "roll": st[:, N_RIGID], "pitch": st[:, N_RIGID + 1], "yaw": st[:, N_RIGID + 2]}   # the estimates
-        flies = ~flight.crashed
-        out[g] = (flies, settles(log, steps, 0.0) & flies, flight.crash_t, judge.score(judge.step_figures(log, steps, 0.0)))
+        flight = simulate(causes.load_vehicle(spec, GAIN_SETS[g]), sc.plan, n, draws, seeds=[seed + k for k in range(n)],
+                          record=record, workers=workers or os.cpu_count() or 1, progress=frac)
+        flies = flight.flies
+        settled = settles(flight.log, sc.steps, 0.0) & flies if steps else flies
+        figures = judge.step_figures(flight.log, sc.steps, 0.0) if steps else []
+        out[g] = (flight, flies, settled, figures)
         if progress is not None:
             progress.step(f"{g}: {n} vehicles, {flight.vehicle_steps / 1e6:.1f} M vehicle-steps")
-    rows = [{"draw": {f"{c}.{name}": float(v[k]) for (c, name), v in draws.items()},
-             **{g: {"gains": g, "flies": bool(out[g][0][k]), "settles": bool(out[g][1][k]),
-                    "score": judge._num(out[g][3][k]) if out[g][0][k] else None,
-                    "outcome": "in the air" if out[g][0][k] else f"crashed at {out[g][2][k]:.2f} s"} for g in GAINS}}
-            for k in range(n)]
-    return _result(spec, scenario, n, seed, spans, rows, ("flies", "settles"),
-                   simulator=f"batched simulator (sim/sweeps/batch.py): the simulated chip and sonar, from {start:g} s "
-                             f"to {end:g} s after arming, in the air")
+    rows = []
+    for k in range(n):
+        row = {"draw": {f"{c}.{name}": float(v[k]) for (c, name), v in draws.items()}}
+        for g in GAINS:
+            flight, flies, settled, figures = out[g]
+            mine = [{key: (v[k] if isinstance(v, np.ndarray) and v.ndim else v) for key, v in f.items()} for f in figures]
+            row[g] = {"gains": g, "flies": bool(flies[k]), "lands": flight.outcome[k] == "landed upright",
+                      "settles": bool(settled[k]), "outcome": flight.outcome[k],
+                      **(judge.summary(mine) if flies[k] and mine else {"score": None})}
+        rows.append(row)
+    return _result(spec, scenario, n, seed, spans, rows, ("flies", "lands", "settles"),
+                   simulator="batched simulator (sim/sweeps/batch.py): each draw's vehicle flown as the full onboard "
+                             "path flies it, from power-on to its landing, compiled")
 
 
 def summary(result: dict) -> str:

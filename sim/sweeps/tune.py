@@ -153,7 +153,6 @@ def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str
 
     from flightctl.sim.sweeps.batch import simulate
     from flightctl.sim.flights.metrics import settles
-    from flightctl.sim.world.model import PHI, PSI, THETA
     from flightctl.sim.sweeps.montecarlo import _batch_window, draw, ranged
     from flightctl.sim.flights.scenarios import SCENARIOS
     spans = ranged(params)
@@ -169,14 +168,14 @@ def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str
         group = candidates[i:i + per]
         under_way = f"candidates {i + 1}-{i + len(group)} of {len(candidates)}: {n * len(group)} vehicles"
         frac = (lambda f: progress.update(f, under_way, len(group))) if progress else None
-        flight = simulate(params, sc.plan, start, end, n * len(group), {k: np.tile(v, len(group)) for k, v in draws.items()},
-                          [g for g in group for _ in range(n)], workers=workers or os.cpu_count() or 1,
-                          sensors=False, progress=frac)   # the control law over the ranges, ideal sensors: the search's speed
-        st = flight.states
-        log = {"t": flight.t, "true_roll": st[:, PHI], "true_pitch": st[:, THETA],
-               "true_yaw": (st[:, PSI] + np.pi) % (2 * np.pi) - np.pi}
+        # each draw with its seed, the same vehicle for every candidate, flown from power-on to the end
+        # of the last attitude step's window
+        flight = simulate(params, sc.plan, n * len(group), {k: np.tile(v, len(group)) for k, v in draws.items()},
+                          [g for g in group for _ in range(n)], seeds=[seed + k for k in range(n)] * len(group),
+                          record=(start, end), until=end, workers=workers or os.cpu_count() or 1,
+                          progress=frac)
         flies = ~flight.crashed
-        ok = settles(log, steps, 0.0) & flies
+        ok = settles(flight.log, steps, 0.0) & flies
         for j in range(len(group)):
             out.append({"flies": float(flies[j * n:(j + 1) * n].mean()), "settles": float(ok[j * n:(j + 1) * n].mean())})
             if progress:

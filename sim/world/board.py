@@ -19,7 +19,8 @@ from flightctl.drivers.mpu9250 import FROZEN_FRAMES, Mpu9250
 from flightctl.hal import Hal
 from flightctl.params import Params
 from flightctl.sim import causes
-from flightctl.sim.world.devices import SensorNoise, SimClock, SimMotors, SimMpu9250, World, vehicle_noise
+from flightctl.sim.world.devices import SensorNoise, SimClock, SimMotors, World, vehicle_noise
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.world.power import SimIna219, SimSMBus
 
 TRUTH_COLUMNS = ("true_x", "true_y", "true_z", "true_roll", "true_pitch", "true_yaw")

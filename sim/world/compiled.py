@@ -1,6 +1,6 @@
 """The simulated world compiled by numba where it is installed (the `fast` extra): the plant's step
 and forces (here; `period` is the plant's one call a period) and the MPU-9250's burst registers
-(`sim.devices.chip_frame`), each function from its one plain-Python source: `compiled_copy(fn,
+(`sim.world.imu.chip_frame`), each function from its one plain-Python source: `compiled_copy(fn,
 name=dependency, ...)` compiles a copy of `fn` whose global names of other plain functions are bound
 to their compiled copies, so that the plain function stays plain (arrays in the batched simulator,
 and everywhere without numba). Nothing on the vehicle imports this: the onboard code is plain Python.
@@ -45,9 +45,13 @@ def enabled() -> bool:
         import flightctl.physics
         here = Path(__file__).parent
         compiled_files = [Path(flightctl.physics.__file__), Path(flightctl.drivers.mpu9250_regs.__file__)]
-        compiled_files += [here / name for name in ("model.py", "compiled.py", "devices.py")]
+        compiled_files += [here / name for name in ("model.py", "compiled.py", "imu.py")]
         compiled_files += [here.parent / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
-        compiled_files += [here.parent / "sweeps" / "batch_imu.py"]
+        compiled_files += [here.parent / "sweeps" / f"{name}.py" for name in ("onboard", "flight")]
+        compiled_files += [Path(sys.modules["flightctl"].__file__).parent / name for name in (
+            "control/estimator.py", "control/mixer.py", "control/landing.py", "control/controller.py", "loop.py",
+            "safety.py", "drivers/hcsr04.py")]
+        compiled_files += [here / name for name in ("devices.py", "plant.py")]
         digest = hashlib.sha1(b"".join(path.read_bytes() for path in compiled_files)).hexdigest()[:12]
         given = os.environ.get("NUMBA_CACHE_DIR")
         user = Path(os.environ.get("XDG_CACHE_HOME") or Path(os.path.expanduser("~")) / ".cache")
@@ -114,6 +118,21 @@ N_OUT = 18   # `period`'s output: the fields of `Forces` (f, tau, force, torque,
 def layout(model):
     """(the wrench codes in the model's order, the parameters q) of a model whose effects the compiled
     plant carries (COMPILED_CAUSES, each at most once; the base model has none), else None."""
+    laid = _layout(model)
+    return None if laid is None else (laid[0], np.array(laid[1], dtype=float))
+
+
+def layout_rows(model, n: int):
+    """`layout` of a model whose parameters (its airframe's, its effects') may be (n,) arrays, one value
+    per vehicle (the batched simulator, sim/sweeps/flight.py): q as (n, len(q)), a row per vehicle."""
+    laid = _layout(model)
+    if laid is None:
+        return None
+    return laid[0], np.stack([np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in laid[1]], axis=1)
+
+
+def _layout(model):
+    """(codes, q as a list of values) of `layout`."""
     causes = [e.cause for e in model.effects]
     if (model.vector or len(set(causes)) < len(causes)
             or not set(causes) <= set(COMPILED_CAUSES)):
@@ -134,19 +153,29 @@ def layout(model):
         elif e.cause == "rotor_drag":
             q[_K_DRAG], q[_YAW] = p["k"], p.get("yaw", 0.0)
             codes.append(DRAG)
-    return np.array(codes, dtype=np.int64), np.array(q + list(model.rigid_constants))
+    return np.array(codes, dtype=np.int64), q + list(model.rigid_constants)
 
 
-def rotors(x, cmd, codes, q, Rm, xdot):
+def work(n: int) -> np.ndarray:
+    """The scratch array of the functions below for a state of n entries: the rotors' f, tau, w, the
+    commanded thrusts and speeds, then a derivative, RK4's four stages and its trial state (n each)."""
+    return np.zeros(_WK_X + 6 * n)
+
+
+_WK_CMD, _WK_X = 12, 20   # where `work` holds the commands and the state-sized arrays
+
+
+def rotors(x, cmd, codes, q, Rm, xdot, wk):
     """`Model._forces` of a model laid out by `layout` (the same functions in the same order): the
     rotors' thrusts f and torques tau, the effects' body force F and torque T, the rotors' speeds w (the
     order of `Forces`), at the state x with the rotation Rm (`rotation_from_trig`), cmd the commanded
-    thrusts (eq. 26) and speeds (eq. 27); the rotor states' derivatives are written into xdot."""
+    thrusts (eq. 26) and speeds (eq. 27); the rotor states' derivatives are written into xdot. f, tau
+    and w are views of the scratch array wk (`work`): no allocation in the batch's inner loop."""
     c1 = q[_C1]
     motor = q[_TAU] > 0.0
-    f = np.empty(4)
-    tau = np.empty(4)
-    w = np.empty(4)
+    f = wk[0:4]
+    tau = wk[4:8]
+    w = wk[8:12]
     spin_up = 0.0
     for i in range(4):
         if motor:              # motor_dynamics: the rotor's speed is a state
@@ -180,9 +209,9 @@ def rotors(x, cmd, codes, q, Rm, xdot):
     return f, tau, (Fx, Fy, Fz), (Tx, Ty, Tz), w
 
 
-def commanded(P1, P2, P3, P4, q):
-    """The commanded thrusts (eq. 26) and speeds (eq. 27) of the command values P1..P4: `rotors`' cmd."""
-    cmd = np.empty(8)
+def commanded(P1, P2, P3, P4, q, cmd):
+    """The commanded thrusts (eq. 26) and speeds (eq. 27) of the command values P1..P4 into cmd (8):
+    `rotors`' cmd."""
     P = (P1, P2, P3, P4)
     for i in range(4):
         cmd[i] = thrust_from_command(P[i], q[_H1], q[_H2])
@@ -190,18 +219,22 @@ def commanded(P1, P2, P3, P4, q):
     return cmd
 
 
-def forces(x, P1, P2, P3, P4, codes, q):
-    """`rotors` at the state x for the command values P1..P4 (`Model.forces`)."""
+def forces(x, P1, P2, P3, P4, codes, q, wk):
+    """`rotors` at the state x for the command values P1..P4 (`Model.forces`); wk: `work`."""
     Rm = rotation_from_trig(sin(x[6]), cos(x[6]), sin(x[7]), cos(x[7]), sin(x[8]), cos(x[8]))
-    return rotors(x, commanded(P1, P2, P3, P4, q), codes, q, Rm, np.zeros(x.shape[0]))
+    n = x.shape[0]
+    xdot = wk[_WK_X:_WK_X + n]
+    for i in range(n):
+        xdot[i] = 0.0
+    return rotors(x, commanded(P1, P2, P3, P4, q, wk[_WK_CMD:_WK_X]), codes, q, Rm, xdot, wk)
 
 
-def stage(x, cmd, codes, q):
-    """`Model.f` of a model laid out by `layout`: `rotors`, `aggregate` and `rigid_derivative`.
-    Arrays in and out."""
-    xdot = np.zeros(x.shape[0])
+def stage(x, cmd, codes, q, xdot, wk):
+    """`Model.f` of a model laid out by `layout`: `rotors`, `aggregate` and `rigid_derivative`, into xdot."""
+    for i in range(xdot.shape[0]):
+        xdot[i] = 0.0
     sf, cf, st, ct, sp, cp = sin(x[6]), cos(x[6]), sin(x[7]), cos(x[7]), sin(x[8]), cos(x[8])
-    f, tau, F, T, w = rotors(x, cmd, codes, q, rotation_from_trig(sf, cf, st, ct, sp, cp), xdot)
+    f, tau, F, T, w = rotors(x, cmd, codes, q, rotation_from_trig(sf, cf, st, ct, sp, cp), xdot, wk)
     agg = aggregate(f[0], f[1], f[2], f[3], tau[0], tau[1], tau[2], tau[3], w[0], w[1], w[2], w[3],
                     F[0], F[1], F[2], T[0], T[1], T[2], q[_L])
     r = _RIGID
@@ -213,47 +246,69 @@ def stage(x, cmd, codes, q):
     return xdot
 
 
-def rk4(x, cmd, codes, q, h):
-    """One classical RK4 step of `stage` with the input held (`Plant._rk4`'s scheme)."""
+def rk4(x, cmd, codes, q, h, wk):
+    """One classical RK4 step of `stage` with the input held (`Plant._rk4`'s scheme, element by
+    element as numpy evaluates it): the new state in a view of wk (`work`)."""
+    n = x.shape[0]
+    o = _WK_X + n
+    k1, k2, k3, k4, y = wk[o:o + n], wk[o + n:o + 2 * n], wk[o + 2 * n:o + 3 * n], wk[o + 3 * n:o + 4 * n], \
+        wk[o + 4 * n:o + 5 * n]
     hh = 0.5 * h
-    k1 = stage(x, cmd, codes, q)
-    k2 = stage(x + hh * k1, cmd, codes, q)
-    k3 = stage(x + hh * k2, cmd, codes, q)
-    k4 = stage(x + h * k3, cmd, codes, q)
-    return x + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
+    stage(x, cmd, codes, q, k1, wk)
+    for i in range(n):
+        y[i] = x[i] + hh * k1[i]
+    stage(y, cmd, codes, q, k2, wk)
+    for i in range(n):
+        y[i] = x[i] + hh * k2[i]
+    stage(y, cmd, codes, q, k3, wk)
+    for i in range(n):
+        y[i] = x[i] + h * k3[i]
+    stage(y, cmd, codes, q, k4, wk)
+    h6 = h / 6.0
+    for i in range(n):
+        y[i] = x[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+    return y
 
 
 def period(x, P1, P2, P3, P4, codes, q, h, ground, out):
     """The plant's step (`Plant.advance`) in one call: the commanded thrusts (eq. 26) and speeds
     (eq. 27) of the command values P1..P4, one `rk4` step of h on x in place (on the floor, `ground`,
     the extensions' states only), then the forces at the new state into out (`N_OUT`)."""
-    y = rk4(x, commanded(P1, P2, P3, P4, q), codes, q, h)
+    wk = work(x.shape[0])
+    y = rk4(x, commanded(P1, P2, P3, P4, q, wk[_WK_CMD:_WK_X]), codes, q, h, wk)
     for i in range(N_RIGID if ground else 0, x.shape[0]):
         x[i] = y[i]
-    f, tau, F, T, w = forces(x, P1, P2, P3, P4, codes, q)
+    f, tau, F, T, w = forces(x, P1, P2, P3, P4, codes, q, wk)
     for i in range(4):
         out[i], out[4 + i], out[14 + i] = f[i], tau[i], w[i]
     for i in range(3):
         out[8 + i], out[11 + i] = F[i], T[i]
 
 
+def forces_of(x, P1, P2, P3, P4, codes, q):
+    """`forces` with its own scratch: (f, tau, F, T, w), f, tau and w new arrays (the single plant's)."""
+    f, tau, F, T, w = forces(x, P1, P2, P3, P4, codes, q, work(x.shape[0]))
+    return f.copy(), tau.copy(), F, T, w.copy()
+
+
 @functools.cache
 def model_period():
     """`period` compiled, with every function it calls (eq. 6-9 and 26-28 and the three effects'), or None."""
-    return _compiled()[2]
+    return functions().get("period")
 
 
 @functools.cache
 def model_forces():
-    """`forces` compiled, or None."""
-    return _compiled()[1]
+    """`forces_of` compiled, or None."""
+    return functions().get("forces_of")
 
 
 @functools.cache
-def _compiled():
-    """(rk4, forces, period) compiled, each call bound to a compiled copy, or (None, None, None)."""
+def functions() -> dict:
+    """The plant's functions compiled, each call bound to a compiled copy: `rk4`, `forces`, `period`,
+    `commanded` (and the batched simulator's `rotation_from_trig`); empty when compilation is off."""
     if not enabled():
-        return None, None, None
+        return {}
     from flightctl import physics
     from flightctl.sim.world import model
     from flightctl.sim.causes import motor_dynamics, rotor_drag, rotor_inflow
@@ -274,11 +329,13 @@ def _compiled():
     step = c(rk4, stage=one)
     command = c(commanded, thrust_from_command=c(physics.thrust_from_command), rotor_speed=eq["rotor_speed"])
     at = c(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"], commanded=command)
-    once = c(period, rk4=step, forces=at, commanded=command)
+    scratch = c(work)
+    once = c(period, rk4=step, forces=at, commanded=command, work=scratch)
+    alone = c(forces_of, forces=at, work=scratch)
     # compiled (or loaded from the cache) now, with the flight's argument types, not at a first step
     # that a simulation paced by the wall clock (`run --board sim`, `hil serve`) would see as a stall
     x, codes, q = np.zeros(N_RIGID + 4), np.array([INFLOW, REACTION, DRAG], dtype=np.int64), np.ones(_RIGID + 8)
     once(x, 0.0, 0.0, 0.0, 0.0, codes, q, 1e-3, False, np.empty(N_OUT))
-    at(x, 0.0, 0.0, 0.0, 0.0, codes, q)
-    step(x, np.zeros(8), codes, q, 1e-3)
-    return step, at, once
+    alone(x, 0.0, 0.0, 0.0, 0.0, codes, q)
+    return {"rk4": step, "forces": at, "forces_of": alone, "period": once, "commanded": command, "work": scratch,
+            "rotation_from_trig": m["rotation_from_trig"]}

@@ -22,7 +22,8 @@ from pathlib import Path
 
 from flightctl.clock import PacedClock
 from flightctl.params import Params
-from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, World
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.world.power import SimIna219, SimSMBus
 
 PI_PINS = (17, 27, 22, 25)          # flightctl/boards/pi.toml

@@ -1,0 +1,481 @@
+"""One vehicle's whole flight, as `flightctl sim` flies it, in one compiled loop: the batched simulator's
+inner loop (sim/sweeps/batch.py sets it up and calls it over every vehicle).
+
+Each loop period, in the order of `flightctl.loop.FlightLoop` against the simulated board
+(sim/world/board.py, sim/flights/run.py):
+
+- the world advances one period: the plant (sim/world/plant.py `Plant.advance`: the actuation delay's
+  ring of commands, the floor until the thrust lifts the vehicle, a touchdown stopping it and its
+  speed recorded; one RK4 step of sim/world/compiled.py's `rk4`), then the sonar's echo edges
+  (sim/world/devices.py `SimGpio`: the echo's rise 10 us + ECHO_DELAY_S after the trigger, its width
+  the distance's, jittered, or the module's no-echo; the driver's watchdog);
+- the chip's burst (`imu.chip_frame`, compiled; the magnetometer every MAG_EVERY reads) decoded and
+  checked as `Mpu9250.read` does it (a refused frame holds the last sample; more than
+  MAX_BAD_IMU_FRAMES stop the motors), the calibration's gyro bias subtracted;
+- the power monitor every tenth of a second (its random numbers only: the battery of a flight of
+  minutes stays far above the low-battery landing), the sonar's trigger every tenth period
+  (`HcSr04.trigger`: not while an echo is under way) and its result (`HcSr04`: 2 cm to 4 m, else NaN);
+- on the floor before arming, the calibration (section 4.4.4: `Calibration.add`), then `apply` and
+  `arm`; after it the plan's setpoints, the echo to the altitude task, the controller
+  (sim/sweeps/onboard.py, the onboard one's compiled copy), the crash check on the estimate
+  (flightctl/safety.py CRASH_TILT), the altitude lost (descend on the accelerometer), the plan's own
+  landing (touchdown on the sonar) or the loop's (`FlightLoop._land`: level, descend at LAND_SPEED,
+  the accelerometer confirms the floor), the plan's end; the motors take the counts while flying.
+
+Random numbers: each vehicle's chip draws its normals from the same generator, in the same order, as
+the single simulator's `NoisePool` of the same seed (`normals`), and its sonar and power monitor from
+the same Mersenne Twister as its `World.rng` (`uniforms`, Python's `random.gauss` on them): a vehicle
+flown here with seed s is the vehicle `flightctl sim` flies with seed s (tests/test_batch.py).
+Left out: the motor-loss detector (a healthy vehicle), a low battery, the stalls and the log's and
+ground station's events.
+
+Plain Python on arrays: sim/world/compiled.py compiles it (`compiled_fly`), or it runs as it is.
+"""
+from __future__ import annotations
+
+import functools
+from math import atan2, cos, exp, inf, log, nan, pi, sin, sqrt
+
+import numpy as np
+
+from flightctl.drivers import mpu9250_regs as reg
+from flightctl.drivers.hcsr04 import MAX_RANGE_M, MIN_RANGE_M, US_PER_M, WATCHDOG_MS
+from flightctl.loop import LAND_LEVEL_S, LAND_SLACK_S, LAND_SPEED, LOST_ALT_S, MAX_BAD_IMU_FRAMES, TOUCHDOWN_ALT, TOUCHDOWN_S
+from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
+from flightctl.sim.sweeps import onboard as ob
+from flightctl.sim.world.devices import EARTH_FIELD_T, SimGpio
+from flightctl.sim.world.imu import _BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, AMBIENT_C, SimMpu9250, _i16, chip_frame
+from flightctl.sim.world.compiled import commanded, forces, rk4, work
+from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VX, VY, VZ, Z, rotation_from_trig
+from flightctl.sim.world.plant import CONTACT_S
+
+ECHO_DELAY_S, NO_ECHO_S = SimGpio.ECHO_DELAY_S, SimGpio.NO_ECHO_S
+WATCHDOG_S = WATCHDOG_MS / 1000.0
+MAG_EVERY = SimMpu9250.MAG_EVERY
+TWOPI = 2.0 * pi
+BN, BW, BU = EARTH_FIELD_T
+AK_LSB = 1.0 / reg.AK_TESLA_PER_LSB
+
+# w: one vehicle's world and loop state. The plant's floor (on the floor, the last contact's time and
+# vertical speed), the command the motors hold and the head of its ring of delayed commands; the chip's
+# last read, the read interval of its DLPF gains, its reads so far, the magnetometer's words; the
+# driver's last accepted and last words, the bad frames in a row; the sample (accelerometer, gyro less
+# the calibration's bias, field); the sonar (an echo under way, its rise and fall, the driver's rise
+# tick, the last edge, the trigger's tick, a result); the Mersenne Twister's position and Python's
+# cached gauss; the loop (armed, flying, landing, blind, the last valid echo, the touchdown's start on
+# the sonar, the highest altitude, the calibration's sums and count, the gyro bias, the loop's landing
+# plan: its start, the setpoints then, its ramp; the plan's end, why it stopped); the judge's figures
+# (the largest true tilt, the fastest touchdown, the highest and the last true altitude, the log's rows);
+# the command the plant applies (after the delay).
+(W_GROUND, W_T_STOP, W_VZ_STOP, W_NEXT, W_HEAD, W_T_LAST, W_KDT, W_READS, W_MAG, W_GOOD, W_PREV, W_HAS_GOOD,
+ W_HAS_PREV, W_BAD, W_S, W_WAITING, W_RISE_T, W_FALL_T, W_RISE, W_LAST_EDGE, W_TRIGGER, W_RESULT, W_HAS_RESULT,
+ W_U, W_GAUSS, W_HAS_GAUSS, W_ARMED, W_FLYING, W_LANDING, W_BLIND, W_LAST_ECHO, W_T_TOUCH, W_MAX_ALT, W_CAL,
+ W_CAL_N, W_CAL_MAG, W_GYRO_BIAS, W_LAND_T, W_LAND_SP, W_LAND_RAMP, W_DURATION, W_REASON, W_DONE, W_TILT,
+ W_TOUCHDOWN, W_Z_MAX, W_Z_END, W_ROWS, W_UAPP, N_W) = \
+    (0, 1, 2, 3, 7, 8, 9, 10, 11, 14, 21, 28, 29, 30, 31, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53,
+     54, 55, 56, 57, 58, 65, 66, 67, 70, 71, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 88)
+# why the loop stopped (w[W_REASON]): still flying, the plan's end (landed or not), a crash by the estimate,
+# the IMU's frames bad, no touchdown by the landing's end, never left the ground, the plant diverged
+RUNNING, ENDED, CRASH, IMU_BAD, NO_TOUCHDOWN, NEVER_LEFT, DIVERGED = range(7)
+# k: the world's constants shared by the vehicles: g, M (the plant's), the sonar's jitter (us) and dropout,
+# the magnetometer's noise (T), the driver's m/s^2 and rad/s per LSB, the die's warming (degC, s), the
+# plan lands, its duration, the power monitor's gaussian draws per read, the loop's dt, t_arm, the
+# driver's temperature range (LSB), the periods between the power monitor's reads and the sonar's triggers
+(G_, M_, SONAR_SIGMA, DROPOUT, MAG_SIGMA, A_SCALE, G_SCALE, WARM_RISE, WARM_TAU, LANDS, DURATION, INA_DRAWS, DT,
+ T_ARM, TEMP_LO, TEMP_HI, POWER_EVERY, SONAR_EVERY, N_WORLD) = range(19)
+# rows of the judged record: the true roll, pitch and yaw (wrapped), and the estimate's
+N_REC = 6
+
+
+def uniform(w, uni) -> float:
+    """The next `random.random()` of the vehicle's Mersenne Twister (its stream in uni)."""
+    j = int(w[W_U])
+    w[W_U] = j + 1
+    return uni[j]
+
+
+def gauss(w, uni, mu: float, sigma: float) -> float:
+    """`random.gauss`, as CPython computes it, on that stream."""
+    if w[W_HAS_GAUSS] != 0.0:
+        z = w[W_GAUSS]
+        w[W_HAS_GAUSS] = 0.0
+    else:
+        x2pi = uniform(w, uni) * TWOPI
+        g2rad = sqrt(-2.0 * log(1.0 - uniform(w, uni)))
+        z = cos(x2pi) * g2rad
+        w[W_GAUSS] = sin(x2pi) * g2rad
+        w[W_HAS_GAUSS] = 1.0
+    return mu + z * sigma
+
+
+def sonar_edges(w, t: float) -> None:
+    """`SimGpio.advance_to(t)` for the echo pin, each edge and watchdog report into `HcSr04._edge`. The
+    edges fire in the order of SimGpio's heap, (time, pin, level): a fall at its rise's instant (a
+    width of 0: a jitter below the floor's range) fires first, and the driver, with no rise yet,
+    ignores it; the rise then waits for the watchdog."""
+    while True:
+        rise, fall = w[W_RISE_T], w[W_FALL_T]
+        if fall <= t and fall <= rise:
+            w[W_FALL_T] = inf
+            w[W_LAST_EDGE] = fall
+            if w[W_RISE] >= 0.0:
+                width_us = round(fall * 1e6) - w[W_RISE]
+                w[W_RISE] = -1.0
+                w[W_WAITING] = 0.0
+                d = width_us / US_PER_M
+                w[W_RESULT] = d if MIN_RANGE_M <= d <= MAX_RANGE_M else nan
+                w[W_HAS_RESULT] = 1.0
+        elif rise <= t:
+            w[W_RISE_T] = inf
+            w[W_LAST_EDGE] = rise
+            w[W_RISE] = round(rise * 1e6)
+        else:
+            break
+    last = w[W_LAST_EDGE]
+    while t - last >= WATCHDOG_S:    # pigpio repeats the report while no edge comes
+        last += WATCHDOG_S
+        w[W_LAST_EDGE] = last
+        if w[W_WAITING] != 0.0 and (w[W_RISE] >= 0.0 or round(last * 1e6) - w[W_TRIGGER] >= 1000 * WATCHDOG_MS):
+            w[W_RISE] = -1.0
+            w[W_WAITING] = 0.0
+            w[W_RESULT] = nan
+            w[W_HAS_RESULT] = 1.0
+
+
+def sonar_trigger(w, x, uni, k, t: float) -> None:
+    """`HcSr04.trigger` and `SimGpio.gpio_trigger`: the echo's edges for the range along -z_b now."""
+    if w[W_WAITING] != 0.0:
+        return
+    w[W_WAITING] = 1.0
+    w[W_TRIGGER] = round(t * 1e6)
+    te = t + 10 * 1e-6 + ECHO_DELAY_S
+    c = cos(x[PHI]) * cos(x[THETA])
+    d = x[Z] / c if c > 0.5 else inf
+    if d > 4.5 or (k[DROPOUT] != 0.0 and uniform(w, uni) < k[DROPOUT]):
+        width = NO_ECHO_S
+    else:
+        width = max(d * US_PER_M + gauss(w, uni, 0.0, k[SONAR_SIGMA]), 0.0) * 1e-6
+    w[W_RISE_T] = te
+    w[W_FALL_T] = te + width
+
+
+def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -> bool:
+    """`Plant.advance` over the loop period ending at i dt: the delayed command, the floor, one RK4 step,
+    a touchdown. False if the state is no longer finite (`Diverged`)."""
+    head = (int(w[W_HEAD]) + 1) % nring
+    w[W_HEAD] = head
+    for j in range(4):
+        ring[head, j] = w[W_NEXT + j]
+    old, new = (head + 1) % nring, (head + 2) % nring
+    if frac != 0.0:
+        u1 = ring[old, 0] * frac + ring[new, 0] * (1.0 - frac)
+        u2 = ring[old, 1] * frac + ring[new, 1] * (1.0 - frac)
+        u3 = ring[old, 2] * frac + ring[new, 2] * (1.0 - frac)
+        u4 = ring[old, 3] * frac + ring[new, 3] * (1.0 - frac)
+    else:
+        u1, u2, u3, u4 = ring[new, 0], ring[new, 1], ring[new, 2], ring[new, 3]
+    w[W_UAPP], w[W_UAPP + 1], w[W_UAPP + 2], w[W_UAPP + 3] = u1, u2, u3, u4
+    dt = k[DT]
+    t_end = (i - 1) * dt + 1 * (dt / 1)
+    ground = False
+    if w[W_GROUND] != 0.0:
+        f, _, force, _, _ = forces(x, u1, u2, u3, u4, codes, q, wk)
+        ground = not (force[2] + f[0] + f[1] + f[2] + f[3]) / k[M_] > k[G_]
+    if not (ground and x.shape[0] == N_RIGID):
+        y = rk4(x, commanded(u1, u2, u3, u4, q, wk[12:20]), codes, q, dt / 1, wk)
+        for j in range(N_RIGID if ground else 0, x.shape[0]):
+            x[j] = y[j]
+        if not ground:
+            w[W_GROUND] = 0.0
+            s = 0.0
+            for j in range(x.shape[0]):
+                s += x[j]
+            if s - s != 0.0:
+                return False
+            if x[Z] < 0.0:                   # `Plant._touch_down`
+                vz = x[VZ]
+                if vz < -0.01 and -vz > w[W_TOUCHDOWN]:
+                    w[W_TOUCHDOWN] = -vz
+                w[W_T_STOP], w[W_VZ_STOP] = t_end, vz
+                for j in (Z, VX, VY, VZ, PHI, THETA, P, Q, R):
+                    x[j] = 0.0
+                w[W_GROUND] = 1.0
+    return True
+
+
+def chip_read(x, w, q, codes, regs, cs, cc, e, jump, k, t: float, wk) -> bool:
+    """`SimMpu9250._sample` at t (the plant's specific force, rates, rotors) and `Mpu9250.read` of the
+    burst; the sample in w[W_S:], the gyro less the calibration's bias. False: the frame is refused."""
+    f, _, force, _, rw = forces(x, w[W_UAPP], w[W_UAPP + 1], w[W_UAPP + 2], w[W_UAPP + 3], codes, q, wk)
+    t_stop, vz = w[W_T_STOP], w[W_VZ_STOP]
+    stopping = -vz / CONTACT_S if 0.0 <= t - t_stop < CONTACT_S else 0.0
+    if w[W_GROUND] != 0.0:
+        fx, fy, fz = 0.0, 0.0, k[G_] + stopping
+    else:
+        m = k[M_]
+        fx, fy, fz = force[0] / m, force[1] / m, (force[2] + f[0] + f[1] + f[2] + f[3]) / m + stopping
+    dt = t - w[W_T_LAST]
+    w[W_T_LAST] = t
+    if dt > 0.0 and dt != w[W_KDT]:
+        w[W_KDT] = dt
+        cc[_C_KA], cc[_C_KG] = 1.0 - exp(-dt / cc[_C_A_DELAY]), 1.0 - exp(-dt / cc[_C_G_DELAY])
+    temp = AMBIENT_C if k[WARM_RISE] == 0.0 else AMBIENT_C + k[WARM_RISE] * (1.0 - exp((0.0 - t) / k[WARM_TAU]))
+    chip_frame(regs, cs, cc, e, 0, fx, fy, fz, x[P], x[Q], x[R], f[0], f[1], f[2], f[3], rw[0], rw[1], rw[2], rw[3],
+               t, dt, temp, w[W_READS] > 0.0)
+    w[W_READS] += 1.0
+    if int(w[W_READS]) % MAG_EVERY == 1 % MAG_EVERY:   # reads 1, 5, 9...: the AK8963's sample
+        sf, cf, st, ct, sp, cp = sin(x[PHI]), cos(x[PHI]), sin(x[THETA]), cos(x[THETA]), sin(x[PSI]), cos(x[PSI])
+        rm = rotation_from_trig(sf, cf, st, ct, sp, cp)
+        bx = rm[0] * BN + rm[3] * BW + rm[6] * BU
+        by = rm[1] * BN + rm[4] * BW + rm[7] * BU
+        bz = rm[2] * BN + rm[5] * BW + rm[8] * BU
+        sm = k[MAG_SIGMA]
+        w[W_MAG] = i16((by + sm * e[9]) * AK_LSB)
+        w[W_MAG + 1] = i16((bx + sm * e[10]) * AK_LSB)
+        w[W_MAG + 2] = i16(-(bz + sm * e[11]) * AK_LSB)
+    words = (word(regs, _BURST), word(regs, _BURST + 2), word(regs, _BURST + 4), word(regs, _BURST + 6),
+             word(regs, _BURST + 8), word(regs, _BURST + 10), word(regs, _BURST + 12))
+    had_prev = w[W_HAS_PREV] != 0.0
+    jumps_prev = False
+    if had_prev:
+        for j in range(7):
+            if abs(w[W_PREV + j] - words[j]) > jump[j]:
+                jumps_prev = True
+    for j in range(7):
+        w[W_PREV + j] = words[j]
+    w[W_HAS_PREV] = 1.0
+    if not k[TEMP_LO] <= words[3] <= k[TEMP_HI]:
+        return False
+    if w[W_HAS_GOOD] != 0.0:
+        jumps_good = False
+        for j in range(7):
+            if abs(w[W_GOOD + j] - words[j]) > jump[j]:
+                jumps_good = True
+        if jumps_good and (not had_prev or jumps_prev):
+            return False
+    for j in range(7):
+        w[W_GOOD + j] = words[j]
+    w[W_HAS_GOOD] = 1.0
+    a, g = k[A_SCALE], k[G_SCALE]
+    s = W_S
+    w[s], w[s + 1], w[s + 2] = words[0] * a, words[1] * a, words[2] * a
+    w[s + 3] = words[4] * g - w[W_GYRO_BIAS]      # `Calibration.correct`
+    w[s + 4] = words[5] * g - w[W_GYRO_BIAS + 1]
+    w[s + 5] = words[6] * g - w[W_GYRO_BIAS + 2]
+    m = reg.AK_TESLA_PER_LSB
+    w[s + 6], w[s + 7], w[s + 8] = w[W_MAG + 1] * m, w[W_MAG] * m, -w[W_MAG + 2] * m   # AK8963 -> body axes
+    return True
+
+
+def word(regs, at: int) -> float:
+    """The big-endian int16 at regs[at] (the driver's `>h`)."""
+    v = regs[at] * 256 + regs[at + 1]
+    return float(v - 65536 if v >= 32768 else v)
+
+
+def i16(v: float) -> float:
+    """`imu._i16` as a float."""
+    return float(_i16(v))
+
+
+def land(w, e, sp, t_plan: float, alt: float) -> None:
+    """`FlightLoop._land` at plan time t_plan: the landing's thrust from now on; roll and pitch back to
+    level over LAND_LEVEL_S, the altitude's ramp to 0 at LAND_SPEED (the log's setpoint), a new end."""
+    ob_landing_start(e, LAND_SPEED)
+    w[W_LANDING] = 1.0
+    w[W_LAND_T] = t_plan
+    for j in range(4):
+        w[W_LAND_SP + j] = sp[j]
+    ramp = (alt if alt > 0.0 else 0.0) / LAND_SPEED
+    w[W_LAND_RAMP] = ramp
+    w[W_DURATION] = t_plan + ramp + LAND_SLACK_S
+
+
+def landing_setpoint(w, t_plan: float, j: int) -> float:
+    """`Plan._value` of the loop's landing plan: channel j's raised-cosine ramp to 0 from its value at
+    the landing's start (yaw held there)."""
+    start, t0 = w[W_LAND_SP + j], w[W_LAND_T]
+    if j == 2:
+        return start
+    ramp = LAND_LEVEL_S if j < 2 else w[W_LAND_RAMP]
+    if ramp <= 0.0 or t_plan >= t0 + ramp:
+        return 0.0
+    s = (t_plan - t0) / ramp
+    return start + (0.0 - start) * 0.5 * (1.0 - cos(pi * s))
+
+
+def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, NORM, UNI, SP, REC, k, jump, i0: int, n: int,
+        i_arm: int, rec0: int) -> None:
+    """Loop periods i0 + 1 .. i0 + n of every vehicle (rows of the arrays): X the plants' states, W the
+    world's and loop's (`w`), E and KC the controllers' (sim/sweeps/onboard.py), Q the plants' constants
+    (sim/world/compiled.py `layout_rows`), RING and NRING, FRAC the delayed commands, REGS, CS, CC the
+    chips' registers, state and constants, NORM their normals (n, 12) per period, UNI the Mersenne
+    Twisters' uniforms, SP the plan's setpoints per period from i0 + 1, REC the judged record (rows
+    from period rec0 on: true and estimated roll, pitch, yaw), k the shared constants (`N_WORLD`), jump the
+    driver's limits per word. The loop arms at period i_arm."""
+    dt, t_arm = k[DT], k[T_ARM]
+    cnt = np.zeros(4, dtype=np.int64)
+    wk = work(X.shape[1])
+    for v in range(X.shape[0]):
+        x, w, e, kc, q, ring, regs, cs, cc = X[v], W[v], E[v], KC[v], Q[v], RING[v], REGS[v], CS[v], CC[v]
+        uni = UNI[v]
+        nring, frac = NRING[v], FRAC[v]
+        for step in range(n):
+            if w[W_DONE] != 0.0:
+                break
+            i = i0 + step + 1
+            t = i * dt
+            if not plant_period(x, w, ring, q, codes, nring, frac, i, k, wk):
+                w[W_REASON], w[W_DONE] = DIVERGED, 1.0
+                break
+            sonar_edges(w, t)
+            if chip_read(x, w, q, codes, regs, cs, cc, NORM[v, step], jump, k, t, wk):
+                w[W_BAD] = 0.0
+            else:
+                w[W_BAD] += 1.0
+                if w[W_BAD] > MAX_BAD_IMU_FRAMES:
+                    w[W_REASON], w[W_DONE] = IMU_BAD, 1.0
+                    break
+            if i % int(k[POWER_EVERY]) == 0:                 # the power monitor's read
+                for _ in range(int(k[INA_DRAWS])):
+                    gauss(w, uni, 0.0, 1.0)
+            if i % int(k[SONAR_EVERY]) == 0:
+                sonar_trigger(w, x, uni, k, t)
+            has_echo = w[W_HAS_RESULT] != 0.0
+            echo = w[W_RESULT]
+            w[W_HAS_RESULT] = 0.0
+            s = W_S
+            ax, ay, az, gx, gy, gz, mx, my, mz = w[s], w[s + 1], w[s + 2], w[s + 3], w[s + 4], w[s + 5], w[s + 6], \
+                w[s + 7], w[s + 8]
+            finished = False
+            write = False
+            sp = (0.0, 0.0, 0.0, 0.0)
+            if w[W_ARMED] == 0.0:
+                roll, pitch = ob_tilt(ax, ay, az)          # `Calibration.add`
+                c = W_CAL
+                w[c] += gx
+                w[c + 1] += gy
+                w[c + 2] += gz
+                w[c + 3] += roll
+                w[c + 4] += pitch
+                h = ob_heading(mx, my, mz, roll, pitch)
+                w[W_CAL_MAG] += 1.0
+                w[c + 5] += cos(h)
+                w[c + 6] += sin(h)
+                w[W_CAL_N] += 1.0
+                if i >= i_arm:                               # `Calibration.apply`, `FlightController.arm`
+                    nc = w[W_CAL_N]
+                    w[W_GYRO_BIAS], w[W_GYRO_BIAS + 1], w[W_GYRO_BIAS + 2] = w[c] / nc, w[c + 1] / nc, w[c + 2] / nc
+                    ob_set_reference(e, w[c + 3] / nc, w[c + 4] / nc, atan2(w[c + 6], w[c + 5]), True)
+                    ob_arm(e, az)
+                    w[W_ARMED] = w[W_FLYING] = e[ob.IN_FLIGHT] = 1.0
+                    w[W_LAST_ECHO] = t
+                    w[W_DURATION] = k[DURATION]
+            else:
+                tp = t - t_arm
+                if w[W_LANDING] != 0.0:
+                    sp = (landing_setpoint(w, tp, 0), landing_setpoint(w, tp, 1), landing_setpoint(w, tp, 2),
+                          landing_setpoint(w, tp, 3))
+                else:
+                    sp = (SP[step, 0], SP[step, 1], SP[step, 2], SP[step, 3])
+                flying = w[W_FLYING] != 0.0
+                if has_echo:
+                    if echo == echo:
+                        w[W_LAST_ECHO] = t
+                    if flying:
+                        ob_on_range(e, kc, echo, t)
+                if flying:
+                    ob_step(e, kc, gx, gy, gz, ax, ay, az, mx, my, mz, True, dt, sp[0], sp[1], sp[2], sp[3], cnt)
+                    if not (abs(e[ob.ROLL]) <= CRASH_TILT and abs(e[ob.PITCH]) <= CRASH_TILT):
+                        w[W_REASON], w[W_DONE] = CRASH, 1.0
+                        break
+                    alt = e[ob.ALT]
+                    if alt > w[W_MAX_ALT]:
+                        w[W_MAX_ALT] = alt
+                    if w[W_BLIND] == 0.0 and t - w[W_LAST_ECHO] > LOST_ALT_S and alt > TOUCHDOWN_ALT:
+                        w[W_BLIND] = 1.0
+                        if w[W_LANDING] == 0.0:
+                            land(w, e, sp, tp, e[ob.VZ])
+                    if w[W_LANDING] != 0.0:
+                        touched = e[ob.L_LANDED] != 0.0
+                    else:
+                        if sp[3] <= 0.0 and alt < TOUCHDOWN_ALT and k[LANDS] != 0.0:
+                            if w[W_T_TOUCH] < 0.0:
+                                w[W_T_TOUCH] = t
+                        else:
+                            w[W_T_TOUCH] = -1.0
+                        touched = w[W_T_TOUCH] >= 0.0 and t - w[W_T_TOUCH] > TOUCHDOWN_S
+                    write = True
+                    if touched:
+                        w[W_FLYING] = e[ob.IN_FLIGHT] = 0.0
+                        for j in range(4):
+                            w[W_NEXT + j] = 0.0               # `SimMotors.stop`
+                        write = False
+                        finished = w[W_LANDING] != 0.0
+                else:
+                    ob_step(e, kc, gx, gy, gz, ax, ay, az, mx, my, mz, True, dt, 0.0, 0.0, e[ob.YAW], 0.0, cnt)
+                if tp >= w[W_DURATION]:
+                    if w[W_FLYING] == 0.0:
+                        w[W_REASON], w[W_DONE] = ENDED, 1.0
+                        break
+                    if w[W_LANDING] != 0.0:
+                        w[W_REASON], w[W_DONE] = NO_TOUCHDOWN, 1.0
+                        break
+                    if w[W_MAX_ALT] < LEFT_GROUND_ALT:
+                        for j in range(4):
+                            w[W_NEXT + j] = 0.0
+                        w[W_REASON], w[W_DONE] = NEVER_LEFT, 1.0
+                        break
+                    land(w, e, sp, tp, e[ob.ALT])
+            if write and w[W_FLYING] != 0.0:                   # `SimMotors.write`
+                for j in range(4):
+                    w[W_NEXT + j] = cnt[j] * (255.0 / 40000.0)
+            if w[W_ARMED] != 0.0:                            # the log's row: the judge's figures
+                tilt = abs(x[PHI]) if abs(x[PHI]) > abs(x[THETA]) else abs(x[THETA])
+                if not tilt <= w[W_TILT]:
+                    w[W_TILT] = tilt if tilt == tilt else inf
+                if x[Z] > w[W_Z_MAX]:
+                    w[W_Z_MAX] = x[Z]
+                w[W_Z_END] = x[Z]
+                row = i - rec0
+                if 0 <= row < REC.shape[1]:
+                    REC[v, row, 0], REC[v, row, 1] = x[PHI], x[THETA]
+                    REC[v, row, 2] = (x[PSI] + pi) % TWOPI - pi
+                    REC[v, row, 3], REC[v, row, 4], REC[v, row, 5] = e[ob.ROLL], e[ob.PITCH], e[ob.YAW]
+                w[W_ROWS] += 1.0
+            if finished or (w[W_ARMED] != 0.0 and w[W_FLYING] == 0.0 and w[W_GROUND] != 0.0):
+                # the loop's own landing ends the flight; after the plan's, nothing moves on the floor
+                # to the plan's end but the estimate: the judged record holds the last row
+                for row in range(max(i - rec0 + 1, 0), REC.shape[1]):
+                    for j in range(N_REC):
+                        REC[v, row, j] = REC[v, row - 1, j] if row > 0 else nan
+                w[W_REASON], w[W_DONE] = ENDED, 1.0
+                break
+
+
+
+
+# the onboard controller's functions (sim/sweeps/onboard.py), bound to their compiled copies by `compiled_fly`
+ob_step, ob_on_range, ob_tilt, ob_heading, ob_set_reference, ob_arm, ob_landing_start = (
+    ob.step, ob.on_range, ob.tilt, ob.heading_from_mag, ob.set_reference, ob.arm, ob.landing_start)
+
+
+@functools.cache
+def compiled_fly():
+    """`fly` compiled (numba), every call bound to a compiled copy of its one plain source, or None."""
+    from flightctl.sim.world import compiled, imu
+    if not compiled.enabled():
+        return None
+    cc = compiled.compiled_copy
+    plant = compiled.functions()
+    o = ob.compiled_functions(cc)
+    u = cc(uniform)
+    g = cc(gauss, uniform=u)
+    at = plant["forces"]
+    return cc(fly, work=plant["work"], plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"]),
+              sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
+              chip_read=cc(chip_read, forces=at, chip_frame=imu.chip_frame_compiled(), word=cc(word),
+                           rotation_from_trig=plant["rotation_from_trig"], i16=cc(i16, _i16=cc(imu._i16))),
+              land=cc(land, ob_landing_start=o["landing_start"]), landing_setpoint=cc(landing_setpoint),
+              ob_step=o["step"], ob_on_range=o["on_range"], ob_tilt=o["tilt"], ob_heading=o["heading"],
+              ob_set_reference=o["set_reference"], ob_arm=o["arm"])
