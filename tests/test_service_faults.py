@@ -19,7 +19,8 @@ from flightctl.drivers.esc import EscError
 from flightctl.params import load
 from flightctl.service import EXIT_ERROR, EXIT_REFUSED, device_error, main, prearm
 from flightctl.service.queue import PlanQueue
-from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, World
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.world.power import SimIna219, SimSMBus
 from test_service_run import Service
 
