@@ -218,4 +218,9 @@ def test_a_log_scrambled_on_purpose_is_refused_naming_the_axis(tmp, tmp_path, ca
     said = err.split("contradict its data on", 1)[1].split(":", 1)[0]
     named = {a for a in AXES if a in said}
     assert named and named <= expected, (expected, err)
+    # each axis named is either significantly negative, or one the rotors fitted freely drive (a motor
+    # order scrambled: the same four columns) where the declared layout shows nothing
+    for axis in named:
+        why = err.split(f"{axis} effectiveness", 1)[1].split(";", 1)[0]
+        assert "(negative: t = -" in why or "each fitted freely, drive" in why, err
     assert not out.exists()

@@ -14,7 +14,7 @@ import json
 import pytest
 
 from flightctl.cli import main
-from real import INDIFLIGHT, need
+from real import FLIGHTS, INDIFLIGHT, need
 
 BENCH_TAU = 0.020                    # s, the paper's Table I: the motor's time constant on the bench
 FLIGHT_TAU = (0.0259, 0.0266)        # s, its onboard fit in flight, motors 1-3
@@ -103,3 +103,44 @@ def test_the_docs_table_is_what_the_corpus_command_computes_quick(tmp_path):
 @pytest.mark.timeout(1800)   # every shipped log, two at a time: 5-10 min on this machine when shared
 def test_every_shipped_log_is_diagnosed_or_refused_as_the_docs_table_says(tmp_path):
     assert _corpus(need(INDIFLIGHT.parent), tmp_path) == _doc_table()
+
+
+def _refusal(capsys, log, tmp_path, *index) -> str:
+    capsys.readouterr()
+    out = tmp_path / "r.json"
+    assert main(["diagnose", str(log), *index, "--json", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and not out.exists(), err
+    return err
+
+
+def test_a_px4_hover_with_motors_logged_at_10_hz_is_judged_for_static_effects(tmp_path):
+    """quadrotor_local.ulg takes off on a ramp that sits on its legs for about ten seconds: with those
+    rows taken as flight no effectiveness could be told from zero and the log was refused as contradicting
+    its layout. Its 10 Hz motor outputs are enough for the static effects, and only those are judged."""
+    report = run([need(FLIGHTS / "px4" / "quadrotor_local.ulg")], tmp_path / "q.json")
+    base = report["base_model"]
+    for name in ("k_p", "k_q", "k_z"):
+        assert base[name]["value"] > 2 * base[name]["stderr"], (name, base[name])
+    not_judged = {n["cause"]: n["why"] for n in report["not_judged"]}
+    assert all("10.0 Hz" in not_judged[c] for c in TIMING), not_judged
+    assert report["data"]["airborne_s"] < 80          # the ramp on the ground and the touchdown left out
+
+
+def test_px4_sensors_logged_at_9_hz_are_refused_for_that(tmp_path, capsys):
+    err = _refusal(capsys, need(FLIGHTS / "px4" / "esc_status_log.ulg"), tmp_path)
+    assert "gyro and accelerometer were logged at 9.6 Hz" in err and "SDLOG_PROFILE" in err, err
+    assert "contradict" not in err
+
+
+def test_a_log_that_hardly_moves_an_axis_is_refused_as_not_showing_it(tmp_path, capsys):
+    """btfl_all.bbl #12: the Gecko of btfl_002 (which is judged), 3.7 s in the air, hardly a pitch."""
+    err = _refusal(capsys, need(FLIGHTS / "betaflight" / "btfl_all.bbl"), tmp_path, "--index", "12")
+    assert "does not identify the vehicle's pitch effectiveness" in err and "s in the air" in err, err
+    assert "contradict" not in err
+
+
+def test_a_take_off_that_never_left_the_ground_is_not_called_an_unlogged_motor(tmp_path, capsys):
+    """INAV's log 3: motor 3 held at its minimum by the controller for half a second on the ground."""
+    err = _refusal(capsys, need(FLIGHTS / "inav" / "blackbox_log_2026-02-21_145057.TXT"), tmp_path, "--index", "3")
+    assert "too short to judge" in err and "not logged" not in err, err

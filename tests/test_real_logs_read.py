@@ -71,7 +71,8 @@ def test_a_px4_quadrotor_on_uavcan_has_its_motors_and_rotor_speeds_found():
     assert flying.mean() > 0.8                          # 40 s of its 44 in the air
     w = np.vstack([t[f"omega{i}"] for i in range(1, 5)])
     assert np.nanmedian(w[:, flying]) * 60 / (2 * math.pi) == pytest.approx(2300, rel=0.25)   # esc_status rpm
-    assert "sensor_combined at 8.6 Hz" in t.meta["import_notes"]
+    assert "sensor_combined gyro at 8.9 Hz: too slow" in t.meta["import_notes"]
+    assert "SDLOG_PROFILE" in t.meta["log_faster"]     # what diagnose's refusal quotes
     assert t.meta["battery_cells"] == "6"
 
 
@@ -119,6 +120,11 @@ def test_a_file_of_44_logs_reads_each_on_its_own():
     four = entries[3]
     assert four.table is not None and four.seconds == pytest.approx(145, abs=3) and four.flight
     assert [e.index for e in entries if e.flight] == [4, 12]
+    # log 12 starts with one frame 19.7 s before the others (dropped as junk): its motors were logged at the
+    # loop's 500 Hz, not at the 112 Hz that its rows over a span with that gap would say
+    twelve = entries[11].table
+    assert float(twelve.meta["motor_rate_hz"]) == pytest.approx(500, rel=0.02)
+    assert float(twelve.meta["rate_hz"]) == pytest.approx(500, rel=0.02) and "log_faster" not in twelve.meta
     v = four.table["battery_v"][np.isfinite(four.table["battery_v"])]
     assert four.table.meta["battery_cells"] == "4" and 4 * 2.9 < v.min() and v.max() < 4 * 4.3     # sags to 3 V a cell on punch-outs
 

@@ -19,6 +19,7 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.logfile import FLIGHT_COLUMNS, FlightLogWriter, Table, read_flight_log
 from flightctl.sim.identify.diagnose.data import IDLE_P       # a motor runs above 1 % of its range
+from flightctl.sim.identify.diagnose.dataset import DYNAMIC_MIN_HZ   # what diagnose needs to time and to follow
 
 AXES = ("x", "y", "z")
 # Extra columns (docs/log-import.md has each one's source and unit): the measurements the diagnosis
@@ -47,10 +48,13 @@ class Stream:
     held: bool = False       # commands: held between samples (zero-order); measurements are interpolated
 
     def rate_hz(self) -> float:
-        """The rate of the stream's own samples (distinct times) over its span."""
-        t = np.unique(self.t)
-        span = t[-1] - t[0] if t.size > 1 else 0.0
-        return float((t.size - 1) / span) if span > 0 else 0.0
+        """The rate of the stream's own samples (distinct times) while it was logged: over its span less
+        its gaps (longer than GAP_PERIODS median periods: a log paused for 20 s is not logged slowly)."""
+        d = np.diff(np.unique(self.t))
+        if d.size == 0:
+            return 0.0
+        d = d[d <= GAP_PERIODS * np.median(d)]
+        return float(d.size / d.sum()) if d.sum() > 0 else 0.0
 
     def gaps(self) -> tuple[int, float]:
         """(the gaps longer than GAP_PERIODS median periods, the longest interval in s)."""
@@ -73,6 +77,25 @@ class Imported:
 
     def fail(self, what: str):
         raise InputError(f"{self.path}: {what}")
+
+
+def rate_notes(imp: Imported, motors: str, how: str) -> None:
+    """Notes when the gyro or the motor commands (`motors`: what they are in the log) were logged slower
+    than diagnose needs (DYNAMIC_MIN_HZ: sensors slower are not judged, motors slower for static effects
+    only), and `# log_faster:` with `how` (what the autopilot's logger needs) for its refusals."""
+    slow = False
+    rate = imp.streams["gyro"].rate_hz()
+    if rate < DYNAMIC_MIN_HZ:
+        slow = True
+        imp.notes.append(f"{imp.streams['gyro'].name} at {rate:.1f} Hz: too slow to follow the vehicle's motion "
+                         f"(diagnose needs {DYNAMIC_MIN_HZ:g} Hz); " + how)
+    rate = imp.streams["motors"].rate_hz()
+    if rate < DYNAMIC_MIN_HZ:
+        slow = True
+        imp.notes.append(f"{motors} logged at {rate:.1f} Hz: held between their samples, enough for static effects "
+                         "only; " + how)
+    if slow:
+        imp.meta["log_faster"] = how
 
 
 def _on(t: np.ndarray, s: Stream) -> np.ndarray:

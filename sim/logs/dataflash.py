@@ -18,7 +18,7 @@ import re
 import numpy as np
 
 from flightctl.errors import InputError
-from flightctl.sim.logs.common import Imported, Stream
+from flightctl.sim.logs.common import Imported, Stream, rate_notes
 
 FRD = np.array([[1.0], [-1.0], [-1.0]])
 DEG = math.pi / 180.0
@@ -40,9 +40,7 @@ QUAD_FRAMES = {
     14: ("CW_X", ((45, 1), (135, -1), (-135, 1), (-45, -1))),
     18: ("BF_X_REV", ((135, 1), (45, -1), (-135, -1), (-45, 1))),
 }
-SLOW_SENSOR_HZ = 100.0
-FAST_HZ = 48.0
-RATE_NOTE = ("to log them at the loop rate set LOG_BITMASK's IMU_FAST (and RCOUT) bits, or INS_RAW_LOG_OPT for "
+RATE_NOTE = ("set LOG_BITMASK's IMU_FAST (and RCOUT) bits, or INS_RAW_LOG_OPT for "
              "the raw gyro (GYR)")
 WANTED = ["PARM", "MSG", "VER", "IMU", "GYR", "ACC", "RCOU", "RCO2", "RCO3", "BAT", "BARO", "RFND", "ATT", "RATE",
           "ESC", "ARM", "EV"]
@@ -189,14 +187,8 @@ def read(path: str, text: bool = False) -> Imported:
         imp.fail("no IMU or GYR messages: the gyro was not logged")
     imp.streams["gyro"] = Stream(gsource.split(" ")[0], tg, g * FRD)
     imp.streams["acc"] = Stream("accelerometer", ta, a * FRD)
-    rate = imp.streams["gyro"].rate_hz()
-    if rate < SLOW_SENSOR_HZ:
-        imp.notes.append(f"gyro logged at {rate:.1f} Hz: too slow to follow the vehicle's rotation; read with the rate "
-                         "declared, for static effects only; " + RATE_NOTE)
     imp.streams["motors"] = _motors(p, msgs, imp)
-    if imp.streams["motors"].rate_hz() < FAST_HZ:
-        imp.notes.append(f"motor commands (RCOU) logged at {imp.streams['motors'].rate_hz():.1f} Hz: held between "
-                         "their samples, enough for static effects only; " + RATE_NOTE)
+    rate_notes(imp, "motor commands (RCOU)", RATE_NOTE)
     _measurements(p, msgs, imp)
     gf, af = float(p.get("INS_GYRO_FILTER", 0) or 0), float(p.get("INS_ACCEL_FILTER", 0) or 0)
     notches = "harmonic notch (INS_HNTCH_ENABLE)" if p.get("INS_HNTCH_ENABLE") else "none"

@@ -15,15 +15,13 @@ import math
 import numpy as np
 
 from flightctl.errors import InputError
-from flightctl.sim.logs.common import Imported, Stream, euler_from_frd_ned
+from flightctl.sim.logs.common import Imported, Stream, euler_from_frd_ned, rate_notes
 
 FRD = np.array([[1.0], [-1.0], [-1.0]])      # FRD (or NED) to ours: y and z change sign
 ARMED = 2                                    # vehicle_status.arming_state ARMED (every PX4 version)
 RANGE_MAX_M = 10.0                           # the contract's rangefinder range
 DOWNWARD = 25                                # distance_sensor.orientation ROTATION_DOWNWARD_FACING
-FAST_HZ = 48.0                               # motors logged slower than this: static effects only (docs/diagnose.md)
-SLOW_SENSOR_HZ = 100.0                       # a gyro logged slower than this cannot follow the rotation dynamics
-PROFILE_NOTE = ("to log them at full rate set SDLOG_PROFILE bit 4 (High rate: add 16, e.g. 17) or bit 3 "
+PROFILE_NOTE = ("set SDLOG_PROFILE bit 4 (High rate: add 16, e.g. 17) or bit 3 "
                 "(System identification: add 8) and reboot")
 
 
@@ -73,15 +71,8 @@ def read(path: str) -> Imported:
     imp.streams["gyro"] = Stream("sensor_combined gyro", t, g * FRD)
     ta = t + sc.get("accelerometer_timestamp_relative", np.zeros(t.size)) * 1e-6
     imp.streams["acc"] = Stream("sensor_combined accelerometer", ta, a * FRD)
-    rate = imp.streams["gyro"].rate_hz()
-    if rate < SLOW_SENSOR_HZ:
-        imp.notes.append(f"sensor_combined at {rate:.1f} Hz: too slow to follow the vehicle's rotation (its dynamics "
-                         "are tens of Hz); read with the rate declared, for static effects only; " + PROFILE_NOTE)
-    motors = px4motors.motors(u, p, imp, armed)
-    imp.streams["motors"] = motors
-    if motors.rate_hz() < FAST_HZ:
-        imp.notes.append(f"motor commands logged at {motors.rate_hz():.1f} Hz (PX4's default logger profile logs them "
-                         "at about 10 Hz): held between their samples, enough for static effects only; " + PROFILE_NOTE)
+    imp.streams["motors"] = px4motors.motors(u, p, imp, armed)
+    rate_notes(imp, "motor commands", PROFILE_NOTE)
     _measurements(u, p, imp)
     cutoff = float(p.get("IMU_GYRO_CUTOFF", 0) or 0)
     info = u.msg_info_dict

@@ -88,7 +88,7 @@ class Candidate:
     explains = ""
     changes_thrust = False   # its `fold` changes the base model (the thrusts, their scales, the rotors'
                              # positions) rather than adding a term to it: folded first
-    dynamic = False          # it needs the commands logged faster than the dynamics it times (verdict.DYNAMIC_MIN_HZ)
+    dynamic = False          # it needs the commands logged faster than the dynamics it times (dataset.DYNAMIC_MIN_HZ)
     physical_check = ""      # what size is physical, and its source (docs/diagnose.md, "Physical checks")
     needs_yaw = False        # it is told from the others by the yaw channel alone: not judged on a vehicle
                              # whose yaw effectiveness the log cannot identify (base.yaw_identified)

@@ -13,6 +13,7 @@ from flightctl.logfile import Table
 from flightctl.params import Airframe
 from flightctl.physics import thrust_from_command
 
+MIN_AIRBORNE_S = 1.0     # s of airborne data needed in total to judge anything
 Z_AIRBORNE = 0.10        # m: below this the legs may touch and the range is near its 2 cm limit
 EDGE_S = 0.1             # s trimmed at both ends of each airborne stretch
 MIN_STRETCH_S = 0.5      # s: shorter airborne stretches are dropped
@@ -24,6 +25,16 @@ IMU_COLUMNS = ("gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z")
 # least THROTTLE_SHARE of its median while all four run (a vehicle on the ground idles far below it).
 IDLE_P = 2.55
 THROTTLE_SHARE = 0.5
+# Without a height, the take-off and the landing: a vehicle can leave the ground only when its thrust is
+# near its weight (in ground effect, 1 / (1 - (R / 4z)^2) <= 4/3 at z >= R/2, it needs 3/4 of it), which
+# with f = h1 (P - h2)^2 and h2 >= 0 is a mean command of at least sqrt(3/4) = 0.87 of the hover's; and
+# a slow take-off sits on its legs, thrust rising under an accelerometer that does not move, until
+# nearly the hover's (px4/quadrotor_local.ulg: 10 s of ramp, off the ground at 0.9 of it). The rows
+# before the mean command (averaged over SMOOTH_S) first reaches HOVER_SHARE of its median, and after it
+# last does, are taken as on the ground: a second of flight lost at either end costs little; ground
+# taken for flight, a thrust that moves nothing, leaves no effectiveness to identify.
+HOVER_SHARE = 0.9
+SMOOTH_S = 0.5
 HEIGHT_SOURCES = ("mocap", "rangefinder")   # heights good to a few cm: they also give the airborne test
 FOREIGN_COLUMNS = ("height", "current", "omega1", "omega2", "omega3", "omega4")
 FILTER_KINDS = ("pt1", "pt2", "pt3", "biquad")
@@ -173,10 +184,13 @@ def _check_columns(table: Table, P: np.ndarray, low: float, what: str) -> None:
         if np.ptp(x) == 0:
             table.fail(f"{x[0]:g} on every row: a dead or unlogged sensor cannot be judged", column=name)
     running = P > low
-    if running.any():
-        for i in np.flatnonzero(~running.any(axis=1)):
-            table.fail(f"motor {i + 1} never runs (P at most {P[i].max():g}, {what}) "
-                       "while the others do: its command was not logged", column=f"P{i + 1}")
+    dt = np.diff(table["t"], append=table["t"][-1])
+    for i in np.flatnonzero(~running.any(axis=1)):
+        others = float(dt[np.delete(running, i, axis=0).all(axis=0)].sum())
+        if others >= MIN_AIRBORNE_S:       # less is no flight: too short to judge, whatever the motor
+            table.fail(f"motor {i + 1} never runs (P at most {P[i].max():g}, {what}) while the others ran "
+                       f"for {others:.1f} s: a quadrotor cannot fly so; its command was not logged",
+                       column=f"P{i + 1}")
 
 
 def _levelled_range(t, rng, Rm):
@@ -210,16 +224,32 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, notes: list[str]):
     else:
         z = _levelled_range(table["t"], table["range"], Rm)
     mean_p = P.mean(axis=0)
-    up = running & (mean_p >= THROTTLE_SHARE * np.median(mean_p[running])) if running.any() else running
+    hover = float(np.median(mean_p[running])) if running.any() else 0.0
+    up = running & (mean_p >= THROTTLE_SHARE * hover)
     if np.isfinite(z).any():
         up &= np.nan_to_num(z, nan=-1.0) > Z_AIRBORNE
-    else:
+    elif up.any():
+        up &= _between_take_off_and_landing(table["t"], mean_p, HOVER_SHARE * hover)
         notes.append(f"no precise height: airborne taken as all motors running with the mean command at least "
-                     f"{THROTTLE_SHARE:g} of its median")
+                     f"{THROTTLE_SHARE:g} of its median, from the first time it reaches {HOVER_SHARE:g} of it "
+                     f"(averaged over {SMOOTH_S:g} s: the take-off) to the last (the landing)")
     omega = None
     if all(f"omega{i}" in table for i in range(1, 5)):
         omega = np.vstack([table[f"omega{i}"] for i in range(1, 5)])
     return layout, up, z, omega
+
+
+def _between_take_off_and_landing(t: np.ndarray, mean_p: np.ndarray, level: float) -> np.ndarray:
+    """(n,) bool: the rows from the first time the mean command, averaged over SMOOTH_S, reaches `level`
+    to the last time it does (HOVER_SHARE: before and after, the vehicle is taken as on the ground)."""
+    n = t.size
+    width = max(1, int(round(SMOOTH_S / float(np.median(np.diff(t)))))) if n > 1 else 1
+    smooth = np.convolve(mean_p, np.ones(width) / width, mode="same")
+    high = np.flatnonzero(smooth >= level)
+    out = np.zeros(n, bool)
+    if high.size:
+        out[high[0]:high[-1] + 1] = True
+    return out
 
 
 def _cells(table: Table) -> int | None:

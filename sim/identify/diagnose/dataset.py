@@ -31,6 +31,10 @@ GYRO, ACC = slice(0, 3), slice(3, 6)
 THRUST_CHANNELS = (0, 1, 2, 5)   # the channels the rotors' thrust drives (roll, pitch, yaw torque; thrust)
 
 LOWPASS_HZ = 12.0        # zero-phase low-pass applied to every residual (2nd-order Butterworth, twice)
+# A lag or a delay of tens of milliseconds shows only in commands logged at several times the low-pass
+# bandwidth; a log whose motor outputs are slower is judged for its static effects only, low-passed at a
+# quarter of its motor rate; one whose gyro and accelerometer are slower is not judged (verdict.py).
+DYNAMIC_MIN_HZ = 4.0 * LOWPASS_HZ
 # After the low-pass the channels are kept at FLAT_PER_BAND times its bandwidth (every `step`-th row):
 # the filter's response there is (1/8)^4 = 2.4e-4 of the pass band's, so nothing is aliased, and the
 # fits, scores and tests see the same signal at a tenth of the samples of a 1 kHz log.

@@ -20,18 +20,13 @@ from flightctl.sim.causes import CAUSES, make
 from flightctl.sim.causes.battery_sag import pack_range
 from flightctl.sim.identify.diagnose.base import YAW_UNKNOWN, identify, yaw_identified
 from flightctl.sim.identify.diagnose.candidate import Result, columns_of
-from flightctl.sim.identify.diagnose.data import MIN_STRETCH_S, Layout, load_file
-from flightctl.sim.identify.diagnose.dataset import (CHANNELS, LOWPASS_HZ, N_BLOCKS, OFFSET, UNITS, Change,
+from flightctl.sim.identify.diagnose.data import MIN_AIRBORNE_S, MIN_STRETCH_S, Layout, load_file
+from flightctl.sim.identify.diagnose.dataset import (CHANNELS, DYNAMIC_MIN_HZ, LOWPASS_HZ, N_BLOCKS, OFFSET, UNITS, Change,
                                                      DataSet, Vehicle)
 from flightctl.sim.identify.diagnose.rotorspeed import rotor_gain_check, rotor_speed_lag, timing_agreement
 from flightctl.sim.identify.diagnose.scoring import (DM_CHANNEL_WINDOW_S, DM_WINDOW_S, MIN_CHANNEL_GAIN, MIN_GAIN,
                                                      T_CHANNEL, T_CRIT, geomean, heldout_linear, significance)
 
-MIN_AIRBORNE_S = 1.0     # s of airborne data needed in total to judge anything
-# A lag or a delay of tens of milliseconds shows only in commands logged at several times the
-# low-pass bandwidth; a log whose motor outputs are slower is judged for its static effects only,
-# low-passed at a quarter of its motor rate.
-DYNAMIC_MIN_HZ = 4.0 * LOWPASS_HZ
 # Causes that are one physical effect modelled two ways: once one is in the chain the other is not tried.
 TWINS = {"motor_lag": "motor_dynamics", "motor_dynamics": "motor_lag"}
 TIMING = ("actuation_delay", "motor_lag", "motor_dynamics")     # the causes that time the actuation
@@ -248,8 +243,25 @@ def _motor_rate(tables: list[Table]) -> float | None:
     return min(rates) if rates else None
 
 
+def _faster(tables: list[Table]) -> str:
+    """'; to log them faster: ...' from a log's `# log_faster:` line (what its autopilot's logger needs), or ''."""
+    how = next((t.meta["log_faster"] for t in tables if t.meta.get("log_faster")), "")
+    return f"; to log them faster: {how}" if how else ""
+
+
+def _sensor_rate(tables: list[Table], files) -> None:
+    """InputError when the gyro and accelerometer were logged slower than DYNAMIC_MIN_HZ: a quadrotor's
+    motion under control has tens of Hz, and samples this sparse, each one reading and not an average
+    over its period, alias it (and the motors' vibration) into what is left (docs/real-flights.md)."""
+    rate = min(1.0 / float(np.median(np.diff(f.t))) for f in files)
+    if rate < DYNAMIC_MIN_HZ:
+        raise InputError(f"{', '.join(t.path for t in tables)}: its gyro and accelerometer were logged at {rate:.1f} Hz: "
+                         f"too slow to follow the vehicle's motion, which needs them at {DYNAMIC_MIN_HZ:g} Hz or more"
+                         + _faster(tables) + "; not judged")
+
+
 def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, speeds, notes: list[str], progress,
-             timed: bool = True) -> Vehicle:
+             slow: str | None = None) -> Vehicle:
     """The base model: a foreign vehicle's identified from the flight unless a parameter file is
     given; this project's airframe otherwise."""
     foreign = [f.foreign for f in files]
@@ -263,7 +275,7 @@ def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, speeds, notes: 
         layout = Layout(tuple(v * scale for v in lay.x), tuple(v * scale for v in lay.y), lay.spin, "m", lay.source)
         notes.append("base model: the parameter file's airframe with the log's rotor layout (arm = l)")
         return Vehicle.known(a, layout)
-    vehicle, more = identify(files, lowpass_hz, progress, speeds, timed)
+    vehicle, more = identify(files, lowpass_hz, progress, speeds, slow)
     notes += [f"base model: {n}" for n in more]
     return vehicle
 
@@ -339,15 +351,18 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
         make(e.cause, **dict(e.parameters))     # the registry's checks (known cause, names, ranges) first
     notes: list[str] = []
     files = _files(tables, a, notes, progress)
-    lowpass, static_only = LOWPASS_HZ, None
+    _sensor_rate(tables, files)
+    lowpass, static_only, slow = LOWPASS_HZ, None, None
     rate = _motor_rate(tables)
     if rate is not None and rate < DYNAMIC_MIN_HZ:
         lowpass = rate / 4.0
         static_only = (f"the motor outputs were logged at {rate:.1f} Hz: a lag or a delay of tens of ms needs "
                        f"them at {DYNAMIC_MIN_HZ:g} Hz or more")
         notes.append(f"{static_only}; only static effects are judged, on data low-passed at {lowpass:.2g} Hz")
+        slow = (f"its motor commands were logged at {rate:.1f} Hz, held between samples that miss what the motors "
+                f"did in between" + _faster(tables))
     speeds = rotor_speed_lag(files)
-    vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, speeds, notes, progress, static_only is None)
+    vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, speeds, notes, progress, slow)
     ds = DataSet(files, vehicle, lowpass)
     ds.rotor_speeds = speeds
     gain_check = None
