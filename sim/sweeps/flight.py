@@ -182,9 +182,10 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
         f, _, force, _, _ = forces(x, u1, u2, u3, u4, codes, q, wk)
         ground = not (force[2] + f[0] + f[1] + f[2] + f[3]) / k[M_] > k[G_]
     if not (ground and x.shape[0] == N_RIGID):
-        y = rk4(x, commanded(u1, u2, u3, u4, q, wk[12:20]), codes, q, dt / 1, wk)
+        rk4(x, commanded(u1, u2, u3, u4, q), codes, q, dt / 1, wk)
+        y = 4 * x.shape[0]                   # where `rk4` leaves the new state
         for j in range(N_RIGID if ground else 0, x.shape[0]):
-            x[j] = y[j]
+            x[j] = wk[y + j]
         if not ground:
             w[W_GROUND] = 0.0
             s = 0.0
@@ -472,7 +473,7 @@ def compiled_fly():
     u = cc(uniform)
     g = cc(gauss, uniform=u)
     at = plant["forces"]
-    return cc(fly, work=plant["work"], plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"]),
+    return cc(fly, allocates=True, work=plant["work"], plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"]),
               sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
               chip_read=cc(chip_read, forces=at, chip_frame=imu.chip_frame_compiled(), word=cc(word),
                            rotation_from_trig=plant["rotation_from_trig"], i16=cc(i16, _i16=cc(imu._i16))),

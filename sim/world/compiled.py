@@ -93,9 +93,14 @@ def writable_folder(candidates) -> Path | None:
     return None
 
 
-def compiled_copy(fn, **dependencies):
+def compiled_copy(fn, allocates: bool = False, **dependencies):
     """`fn` compiled in nopython mode, its globals named in `dependencies` replaced (the compiled
-    copies of the plain functions it calls); None when compilation is off."""
+    copies of the plain functions it calls); None when compilation is off.
+
+    `allocates`: fn makes an array or returns one, and keeps numba's reference counting. Every other
+    copy compiles without it (numba's `_nrt=False`): the arrays it is given are its caller's, borrowed
+    for the call, so that no call in the batch's inner loop counts references (an atomic increment and
+    decrement per array argument per call: a third of the loop's time with it)."""
     if not enabled():
         return None
     import numba
@@ -103,7 +108,7 @@ def compiled_copy(fn, **dependencies):
     g.update(dependencies)
     copy = types.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__)
     copy.__qualname__, copy.__module__, copy.__doc__ = fn.__qualname__, fn.__module__, fn.__doc__
-    return numba.njit(cache=CACHE, nogil=True)(copy)
+    return numba.njit(cache=CACHE, nogil=True, **({} if allocates else {"_nrt": False}))(copy)
 
 
 # The effects the compiled plant carries, by their wrench hooks' codes (`layout`); a model with any other
@@ -157,127 +162,118 @@ def _layout(model):
 
 
 def work(n: int) -> np.ndarray:
-    """The scratch array of the functions below for a state of n entries: the rotors' f, tau, w, the
-    commanded thrusts and speeds, then a derivative, RK4's four stages and its trial state (n each)."""
-    return np.zeros(_WK_X + 6 * n)
+    """The scratch array of the functions below for a state of n entries: RK4's four stages and its
+    trial state (n each, `rk4`'s offsets)."""
+    return np.zeros(5 * n)
 
 
-_WK_CMD, _WK_X = 12, 20   # where `work` holds the commands and the state-sized arrays
+def commanded(P1, P2, P3, P4, q):
+    """The commanded thrusts (eq. 26) and speeds (eq. 27) of the command values P1..P4: (f1, f2, f3, f4,
+    w1, w2, w3, w4), `rotors`' cmd."""
+    h1, h2, c1 = q[_H1], q[_H2], q[_C1]
+    f1, f2 = thrust_from_command(P1, h1, h2), thrust_from_command(P2, h1, h2)
+    f3, f4 = thrust_from_command(P3, h1, h2), thrust_from_command(P4, h1, h2)
+    return f1, f2, f3, f4, rotor_speed(f1, c1), rotor_speed(f2, c1), rotor_speed(f3, c1), rotor_speed(f4, c1)
 
 
-def rotors(x, cmd, codes, q, Rm, xdot, wk):
+def rotors(x, xo, cmd, codes, q, Rm, xdot, do):
     """`Model._forces` of a model laid out by `layout` (the same functions in the same order): the
     rotors' thrusts f and torques tau, the effects' body force F and torque T, the rotors' speeds w (the
-    order of `Forces`), at the state x with the rotation Rm (`rotation_from_trig`), cmd the commanded
-    thrusts (eq. 26) and speeds (eq. 27); the rotor states' derivatives are written into xdot. f, tau
-    and w are views of the scratch array wk (`work`): no allocation in the batch's inner loop."""
+    order of `Forces`, each a tuple), at the state x[xo:] with the rotation Rm (`rotation_from_trig`),
+    cmd the commanded thrusts and speeds (`commanded`); the rotor states' derivatives are written into
+    xdot[do + N_RIGID:]. Offsets into arrays and tuples of floats, never a new array or view: nothing
+    for numba's reference counting in the batch's inner loop."""
     c1 = q[_C1]
-    motor = q[_TAU] > 0.0
-    f = wk[0:4]
-    tau = wk[4:8]
-    w = wk[8:12]
-    spin_up = 0.0
-    for i in range(4):
-        if motor:              # motor_dynamics: the rotor's speed is a state
-            dw = speed_rate(cmd[4 + i], x[N_RIGID + i], q[_TAU], q[_DOWN])
-            xdot[N_RIGID + i] = dw
-            spin_up += SPIN[i] * dw
-            f[i] = thrust_from_speed(x[N_RIGID + i], c1)
-        else:
-            f[i] = cmd[i]
-    for i in range(4):
-        tau[i] = rotor_torque(f[i], q[_G1], q[_G2])
-    for i in range(4):
-        w[i] = rotor_speed(f[i], c1)
-    vb = body_velocity(Rm, x[3], x[4], x[5])
+    if q[_TAU] > 0.0:          # motor_dynamics: the rotor's speed is a state
+        tau, down, r = q[_TAU], q[_DOWN], xo + N_RIGID
+        d1, d2 = speed_rate(cmd[4], x[r], tau, down), speed_rate(cmd[5], x[r + 1], tau, down)
+        d3, d4 = speed_rate(cmd[6], x[r + 2], tau, down), speed_rate(cmd[7], x[r + 3], tau, down)
+        xdot[do + N_RIGID], xdot[do + N_RIGID + 1], xdot[do + N_RIGID + 2], xdot[do + N_RIGID + 3] = d1, d2, d3, d4
+        spin_up = SPIN[0] * d1
+        spin_up += SPIN[1] * d2
+        spin_up += SPIN[2] * d3
+        spin_up += SPIN[3] * d4
+        f = (thrust_from_speed(x[r], c1), thrust_from_speed(x[r + 1], c1), thrust_from_speed(x[r + 2], c1),
+             thrust_from_speed(x[r + 3], c1))
+    else:
+        spin_up = 0.0
+        f = (cmd[0], cmd[1], cmd[2], cmd[3])
+    g1, g2 = q[_G1], q[_G2]
+    tau4 = (rotor_torque(f[0], g1, g2), rotor_torque(f[1], g1, g2), rotor_torque(f[2], g1, g2),
+            rotor_torque(f[3], g1, g2))
+    w = (rotor_speed(f[0], c1), rotor_speed(f[1], c1), rotor_speed(f[2], c1), rotor_speed(f[3], c1))
+    vb = body_velocity(Rm, x[xo + 3], x[xo + 4], x[xo + 5])
     running = airflow(f[0], f[1], f[2], f[3], q[_B]) if codes.shape[0] else 4.0
     Fx = Fy = Fz = Tx = Ty = Tz = 0.0
     for code in codes:
         if code == INFLOW:
             dz, dx, dy = inflow_wrench(f[0], f[1], f[2], f[3], q[_K_IN], q[_B], q[_L], q[_HUB], running, vb[2],
-                                       x[9], x[10])
+                                       x[xo + 9], x[xo + 10])
             Fz += dz
             Tx += dx
             Ty += dy
         elif code == REACTION:
             Tz += reaction_torque(q[_JP], spin_up)
         else:
-            dx, dy, dz = drag_wrench(q[_K_DRAG], q[_YAW], running, vb[0], vb[1], x[11])
+            dx, dy, dz = drag_wrench(q[_K_DRAG], q[_YAW], running, vb[0], vb[1], x[xo + 11])
             Fx += dx
             Fy += dy
             Tz += dz
-    return f, tau, (Fx, Fy, Fz), (Tx, Ty, Tz), w
-
-
-def commanded(P1, P2, P3, P4, q, cmd):
-    """The commanded thrusts (eq. 26) and speeds (eq. 27) of the command values P1..P4 into cmd (8):
-    `rotors`' cmd."""
-    P = (P1, P2, P3, P4)
-    for i in range(4):
-        cmd[i] = thrust_from_command(P[i], q[_H1], q[_H2])
-        cmd[4 + i] = rotor_speed(cmd[i], q[_C1])
-    return cmd
+    return f, tau4, (Fx, Fy, Fz), (Tx, Ty, Tz), w
 
 
 def forces(x, P1, P2, P3, P4, codes, q, wk):
-    """`rotors` at the state x for the command values P1..P4 (`Model.forces`); wk: `work`."""
+    """`rotors` at the state x for the command values P1..P4 (`Model.forces`); wk: `work` (the rotor
+    states' derivatives go to its first stage)."""
     Rm = rotation_from_trig(sin(x[6]), cos(x[6]), sin(x[7]), cos(x[7]), sin(x[8]), cos(x[8]))
-    n = x.shape[0]
-    xdot = wk[_WK_X:_WK_X + n]
-    for i in range(n):
-        xdot[i] = 0.0
-    return rotors(x, commanded(P1, P2, P3, P4, q, wk[_WK_CMD:_WK_X]), codes, q, Rm, xdot, wk)
+    return rotors(x, 0, commanded(P1, P2, P3, P4, q), codes, q, Rm, wk, 0)
 
 
-def stage(x, cmd, codes, q, xdot, wk):
-    """`Model.f` of a model laid out by `layout`: `rotors`, `aggregate` and `rigid_derivative`, into xdot."""
-    for i in range(xdot.shape[0]):
-        xdot[i] = 0.0
-    sf, cf, st, ct, sp, cp = sin(x[6]), cos(x[6]), sin(x[7]), cos(x[7]), sin(x[8]), cos(x[8])
-    f, tau, F, T, w = rotors(x, cmd, codes, q, rotation_from_trig(sf, cf, st, ct, sp, cp), xdot, wk)
+def stage(x, xo, cmd, codes, q, xdot, do):
+    """`Model.f` of a model laid out by `layout` at the state x[xo:xo + n]: `rotors`, `aggregate` and
+    `rigid_derivative`, into xdot[do:do + n]."""
+    sf, cf, st, ct, sp, cp = sin(x[xo + 6]), cos(x[xo + 6]), sin(x[xo + 7]), cos(x[xo + 7]), sin(x[xo + 8]), cos(x[xo + 8])
+    f, tau, F, T, w = rotors(x, xo, cmd, codes, q, rotation_from_trig(sf, cf, st, ct, sp, cp), xdot, do)
     agg = aggregate(f[0], f[1], f[2], f[3], tau[0], tau[1], tau[2], tau[3], w[0], w[1], w[2], w[3],
                     F[0], F[1], F[2], T[0], T[1], T[2], q[_L])
     r = _RIGID
-    d = rigid_derivative(x[3], x[4], x[5], sf, cf, st, ct, sp, cp, x[9], x[10], x[11], agg[0], agg[1], agg[2],
-                         agg[3], agg[4], agg[5], agg[6], q[r], q[r + 1], q[r + 2], q[r + 3], q[r + 4], q[r + 5],
-                         q[r + 6], q[r + 7])
+    d = rigid_derivative(x[xo + 3], x[xo + 4], x[xo + 5], sf, cf, st, ct, sp, cp, x[xo + 9], x[xo + 10], x[xo + 11],
+                         agg[0], agg[1], agg[2], agg[3], agg[4], agg[5], agg[6], q[r], q[r + 1], q[r + 2], q[r + 3],
+                         q[r + 4], q[r + 5], q[r + 6], q[r + 7])
     for i in range(N_RIGID):
-        xdot[i] = d[i]
-    return xdot
+        xdot[do + i] = d[i]
 
 
 def rk4(x, cmd, codes, q, h, wk):
     """One classical RK4 step of `stage` with the input held (`Plant._rk4`'s scheme, element by
-    element as numpy evaluates it): the new state in a view of wk (`work`)."""
+    element as numpy evaluates it): the new state in wk[4 n:5 n] (`work`; its stages before it)."""
     n = x.shape[0]
-    o = _WK_X + n
-    k1, k2, k3, k4, y = wk[o:o + n], wk[o + n:o + 2 * n], wk[o + 2 * n:o + 3 * n], wk[o + 3 * n:o + 4 * n], \
-        wk[o + 4 * n:o + 5 * n]
+    y = 4 * n
     hh = 0.5 * h
-    stage(x, cmd, codes, q, k1, wk)
+    stage(x, 0, cmd, codes, q, wk, 0)
     for i in range(n):
-        y[i] = x[i] + hh * k1[i]
-    stage(y, cmd, codes, q, k2, wk)
+        wk[y + i] = x[i] + hh * wk[i]
+    stage(wk, y, cmd, codes, q, wk, n)
     for i in range(n):
-        y[i] = x[i] + hh * k2[i]
-    stage(y, cmd, codes, q, k3, wk)
+        wk[y + i] = x[i] + hh * wk[n + i]
+    stage(wk, y, cmd, codes, q, wk, 2 * n)
     for i in range(n):
-        y[i] = x[i] + h * k3[i]
-    stage(y, cmd, codes, q, k4, wk)
+        wk[y + i] = x[i] + h * wk[2 * n + i]
+    stage(wk, y, cmd, codes, q, wk, 3 * n)
     h6 = h / 6.0
     for i in range(n):
-        y[i] = x[i] + h6 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
-    return y
+        wk[y + i] = x[i] + h6 * (wk[i] + 2.0 * (wk[n + i] + wk[2 * n + i]) + wk[3 * n + i])
 
 
 def period(x, P1, P2, P3, P4, codes, q, h, ground, out):
     """The plant's step (`Plant.advance`) in one call: the commanded thrusts (eq. 26) and speeds
     (eq. 27) of the command values P1..P4, one `rk4` step of h on x in place (on the floor, `ground`,
     the extensions' states only), then the forces at the new state into out (`N_OUT`)."""
-    wk = work(x.shape[0])
-    y = rk4(x, commanded(P1, P2, P3, P4, q, wk[_WK_CMD:_WK_X]), codes, q, h, wk)
-    for i in range(N_RIGID if ground else 0, x.shape[0]):
-        x[i] = y[i]
+    n = x.shape[0]
+    wk = work(n)
+    rk4(x, commanded(P1, P2, P3, P4, q), codes, q, h, wk)
+    for i in range(N_RIGID if ground else 0, n):
+        x[i] = wk[4 * n + i]
     f, tau, F, T, w = forces(x, P1, P2, P3, P4, codes, q, wk)
     for i in range(4):
         out[i], out[4 + i], out[14 + i] = f[i], tau[i], w[i]
@@ -286,9 +282,9 @@ def period(x, P1, P2, P3, P4, codes, q, h, ground, out):
 
 
 def forces_of(x, P1, P2, P3, P4, codes, q):
-    """`forces` with its own scratch: (f, tau, F, T, w), f, tau and w new arrays (the single plant's)."""
+    """`forces` with its own scratch: (f, tau, F, T, w), f, tau and w arrays (the single plant's)."""
     f, tau, F, T, w = forces(x, P1, P2, P3, P4, codes, q, work(x.shape[0]))
-    return f.copy(), tau.copy(), F, T, w.copy()
+    return np.array(f), np.array(tau), F, T, np.array(w)
 
 
 @functools.cache
@@ -329,9 +325,9 @@ def functions() -> dict:
     step = c(rk4, stage=one)
     command = c(commanded, thrust_from_command=c(physics.thrust_from_command), rotor_speed=eq["rotor_speed"])
     at = c(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"], commanded=command)
-    scratch = c(work)
-    once = c(period, rk4=step, forces=at, commanded=command, work=scratch)
-    alone = c(forces_of, forces=at, work=scratch)
+    scratch = c(work, allocates=True)
+    once = c(period, allocates=True, rk4=step, forces=at, commanded=command, work=scratch)
+    alone = c(forces_of, allocates=True, forces=at, work=scratch)
     # compiled (or loaded from the cache) now, with the flight's argument types, not at a first step
     # that a simulation paced by the wall clock (`run --board sim`, `hil serve`) would see as a stall
     x, codes, q = np.zeros(N_RIGID + 4), np.array([INFLOW, REACTION, DRAG], dtype=np.int64), np.ones(_RIGID + 8)
