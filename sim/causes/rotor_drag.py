@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from flightctl.sim.causes.rotor_inflow import airflow
+from flightctl.sim.causes.rotor_inflow import airflow, airflow_root
 from flightctl.sim.identify.diagnose.candidate import GridCandidate, Result
 from flightctl.sim.identify.diagnose.data import stretches
 from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, Change
@@ -50,8 +50,9 @@ class RotorDrag(Effect):
         self._B = airframe.M * airframe.g / 4.0
 
     def wrench(self, t, x, f, vb, force, torque):
-        fx, fy, tz = drag_wrench(self.parameters["k"], self.parameters.get("yaw", 0.0),
-                                 airflow(f[0], f[1], f[2], f[3], self._B), vb[0], vb[1], x[R])
+        B = self._B
+        running = airflow(airflow_root(f[0], B), airflow_root(f[1], B), airflow_root(f[2], B), airflow_root(f[3], B))
+        fx, fy, tz = drag_wrench(self.parameters["k"], self.parameters.get("yaw", 0.0), running, vb[0], vb[1], x[R])
         force[0] += fx
         force[1] += fy
         torque[2] += tz   # each rotor's drag at r l, arm l

@@ -54,32 +54,39 @@ from flightctl.sim.world.model import P, Q, Effect, Parameter, body_torques
 
 
 ON = 0.25   # of the hover thrust B: below this a rotor's airflow terms fall with its induced velocity
+SQRT_ON = 0.5   # sqrt(ON)
 
 
-def airflow_share(f, B: float):
-    """One rotor's share of the airflow terms at thrust f >= 0: sqrt(min(f / (ON B), 1)) (floats,
-    arrays, compiled: plain arithmetic)."""
-    x = f / (ON * B)
-    return (0.5 * (x + 1.0 - abs(x - 1.0))) ** 0.5
+def airflow_root(f, B: float):
+    """sqrt(f / B) of a rotor's thrust f >= 0: its induced velocity over the hover's (momentum theory),
+    the root both airflow terms scale by. A rotor whose speed Omega is known has it without a root:
+    Omega sqrt(c1 / B) (eq. 27; the compiled plant's motor states, sim/world/compiled.py)."""
+    return (f / B) ** 0.5
 
 
-def airflow(f1, f2, f3, f4, B: float):
-    """The four rotors' summed shares of the airflow terms: 4 when all carry at least ON B, 2 when one
-    pair is stopped."""
-    return airflow_share(f1, B) + airflow_share(f2, B) + airflow_share(f3, B) + airflow_share(f4, B)
+def airflow_share(root):
+    """One rotor's share of the airflow terms from its `airflow_root`: sqrt(min(f / (ON B), 1)) =
+    min(root / sqrt(ON), 1) (floats, arrays, compiled: plain arithmetic)."""
+    x = root / SQRT_ON
+    return 0.5 * (x + 1.0 - abs(x - 1.0))
 
 
-def thrust_change(f1, f2, f3, f4, k: float, B: float, l: float, w, p, q):
-    """The four rotors' thrust changes -k sqrt(f_i / B) (w + p y_i - q x_i) ("+" layout), for
-    floats (the simulator) or arrays (the fit)."""
-    return (-k * (f1 / B) ** 0.5 * (w - q * l), -k * (f2 / B) ** 0.5 * (w + p * l),
-            -k * (f3 / B) ** 0.5 * (w + q * l), -k * (f4 / B) ** 0.5 * (w - p * l))
+def airflow(r1, r2, r3, r4):
+    """The four rotors' summed shares of the airflow terms, from their `airflow_root`s: 4 when all carry
+    at least ON B, 2 when one pair is stopped."""
+    return airflow_share(r1) + airflow_share(r2) + airflow_share(r3) + airflow_share(r4)
 
 
-def inflow_wrench(f1, f2, f3, f4, k: float, B: float, l: float, hub: float, running, w, p, q):
+def thrust_change(r1, r2, r3, r4, k: float, l: float, w, p, q):
+    """The four rotors' thrust changes -k sqrt(f_i / B) (w + p y_i - q x_i) ("+" layout), from their
+    `airflow_root`s, for floats (the simulator) or arrays (the fit)."""
+    return -k * r1 * (w - q * l), -k * r2 * (w + p * l), -k * r3 * (w + q * l), -k * r4 * (w - p * l)
+
+
+def inflow_wrench(r1, r2, r3, r4, k: float, l: float, hub: float, running, w, p, q):
     """The thrust changes' force along z_b and their roll and pitch torques, with the hub's damping
-    (`hub` for four rotors, times `running` / 4: `airflow`)."""
-    d1, d2, d3, d4 = thrust_change(f1, f2, f3, f4, k, B, l, w, p, q)
+    (`hub` for four rotors, times `running` / 4: `airflow`), from the rotors' `airflow_root`s."""
+    d1, d2, d3, d4 = thrust_change(r1, r2, r3, r4, k, l, w, p, q)
     t_phi, t_theta, _ = body_torques(d1, d2, d3, d4, 0.0, 0.0, 0.0, 0.0, l)
     h = 0.25 * hub * running
     return d1 + d2 + d3 + d4, t_phi - h * p, t_theta - h * q
@@ -97,9 +104,9 @@ class RotorInflow(Effect):
 
     def wrench(self, t, x, f, vb, force, torque):
         B = self._B
-        fz, tx, ty = inflow_wrench(f[0], f[1], f[2], f[3], self.parameters["k"], B, self.a.l,
-                                   self.parameters.get("hub", 0.0), airflow(f[0], f[1], f[2], f[3], B),
-                                   vb[2], x[P], x[Q])
+        r1, r2, r3, r4 = airflow_root(f[0], B), airflow_root(f[1], B), airflow_root(f[2], B), airflow_root(f[3], B)
+        fz, tx, ty = inflow_wrench(r1, r2, r3, r4, self.parameters["k"], self.a.l, self.parameters.get("hub", 0.0),
+                                   airflow(r1, r2, r3, r4), vb[2], x[P], x[Q])
         force[2] += fz
         torque[0] += tx
         torque[1] += ty

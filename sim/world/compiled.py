@@ -116,7 +116,8 @@ def compiled_copy(fn, allocates: bool = False, **dependencies):
 INFLOW, REACTION, DRAG = 1, 2, 3
 COMPILED_CAUSES = ("rotor_inflow", "motor_dynamics", "rotor_drag", "actuation_delay")
 # q: the parameters of `stage`, by index
-_C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _H1, _H2, _JP, _RIGID = range(15)
+# (_ROOT: sqrt(c1 / B), a rotor's `airflow_root` per rad/s of its speed)
+_C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _H1, _H2, _JP, _ROOT, _RIGID = range(16)
 N_OUT = 18   # `period`'s output: the fields of `Forces` (f, tau, force, torque, w) one after another
 
 
@@ -143,7 +144,8 @@ def _layout(model):
             or not set(causes) <= set(COMPILED_CAUSES)):
         return None
     a = model.a
-    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, a.M * a.g / 4.0, 0.0, 0.0, 0.0, a.h1, a.h2, a.Jp]
+    B = a.M * a.g / 4.0
+    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, B, 0.0, 0.0, 0.0, a.h1, a.h2, a.Jp, (a.c1 / B) ** 0.5]
     codes = []
     for e in model.effects:
         p = e.parameters
@@ -182,7 +184,9 @@ def rotors(x, xo, cmd, codes, q, Rm, xdot, do):
     order of `Forces`, each a tuple), at the state x[xo:] with the rotation Rm (`rotation_from_trig`),
     cmd the commanded thrusts and speeds (`commanded`); the rotor states' derivatives are written into
     xdot[do + N_RIGID:]. Offsets into arrays and tuples of floats, never a new array or view: nothing
-    for numba's reference counting in the batch's inner loop."""
+    for numba's reference counting in the batch's inner loop. Each rotor's speed is known without a
+    root: its state (motor_dynamics; eq. 27 inverted of eq. 27's thrust is |Omega|) or the commanded
+    speed, and so is the airflow terms' `airflow_root`, Omega sqrt(c1 / B)."""
     c1 = q[_C1]
     if q[_TAU] > 0.0:          # motor_dynamics: the rotor's speed is a state
         tau, down, r = q[_TAU], q[_DOWN], xo + N_RIGID
@@ -195,20 +199,21 @@ def rotors(x, xo, cmd, codes, q, Rm, xdot, do):
         spin_up += SPIN[3] * d4
         f = (thrust_from_speed(x[r], c1), thrust_from_speed(x[r + 1], c1), thrust_from_speed(x[r + 2], c1),
              thrust_from_speed(x[r + 3], c1))
+        w = (abs(x[r]), abs(x[r + 1]), abs(x[r + 2]), abs(x[r + 3]))
     else:
         spin_up = 0.0
-        f = (cmd[0], cmd[1], cmd[2], cmd[3])
+        f, w = (cmd[0], cmd[1], cmd[2], cmd[3]), (cmd[4], cmd[5], cmd[6], cmd[7])
     g1, g2 = q[_G1], q[_G2]
     tau4 = (rotor_torque(f[0], g1, g2), rotor_torque(f[1], g1, g2), rotor_torque(f[2], g1, g2),
             rotor_torque(f[3], g1, g2))
-    w = (rotor_speed(f[0], c1), rotor_speed(f[1], c1), rotor_speed(f[2], c1), rotor_speed(f[3], c1))
     vb = body_velocity(Rm, x[xo + 3], x[xo + 4], x[xo + 5])
-    running = airflow(f[0], f[1], f[2], f[3], q[_B]) if codes.shape[0] else 4.0
+    k = q[_ROOT]
+    r1, r2, r3, r4 = w[0] * k, w[1] * k, w[2] * k, w[3] * k
+    running = airflow(r1, r2, r3, r4) if codes.shape[0] else 4.0
     Fx = Fy = Fz = Tx = Ty = Tz = 0.0
     for code in codes:
         if code == INFLOW:
-            dz, dx, dy = inflow_wrench(f[0], f[1], f[2], f[3], q[_K_IN], q[_B], q[_L], q[_HUB], running, vb[2],
-                                       x[xo + 9], x[xo + 10])
+            dz, dx, dy = inflow_wrench(r1, r2, r3, r4, q[_K_IN], q[_L], q[_HUB], running, vb[2], x[xo + 9], x[xo + 10])
             Fz += dz
             Tx += dx
             Ty += dy
@@ -318,8 +323,8 @@ def functions() -> dict:
     flow = c(rotor_inflow.airflow, airflow_share=c(rotor_inflow.airflow_share))
     wrenches = c(rotors, inflow_wrench=inflow, drag_wrench=c(rotor_drag.drag_wrench), airflow=flow,
                  speed_rate=c(motor_dynamics.speed_rate), reaction_torque=c(motor_dynamics.reaction_torque),
-                 rotor_torque=eq["rotor_torque"], rotor_speed=eq["rotor_speed"],
-                 thrust_from_speed=eq["thrust_from_speed"], body_velocity=m["body_velocity"])
+                 rotor_torque=eq["rotor_torque"], thrust_from_speed=eq["thrust_from_speed"],
+                 body_velocity=m["body_velocity"])
     one = c(stage, rotors=wrenches, rigid_derivative=rigid, rotation_from_trig=m["rotation_from_trig"],
             aggregate=m["aggregate"])
     step = c(rk4, stage=one)
