@@ -53,8 +53,8 @@ def test_the_compiled_step_and_forces_equal_the_plain_ones():
             f = model._commanded(u)
             cmd = tuple(f + [rotor_speed(v, model.a.c1) for v in f])
             wk = compiled.work(len(x))
-            compiled.rk4(x, cmd, codes, q, h, wk)                                                # (plain)
-            np.testing.assert_allclose(wk[4 * len(x):], want, rtol=1e-12, atol=1e-12)
+            compiled.rk4(x, cmd, codes, q, h, wk, False)                                         # (plain)
+            np.testing.assert_allclose(wk[4 * len(x):5 * len(x)], want, rtol=1e-12, atol=1e-12)
             rotors = model.forces(0.0, list(x), u)             # what the battery and the chip ask for
             for plain_part, fast_part in zip(rotors, compiled.model_forces()(x, *u[:4], codes, q)):
                 np.testing.assert_allclose(fast_part, plain_part, rtol=1e-12, atol=1e-12)

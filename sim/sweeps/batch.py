@@ -133,6 +133,8 @@ class _Vehicles:
         self.w[:, [fl.W_T_STOP, fl.W_RISE, fl.W_T_TOUCH]] = -1.0
         self.w[:, [fl.W_RISE_T, fl.W_FALL_T]] = np.inf
         self.w[:, fl.W_Z_MAX] = -np.inf
+        self.w[:, fl.W_UAPP:fl.W_UAPP + 4] = np.nan       # no command applied yet
+        self.w[:, fl.W_LIFT_AT:fl.W_LIFT_AT + 4] = np.nan
         self.e = np.zeros((n, ob.N_E))
         self.e[:, ob.ALT_T] = -1.0
         self.kc = np.zeros((n, ob.N_K))

@@ -66,14 +66,15 @@ AK_LSB = 1.0 / reg.AK_TESLA_PER_LSB
 # the sonar, the highest altitude, the calibration's sums and count, the gyro bias, the loop's landing
 # plan: its start, the setpoints then, its ramp; the plan's end, why it stopped); the judge's figures
 # (the largest true tilt, the fastest touchdown, the highest and the last true altitude, the log's rows);
-# the command the plant applies (after the delay).
+# the command the plant applies (after the delay), its thrusts and speeds (`commanded`), and the rotors'
+# vertical force at the state now for the command it was found with (the chip's read: the floor's test).
 (W_GROUND, W_T_STOP, W_VZ_STOP, W_NEXT, W_HEAD, W_T_LAST, W_KDT, W_READS, W_MAG, W_GOOD, W_PREV, W_HAS_GOOD,
  W_HAS_PREV, W_BAD, W_S, W_WAITING, W_RISE_T, W_FALL_T, W_RISE, W_LAST_EDGE, W_TRIGGER, W_RESULT, W_HAS_RESULT,
  W_U, W_GAUSS, W_HAS_GAUSS, W_ARMED, W_FLYING, W_LANDING, W_BLIND, W_LAST_ECHO, W_T_TOUCH, W_MAX_ALT, W_CAL,
  W_CAL_N, W_CAL_MAG, W_GYRO_BIAS, W_LAND_T, W_LAND_SP, W_LAND_RAMP, W_DURATION, W_REASON, W_DONE, W_TILT,
- W_TOUCHDOWN, W_Z_MAX, W_Z_END, W_ROWS, W_UAPP, N_W) = \
+ W_TOUCHDOWN, W_Z_MAX, W_Z_END, W_ROWS, W_UAPP, W_CMD, W_LIFT, W_LIFT_AT, N_W) = \
     (0, 1, 2, 3, 7, 8, 9, 10, 11, 14, 21, 28, 29, 30, 31, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53,
-     54, 55, 56, 57, 58, 65, 66, 67, 70, 71, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 88)
+     54, 55, 56, 57, 58, 65, 66, 67, 70, 71, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 88, 96, 97, 101)
 # why the loop stopped (w[W_REASON]): still flying, the plan's end (landed or not), a crash by the estimate,
 # the IMU's frames bad, no touchdown by the landing's end, never left the ground, the plant diverged
 RUNNING, ENDED, CRASH, IMU_BAD, NO_TOUCHDOWN, NEVER_LEFT, DIVERGED = range(7)
@@ -174,15 +175,24 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
         u4 = ring[old, 3] * frac + ring[new, 3] * (1.0 - frac)
     else:
         u1, u2, u3, u4 = ring[new, 0], ring[new, 1], ring[new, 2], ring[new, 3]
-    w[W_UAPP], w[W_UAPP + 1], w[W_UAPP + 2], w[W_UAPP + 3] = u1, u2, u3, u4
+    if not (u1 == w[W_UAPP] and u2 == w[W_UAPP + 1] and u3 == w[W_UAPP + 2] and u4 == w[W_UAPP + 3]):
+        cmd = commanded(u1, u2, u3, u4, q)      # (a pure function of the command: found once for each)
+        for j in range(8):
+            w[W_CMD + j] = cmd[j]
+        w[W_UAPP], w[W_UAPP + 1], w[W_UAPP + 2], w[W_UAPP + 3] = u1, u2, u3, u4
+    cmd = held_command(w)
     dt = k[DT]
     t_end = (i - 1) * dt + 1 * (dt / 1)
     ground = False
     if w[W_GROUND] != 0.0:
-        f, _, force, _, _ = forces(x, u1, u2, u3, u4, codes, q, wk)
-        ground = not (force[2] + f[0] + f[1] + f[2] + f[3]) / k[M_] > k[G_]
+        if u1 == w[W_LIFT_AT] and u2 == w[W_LIFT_AT + 1] and u3 == w[W_LIFT_AT + 2] and u4 == w[W_LIFT_AT + 3]:
+            lift = w[W_LIFT]                      # the chip's read found it at this state and command
+        else:
+            f, _, force, _, _ = forces(x, cmd, codes, q, wk)
+            lift = force[2] + f[0] + f[1] + f[2] + f[3]
+        ground = not lift / k[M_] > k[G_]
     if not (ground and x.shape[0] == N_RIGID):
-        rk4(x, commanded(u1, u2, u3, u4, q), codes, q, dt / 1, wk)
+        rk4(x, cmd, codes, q, dt / 1, wk, ground)
         y = 4 * x.shape[0]                   # where `rk4` leaves the new state
         for j in range(N_RIGID if ground else 0, x.shape[0]):
             x[j] = wk[y + j]
@@ -204,10 +214,19 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
     return True
 
 
+def held_command(w):
+    """The commanded thrusts and speeds of the command the plant applies (`commanded`, kept in w)."""
+    c = W_CMD
+    return w[c], w[c + 1], w[c + 2], w[c + 3], w[c + 4], w[c + 5], w[c + 6], w[c + 7]
+
+
 def chip_read(x, w, q, codes, regs, cs, cc, e, jump, k, t: float, wk) -> bool:
     """`SimMpu9250._sample` at t (the plant's specific force, rates, rotors) and `Mpu9250.read` of the
     burst; the sample in w[W_S:], the gyro less the calibration's bias. False: the frame is refused."""
-    f, _, force, _, rw = forces(x, w[W_UAPP], w[W_UAPP + 1], w[W_UAPP + 2], w[W_UAPP + 3], codes, q, wk)
+    f, _, force, _, rw = forces(x, held_command(w), codes, q, wk)
+    w[W_LIFT] = force[2] + f[0] + f[1] + f[2] + f[3]    # the floor's test at this state, for this command
+    for j in range(4):
+        w[W_LIFT_AT + j] = w[W_UAPP + j]
     t_stop, vz = w[W_T_STOP], w[W_VZ_STOP]
     stopping = -vz / CONTACT_S if 0.0 <= t - t_stop < CONTACT_S else 0.0
     if w[W_GROUND] != 0.0:
@@ -473,9 +492,11 @@ def compiled_fly():
     u = cc(uniform)
     g = cc(gauss, uniform=u)
     at = plant["forces"]
-    return cc(fly, allocates=True, work=plant["work"], plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"]),
+    held = cc(held_command)
+    return cc(fly, allocates=True, work=plant["work"],
+              plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held),
               sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
-              chip_read=cc(chip_read, forces=at, chip_frame=imu.chip_frame_compiled(), word=cc(word),
+              chip_read=cc(chip_read, forces=at, held_command=held, chip_frame=imu.chip_frame_compiled(), word=cc(word),
                            rotation_from_trig=plant["rotation_from_trig"], i16=cc(i16, _i16=cc(imu._i16))),
               land=cc(land, ob_landing_start=o["landing_start"]), landing_setpoint=cc(landing_setpoint),
               ob_step=o["step"], ob_on_range=o["on_range"], ob_tilt=o["tilt"], ob_heading=o["heading"],

@@ -24,7 +24,7 @@ import sys
 import tempfile
 import types
 from pathlib import Path
-from math import cos, sin
+from math import copysign, cos, sin
 
 import numpy as np
 
@@ -165,8 +165,27 @@ def _layout(model):
 
 def work(n: int) -> np.ndarray:
     """The scratch array of the functions below for a state of n entries: RK4's four stages and its
-    trial state (n each, `rk4`'s offsets)."""
-    return np.zeros(5 * n)
+    trial state (n each, `rk4`'s offsets), then the attitude `attitude_trig` remembers (none yet)."""
+    wk = np.zeros(5 * n + _TRIG)
+    wk[5 * n:5 * n + 3] = np.nan
+    return wk
+
+
+_TRIG = 9   # `work`'s last entries: phi, theta, psi and their sines and cosines
+
+
+def attitude_trig(x, xo, wk):
+    """(sin phi, cos phi, sin theta, cos theta, sin psi, cos psi) at the state x[xo:], remembered with
+    the angles in `work`'s last entries: an RK4 step's first stage is at the state whose forces were
+    asked last (the chip's, the floor's), so that each step computes three of them fewer."""
+    m = wk.shape[0] - _TRIG
+    phi, theta, psi = x[xo + 6], x[xo + 7], x[xo + 8]
+    if not (phi == wk[m] and theta == wk[m + 1] and psi == wk[m + 2] and copysign(1.0, phi) == copysign(1.0, wk[m])
+            and copysign(1.0, theta) == copysign(1.0, wk[m + 1]) and copysign(1.0, psi) == copysign(1.0, wk[m + 2])):
+        wk[m], wk[m + 1], wk[m + 2] = phi, theta, psi
+        wk[m + 3], wk[m + 4], wk[m + 5], wk[m + 6] = sin(phi), cos(phi), sin(theta), cos(theta)
+        wk[m + 7], wk[m + 8] = sin(psi), cos(psi)
+    return wk[m + 3], wk[m + 4], wk[m + 5], wk[m + 6], wk[m + 7], wk[m + 8]
 
 
 def commanded(P1, P2, P3, P4, q):
@@ -189,14 +208,8 @@ def rotors(x, xo, cmd, codes, q, Rm, xdot, do):
     speed, and so is the airflow terms' `airflow_root`, Omega sqrt(c1 / B)."""
     c1 = q[_C1]
     if q[_TAU] > 0.0:          # motor_dynamics: the rotor's speed is a state
-        tau, down, r = q[_TAU], q[_DOWN], xo + N_RIGID
-        d1, d2 = speed_rate(cmd[4], x[r], tau, down), speed_rate(cmd[5], x[r + 1], tau, down)
-        d3, d4 = speed_rate(cmd[6], x[r + 2], tau, down), speed_rate(cmd[7], x[r + 3], tau, down)
-        xdot[do + N_RIGID], xdot[do + N_RIGID + 1], xdot[do + N_RIGID + 2], xdot[do + N_RIGID + 3] = d1, d2, d3, d4
-        spin_up = SPIN[0] * d1
-        spin_up += SPIN[1] * d2
-        spin_up += SPIN[2] * d3
-        spin_up += SPIN[3] * d4
+        r = xo + N_RIGID
+        spin_up = rotor_rates(x, r, cmd, q, xdot, do + N_RIGID)
         f = (thrust_from_speed(x[r], c1), thrust_from_speed(x[r + 1], c1), thrust_from_speed(x[r + 2], c1),
              thrust_from_speed(x[r + 3], c1))
         w = (abs(x[r]), abs(x[r + 1]), abs(x[r + 2]), abs(x[r + 3]))
@@ -227,17 +240,35 @@ def rotors(x, xo, cmd, codes, q, Rm, xdot, do):
     return f, tau4, (Fx, Fy, Fz), (Tx, Ty, Tz), w
 
 
-def forces(x, P1, P2, P3, P4, codes, q, wk):
-    """`rotors` at the state x for the command values P1..P4 (`Model.forces`); wk: `work` (the rotor
-    states' derivatives go to its first stage)."""
-    Rm = rotation_from_trig(sin(x[6]), cos(x[6]), sin(x[7]), cos(x[7]), sin(x[8]), cos(x[8]))
-    return rotors(x, 0, commanded(P1, P2, P3, P4, q), codes, q, Rm, wk, 0)
+def rotor_rates(x, r, cmd, q, xdot, do):
+    """motor_dynamics' rotor states x[r:r + 4]: each speed's rate toward the commanded speed (cmd,
+    `commanded`) into xdot[do:do + 4]; their spin-up sum s_i dOmega_i/dt (eq. 9's sense)."""
+    tau, down = q[_TAU], q[_DOWN]
+    d1, d2 = speed_rate(cmd[4], x[r], tau, down), speed_rate(cmd[5], x[r + 1], tau, down)
+    d3, d4 = speed_rate(cmd[6], x[r + 2], tau, down), speed_rate(cmd[7], x[r + 3], tau, down)
+    xdot[do], xdot[do + 1], xdot[do + 2], xdot[do + 3] = d1, d2, d3, d4
+    spin_up = SPIN[0] * d1
+    spin_up += SPIN[1] * d2
+    spin_up += SPIN[2] * d3
+    spin_up += SPIN[3] * d4
+    return spin_up
 
 
-def stage(x, xo, cmd, codes, q, xdot, do):
+def forces(x, cmd, codes, q, wk):
+    """`rotors` at the state x for the commanded thrusts and speeds cmd (`commanded`; `Model.forces`);
+    wk: `work` (the rotor states' derivatives go to its first stage)."""
+    return rotors(x, 0, cmd, codes, q, rotation_from_trig(*attitude_trig(x, 0, wk)), wk, 0)
+
+
+def stage(x, xo, cmd, codes, q, xdot, do, ground):
     """`Model.f` of a model laid out by `layout` at the state x[xo:xo + n]: `rotors`, `aggregate` and
-    `rigid_derivative`, into xdot[do:do + n]."""
-    sf, cf, st, ct, sp, cp = sin(x[xo + 6]), cos(x[xo + 6]), sin(x[xo + 7]), cos(x[xo + 7]), sin(x[xo + 8]), cos(x[xo + 8])
+    `rigid_derivative`, into xdot[do:do + n] (xdot: `work`, whose attitude it remembers); on the floor (`ground`) the rotor states' only (the rigid
+    body's stay put, and nothing of it enters the rotors' rates)."""
+    if ground:
+        if q[_TAU] > 0.0:
+            rotor_rates(x, xo + N_RIGID, cmd, q, xdot, do + N_RIGID)
+        return
+    sf, cf, st, ct, sp, cp = attitude_trig(x, xo, xdot)
     f, tau, F, T, w = rotors(x, xo, cmd, codes, q, rotation_from_trig(sf, cf, st, ct, sp, cp), xdot, do)
     agg = aggregate(f[0], f[1], f[2], f[3], tau[0], tau[1], tau[2], tau[3], w[0], w[1], w[2], w[3],
                     F[0], F[1], F[2], T[0], T[1], T[2], q[_L])
@@ -249,24 +280,27 @@ def stage(x, xo, cmd, codes, q, xdot, do):
         xdot[do + i] = d[i]
 
 
-def rk4(x, cmd, codes, q, h, wk):
+def rk4(x, cmd, codes, q, h, wk, ground):
     """One classical RK4 step of `stage` with the input held (`Plant._rk4`'s scheme, element by
-    element as numpy evaluates it): the new state in wk[4 n:5 n] (`work`; its stages before it)."""
+    element as numpy evaluates it): the new state in wk[4 n:5 n] (`work`; its stages before it). On the
+    floor (`ground`) the rotor states' only: each entry's arithmetic is the whole step's (a rotor's
+    rate depends on its own state and command), and the rigid body's entries are left as they are."""
     n = x.shape[0]
+    lo = N_RIGID if ground else 0
     y = 4 * n
     hh = 0.5 * h
-    stage(x, 0, cmd, codes, q, wk, 0)
-    for i in range(n):
+    stage(x, 0, cmd, codes, q, wk, 0, ground)
+    for i in range(lo, n):
         wk[y + i] = x[i] + hh * wk[i]
-    stage(wk, y, cmd, codes, q, wk, n)
-    for i in range(n):
+    stage(wk, y, cmd, codes, q, wk, n, ground)
+    for i in range(lo, n):
         wk[y + i] = x[i] + hh * wk[n + i]
-    stage(wk, y, cmd, codes, q, wk, 2 * n)
-    for i in range(n):
+    stage(wk, y, cmd, codes, q, wk, 2 * n, ground)
+    for i in range(lo, n):
         wk[y + i] = x[i] + h * wk[2 * n + i]
-    stage(wk, y, cmd, codes, q, wk, 3 * n)
+    stage(wk, y, cmd, codes, q, wk, 3 * n, ground)
     h6 = h / 6.0
-    for i in range(n):
+    for i in range(lo, n):
         wk[y + i] = x[i] + h6 * (wk[i] + 2.0 * (wk[n + i] + wk[2 * n + i]) + wk[3 * n + i])
 
 
@@ -276,10 +310,11 @@ def period(x, P1, P2, P3, P4, codes, q, h, ground, out):
     the extensions' states only), then the forces at the new state into out (`N_OUT`)."""
     n = x.shape[0]
     wk = work(n)
-    rk4(x, commanded(P1, P2, P3, P4, q), codes, q, h, wk)
+    cmd = commanded(P1, P2, P3, P4, q)
+    rk4(x, cmd, codes, q, h, wk, ground)
     for i in range(N_RIGID if ground else 0, n):
         x[i] = wk[4 * n + i]
-    f, tau, F, T, w = forces(x, P1, P2, P3, P4, codes, q, wk)
+    f, tau, F, T, w = forces(x, cmd, codes, q, wk)
     for i in range(4):
         out[i], out[4 + i], out[14 + i] = f[i], tau[i], w[i]
     for i in range(3):
@@ -288,7 +323,7 @@ def period(x, P1, P2, P3, P4, codes, q, h, ground, out):
 
 def forces_of(x, P1, P2, P3, P4, codes, q):
     """`forces` with its own scratch: (f, tau, F, T, w), f, tau and w arrays (the single plant's)."""
-    f, tau, F, T, w = forces(x, P1, P2, P3, P4, codes, q, work(x.shape[0]))
+    f, tau, F, T, w = forces(x, commanded(P1, P2, P3, P4, q), codes, q, work(x.shape[0]))
     return np.array(f), np.array(tau), F, T, np.array(w)
 
 
@@ -321,18 +356,20 @@ def functions() -> dict:
               euler_rates=m["euler_rates"])
     inflow = c(rotor_inflow.inflow_wrench, body_torques=m["body_torques"], thrust_change=c(rotor_inflow.thrust_change))
     flow = c(rotor_inflow.airflow, airflow_share=c(rotor_inflow.airflow_share))
+    rates = c(rotor_rates, speed_rate=c(motor_dynamics.speed_rate))
+    trig = c(attitude_trig)
     wrenches = c(rotors, inflow_wrench=inflow, drag_wrench=c(rotor_drag.drag_wrench), airflow=flow,
-                 speed_rate=c(motor_dynamics.speed_rate), reaction_torque=c(motor_dynamics.reaction_torque),
+                 rotor_rates=rates, reaction_torque=c(motor_dynamics.reaction_torque),
                  rotor_torque=eq["rotor_torque"], thrust_from_speed=eq["thrust_from_speed"],
                  body_velocity=m["body_velocity"])
     one = c(stage, rotors=wrenches, rigid_derivative=rigid, rotation_from_trig=m["rotation_from_trig"],
-            aggregate=m["aggregate"])
+            attitude_trig=trig, rotor_rates=rates, aggregate=m["aggregate"])
     step = c(rk4, stage=one)
     command = c(commanded, thrust_from_command=c(physics.thrust_from_command), rotor_speed=eq["rotor_speed"])
-    at = c(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"], commanded=command)
+    at = c(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"], attitude_trig=trig)
     scratch = c(work, allocates=True)
     once = c(period, allocates=True, rk4=step, forces=at, commanded=command, work=scratch)
-    alone = c(forces_of, allocates=True, forces=at, work=scratch)
+    alone = c(forces_of, allocates=True, forces=at, work=scratch, commanded=command)
     # compiled (or loaded from the cache) now, with the flight's argument types, not at a first step
     # that a simulation paced by the wall clock (`run --board sim`, `hil serve`) would see as a stall
     x, codes, q = np.zeros(N_RIGID + 4), np.array([INFLOW, REACTION, DRAG], dtype=np.int64), np.ones(_RIGID + 8)
