@@ -106,7 +106,7 @@ def _world_constants(params: Params, plan: Plan, template: dict, dt: float) -> n
 class _Vehicles:
     """The arrays of `flight.fly` for vehicles with their parameters, draws and seeds, at power-on."""
 
-    def __init__(self, params: Params, draws: dict, gains, seeds, template: dict, structure: str):
+    def __init__(self, params: Params, draws: dict, gains, seeds, template: dict, structure: str, uniforms: int):
         from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params
         from flightctl.sim.world import compiled
         from flightctl.sim.world.devices import SensorNoise, vehicle_noise
@@ -141,8 +141,8 @@ class _Vehicles:
         self.regs = np.zeros((n, 128), dtype=np.uint8)
         self.cs, self.cc = np.zeros((n, N_CHIP_STATE)), np.zeros((n, N_CHIP_CONST))
         self.normal = [np.random.default_rng(s) for s in seeds]
-        self.mt = []
-        self.uni = np.zeros((n, 4 * CHUNK))
+        self.rng = []             # each vehicle's `World.rng`, whose `random()`s the loop takes from uni
+        self.uni = np.zeros((n, uniforms))
         for v, seed in enumerate(seeds):
             drawn = {key: float(val[v]) for key, val in draws.items()}
             p = drawn_params(params, drawn) if drawn else params
@@ -155,47 +155,45 @@ class _Vehicles:
             self.cs[v], self.cc[v] = s, c
             for _ in range(template["start_draws"]):
                 r.gauss(0.0, 1.0)
-            version, key, cached = r.getstate()
-            bits = np.random.MT19937()
-            bits.state = {"bit_generator": "MT19937", "state": {"key": np.array(key[:624], dtype=np.uint32), "pos": key[624]}}
-            self.mt.append(np.random.Generator(bits))
-            if cached is not None:
-                self.w[v, fl.W_GAUSS], self.w[v, fl.W_HAS_GAUSS] = cached, 1.0
-            self.mt[v].random(out=self.uni[v])
+            if r.gauss_next is not None:            # `random.gauss`'s second number, kept for its next call
+                self.w[v, fl.W_GAUSS], self.w[v, fl.W_HAS_GAUSS] = r.gauss_next, 1.0
+            self.rng.append(r)
+            self.uni[v] = [r.random() for _ in range(uniforms)]
         self.cc[:, template["registered"]] = template["values"]
         self.pool = (0, 0)        # `NoisePool`: its block and index
         self.raw = 0              # the normals each vehicle's generator has given so far
 
-    def normals(self, first_read: int, n: int) -> np.ndarray:
-        """(vehicles, n, 12): the chip's nine normals of reads first_read .. first_read + n - 1 and the
-        magnetometer's three (reads 1, 5, 9...), where `NoisePool` puts them in each vehicle's stream."""
+    def normals(self, first_read: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The chip's normals of reads first_read .. first_read + n - 1, nine a read, and the
+        magnetometer's three (reads 1, 5, 9...), each vehicle's stream as `NoisePool` draws them (its
+        blocks: a read whose numbers would cross one's end starts the next): (the normals, a row per
+        vehicle; where each read's nine and three start in it, (n, 2), the same for every vehicle)."""
         block, i = self.pool
-        pos = np.zeros((n, 12), dtype=np.int64)
+        at = np.zeros((n, 2), dtype=np.int64)
         for j in range(n):
-            for lo, count in ((0, 9), (9, 3)) if (first_read + j) % fl.MAG_EVERY == 1 % fl.MAG_EVERY else ((0, 9),):
+            for lo, count in ((0, 9), (1, 3)) if (first_read + j) % fl.MAG_EVERY == 1 % fl.MAG_EVERY else ((0, 9),):
                 if i + count > NOISE_BLOCK:
                     block, i = block + 1, 0
-                pos[j, lo:lo + count] = block * NOISE_BLOCK + i + np.arange(count)
+                at[j, lo] = block * NOISE_BLOCK + i - self.raw
                 i += count
         self.pool = (block, i)
         hi = block * NOISE_BLOCK + i
         raw = np.empty((self.n, hi - self.raw))
         for v, gen in enumerate(self.normal):
             gen.standard_normal(out=raw[v])
-        out = raw[:, np.maximum(pos - self.raw, 0)]
         self.raw = hi
-        return out
+        return raw, at
 
     def refill(self) -> None:
         """The uniforms each vehicle used since the last refill, drawn anew behind the ones left."""
         used = self.w[:, fl.W_U].astype(np.int64)
         m = self.uni.shape[1]
-        if used.max() > m - 2 * CHUNK:
+        if used.max() > m:
             raise RuntimeError("a vehicle drew more random numbers than the batch holds for it")
         for v in np.nonzero(used)[0]:
-            u = used[v]
+            u, r = used[v], self.rng[v]
             self.uni[v, :m - u] = self.uni[v, u:].copy()
-            self.mt[v].random(out=self.uni[v, m - u:])
+            self.uni[v, m - u:] = [r.random() for _ in range(u)]
         self.w[:, fl.W_U] = 0.0
 
 
@@ -228,7 +226,10 @@ def _fly_group(job) -> tuple:
     i_arm = next(i for i in range(1, 10 ** 7) if i * dt >= SIM_CALIBRATE_S)
     end_s = plan.duration + LAND_MARGIN_S if until is None else until
     i_end = i_arm + int(math.ceil(end_s / dt)) + 1
-    veh = _Vehicles(params, draws, gains, seeds, template, structure)
+    # the most uniforms a vehicle takes in a chunk: the sonar's dropout and jitter at each trigger (a
+    # gauss takes two), the power monitor's gausses at each read
+    most = 3 * -(-CHUNK // int(k[fl.SONAR_EVERY])) + 2 * template["per_read"] * -(-CHUNK // int(k[fl.POWER_EVERY])) + 2
+    veh = _Vehicles(params, draws, gains, seeds, template, structure, most)
     plan.restart()
     sp = np.zeros((i_end + 1, 4))
     for i in range(i_arm + 1, i_end + 1):
@@ -241,8 +242,9 @@ def _fly_group(job) -> tuple:
     i0 = 0
     while i0 < i_end and not veh.w[:, fl.W_DONE].all():
         n = min(CHUNK, i_end - i0)
+        normals, at = veh.normals(i0 + 1, n)
         run(veh.x, veh.w, veh.e, veh.kc, veh.q, veh.codes, veh.ring, veh.nring, veh.frac, veh.regs, veh.cs, veh.cc,
-            veh.normals(i0 + 1, n), veh.uni, np.ascontiguousarray(sp[i0 + 1:i0 + 1 + n]), rec, k, template["jump"],
+            normals, at, veh.uni, np.ascontiguousarray(sp[i0 + 1:i0 + 1 + n]), rec, k, template["jump"],
             i0, n, i_arm, rec0)
         veh.refill()
         i0 += n

@@ -220,9 +220,10 @@ def held_command(w):
     return w[c], w[c + 1], w[c + 2], w[c + 3], w[c + 4], w[c + 5], w[c + 6], w[c + 7]
 
 
-def chip_read(x, w, q, codes, regs, cs, cc, e, jump, k, t: float, wk) -> bool:
+def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: float, wk) -> bool:
     """`SimMpu9250._sample` at t (the plant's specific force, rates, rotors) and `Mpu9250.read` of the
-    burst; the sample in w[W_S:], the gyro less the calibration's bias. False: the frame is refused."""
+    burst, with the chip's nine normals e[ie:ie + 9] and the magnetometer's three e[im:im + 3]; the
+    sample in w[W_S:], the gyro less the calibration's bias. False: the frame is refused."""
     f, _, force, _, rw = forces(x, held_command(w), codes, q, wk)
     w[W_LIFT] = force[2] + f[0] + f[1] + f[2] + f[3]    # the floor's test at this state, for this command
     for j in range(4):
@@ -240,7 +241,7 @@ def chip_read(x, w, q, codes, regs, cs, cc, e, jump, k, t: float, wk) -> bool:
         w[W_KDT] = dt
         cc[_C_KA], cc[_C_KG] = 1.0 - exp(-dt / cc[_C_A_DELAY]), 1.0 - exp(-dt / cc[_C_G_DELAY])
     temp = AMBIENT_C if k[WARM_RISE] == 0.0 else AMBIENT_C + k[WARM_RISE] * (1.0 - exp((0.0 - t) / k[WARM_TAU]))
-    chip_frame(regs, cs, cc, e, 0, fx, fy, fz, x[P], x[Q], x[R], f[0], f[1], f[2], f[3], rw[0], rw[1], rw[2], rw[3],
+    chip_frame(regs, cs, cc, e, ie, fx, fy, fz, x[P], x[Q], x[R], f[0], f[1], f[2], f[3], rw[0], rw[1], rw[2], rw[3],
                t, dt, temp, w[W_READS] > 0.0)
     w[W_READS] += 1.0
     if int(w[W_READS]) % MAG_EVERY == 1 % MAG_EVERY:   # reads 1, 5, 9...: the AK8963's sample
@@ -250,9 +251,9 @@ def chip_read(x, w, q, codes, regs, cs, cc, e, jump, k, t: float, wk) -> bool:
         by = rm[1] * BN + rm[4] * BW + rm[7] * BU
         bz = rm[2] * BN + rm[5] * BW + rm[8] * BU
         sm = k[MAG_SIGMA]
-        w[W_MAG] = i16((by + sm * e[9]) * AK_LSB)
-        w[W_MAG + 1] = i16((bx + sm * e[10]) * AK_LSB)
-        w[W_MAG + 2] = i16(-(bz + sm * e[11]) * AK_LSB)
+        w[W_MAG] = i16((by + sm * e[im]) * AK_LSB)
+        w[W_MAG + 1] = i16((bx + sm * e[im + 1]) * AK_LSB)
+        w[W_MAG + 2] = i16(-(bz + sm * e[im + 2]) * AK_LSB)
     words = (word(regs, _BURST), word(regs, _BURST + 2), word(regs, _BURST + 4), word(regs, _BURST + 6),
              word(regs, _BURST + 8), word(regs, _BURST + 10), word(regs, _BURST + 12))
     had_prev = w[W_HAS_PREV] != 0.0
@@ -324,12 +325,13 @@ def landing_setpoint(w, t_plan: float, j: int) -> float:
     return start + (0.0 - start) * 0.5 * (1.0 - cos(pi * s))
 
 
-def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, NORM, UNI, SP, REC, k, jump, i0: int, n: int,
+def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, NORM, AT, UNI, SP, REC, k, jump, i0: int, n: int,
         i_arm: int, rec0: int) -> None:
     """Loop periods i0 + 1 .. i0 + n of every vehicle (rows of the arrays): X the plants' states, W the
     world's and loop's (`w`), E and KC the controllers' (sim/sweeps/onboard.py), Q the plants' constants
     (sim/world/compiled.py `layout_rows`), RING and NRING, FRAC the delayed commands, REGS, CS, CC the
-    chips' registers, state and constants, NORM their normals (n, 12) per period, UNI the Mersenne
+    chips' registers, state and constants, NORM their normals (a row per vehicle) and AT where each
+    period's are in it ((n, 2): the chip's nine, the magnetometer's three), UNI the Mersenne
     Twisters' uniforms, SP the plan's setpoints per period from i0 + 1, REC the judged record (rows
     from period rec0 on: true and estimated roll, pitch, yaw), k the shared constants (`N_WORLD`), jump the
     driver's limits per word. The loop arms at period i_arm."""
@@ -349,7 +351,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, NORM, UNI, SP, R
                 w[W_REASON], w[W_DONE] = DIVERGED, 1.0
                 break
             sonar_edges(w, t)
-            if chip_read(x, w, q, codes, regs, cs, cc, NORM[v, step], jump, k, t, wk):
+            if chip_read(x, w, q, codes, regs, cs, cc, NORM[v], AT[step, 0], AT[step, 1], jump, k, t, wk):
                 w[W_BAD] = 0.0
             else:
                 w[W_BAD] += 1.0
