@@ -76,6 +76,18 @@ def score(figures: list[dict]):
     return worst
 
 
+def holds(figures: list[dict], flies):
+    """It flies (left the ground, no crash, landed upright) and every attitude step rings and holds
+    within its channel's band (SETTLED_DEG: 1 degree for a bank, 3 for a turn): the true angle's
+    peak-to-peak once the step has arrived, and the controller's own held error, both apart from the
+    estimator's bias. `flies` a bool or an (N,) array (the batched simulator's vehicles)."""
+    ok = np.asarray(flies, dtype=bool)
+    for f in figures:
+        band = SETTLED_DEG[f["channel"]]
+        ok = ok & (f["ringing"] <= band) & (np.abs(f["held"]) <= band)
+    return ok
+
+
 def summary(figures: list[dict]) -> dict:
     """JSON-ready figures of one flight (one vehicle): the score, and per channel the worst ringing,
     the lowest damping, the largest held error and estimator bias."""

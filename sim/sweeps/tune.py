@@ -24,11 +24,15 @@ the paper's own simulation setting; the tuned gains are then flown through the n
 (`range.NAME = [lo, hi]`, `--params paper-as-flown`) say the model is not known that well. The robust
 mode takes N draws of those ranges and flies the scenario's attitude steps on the batched simulator
 (sim/sweeps/batch.py, the Monte Carlo's `--batch` setting) with the roll and pitch gains scaled, kp and kd
-each by a factor on a grid, every candidate on the same draws; the candidate that flies and settles
-(`flightctl.sim.flights.metrics.settles`) in the largest share of the draws wins, a second, finer grid around
-it refines it, and the altitude and yaw gains stay the procedure's. Among candidates that tie, the
-least change from the procedure's gains wins (the factors nearest 1). Table 4 and Table 6 are flown on
-the same draws beside them.
+each by a factor on a grid, every candidate on the same draws, each flight to its landing, judged as the
+Monte Carlo judges (sim/sweeps/judge.py: it flies and lands upright; each step's ringing, the true
+angle's peak-to-peak once the step has arrived, and the controller's held error, both apart from the
+estimator's bias, which no gains remove). The candidate that holds (flies, and every step rings and
+holds within its band) in the largest share of the draws wins, then the one that flies in the largest
+share, then the lowest median score (the worst ringing over its band); a second, finer grid around it
+refines it, and the altitude and yaw gains stay the procedure's. Among candidates that tie, the least
+change from the procedure's gains wins (the factors nearest 1). Table 4 and Table 6 are flown on the
+same draws beside them.
 """
 from __future__ import annotations
 
@@ -128,7 +132,8 @@ def tune(params, progress=None, strict: bool = False) -> tuple[Gains, dict]:
         gains = dataclasses.replace(gains, **{kp_name: kp, kd_name: kd})
         t, y = _response(params, gains, ch)
         found[ch] = {"kp": kp, "kd": kd, "oscillations_at_kp": count(kp), "overshoot": float(np.max(y) - 1.0),
-                     "table4": {"kp": getattr(TABLE4, kp_name), "kd": getattr(TABLE4, kd_name)}}
+                     "table4": {"kp": getattr(TABLE4, kp_name), "kd": getattr(TABLE4, kd_name),
+                                "oscillations_at_kp": count(getattr(TABLE4, kp_name))}}
         if progress:
             progress(f"{ch}: kd {kd:.4g}: an overshoot of {100 * found[ch]['overshoot']:.1f} %, then none")
     return gains, found
@@ -146,13 +151,16 @@ def scaled(gains: Gains, kp: float, kd: float) -> Gains:
 
 def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str = "paper", workers=None,
            progress=None) -> list[dict]:
-    """Per candidate, the shares of n draws of the file's ranges that fly and that settle, on the
-    batched simulator (every candidate on the same draws). `progress`: a sim/progress.py Progress,
-    one step a candidate, the vehicle-steps in between."""
+    """Per candidate, over n draws of the file's ranges on the batched simulator (every candidate on
+    the same draws, each flown to the plan's end), judged as the Monte Carlo judges
+    (sim/sweeps/judge.py): the shares that fly (and land upright) and that hold (fly, and every
+    attitude step rings and holds within its band, apart from the estimator's bias), and the median
+    score (the worst ringing over the bands; None when most draws do not fly). `progress`: a
+    sim/progress.py Progress, one step a candidate, the vehicle-steps in between."""
     import os
 
+    from flightctl.sim.sweeps import judge
     from flightctl.sim.sweeps.batch import simulate
-    from flightctl.sim.flights.metrics import settles
     from flightctl.sim.sweeps.montecarlo import _batch_window, draw, ranged
     from flightctl.sim.flights.scenarios import SCENARIOS
     spans = ranged(params)
@@ -168,18 +176,21 @@ def shares(params, candidates: list[Gains], n: int, seed: int = 0, scenario: str
         group = candidates[i:i + per]
         under_way = f"candidates {i + 1}-{i + len(group)} of {len(candidates)}: {n * len(group)} vehicles"
         frac = (lambda f: progress.update(f, under_way, len(group))) if progress else None
-        # each draw with its seed, the same vehicle for every candidate, flown from power-on to the end
-        # of the last attitude step's window
+        # each draw with its seed, the same vehicle for every candidate, flown from power-on to its landing
         flight = simulate(params, sc.plan, n * len(group), {k: np.tile(v, len(group)) for k, v in draws.items()},
                           [g for g in group for _ in range(n)], seeds=[seed + k for k in range(n)] * len(group),
-                          record=(start, end), until=end, workers=workers or os.cpu_count() or 1,
-                          progress=frac)
-        flies = ~flight.crashed
-        ok = settles(flight.log, steps, 0.0) & flies
+                          record=(start, end), workers=workers or os.cpu_count() or 1, progress=frac)
+        flies = flight.flies
+        figures = judge.step_figures(flight.log, steps, 0.0)
+        held = judge.holds(figures, flies)
+        score = np.where(flies, judge.score(figures), np.inf)
         for j in range(len(group)):
-            out.append({"flies": float(flies[j * n:(j + 1) * n].mean()), "settles": float(ok[j * n:(j + 1) * n].mean())})
+            part = slice(j * n, (j + 1) * n)
+            median = float(np.median(score[part]))
+            out.append({"flies": float(flies[part].mean()), "holds": float(held[part].mean()),
+                        "score": median if math.isfinite(median) else None})
             if progress:
-                progress.step(f"candidate {len(out)}/{len(candidates)}: settles {100 * out[-1]['settles']:.0f} %")
+                progress.step(f"candidate {len(out)}/{len(candidates)}: holds {100 * out[-1]['holds']:.0f} %")
     return out
 
 
@@ -192,9 +203,11 @@ def robust(params, base: Gains, n: int, seed: int = 0, progress=None, workers=No
     coarse, table4, table6 = coarse[:-2], coarse[-2], coarse[-1]
 
     def best(points, results):
-        # the largest share that settles, then that flies, then the least change from the procedure
-        return max(zip(points, results), key=lambda pr: (pr[1]["settles"], pr[1]["flies"],
-                                                         -abs(math.log(pr[0][0])) - abs(math.log(pr[0][1]))))
+        # the largest share that holds, then that flies, then the lowest median score, then the least
+        # change from the procedure
+        return max(zip(points, results), key=lambda pr: (
+            pr[1]["holds"], pr[1]["flies"], -(math.inf if pr[1]["score"] is None else pr[1]["score"]),
+            -abs(math.log(pr[0][0])) - abs(math.log(pr[0][1]))))
     (kp0, kd0), _ = best(grid, coarse)
     fine_grid = [(kp0 * a, kd0 * b) for a in FINE for b in FINE if (a, b) != (1.0, 1.0)]
     fine = shares(params, [scaled(base, kp, kd) for kp, kd in fine_grid], n, seed, scenario, workers=workers,
@@ -208,24 +221,35 @@ def robust(params, base: Gains, n: int, seed: int = 0, progress=None, workers=No
 
 
 def robust_plot(found: dict, path) -> None:
-    """The share that settles over the grid of factors on the procedure's roll and pitch kp and kd."""
+    """Over the grid of factors on the procedure's roll and pitch kp and kd: the share that holds, and
+    the median score (the worst ringing over its band, of the draws that fly)."""
     from flightctl.sim.plots import figure, save
-    fig, ax = figure(1, 1, size=(7.0, 5.5))
-    a = ax[0, 0]
+    fig, ax = figure(1, 2, size=(13.0, 5.5))
     pts = found["grid"]
-    sc = a.scatter([p["kp_factor"] for p in pts], [p["kd_factor"] for p in pts], c=[100 * p["settles"] for p in pts],
-                   cmap="viridis", vmin=0, vmax=100, s=60, edgecolors="k", linewidths=0.3)
-    fig.colorbar(sc, ax=a, label="settles (% of the draws)")
-    a.plot([found["kp_factor"]], [found["kd_factor"]], "r*", ms=16, label=f"chosen: settles {100 * found['settles']:.0f} %")
-    a.plot([1.0], [1.0], "ks", ms=8, mfc="none", label=f"the procedure's: {100 * found['procedure']['settles']:.0f} %")
-    a.plot(*found["table6_factors"], "wD", ms=8, mec="k", label=f"Table 6 (roll): {100 * found['table6']['settles']:.0f} %")
-    a.set_xscale("log")
-    a.set_yscale("log")
-    a.set_xlabel("factor on roll and pitch kp")
-    a.set_ylabel("factor on roll and pitch kd")
-    a.set_title(f"flightctl tune --robust {found['draws']}: Table 4 settles in {100 * found['table4']['settles']:.0f} %", fontsize=10)
-    a.legend(fontsize=8)
-    a.grid(alpha=0.3, which="both")
+    kp, kd = [p["kp_factor"] for p in pts], [p["kd_factor"] for p in pts]
+    worst = max([p["score"] for p in pts if p["score"] is not None] + [1.0])
+    panels = ((ax[0, 0], [100 * p["holds"] for p in pts], "holds (% of the draws)", "viridis", 0.0, 100.0, "holds"),
+              (ax[0, 1], [p["score"] if p["score"] is not None else np.nan for p in pts],
+               "median score (worst ringing / band; blank: most draws crash)", "magma_r", 0.0, worst, "score"))
+    for a, colour, label, cmap, lo, hi, key in panels:
+        sc = a.scatter(kp, kd, c=colour, cmap=cmap, vmin=lo, vmax=hi, s=60, edgecolors="k", linewidths=0.3,
+                       plotnonfinite=True)
+        fig.colorbar(sc, ax=a, label=label)
+
+        def said(r):
+            v = r[key]
+            return "none fly" if v is None else f"{100 * v:.0f} %" if key == "holds" else f"{v:.2g}"
+        a.plot([found["kp_factor"]], [found["kd_factor"]], "r*", ms=16, label=f"chosen: {said(found)}")
+        a.plot([1.0], [1.0], "ks", ms=8, mfc="none", label=f"the procedure's: {said(found['procedure'])}")
+        a.plot(*found["table6_factors"], "wD", ms=8, mec="k", label=f"Table 6 (roll): {said(found['table6'])}")
+        a.set_xscale("log")
+        a.set_yscale("log")
+        a.set_xlabel("factor on roll and pitch kp")
+        a.set_ylabel("factor on roll and pitch kd")
+        a.legend(fontsize=8)
+        a.grid(alpha=0.3, which="both")
+    fig.suptitle(f"flightctl tune --robust {found['draws']}: Table 4 flies in {100 * found['table4']['flies']:.0f} %, "
+                 f"holds in {100 * found['table4']['holds']:.0f} %", fontsize=10)
     save(fig, path)
 
 
@@ -258,6 +282,49 @@ def plot(params, gains: Gains, path) -> None:
     save(fig, path)
 
 
+LABEL = {"alt": "altitude", "roll": "roll", "pitch": "pitch", "yaw": "yaw"}
+
+
+def doc_block(found: dict, strict: bool, command: str) -> tuple[str, str]:
+    """(marker name, markdown) of what `tune` found, for docs/tune.md (`--doc`): the procedure's gains
+    against Table 4 (`tune procedure`), the strict reading's kd (`tune strict`), or the robust search's
+    shares (`tune robust`), with the command that wrote it."""
+    pct = lambda a, b: f"{100 * a / b:.0f} %"   # noqa: E731
+    if "robust" in found:
+        r = found["robust"]
+        g0 = r["procedure_gains"]
+        rows = [("the procedure (base model)", g0["kp_phi"], g0["kp_theta"], g0["kd_phi"], g0["kd_theta"], r["procedure"]),
+                ("Table 4", TABLE4.kp_phi, TABLE4.kp_theta, TABLE4.kd_phi, TABLE4.kd_theta, r["table4"]),
+                ("Table 6 (retuned on the vehicle)", TABLE6.kp_phi, TABLE6.kp_theta, TABLE6.kd_phi, TABLE6.kd_theta,
+                 r["table6"]),
+                (f"**robust** (kp x {r['kp_factor']:.2g}, kd x {r['kd_factor']:.2g})", g0["kp_phi"] * r["kp_factor"],
+                 g0["kp_theta"] * r["kp_factor"], g0["kd_phi"] * r["kd_factor"], g0["kd_theta"] * r["kd_factor"], r)]
+        lines = [f"`{command}`: {len(r['grid'])} candidates, each on the same {r['draws']} draws (seed {r['seed']}), "
+                 "flown to their landing and judged as the Monte Carlo judges.", "",
+                 "| roll / pitch gains | kp | kd | flies | holds | median score |", "|---|---|---|---|---|---|"]
+        for name, kpp, kpt, kdp, kdt, res in rows:
+            score = "- (most crash)" if res["score"] is None else f"{res['score']:.2f}"
+            lines.append(f"| {name} | {kpp:.3g} / {kpt:.3g} | {kdp:.3g} / {kdt:.3g} | {100 * res['flies']:.0f} % | "
+                         f"{100 * res['holds']:.0f} % | {score} |")
+        return "tune robust", "\n".join(lines)
+    if strict:
+        lines = [f"`{command}`:", "", "| channel | kd strict / Table 4 | of Table 4's | overshoot |", "|---|---|---|---|"]
+        for ch in ORDER:
+            f = found[ch]
+            lines.append(f"| {LABEL[ch]} | {f['kd']:.3g} / {f['table4']['kd']:g} | {pct(f['kd'], f['table4']['kd'])} | "
+                         f"{100 * f['overshoot']:.1f} % |")
+        return "tune strict", "\n".join(lines)
+    lines = [f"`{command}`:", "",
+             "| channel | kp tuned / Table 4 | of Table 4's | oscillations in 3 s: tuned kp / Table 4's | "
+             "kd tuned / Table 4 | of Table 4's | overshoot |", "|---|---|---|---|---|---|---|"]
+    for ch in ORDER:
+        f, t4 = found[ch], found[ch]["table4"]
+        lines.append(f"| {LABEL[ch]} | {f['kp']:.3g} / {t4['kp']:g} | {pct(f['kp'], t4['kp'])} | "
+                     f"{f['oscillations_at_kp']:.2f} / {t4['oscillations_at_kp']:.2f} | {f['kd']:.3g} / {t4['kd']:g} | "
+                     f"{pct(f['kd'], t4['kd'])} | {100 * f['overshoot']:.1f} % |")
+    return "tune procedure", "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     from flightctl.sim import causes
     from flightctl.sim.sweeps.montecarlo import ranged
@@ -270,9 +337,12 @@ def main(argv: list[str] | None = None) -> int:
                    help="read 'no oscillation remains' as no overshoot beyond the allowable error either")
     p.add_argument("--robust", type=int, metavar="N",
                    help="then scale the roll and pitch gains for the largest share of N draws of the file's ranges "
-                        "that flies and settles (batched simulator; --plot also draws the grid)")
+                        "that flies and holds each step, as the Monte Carlo judges (batched simulator; "
+                        "--plot also draws the grid)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the --robust draws (a whole number from 0)")
     p.add_argument("--scenario", default="paper", help="the scenario whose attitude steps --robust flies (default: paper)")
+    p.add_argument("--doc", metavar="FILE.md", help="write what was found into FILE's block (<!-- tune procedure: "
+                   "begin --> ... end -->, or tune strict, tune robust: docs/tune.md)")
     args = p.parse_args(argv)
     if args.robust is not None and not 1 <= args.robust <= 10000:
         raise InputError(f"--robust {args.robust}: between 1 and 10000 draws")
@@ -284,6 +354,12 @@ def main(argv: list[str] | None = None) -> int:
         output_file(args.json, "--json")
     if args.plot:
         output_file(args.plot, "--plot", ".png")
+    if args.doc:
+        from flightctl.sim.docs import block
+        name = "tune robust" if args.robust else "tune strict" if args.strict else "tune procedure"
+        if not Path(args.doc).is_file() or block(Path(args.doc).read_text(), f"<!-- {name}: begin -->",
+                                                 f"<!-- {name}: end -->") is None:
+            raise InputError(f"--doc {args.doc}: no block <!-- {name}: begin --> ... <!-- {name}: end --> in it")
     params = causes.load_vehicle(args.params)
     if params.effects:
         print("flightctl tune: the plant carries " + ", ".join(e.cause for e in params.effects)
@@ -312,9 +388,11 @@ def main(argv: list[str] | None = None) -> int:
             for ax in ("phi", "theta"):
                 name = f"{k}_{ax}"
                 src[name] = (f"flightctl tune --robust {args.robust}: the procedure's {getattr(procedure, name):.4g} "
-                             f"x {rob[k + '_factor']:.3g}, settles in {100 * rob['settles']:.0f} % of the draws of "
-                             f"{args.params}'s ranges (the procedure's {100 * rob['procedure']['settles']:.0f} %, "
-                             f"Table 4 {100 * rob['table4']['settles']:.0f} %); Table 4: {getattr(TABLE4, name):g}")
+                             f"x {rob[k + '_factor']:.3g}, holds in {100 * rob['holds']:.0f} % and flies in "
+                             f"{100 * rob['flies']:.0f} % of the draws of {args.params}'s ranges (the procedure's "
+                             f"{100 * rob['procedure']['holds']:.0f} % and {100 * rob['procedure']['flies']:.0f} %, "
+                             f"Table 4 {100 * rob['table4']['holds']:.0f} % and {100 * rob['table4']['flies']:.0f} %); "
+                             f"Table 4: {getattr(TABLE4, name):g}")
     write_atomic(out, "# Gains tuned by flightctl tune on " + (args.params or "the reference airframe") + "\n"
                  + dumps(dataclasses.replace(params, gains=gains), src, tables=("gains",)))
     print("channel   kp (tuned / Table 4)    kd (tuned / Table 4)")
@@ -328,9 +406,19 @@ def main(argv: list[str] | None = None) -> int:
     if args.robust:
         r = found["robust"]
         print(f"robust over {r['draws']} draws: roll and pitch kp x {r['kp_factor']:.3g}, kd x {r['kd_factor']:.3g} "
-              f"of the procedure's: flies {100 * r['flies']:.0f} %, settles {100 * r['settles']:.0f} % "
-              f"(the procedure's {100 * r['procedure']['settles']:.0f} %, Table 4 {100 * r['table4']['settles']:.0f} %, "
-              f"Table 6 {100 * r['table6']['settles']:.0f} %)")
+              f"of the procedure's")
+        for name, g in (("robust", r), ("the procedure's", r["procedure"]), ("Table 4", r["table4"]),
+                        ("Table 6", r["table6"])):
+            print(f"  {name:<16} flies {100 * g['flies']:3.0f} %, holds {100 * g['holds']:3.0f} %, median score "
+                  + ("- (most crash)" if g["score"] is None else f"{g['score']:.2f}"))
+    if args.doc:
+        from flightctl.sim.docs import write_block
+        shown = ["flightctl tune"] + [a for a in (argv if argv is not None else sys.argv[1:])]
+        skip = {"--out", "--json", "--plot", "--doc"}
+        words = [w for k, w in enumerate(shown) if w not in skip and (k == 0 or shown[k - 1] not in skip)]
+        name, body = doc_block(found, args.strict, " ".join(words))
+        write_block(args.doc, f"<!-- {name}: begin -->", f"<!-- {name}: end -->", body)
+        print(f"  {name} -> {args.doc}")
     if args.plot:
         plot(params, gains, args.plot)
         print(f"  plot -> {args.plot}")
