@@ -228,7 +228,8 @@ def robust_plot(found: dict, path) -> None:
     pts = found["grid"]
     kp, kd = [p["kp_factor"] for p in pts], [p["kd_factor"] for p in pts]
     worst = max([p["score"] for p in pts if p["score"] is not None] + [1.0])
-    panels = ((ax[0, 0], [100 * p["holds"] for p in pts], "holds (% of the draws)", "viridis", 0.0, 100.0, "holds"),
+    most = max(10.0, 100 * max(p["holds"] for p in pts))
+    panels = ((ax[0, 0], [100 * p["holds"] for p in pts], "holds (% of the draws)", "viridis", 0.0, most, "holds"),
               (ax[0, 1], [p["score"] if p["score"] is not None else np.nan for p in pts],
                "median score (worst ringing / band; blank: most draws crash)", "magma_r", 0.0, worst, "score"))
     for a, colour, label, cmap, lo, hi, key in panels:
