@@ -26,8 +26,8 @@ from flightctl.params import Params
 
 FILTER_S = 0.01          # s: the residuals' low-pass
 BIAS_S = 0.5             # s: their slow part, followed while no motor is suspected
-THRESHOLD = 0.6          # of the suspected motor's commanded thrust, missing in torque and in collective, ...
-LOOPS = 9                # ... for this many loops (20 ms) in a row: lost
+THRESHOLD = 0.45         # of the suspected motor's commanded thrust, missing in torque and in collective, ...
+LOOPS = 5                # ... for this many loops (20 ms) in a row: lost
 WEAK = 0.15              # missing at least this share ...
 WEAK_LOOPS = 45          # ... for this many loops (100 ms) in a row: named with its share
 CALM = 1.0               # rad/s: |p| + |q| low-passed over CALM_S: the count starts only below this
@@ -60,8 +60,8 @@ class MotorLossDetector:
     `fast` whether the fast test named it (its rotor may still be running down: at least that share).
     `accept()`: the loop flies on with that motor (a weak one): its missing thrust becomes part of
     the residuals' slow part."""
-    __slots__ = ("km", "kf", "kb", "kc", "fl", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
-                 "strong", "missing", "fast", "damp", "hold", "jolt_loops", "p", "q", "half", "quiet", "ic1", "Jxx", "Jyy", "Jp", "jx",
+    __slots__ = ("km", "kf", "kb", "kc", "fl", "sx", "sy", "sz", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
+                 "strong", "missing", "fast", "damp", "hold", "jolt_loops", "p", "q", "half", "quiet", "ic1", "c1", "w", "Jxx", "Jyy", "Jp", "jx",
                  "jy", "l", "iM", "M", "il")
 
     def __init__(self, params: Params, tau_motor: float | None = None):
@@ -69,19 +69,20 @@ class MotorLossDetector:
         dt = a.dt
         tau = motor_time_constant(params) if tau_motor is None else tau_motor
         self.km = dt / (tau + dt)
-        self.kf, self.kb, self.kc = dt / (FILTER_S + dt), dt / (BIAS_S + dt), dt / (CALM_S + dt)
+        self.kf, self.kb, self.kc = dt / (0.5 * FILTER_S + dt), dt / (BIAS_S + dt), dt / (CALM_S + dt)
         self.half = 0.5 * a.B              # a commanded thrust counts as at least this (near-idle rotors)
         # a collective drop (N) at most this cannot be WEAK of any motor's thrust (each counts as
         # at least `half`): no motor is suspected, and the loop need not look at each (most loops)
         self.quiet = WEAK * self.half
         # the airframe's constants of eq. 7, 9 and 27, bound once (the loop reads them every period)
-        self.ic1, self.Jxx, self.Jyy, self.Jp = 1.0 / a.c1, a.Jxx, a.Jyy, a.Jp
+        self.c1, self.ic1, self.Jxx, self.Jyy, self.Jp = a.c1, 1.0 / a.c1, a.Jxx, a.Jyy, a.Jp
         self.jx, self.jy = a.Jzz - a.Jyy, a.Jxx - a.Jzz
         # the roll and pitch damping of the rotors' airflow the file carries (rotor_inflow: 2 k l^2 of the
         # thrust changes and the hub moment, for four rotors at hover): torque the rotors gave, too
         self.damp = 2.0 * effect_value(params, "rotor_inflow", "k") * a.l * a.l + effect_value(params, "rotor_inflow", "hub")
         self.l, self.il, self.M, self.iM = a.l, 1.0 / a.l, a.M, 1.0 / a.M
         self.fl = [0.0, 0.0, 0.0, 0.0]
+        self.w = [0.0, 0.0, 0.0, 0.0]
         self.count = [0, 0, 0, 0]
         self.strong = [0, 0, 0, 0]
         self.missing, self.fast = 0.0, False
@@ -92,24 +93,32 @@ class MotorLossDetector:
         """At take-off: the rotors at f0 each, nothing suspected."""
         for i in range(4):
             self.fl[i] = f0
+            self.w[i] = sqrt(f0 * self.ic1)
             self.count[i] = self.strong[i] = 0
-        self.rx = self.ry = self.rz = self.bx = self.by = self.bz = 0.0
+        self.rx = self.ry = self.rz = self.bx = self.by = self.bz = self.sx = self.sy = self.sz = 0.0
         self.calm = 0.0
         self.hold = 0
         self.p = self.q = None
 
     def update(self, s: ImuSample, f: list[float], dt: float) -> int:
-        fl, km = self.fl, self.km
-        f0 = fl[0] = fl[0] + km * (f[0] - fl[0])    # the thrusts now, from the commands (one loop late)
-        f1 = fl[1] = fl[1] + km * (f[1] - fl[1])
-        f2 = fl[2] = fl[2] + km * (f[2] - fl[2])
-        f3 = fl[3] = fl[3] + km * (f[3] - fl[3])
+        # the rotors' speeds now (eq. 27), from the thrusts commanded one loop earlier through the motor
+        # time constant (the speed lags, as the plant's motor_dynamics has it), and their thrusts
+        w, km, ic1, c1 = self.w, self.km, self.ic1, self.c1
+        w0 = w[0] = w[0] + km * (sqrt(f[0] * ic1) - w[0])
+        w1 = w[1] = w[1] + km * (sqrt(f[1] * ic1) - w[1])
+        w2 = w[2] = w[2] + km * (sqrt(f[2] * ic1) - w[2])
+        w3 = w[3] = w[3] + km * (sqrt(f[3] * ic1) - w[3])
+        fl = self.fl
+        f0 = fl[0] = c1 * w0 * w0
+        f1 = fl[1] = c1 * w1 * w1
+        f2 = fl[2] = c1 * w2 * w2
+        f3 = fl[3] = c1 * w3 * w3
         p, q, r = s.gx, s.gy, s.gz
         if self.p is None:
             self.p, self.q = p, q
             return 0
-        ic1, l = self.ic1, self.l
-        Om = -sqrt(f0 * ic1) + sqrt(f1 * ic1) - sqrt(f2 * ic1) + sqrt(f3 * ic1)   # eq. 9 with eq. 27
+        l = self.l
+        Om = -w0 + w1 - w2 + w3                      # eq. 9
         JpOm = self.Jp * Om
         # eq. 7 turned around: the torque the body felt, less the one the commanded thrusts give
         d = self.damp
@@ -117,14 +126,18 @@ class MotorLossDetector:
         ty = self.Jyy * (q - self.q) / dt + p * r * self.jy - p * JpOm + d * q - l * (f2 - f0)
         tz = s.az - (f0 + f1 + f2 + f3) * self.iM
         self.p, self.q = p, q
-        kf = self.kf
-        rx = self.rx = self.rx + kf * (tx - self.rx)
-        ry = self.ry = self.ry + kf * (ty - self.ry)
-        rz = self.rz = self.rz + kf * (tz - self.rz)
+        kf = self.kf                               # two EMAs of FILTER_S / 2: a critically damped low-pass
+        sx = self.sx = self.sx + kf * (tx - self.sx)
+        sy = self.sy = self.sy + kf * (ty - self.sy)
+        sz = self.sz = self.sz + kf * (tz - self.sz)
+        rx = self.rx = self.rx + kf * (sx - self.rx)
+        ry = self.ry = self.ry + kf * (sy - self.ry)
+        rz = self.rz = self.rz + kf * (sz - self.rz)
         self.calm += self.kc * ((p if p > 0 else -p) + (q if q > 0 else -q) - self.calm)
         count, strong = self.count, self.strong
         fall = (self.bz - rz) * self.M             # the collective thrust missing (N)
-        if tz > JOLT:                              # the floor pushing up: a touchdown
+        if rz > JOLT:                              # the floor pushing up: a touchdown (low-passed: not the
+            #                                      rotors' vibration on the accelerometer)
             self.hold = self.jolt_loops
         elif self.hold > 0:
             self.hold -= 1

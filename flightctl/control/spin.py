@@ -154,7 +154,7 @@ class SpinController:
         u = -(K[0] * p + K[1] * q + K[2] * dx + K[3] * dy + K[4] * self.u_act)
         F = F / (nz if nz > 0.5 else 0.5)        # along the thrust axis, tilted from the vertical
         F = F if F > 0.0 else 0.0
-        lim = a.l * F * 0.5                        # each rotor's thrust stays >= 0
+        lim = a.l * F                              # each rotor's thrust stays >= 0
         u = lim if u > lim else -lim if u < -lim else u
         self.u = u
         i, j = self.pair
