@@ -61,7 +61,7 @@ class MotorLossDetector:
     `accept()`: the loop flies on with that motor (a weak one): its missing thrust becomes part of
     the residuals' slow part."""
     __slots__ = ("km", "kf", "kb", "kc", "fl", "sx", "sy", "sz", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
-                 "strong", "missing", "fast", "damp", "hold", "jolt_loops", "p", "q", "half", "quiet", "ic1", "c1", "w", "Jxx", "Jyy", "Jp", "jx",
+                 "strong", "missing", "fast", "seen", "damp", "hold", "jolt_loops", "p", "q", "half", "quiet", "ic1", "c1", "w", "Jxx", "Jyy", "Jp", "jx",
                  "jy", "l", "iM", "M", "il")
 
     def __init__(self, params: Params, tau_motor: float | None = None):
@@ -86,6 +86,7 @@ class MotorLossDetector:
         self.count = [0, 0, 0, 0]
         self.strong = [0, 0, 0, 0]
         self.missing, self.fast = 0.0, False
+        self.seen = 0.0          # the largest missing share any motor showed this loop in calm flight
         self.jolt_loops = int(JOLT_S / dt + 0.5)
         self.reset(a.B)
 
@@ -143,9 +144,10 @@ class MotorLossDetector:
             self.hold -= 1
         if self.hold or fall <= self.quiet:   # on the floor the floor carries weight: no fall
             count[0] = count[1] = count[2] = count[3] = strong[0] = strong[1] = strong[2] = strong[3] = 0
+            self.seen = 0.0
         else:
             ex, ey = rx - self.bx, ry - self.by
-            lost, half, calm = 0, self.half, self.calm < CALM
+            lost, half, calm, seen = 0, self.half, self.calm < CALM, 0.0
             il = self.il
             # the missing torque of motor i lies along its arm: +y for 1, -x for 2, -y for 3, +x for 4
             for i in range(4):
@@ -157,6 +159,8 @@ class MotorLossDetector:
                 drop = fall / fi
                 if drop < share:
                     share = drop
+                if calm and share > seen:
+                    seen = share
                 if WEAK < share < HIGH and (calm or count[i] > 0):
                     count[i] += 1
                     strong[i] = strong[i] + 1 if share > THRESHOLD and calm else 0
@@ -164,6 +168,7 @@ class MotorLossDetector:
                         lost, self.missing, self.fast = i + 1, share, strong[i] >= LOOPS
                 else:
                     count[i] = strong[i] = 0
+            self.seen = seen
             if lost:
                 return lost
             if count[0] or count[1] or count[2] or count[3]:
