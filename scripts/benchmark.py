@@ -221,7 +221,7 @@ def main() -> None:
           f"{period_us:.0f} us loop period (fastest of {100 * args.repeat} runs of 1000), targets < 3 % "
           f"and < 8 us (issue 17)")
     cold, warm, us_spin = spin_costs()
-    print(f"motor-loss gain schedule (as-flown, judged over its Jp range): {cold:.1f} s of CPU to build, "
+    print(f"motor-loss gain schedule (as-flown, judged over its Jp, motor time constant and delay ranges): {cold:.1f} s of CPU to build, "
           f"{1e3 * warm:.0f} ms to read back from the disk cache; the two-rotor controller: {us_spin:.1f} us a loop")
     for sensors in (False, True):
         for workers in sorted({1, os.cpu_count() or 1}):

@@ -133,7 +133,7 @@ def margins() -> list[tuple[str, float, float]]:
                     params = drawn_params(causes.load_vehicle("paper-as-flown", GAIN_SETS[gains]), d)
                     if top:
                         params = dataclasses.replace(params, sensors=dataclasses.replace(params.sensors,
-                                                                                         **noise_end(params, 2)))
+                                                                                         **noise_end(params, 1)))
                     effects = tuple(causes.make(e.cause, **dict(e.parameters)) for e in params.effects)
                     worst = np.maximum(worst, flight(params, effects, params.airframe, "paper", k))
             rows.append((f"the paper flight over {n} draws of the as-flown ranges, both gain sets"

@@ -15,19 +15,24 @@ n_x, n_y) and the pair's torque across its arm (`pair_model`):
 The damping d of each axis is what the parameter file carries from the rotors' airflow, for the two
 rotors that run (rotor_inflow's hub moment and its inflow damping on the pair's own axis, 2 k l^2
 sqrt(2); 0 on the base model) and a token EPS_DAMPING (a solvable Riccati equation where the other axis'
-gyroscopic coupling vanishes, below). The pair's torque follows its command through the motor time
-constant (a fifth state). The gains are the discrete LQR of this model held over one loop, on a grid
-of spin rates from R_LO (a yaw turn against the pair's spin when the motor is lost: the pair brakes
-it, through zero spin) to past the equilibrium, and of rotor momenta from none to OMEGA_TOP of the
-pair's own in hover; the loop interpolates them (bilinear) at the measured rate and the rotors'
-modelled speeds.
+gyroscopic coupling vanishes, below). The pair's torque follows its command through the file's motor
+time constant (a fifth state) and its delay chain (`actuation_delay`: the model held over one loop with
+its input delay = m dt + delta late, the commands still in the chain as states: `discrete`,
+`augmented`). The gains are the discrete LQR of this model on a grid of spin rates from R_LO (a yaw turn
+against the pair's spin when the motor is lost: the pair brakes it, through zero spin) to past the
+equilibrium, and of rotor momenta from none to OMEGA_TOP of the pair's own in hover; the loop
+interpolates them (bilinear) at the measured rate and the rotors' modelled speeds. The rates reach the
+gains through the file's rate path (`[filters] tau_rate`, the D term's EMA), built around eq. 7's
+prediction from the last loop (`rate_filter`): the loop as it runs, filter, torque model and gains, is
+`closed_loop`, and each point's gains are judged on it over the file's ranges (`plants`: Jp, the motor
+time constant, the delay chain).
 
 **Where it is weak.** The torque reaches the other axis only through the coupling
 (Jzz - Jyy) r + H (pair 1-3) or (Jzz - Jxx) r + H (pair 2-4). The rotors turn against the spin
 (H < 0 in the spin's direction), so the coupling vanishes at r_s = Jp |Omega| / (Jzz - Jyy): 26 rad/s
 with Table 2's Jp at the pair's hover speed, right at the equilibrium spin; 9.7 rad/s with the
-as-flown file's 1e-4. There that axis is not steered, only damped (`radius` gives the closed
-loop's spectral radius at each point; docs/safety.md tabulates it).
+as-flown file's 1e-4. There that axis is not steered, only damped (`spectral_radius` of `closed_loop`
+at each point; docs/safety.md tabulates the worst over the file's ranges).
 
 **Where it cannot work** (`unusable`): no spin (the pair's torque 2 (g1 f + g2) not positive), no
 drag to settle it (gamma1 = gamma0 = 0), or an equilibrium beyond the gyro's full scale (the driver's
@@ -481,7 +486,7 @@ _MEMORY: dict = {}
 
 def key(d: tuple) -> str:
     """The cache's name for the schedule of `d`: a hash of it and of the design's own constants."""
-    constants = (R_LO, SPIN_STEP, OMEGA_STEPS, OMEGA_TOP, RATE_SCALE, AXIS_SCALE, EPS_DAMPING, GYRO_MAX)
+    constants = (R_LO, SPIN_STEP, OMEGA_STEPS, OMEGA_TOP, RATE_SCALE, AXIS_SCALE, EPS_DAMPING, GYRO_MAX, ROBUST_JP)
     return hashlib.sha256(repr((d, constants)).encode()).hexdigest()[:20]
 
 
