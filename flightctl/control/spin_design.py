@@ -24,7 +24,7 @@ equilibrium, and of rotor momenta from none to OMEGA_TOP of the pair's own in ho
 interpolates them (bilinear) at the measured rate and the rotors' modelled speeds. The rates reach the
 gains through the file's rate path (`[filters] tau_rate`, the D term's EMA), built around eq. 7's
 prediction from the last loop (`rate_filter`): the loop as it runs, filter, torque model and gains, is
-`closed_loop`, and each point's gains are judged on it over the file's ranges (`plants`: Jp, the motor
+`loop_parts` and `closed_loop`, and each point's gains are judged on it over the file's ranges (`plants`: Jp, the motor
 time constant, the delay chain).
 
 **Where it is weak.** The torque reaches the other axis only through the coupling
@@ -302,12 +302,13 @@ def lqr(d: Inputs, pair, r: float, H: float) -> list[float]:
     return [float(x) * u_max for x in K[:n]] + [0.0] * (5 - n) + [float(x) for x in K[n:]]
 
 
-def closed_loop(d: Inputs, pair, r: float, H_true: float, K, true: Inputs):
+def loop_parts(d: Inputs, pair, r: float, H_true: float, true: Inputs):
     """The loop as spin.py flies it, linearised at spin r, on the plant `true` (its Jp, motor time
     constant and delay; rotor momentum H_true) with the controller designed on `d`: the rate filter
     around eq. 7's prediction (at the design's momentum, H = Jp Omega with the file's Jp), the torque
-    model through the design's time constant and delay, the gains K. The matrix maps the loop's whole
-    state from one loop to the next."""
+    model through the design's time constant and delay. (M0, c, rows): with gains K, the matrix that
+    maps the loop's whole state from one loop to the next is M0 + c (-K rows) (`closed_loop`): the
+    command is -K rows X, and c is where it enters."""
     import numpy as np
     A, B = pair_model(true, pair, r, H_true)
     Phi, Ga, Gb, mt = discrete(A, B, d.dt, true.delay)
@@ -317,35 +318,43 @@ def closed_loop(d: Inputs, pair, r: float, H_true: float, K, true: Inputs):
     # X = (x [n], u_{k-1} .. u_{k-S} [S], p_hat_{k-1}, q_hat_{k-1}, tau_hat_k, tau_hat_{k-1})
     N = n + S + 4
     iu, ip, iq, it, itp = n, n + S, n + S + 1, n + S + 2, n + S + 3
-
-    def e(i):
-        v = np.zeros(N)
-        v[i] = 1.0
-        return v
+    eye = np.eye(N)
     Ac, _ = pair_model(d, pair, r, H_true * d.Jp / true.Jp if true.Jp > 0 else H_true)   # the controller's model
-    bcol = (np.array([0.0, 1.0 / d.Jyy]) if pair == (0, 2) else np.array([1.0 / d.Jxx, 0.0]))
+    bcol = (0.0, 1.0 / d.Jyy) if pair == (0, 2) else (1.0 / d.Jxx, 0.0)
     a = rate_filter(d)
-    tq = 0.5 * (e(it) + e(itp))
-    pred_p = e(ip) + d.dt * (Ac[0, 0] * e(ip) + Ac[0, 1] * e(iq) + bcol[0] * tq)
-    pred_q = e(iq) + d.dt * (Ac[1, 0] * e(ip) + Ac[1, 1] * e(iq) + bcol[1] * tq)
-    p_hat = (1.0 - a) * pred_p + a * e(0)
-    q_hat = (1.0 - a) * pred_q + a * e(1)
-    Kv = list(K)
-    u = -(Kv[0] * p_hat + Kv[1] * q_hat + Kv[2] * e(2) + Kv[3] * e(3) + Kv[4] * e(it))
-    for j in range(mn + 1):
-        u = u - Kv[5 + j] * e(iu + j)
+    tq = 0.5 * (eye[it] + eye[itp])
+    pred_p = eye[ip] + d.dt * (Ac[0, 0] * eye[ip] + Ac[0, 1] * eye[iq] + bcol[0] * tq)
+    pred_q = eye[iq] + d.dt * (Ac[1, 0] * eye[ip] + Ac[1, 1] * eye[iq] + bcol[1] * tq)
+    p_hat = (1.0 - a) * pred_p + a * eye[0]
+    q_hat = (1.0 - a) * pred_q + a * eye[1]
+    rows = np.array([p_hat, q_hat, eye[2], eye[3], eye[it]] + [eye[iu + j] for j in range(mn + 1)])
+    M0, c = np.zeros((N, N)), np.zeros(N)
 
-    def past(j):                              # u_{k-j} as a row over X (j = 0: u_k)
-        return u if j == 0 else e(iu + j - 1)
-    M = np.zeros((N, N))
-    M[:n] = Phi @ np.eye(n, N) + np.outer(Ga[:, 0], past(mt + 1)) + np.outer(Gb[:, 0], past(mt))
-    M[iu] = u
+    def enter(i, k, coef):                    # row i takes coef u_{k-k}: the command itself, or the chain
+        if k == 0:
+            c[i] += coef
+        else:
+            M0[i, iu + k - 1] += coef
+    M0[:n, :n] = Phi
+    for i in range(n):
+        enter(i, mt + 1, Ga[i, 0])
+        enter(i, mt, Gb[i, 0])
+    c[iu] = 1.0
     for j in range(1, S):
-        M[iu + j] = e(iu + j - 1)
-    M[ip], M[iq] = p_hat, q_hat
-    M[it] = phi * e(it) + ga * past(mn + 1) + gb * past(mn)
-    M[itp] = e(it)
-    return M
+        M0[iu + j, iu + j - 1] = 1.0
+    M0[ip], M0[iq] = p_hat, q_hat
+    M0[it, it] = phi
+    enter(it, mn + 1, ga)
+    enter(it, mn, gb)
+    M0[itp, it] = 1.0
+    return M0, c, rows
+
+
+def closed_loop(parts, K):
+    """The loop's matrix from `loop_parts` and the gains K."""
+    import numpy as np
+    M0, c, rows = parts
+    return M0 - np.outer(c, np.asarray(K[:rows.shape[0]]) @ rows)
 
 
 def spectral_radius(M) -> float:
@@ -392,14 +401,16 @@ def robust_gains(d: Inputs, pair, r: float, frac: float, models=None) -> tuple[l
     candidates = [(d, d.Jp * speed), (d, sign * coupling * r)]
     if d.tau_hi > d.tau:
         candidates.append((d._replace(tau=d.tau_hi), d.Jp * speed))
-    best = (None, float("nan"))
+    best, parts = (None, float("nan")), None
     for design, Hd in candidates:
         try:
             K = lqr(design, pair, r, -sign * Hd)
         except (LinAlgError, ValueError):     # no spin, no momentum: one axis cannot be turned at all
             continue
-        worst = max(spectral_radius(closed_loop(d, pair, r, -sign * t.Jp * speed, K, t)) for t in models)
-        if best[0] is None or worst < best[1]:
+        if parts is None:
+            parts = [loop_parts(d, pair, r, -sign * t.Jp * speed, t) for t in models]
+        worst = max(spectral_radius(closed_loop(pt, K)) for pt in parts)
+        if best[0] is None or worst < best[1] - 1e-12:     # a tie (a marginal point) keeps the first
             best = (K, worst)
     return best
 
