@@ -2,8 +2,9 @@
 the gyro, the accelerometer and the thrusts it commanded one loop earlier (the mixer's, through the
 motor time constant the parameter file carries, if any). Eq. 7 turned around gives the roll and pitch
 torques the body felt, `J dw/dt + w x (J w + Jp Omega z_b)` (the gyro differenced), and the specific
-force along z_b the collective thrust; what the commanded thrusts predict (the "+" layout, eq. 25) is
-subtracted, both low-passed over FILTER_S, and their slow parts (BIAS_S: a centre of mass off the
+force along z_b the collective thrust; what the commanded thrusts predict (the "+" layout, eq. 25; the
+rotors' speeds, eq. 27, following them through the motor time constant) is subtracted, both low-passed over FILTER_S (two EMAs of half of it: the rotors' vibration lines and the
+gyro's noise, differenced, kept out), and their slow parts (BIAS_S: a centre of mass off the
 middle, a battery that sags, a weak motor) are taken away. A stopped rotor (or a lost propeller) i
 leaves its whole thrust missing: the torque residual points along its arm and the collective one is
 down by its thrust; a weak one (a failing ESC, a chipped propeller) leaves part of it missing. The
@@ -14,7 +15,8 @@ for tens of milliseconds, but not in the collective (the two sides of an axis ch
 directions); and the count only starts in calm flight (the body rates, low-passed, below CALM): a
 vehicle already tumbling is not read as a lost rotor. It looks at any height: a vehicle resting on
 the floor has the floor carrying weight, the collective residual the other way; a touchdown's jolt
-(JOLT above the commanded thrusts) holds the count off for JOLT_S (a hop, legs settling).
+(the low-passed collective residual JOLT above the commanded thrusts) holds the count off for JOLT_S
+(a hop, legs settling).
 """
 from __future__ import annotations
 
@@ -24,10 +26,11 @@ from flightctl.control.spin_design import effect_value, motor_time_constant
 from flightctl.hal import ImuSample
 from flightctl.params import Params
 
-FILTER_S = 0.01          # s: the residuals' low-pass
+FILTER_S = 0.01          # s: the residuals' low-pass (two EMAs of FILTER_S / 2)
 BIAS_S = 0.5             # s: their slow part, followed while no motor is suspected
-THRESHOLD = 0.45         # of the suspected motor's commanded thrust, missing in torque and in collective, ...
-LOOPS = 5                # ... for this many loops (20 ms) in a row: lost
+THRESHOLD = 0.45         # of the suspected motor's commanded thrust, missing in torque and in collective (above
+#                          1 - TRIM: a stopping rotor named this early is never flown on four), ...
+LOOPS = 5                # ... for this many loops (11 ms) in a row: lost
 WEAK = 0.15              # missing at least this share ...
 WEAK_LOOPS = 45          # ... for this many loops (100 ms) in a row: named with its share
 CALM = 1.0               # rad/s: |p| + |q| low-passed over CALM_S: the count starts only below this
