@@ -71,6 +71,7 @@ def test_the_extension_table_is_read_and_extends_the_contract():
 
 def test_registry_has_the_causes_of_the_contract_in_its_order_then_the_extensions():
     assert list(causes.CAUSES) == list(all_causes())
+    assert causes.EXTENSIONS == tuple(extension_table())
 
 
 def test_registry_parameters_and_units_match_the_tables():

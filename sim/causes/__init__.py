@@ -43,11 +43,12 @@ class Cause:
 _FITS = (motor_lag.MotorLagFit, actuation_delay.ActuationDelayFit, ground_effect.GroundEffectFit,
          battery_sag.BatterySagFit, linear_yaw_drag.LinearYawDragFit, rotor_drag.RotorDragFit,
          com_offset.ComOffsetFit, motor_weak.MotorWeakFit, rotor_inflow.RotorInflowFit,
-         motor_dynamics.MotorDynamicsFit,
-         # the project's own extensions, after the contract's (docs/diagnose.md, "Causes beyond the contract")
-         gyro_lag.GyroLagFit)
+         motor_dynamics.MotorDynamicsFit)
+# the project's own causes, after the contract's (docs/diagnose.md, "Causes beyond the contract")
+_EXTENSION_FITS = (gyro_lag.GyroLagFit,)
 
-CAUSES: dict[str, Cause] = {c.name: c for c in map(Cause.of, _FITS)}
+CAUSES: dict[str, Cause] = {c.name: c for c in map(Cause.of, _FITS + _EXTENSION_FITS)}
+EXTENSIONS: tuple[str, ...] = tuple(f.effect.cause for f in _EXTENSION_FITS)
 
 
 def make(cause: str, **parameters: float) -> Effect:
