@@ -70,3 +70,40 @@ def test_parse_builds_it_and_refuses_a_lag_out_of_range():
     assert e.uses_gyro and e.parameters == {"tau": 0.03}
     with pytest.raises(InputError, match="out of range"):
         causes.parse("gyro_lag:tau=-0.01")
+
+
+def _noise(tmp_path, name, *args, params=()):
+    """The gyro noise diagnose reports for a quick flight of the hidden-effect tests (`flightctl sim
+    --plan`, then `flightctl diagnose`), with `args` added to the simulation's command line and `params`
+    to both."""
+    import json
+
+    from flightctl.cli import main
+    from test_diagnose_cases import quick_plan
+    log, out = tmp_path / f"{name}.csv", tmp_path / f"{name}.json"
+    assert main(["sim", "--plan", str(quick_plan(tmp_path)), "--log", str(log), "--seed", "7", "--no-plot",
+                 "--quiet", *args, *params]) in (0, 1)
+    assert main(["diagnose", str(log), "--json", str(out), "--quiet", *params]) == 0
+    report = json.loads(out.read_text())
+    return report["data"]["gyro_noise"], report["causes"]
+
+
+def test_diagnose_reports_the_gyro_noise_beside_the_causes_not_as_one(tmp_path):
+    """The level diagnose reports (the gyro above 60 Hz, as white noise per read) is the simulated chip's
+    own where it is all there is, rises with the as-flown vehicle's `[sensors]` (frame broadband noise
+    and rotor lines) and falls where a lag smooths the gyro; more noise names no cause."""
+    from flightctl.drivers import mpu9250_regs as reg
+    from flightctl.drivers.mpu9250 import DLPF
+    chip = SensorNoise().gyro_density * math.sqrt(0.5 * math.pi * reg.GYRO_DLPF[DLPF][0])   # rad/s per read
+    plain, named = _noise(tmp_path, "plain")
+    assert named == []
+    for axis in "pqr":
+        assert plain["white_per_read"][axis] == pytest.approx(chip, rel=0.15)
+    noisy, named = _noise(tmp_path, "as_flown", params=("--params", "paper-as-flown"))
+    from flightctl.params import load
+    broadband = load("paper-as-flown").sensors.gyro_broadband    # rad/s per read at hover thrust, roll and pitch
+    assert min(noisy["white_per_read"][a] for a in "pq") == pytest.approx(broadband, rel=0.5)
+    assert "gyro_lag" not in [c["cause"] for c in named]
+    lagged, named = _noise(tmp_path, "lagged", "--effect", "gyro_lag:tau=0.01")
+    assert [c["cause"] for c in named] == ["gyro_lag"]
+    assert max(lagged["rms"].values()) < 0.5 * min(plain["rms"].values())

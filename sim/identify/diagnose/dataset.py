@@ -211,16 +211,22 @@ class DataSet:
     def add_gyro_filter(self, b, a) -> None:
         """A first-order gyro filter (b, a), y_k = b0 x_k - a1 y_(k-1), that the log does not declare (a
         `gyro_lag`, folded into the model or tried): the model's gyro channels go through it as through
-        the declared ones (`_sense`), its rates (`wmid`, in the coupling, rotor-momentum and yaw-drag
-        terms) are the logged gyro through its exact inverse, x_k = (y_k + a1 y_(k-1)) / b0, and the base
-        is recomputed. The inverse's noise is filtered again with the prediction."""
+        the declared ones (`_sense`), and its rates (`wmid`, in the coupling, rotor-momentum and
+        yaw-drag terms) are the logged gyro corrected by its exact inverse, x_k = (y_k + a1 y_(k-1)) / b0,
+        the correction x - y low-passed (zero-phase, at twice the residual's low-pass: products of
+        rates reach that band from there) so that the inverse's amplified noise stays out; the base
+        is recomputed."""
+        from scipy import signal
         stage = _sos([(b, a)])
         self._sensor = [(stage if g is None else np.vstack([g, stage]), acc) for g, acc in self._sensor]
+        smooth = signal.butter(2, min(2.0 * self.lowpass_hz, 0.4 * self.fs), fs=self.fs, output="sos")
         wmid = []
         for w in self.wmid:
-            x = w.copy()
-            x[:, 1:-1] = (w[:, 1:-1] + a[1] * w[:, :-2]) / b[0]
-            wmid.append(x)
+            x = np.zeros_like(w)
+            x[:, 1:-1] = (w[:, 1:-1] + a[1] * w[:, :-2]) / b[0] - w[:, 1:-1]
+            x = signal.sosfiltfilt(smooth, x, axis=1)
+            x[:, -1] = 0.0
+            wmid.append(w + x)
         self.wmid = wmid
         self.w = self.flat(wmid)
         self.rebase()

@@ -70,6 +70,10 @@ def text(d: Diagnosis) -> str:
     L.append(f"flightctl diagnose: {', '.join(rep['data']['files'])}")
     L.append(f"  {ds.seconds:.1f} s airborne, {ds.n} samples kept at {ds.fs_flat:.0f} Hz of the log's {ds.fs:.0f} Hz, {len(ds.stretches)} stretch(es)")
     L.append(f"  metric: {rep['metric']}")
+    if (gn := rep["data"]["gyro_noise"]) is not None:
+        L.append(f"  gyro noise in flight, above {gn['above_hz']:g} Hz (not a cause; beside the parameter file's [sensors]): "
+                 + ", ".join(f"{k} {v:.3g}" for k, v in gn["rms"].items()) + " rad/s rms, as white noise per read "
+                 + ", ".join(f"{k} {v:.3g}" for k, v in gn["white_per_read"].items()) + " rad/s")
     base = ", ".join(f"{e['cause']} {e['parameters']}" for e in d.carried)
     if ds.vehicle.identified:
         L.append("  base model: identified from the flight (another vehicle; docs/real-flights.md), per unit mass "
