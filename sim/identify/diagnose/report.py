@@ -70,10 +70,6 @@ def text(d: Diagnosis) -> str:
     L.append(f"flightctl diagnose: {', '.join(rep['data']['files'])}")
     L.append(f"  {ds.seconds:.1f} s airborne, {ds.n} samples kept at {ds.fs_flat:.0f} Hz of the log's {ds.fs:.0f} Hz, {len(ds.stretches)} stretch(es)")
     L.append(f"  metric: {rep['metric']}")
-    if (gn := rep["data"]["gyro_noise"]) is not None:
-        L.append(f"  gyro noise in flight, above {gn['above_hz']:g} Hz (not a cause; beside the parameter file's [sensors]): "
-                 + ", ".join(f"{k} {v:.3g}" for k, v in gn["rms"].items()) + " rad/s rms, as white noise per read "
-                 + ", ".join(f"{k} {v:.3g}" for k, v in gn["white_per_read"].items()) + " rad/s")
     base = ", ".join(f"{e['cause']} {e['parameters']}" for e in d.carried)
     if ds.vehicle.identified:
         L.append("  base model: identified from the flight (another vehicle; docs/real-flights.md), per unit mass "
@@ -88,6 +84,10 @@ def text(d: Diagnosis) -> str:
         L.append(f"    median command in flight P = {bm['median_P']['value']}; rotors: {bm['layout']['source']}")
     else:
         L.append(f"  base model: the paper's{' with ' + base if base else ''}")
+    if (gn := rep["data"]["gyro_noise"]) is not None:
+        L.append(f"  gyro noise in flight, above {gn['above_hz']:g} Hz (not a cause; beside the parameter file's [sensors]): "
+                 + ", ".join(f"{k} {v:.3g}" for k, v in gn["rms"].items()) + " rad/s rms, as white noise per read "
+                 + ", ".join(f"{k} {v:.3g}" for k, v in gn["white_per_read"].items()) + " rad/s")
     L.append("")
     L.append(f"  {'candidate':<16} {'parameters':<34} {'gain':>8} {'t':>7}  {'best channel (gain, t)':<24} named?")
     for c in rep["candidates"]:
