@@ -12,7 +12,8 @@ from flightctl.hal import ImuSample
 from flightctl.params import Params
 from flightctl.sim import causes
 from flightctl.sim.causes.gyro_lag import pt1_gain
-from flightctl.sim.world.devices import SensorNoise, SimMpu9250, World
+from flightctl.sim.world.devices import SensorNoise, World
+from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.world.model import P, R
 
 LSB = math.radians(1.0 / 16.4)   # rad/s: the driver's gyro scale (+-2000 deg/s)
