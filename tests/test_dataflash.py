@@ -266,3 +266,17 @@ def test_a_simulated_flight_written_as_an_arducopter_3_1_text_dump_comes_back(fl
         assert np.allclose(t[f"P{m}"], np.clip(want, 0, 255), atol=1e-3), m
     assert np.nanmean(t["battery_v"]) == pytest.approx(11.9)                  # CURR's Volt in cV
     assert float(t.meta["motor_rate_hz"]) < float(t.meta["rate_hz"]) / 3
+
+
+def test_a_damaged_arducopter_text_dump_is_read_up_to_its_damage_or_refused_in_one_line(tmp_path, capsys):
+    data = (EXAMPLES / "nan.log").read_bytes()
+    rng = np.random.default_rng(5)
+    for k in range(8):
+        cut = int(rng.integers(2000, len(data)))
+        junk = rng.integers(0, 256, int(rng.integers(1, 400)), dtype=np.uint8).tobytes()
+        path, out = tmp_path / f"d{k}.log", tmp_path / f"d{k}.csv"
+        path.write_bytes(data[:cut] + (junk + data[cut:] if k % 2 else b""))    # cut, or bytes pasted in
+        rc = main(["log", "import", str(path), str(out), "--quiet"])
+        err = capsys.readouterr().err
+        assert (rc == 0 and out.exists()) or (rc == 2 and err.count("\n") == 1 and str(path) in err
+                                              and not out.exists()), err

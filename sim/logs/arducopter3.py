@@ -81,11 +81,17 @@ def unlogged(p: dict, gyro: bool, motors: bool) -> str:
               ([("the motor outputs", LOG_MOTORS, "MOTORS, named RCOUT from 3.1")] if not motors else [])
     if not missing:
         return ""
-    mask = log_bitmask(p)
     what = " and ".join(m[0] for m in missing)
-    bits = ", ".join(f"bit {b} ({name}, {1 << b})" for _, b, name in missing if not mask >> b & 1)
-    return (f"{what} {'were' if len(missing) > 1 else 'was'} not logged"
-            + (f": LOG_BITMASK {mask} lacks {bits}; add {sum(1 << b for _, b, _ in missing)}" if bits else ""))
+    were = f"{what} {'were' if len(missing) > 1 else 'was'} not logged"
+    if "LOG_BITMASK" not in p:
+        return were + ": LOG_BITMASK's " + " and ".join(f"bit {b} ({name}, {1 << b})" for _, b, name in missing) + \
+            " log them (the parameter is not in this log)"
+    mask = log_bitmask(p)
+    lacks = [(b, name) for _, b, name in missing if not mask >> b & 1]
+    if not lacks:
+        return were
+    return (were + f": LOG_BITMASK {mask} lacks " + ", ".join(f"bit {b} ({name}, {1 << b})" for b, name in lacks)
+            + f"; add {sum(1 << b for b, _ in lacks)}")
 
 
 def outputs(p: dict, msgs: dict, imp: Imported) -> tuple[str, list[str]]:
