@@ -207,7 +207,7 @@ def test_diagnose_refuses_the_arducopter_3_1_log_and_says_how_to_log_faster(tmp_
 REFUSED = {"mechanical_fail.log": ("no IMU", "LOG_BITMASK 1854", "bit 7"),          # ArduCopter 3.1, quad X
            "underpowered.log": ("LOG_BITMASK 830", "gyro (IMU) and the motor outputs"),  # ArduCopter 3.0.1
            "robert_lefebvre_octo_PM.log": ("an octocopter", "Mot1..Mot8"),
-           "tradheli_brownout.log": ("a helicopter", "GGain")}
+           "tradheli_brownout.log": ("a traditional helicopter", "GGain")}
 
 
 @pytest.mark.parametrize("name", sorted(REFUSED))

@@ -23,14 +23,16 @@ import re
 import numpy as np
 
 from flightctl.sim.logs.common import Imported
+from flightctl.sim.logs.px4motors import MOVES      # an output moves when its spread is over 1 % of its range
 
 FRAME_CONFIG = {"QUAD": 1, "HEXA": 2, "OCTA": 3, "OCTA_QUAD": 4, "Y6": 5, "HELI": 6, "TRI": 7, "SINGLE": 8,
                 "COAX": 9}                    # FRAME_CONFIG_STRING to today's FRAME_CLASS
-MOTOR_COUNTS = {3: 7, 4: 1, 6: 2, 8: 3}       # MOT's motor fields to FRAME_CLASS (6: hexa or Y6, 8: octa or octa-quad)
+# MOT's motor fields to (FRAME_CLASS, what the count alone tells)
+MOTOR_COUNTS = {3: (7, "a tricopter"), 4: (1, "a quadrotor"), 6: (2, "a hexacopter or a Y6"),
+                8: (3, "an octocopter or an octo-quad")}
 ORIENTATION = {0: 0, 1: 1, 3: 3}              # FRAME to today's FRAME_TYPE: plus, X, H
 UNTAKEN = {2: "V", 4: "V-tail", 5: "A-tail"}
 LOG_IMU, LOG_MOTORS = 7, 10                   # LOG_BITMASK bits
-MOVES = 0.01                                  # an output moves while armed when its spread is over 1 % of its range
 
 
 def is_legacy(p: dict) -> bool:
@@ -38,24 +40,24 @@ def is_legacy(p: dict) -> bool:
     return "FRAME_CLASS" not in p and "FRAME" in p
 
 
-def frame_class(p: dict, formats: dict, texts: list[str]) -> tuple[int | None, str]:
-    """(today's FRAME_CLASS or None when the log does not say, the evidence in words)."""
+def frame_class(p: dict, formats: dict, texts: list[str]) -> tuple[int | None, str, str]:
+    """(today's FRAME_CLASS or None when the log does not say, what the vehicle is, the evidence in words)."""
     for text in texts:
         m = re.search(r"Frame: (\w+)", text)
         if m and m[1] in FRAME_CONFIG:
-            return FRAME_CONFIG[m[1]], f"'Frame: {m[1]}' in the log"
+            return FRAME_CONFIG[m[1]], "", f"'Frame: {m[1]}' in the log"
     heli = sorted(k for k in p if k.startswith(("H_SV", "H_SWASH", "H_COL_")))
     mot = formats.get("MOT")
     cols = list(getattr(mot, "columns", []) or [])
     if heli or "GGain" in cols:
         why = ", ".join(([f"its H_ parameters ({', '.join(heli[:3])}, ...)"] if heli else [])
                         + (["MOT's GGain field"] if "GGain" in cols else []))
-        return 6, f"ArduCopter's helicopter build: {why}"
+        return 6, "a traditional helicopter", f"ArduCopter's helicopter build: {why}"
     n = sum(1 for c in cols if re.fullmatch(r"Mot\d+", c))
     if n:
-        cls = MOTOR_COUNTS.get(n)
-        return cls, f"the log's MOT message has {n} motor fields ({cols[0]}..{cols[n - 1]}): the {n}-motor build"
-    return None, ""
+        cls, name = MOTOR_COUNTS.get(n, (None, ""))
+        return cls, name, f"the log's MOT message has {n} motor fields ({cols[0]}..{cols[n - 1]}): the {n}-motor build"
+    return None, "", ""
 
 
 def frame_type(p: dict, imp: Imported) -> int:

@@ -155,9 +155,9 @@ def _vehicle(p: dict, firmware: str, formats: dict, texts: list[str], imp: Impor
     if low.startswith(("rover", "ardurover", "ardusub", "antennatracker", "blimp")):
         imp.fail(f"{firmware}: not a multirotor: diagnose knows quadrotors (4)")
     if arducopter3.is_legacy(p):
-        cls, why = arducopter3.frame_class(p, formats, texts)
+        cls, name, why = arducopter3.frame_class(p, formats, texts)
         if cls is not None and cls != QUAD:
-            imp.fail(f"{firmware or 'ArduCopter'}: {FRAME_CLASSES.get(cls, 'not a quadrotor')} ({why}), not a "
+            imp.fail(f"{firmware or 'ArduCopter'}: {name or FRAME_CLASSES.get(cls, 'not a quadrotor')} ({why}), not a "
                      "quadrotor: diagnose knows quadrotors (4)")
         imp.meta["frame_class_source"] = why or ("not in the log (ArduCopter before 3.2 is built for one frame): a "
                                                  "quadrotor if no more than four outputs move")
