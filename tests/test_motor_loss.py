@@ -189,11 +189,22 @@ def test_the_spin_settles_where_eq_6_balances_the_pair_now_that_the_airflow_term
 @pytest.mark.parametrize("airframe,why", [("gamma1 = 0.0\n", "beyond the gyro"), ("gamma1 = 1e-12\n", "beyond the gyro"),
                                           ("g1 = 0.0\ng2 = -0.01\n", "not positive")])
 def test_a_vehicle_on_which_the_two_rotor_mode_cannot_work_flies_without_it_and_says_so(tmp_path, airframe, why):
+    """It arms, says once why it has no two-rotor landing, and flies its plan; a motor it then loses is
+    still named, and without the mode the vehicle falls on the remaining three: a crash, said as such
+    (exit 1), never a traceback."""
     (tmp_path / "p.toml").write_text(airframe)
-    rc, report = _sim(tmp_path, "hover_low", "motor_stop:motor=1,at=30", str(tmp_path / "p.toml"))
-    assert rc == 0 and report["outcome"] == "landed upright"
+    out = tmp_path / "m.json"
+    argv = ["sim", "hover_low", "--log", str(tmp_path / "f.csv"), "--json", str(out), "--no-plot", "--quiet",
+            "--params", str(tmp_path / "p.toml")]
+    assert main(argv) == 0
+    report = json.loads(out.read_text())
+    assert report["outcome"] == "landed upright"
     said = [e["what"] for e in report["events"] if e["what"].startswith("no two-rotor landing")]
     assert len(said) == 1 and why in said[0], report["events"]
+    rc, report = _sim(tmp_path, "hover_low", "motor_stop:motor=1,at=10", str(tmp_path / "p.toml"))
+    named = [e for e in report["events"] if e["what"].startswith("motor 1 lost")]
+    assert named and 10.0 <= named[0]["t"] <= 10.1 and "no two-rotor mode" in named[0]["what"], report["events"]
+    assert rc == 1 and report["outcome"].startswith("crashed")
 
 
 def test_the_schedule_is_cached_on_disk_by_the_parameters_it_depends_on(tmp_path, monkeypatch):
