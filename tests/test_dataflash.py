@@ -200,7 +200,7 @@ def test_diagnose_refuses_the_arducopter_3_1_log_and_says_how_to_log_faster(tmp_
     out = tmp_path / "r.json"
     assert main(["diagnose", str(EXAMPLES / "nan.log"), "--json", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "10.0 Hz" in err and "before 3.3" in err, err
+    assert len(err.splitlines()) == 1 and "10.0 Hz" in err and "before 3.3" in err and "left the ground" in err, err
     assert not out.exists()
 
 
