@@ -250,7 +250,7 @@ def figures(repeat: int) -> list[tuple[str, str, str]]:
                  f"{us:.1f} us = {100 * us / period_us:.2f} % of the {period_us:.0f} us period "
                  f"(fastest of {100 * repeat} runs of 1000)", "< 3 % and < 8 us"))
     cold, warm, us_spin = spin_costs()
-    rows.append(("the motor-loss gain schedule (as-flown, judged over its ranges)",
+    rows.append(("the motor-loss gain schedule (as-flown, judged over its Jp, motor time constant and delay ranges)",
                  f"{cold:.1f} s of CPU to build, {1e3 * warm:.0f} ms to read back from the disk cache", "-"))
     rows.append(("one loop of the two-rotor controller (after a lost motor)", f"{us_spin:.1f} us", "-"))
     for workers in sorted({1, os.cpu_count() or 1}):

@@ -28,6 +28,7 @@ import numpy as np
 from flightctl.control import motor_loss as ml
 from flightctl.control import spin_design as sd
 from flightctl.params import GAIN_SETS, load
+from flightctl.sim import causes
 from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import SCENARIOS
 from flightctl.sim.world import faults
@@ -35,6 +36,9 @@ from flightctl.sim.world import faults
 BEGIN, END = "<!-- motor loss: begin (written by scripts/motor_loss.py) -->", "<!-- motor loss: end -->"
 MODELS = (("base", None), ("as-flown", "paper-as-flown"))
 DRAWS = 5                       # losses per model and gain set at random times of the paper flight
+MC_DRAWS = 4                    # draws of the as-flown ranges in the false-alarm margins (each: both gain sets)
+# the gain sets that fly each model (Table 4 limit-cycles on the as-flown file: `limit_cycle`)
+FLOWN = (("base", None, "table6"), ("base", None, "table4"), ("as-flown", "paper-as-flown", "table6"))
 AIRBORNE = (1.0, 81.5)          # s: the paper flight is off the floor from 1 s to its touchdown at 81.7 s
 TURNS = (40.1, 46.1, 52.1, 58.1)   # s: 0.1 s into each yaw step of the paper flight (2.3-2.6 rad/s)
 
@@ -43,11 +47,17 @@ def params_of(spec, gains="table6"):
     return dataclasses.replace(load(spec), gains=GAIN_SETS[gains])
 
 
-def loss(plan: str, params, spec: str, plant: dict | None = None, seed: int = 0) -> dict:
-    """One flight with the fault `spec`: outcome, naming, tilt, touchdown speed, drift, spin."""
+def loss(plan: str, params, spec: str, plant: dict | None = None, seed: int = 0, tau: float | None = None,
+         sensors: dict | None = None) -> dict:
+    """One flight with the fault `spec`: outcome, naming, tilt, touchdown speed, drift, spin. `plant`:
+    airframe values, `tau`: the motor time constant, `sensors`: the IMU's [sensors] values, of the
+    simulated vehicle only (the loop is told the file's)."""
     fault = faults.parse(spec)
     airframe = dataclasses.replace(params.airframe, **plant) if plant else None
-    fl = fly(SCENARIOS[plan](), params, os.devnull, faults=[fault], seed=seed, plant_airframe=airframe)
+    effects = (causes.make("motor_dynamics", tau=tau, tau_down=tau),) if tau is not None else ()
+    if sensors:                    # read by the simulated IMU only: the onboard code never reads [sensors]
+        params = dataclasses.replace(params, sensors=dataclasses.replace(params.sensors, **sensors))
+    fl = fly(SCENARIOS[plan](), params, os.devnull, faults=[fault], seed=seed, plant_airframe=airframe, effects=effects)
     L, at = fl.log, fault.at
     t = L["t"]
     after = t >= at
@@ -67,13 +77,19 @@ def loss(plan: str, params, spec: str, plant: dict | None = None, seed: int = 0)
             "flight": fl, "at": at}
 
 
+def noise_end(params, end: int) -> dict:
+    """The [sensors] values at the bottom (end 0) or the top (end 1) of the file's ranges."""
+    return {name: (lo, hi)[end] for table, name, lo, hi in params.table_ranges if table == "sensors"}
+
+
 def margins() -> list[tuple[str, float, float]]:
     """The detector's largest missing share held for LOOPS and for WEAK_LOOPS loops in calm flight, in
-    every plan without a loss (both models, both gain sets), and over draws of the as-flown ranges."""
+    every plan without a loss (both models, both gain sets), and over draws of the as-flown ranges (the
+    controller told each draw, as the Monte Carlo does), also with the IMU's noise at the top of its
+    ranges."""
     from flightctl.loop import FlightLoop
     from flightctl.plans import PLANS
-    from flightctl.sim import causes
-    from flightctl.sim.sweeps.montecarlo import draw, drawn_airframe
+    from flightctl.sim.sweeps.montecarlo import draw, drawn_params
     from flightctl.sim.world.board import SIM_CALIBRATE_S, sim_board
     import flightctl.loop as loop_module
     seen: list[float] = []
@@ -83,19 +99,18 @@ def margins() -> list[tuple[str, float, float]]:
 
         def update(self, s, f, dt):
             out = super().update(s, f, dt)
-            if self.p is not None:
-                fall = (self.bz - self.rz) * self.M
-                ex, ey = self.rx - self.bx, self.ry - self.by
-                best = 0.0
-                for i, along in enumerate((ey, -ex, -ey, ex)):
-                    fi = max(self.fl[i], self.half)
-                    best = max(best, min(along * self.il / fi, fall / fi))
-                seen.append(best if self.calm < ml.CALM else 0.0)
+            seen.append(self.seen)
             return out
 
     def held(n):
         a = np.array(seen)
         return float(np.lib.stride_tricks.sliding_window_view(a, n).min(axis=1).max()) if len(a) >= n else 0.0
+
+    def flight(params, effects, airframe, plan, seed):
+        seen.clear()
+        hal, world = sim_board(params, effects, seed=seed, airframe=airframe)
+        FlightLoop(hal, params, PLANS[plan](), None, calibrate_s=SIM_CALIBRATE_S).run()
+        return held(ml.LOOPS), held(ml.WEAK_LOOPS)
 
     rows = []
     inner = loop_module.MotorLossDetector
@@ -105,61 +120,80 @@ def margins() -> list[tuple[str, float, float]]:
             worst = [0.0, 0.0]
             for plan in PLANS:
                 for gains in GAIN_SETS:
-                    seen.clear()
-                    params = params_of(spec, gains)
-                    hal, world = sim_board(params, (), seed=1)
-                    FlightLoop(hal, params, PLANS[plan](), None, calibrate_s=SIM_CALIBRATE_S).run()
-                    worst = [max(worst[0], held(ml.LOOPS)), max(worst[1], held(ml.WEAK_LOOPS))]
+                    worst = np.maximum(worst, flight(params_of(spec, gains), (), None, plan, 1))
             rows.append((f"every plan, {name} model, both gain sets", *worst))
         base = causes.load_vehicle("paper-as-flown")
-        n = 6
+        n = MC_DRAWS
         drawn = draw(base, n, 28)
-        worst = [0.0, 0.0]
-        for k in range(n):
-            d = {key: float(v[k]) for key, v in drawn.items()}
-            for gains in GAIN_SETS:
-                params = causes.load_vehicle("paper-as-flown", GAIN_SETS[gains])
-                effects = tuple(causes.make(e.cause, **{**dict(e.parameters), **{p: v for (c, p), v in d.items()
-                                                                                  if c == e.cause}})
-                                for e in params.effects)
-                seen.clear()
-                hal, world = sim_board(params, effects, seed=k, airframe=drawn_airframe(params.airframe, d))
-                FlightLoop(hal, params, PLANS["paper"](), None, calibrate_s=SIM_CALIBRATE_S).run()
-                worst = [max(worst[0], held(ml.LOOPS)), max(worst[1], held(ml.WEAK_LOOPS))]
-        rows.append((f"the paper flight over {n} draws of the as-flown ranges, both gain sets", *worst))
+        for top in (False, True):
+            worst = [0.0, 0.0]
+            for k in range(n):
+                d = {key: float(v[k]) for key, v in drawn.items()}
+                for gains in GAIN_SETS:
+                    params = drawn_params(causes.load_vehicle("paper-as-flown", GAIN_SETS[gains]), d)
+                    if top:
+                        params = dataclasses.replace(params, sensors=dataclasses.replace(params.sensors,
+                                                                                         **noise_end(params, 1)))
+                    effects = tuple(causes.make(e.cause, **dict(e.parameters)) for e in params.effects)
+                    worst = np.maximum(worst, flight(params, effects, params.airframe, "paper", k))
+            rows.append((f"the paper flight over {n} draws of the as-flown ranges, both gain sets"
+                         + (", the IMU's noise and vibration at the top of their ranges" if top else ""), *worst))
     finally:
         loop_module.MotorLossDetector = inner
-    return rows
+    return [(what, float(a), float(b)) for what, a, b in rows]
+
+
+def limit_cycle() -> dict:
+    """Table 4 on the as-flown file without a loss: the hover's roll and pitch peak-to-peak once at
+    height, and the share of those loops in calm flight (where the detector looks)."""
+    fl = fly(SCENARIOS["hover"](), params_of("paper-as-flown", "table4"), os.devnull, seed=0)
+    L = fl.log
+    held = (L["t"] > 8.0) & (L["t"] < 20.0)
+    ptp = max(float(np.ptp(L["true_roll"][held])), float(np.ptp(L["true_pitch"][held])))
+    rates = np.abs(L["gyro_x"][held]) + np.abs(L["gyro_y"][held])
+    k = 2.2222e-3 / (ml.CALM_S + 2.2222e-3)
+    calm, c = [], 0.0
+    for v in rates:
+        c += k * (v - c)
+        calm.append(c < ml.CALM)
+    return {"ptp": math.degrees(ptp), "calm": float(np.mean(calm)), "outcome": fl.outcome}
 
 
 def measure(quick: bool = False) -> dict:
     asf = params_of("paper-as-flown")
     d = sd.design_inputs(asf)
     out = {"design": d, "r_bar": sd.equilibrium_spin(d),
-           "r_gamma_half": sd.equilibrium_spin(d[:11] + (d[11] / 2,) + d[12:]),
-           "r_gamma_twice": sd.equilibrium_spin(d[:11] + (d[11] * 2,) + d[12:]),
-           "r_g1_twice": sd.equilibrium_spin(d[:9] + (d[9] * 2,) + d[10:]),
+           "r_gamma_half": sd.equilibrium_spin(d._replace(gamma1=d.gamma1 / 2)),
+           "r_gamma_twice": sd.equilibrium_spin(d._replace(gamma1=d.gamma1 * 2)),
+           "r_g1_twice": sd.equilibrium_spin(d._replace(g1=d.g1 * 2)),
            "schedule": sd.load(d)}
     out["figure"] = loss("hover", asf, "motor_stop:motor=2,at=6.3")
     rng = random.Random(28)
     anywhere = []
-    for name, spec in MODELS:
-        for gains in GAIN_SETS:
-            for _ in range(1 if quick else DRAWS):
-                m, at = rng.randint(1, 4), round(rng.uniform(*AIRBORNE), 2)
-                anywhere.append((name, gains, m, at, loss("paper", params_of(spec, gains), f"motor_stop:motor={m},at={at}")))
+    for name, spec, gains in FLOWN:
+        for _ in range(1 if quick else DRAWS):
+            m, at = rng.randint(1, 4), round(rng.uniform(*AIRBORNE), 2)
+            anywhere.append((name, gains, m, at, loss("paper", params_of(spec, gains), f"motor_stop:motor={m},at={at}")))
     out["anywhere"] = anywhere
+    out["limit_cycle"] = limit_cycle()
     # during the yaw turns: each motor, so that half the losses meet a yaw rate against the pair's spin
     out["turns"] = [(m, at, loss("paper", asf, f"motor_stop:motor={m},at={at}"))
                     for at in TURNS for m in ((1, 2) if quick else (1, 2, 3, 4))]
-    lo_hi = {"Jp": (asf.airframe.Jp, next(r[1:] for r in asf.ranges if r[0] == "Jp"))}
-    out["ends"] = [(f"{k} = {v:.3g}", loss("hover", asf, "motor_stop:motor=2,at=8", {k: v}))
-                   for k, v in (("Jp", lo_hi["Jp"][1][0]), ("Jp", lo_hi["Jp"][1][1]),
-                                ("gamma1", asf.airframe.gamma1 / 2), ("gamma1", asf.airframe.gamma1 * 2),
-                                ("g1", asf.airframe.g1 / 2), ("g1", asf.airframe.g1 * 2))]
-    out["partial"] = [(gains, share, loss("hover", params_of("paper-as-flown", gains),
-                                          f"motor_partial:motor=2,share={share},at=8"))
-                      for gains in GAIN_SETS for share in (0.1, 0.3, 0.5, 0.6, 0.7)]
+    a = asf.airframe
+    lo, hi = noise_end(asf, 0), noise_end(asf, 1)
+    out["ends"] = [(what, loss("hover", asf, "motor_stop:motor=2,at=8", **kw)) for what, kw in (
+        (f"Jp = {d.Jp_lo:.3g}", {"plant": {"Jp": d.Jp_lo}}), (f"Jp = {d.Jp_hi:.3g}", {"plant": {"Jp": d.Jp_hi}}),
+        (f"gamma1 = {a.gamma1 / 2:.3g}", {"plant": {"gamma1": a.gamma1 / 2}}),
+        (f"gamma1 = {a.gamma1 * 2:.3g}", {"plant": {"gamma1": a.gamma1 * 2}}),
+        (f"g1 = {a.g1 / 2:.3g}", {"plant": {"g1": a.g1 / 2}}), (f"g1 = {a.g1 * 2:.3g}", {"plant": {"g1": a.g1 * 2}}),
+        (f"motor tau = {1e3 * d.tau_lo:.0f} ms", {"tau": d.tau_lo}),
+        (f"motor tau = {1e3 * d.tau_hi:.0f} ms", {"tau": d.tau_hi}),
+        (f"IMU noise at the bottom (gyro broadband {lo['gyro_broadband']:.3g} rad/s)", {"sensors": lo}),
+        (f"IMU noise at the top (gyro broadband {hi['gyro_broadband']:.3g} rad/s)", {"sensors": hi}),
+        (f"motor tau = {1e3 * d.tau_hi:.0f} ms, Jp = {d.Jp_lo:.3g}, IMU noise at the top",
+         {"tau": d.tau_hi, "plant": {"Jp": d.Jp_lo}, "sensors": hi}))]
+    out["partial"] = [(name, gains, share, loss("hover", params_of(spec, gains), f"motor_partial:motor=2,share={share},at=8"))
+                      for name, spec, gains in (FLOWN[2], FLOWN[1]) for share in (0.1, 0.3, 0.5, 0.6, 0.7)]
     out["low"] = [(at, loss("paper", asf, f"motor_stop:motor=3,at={at}")) for at in (1.2, 1.6, 81.0)]
     out["margins"] = [] if quick else margins()
     return out
@@ -175,15 +209,15 @@ def markdown(m: dict, figure: str) -> str:
     d = m["design"]
     trims = {g: next((k / 100 for k in range(100) if ml.flown_on_four(params_of("paper-as-flown", g), 2, k / 100)), None)
              for g in GAIN_SETS}
-    coupling = d[6] - d[5]
-    r_s = {name: J * sd.pair_speed(d) / coupling for name, J in (("the bottom of the as-flown Jp range", d[17]),
-                                                                ("the as-flown Jp", d[7]), ("Table 2's Jp", d[18]))}
+    coupling = d.Jzz - d.Jyy
+    r_s = {name: J * sd.pair_speed(d) / coupling for name, J in (("the bottom of the as-flown Jp range", d.Jp_lo),
+                                                                ("the as-flown Jp", d.Jp), ("Table 2's Jp", d.Jp_hi))}
     lines = [f"`python scripts/motor_loss.py` measured everything in this block (seeded flights, the "
              f"onboard loop against the simulated quadcopter).", "",
              "**The rule's edge**: the smallest share a motor on the roll axis may give and be flown on four: "
              + ", ".join(f"{g} {v:.2f}" for g, v in trims.items()) + ".", "",
              "**Where the coupling vanishes** (pair 1-3 at its hover speed): r_s = "
-             + ", ".join(f"{v:.1f} rad/s with {k} ({J:.3g})" for (k, v), J in zip(r_s.items(), (d[17], d[7], d[18])))
+             + ", ".join(f"{v:.1f} rad/s with {k} ({J:.3g})" for (k, v), J in zip(r_s.items(), (d.Jp_lo, d.Jp, d.Jp_hi)))
              + ".", "",
              f"**The spin.** The pair's reaction torques balance eq. 6's yaw drag at **{m['r_bar']:.1f} rad/s** on "
              f"the reference airframe (the loop's own event text says it); {m['r_gamma_half']:.1f} rad/s at half the "
@@ -196,11 +230,16 @@ def markdown(m: dict, figure: str) -> str:
              f"spin reaches {f['spin']:.1f} rad/s before touchdown; the touchdown is at {f['touchdown']:.2f} m/s; the "
              f"vehicle drifts {f['drift']:.1f} m from where the loss found it (beyond the velocity it had).", "",
              "**Anywhere in the paper flight** (each motor at times drawn from a seeded generator while it is off "
-             "the floor):", "",
+             "the floor; each gain set on the models it flies):", "",
              "| model | gains | motor | at (s) | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) |",
              "|---|---|---|---|---|---|---|---|---|"]
     for name, gains, mot, at, r in m["anywhere"]:
         lines.append(f"| {name} | {gains} | {mot} | {at:g} | {_row(r)} |")
+    lc = m["limit_cycle"]
+    lines += ["", f"Table 4 on the as-flown file is left out: without any loss its hover limit-cycles at "
+              f"{lc['ptp']:.0f} degrees peak-to-peak ({lc['outcome']}), and only {100 * lc['calm']:.0f} % of its loops "
+              f"at height are calm flight, where the detector looks (docs/as-flown.md: Table 4 flies in part of the "
+              f"file's ranges, not at its nominal point)."]
     lines += ["", "**During the yaw turns** (as-flown, Table 6; 0.1 s into each yaw step: the pair left after "
               "motor 1 or 3 spins the body at negative r, after 2 or 4 at positive r, so a yaw rate of the "
               "other sign is a turn against the pair's spin):", "",
@@ -209,18 +248,19 @@ def markdown(m: dict, figure: str) -> str:
     for mot, at, r in m["turns"]:
         lines.append(f"| {mot} | {at:g} | {r['r0']:+.2f} | {_row(r)} |")
     lines += ["", "**The plant at the ends of its ranges** (as-flown, hover, motor 2 at 8 s; the loop told the "
-              "file's values; Jp's range is the file's, gamma1 and g1 halved and doubled):", "",
+              "file's values; Jp's, the motor time constant's and the IMU's ranges are the file's (the motor's top "
+              "at the file's Jp), gamma1 and g1 halved and doubled):", "",
               "| plant | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) | largest spin (rad/s) |",
               "|---|---|---|---|---|---|---|"]
     for what, r in m["ends"]:
         lines.append(f"| {what} | {_row(r)} | {r['spin']:.1f} |")
-    lines += ["", "**Partial losses** (as-flown, hover, motor 2 giving a share of its commanded thrust from 8 s; "
-              "the loop's answer by the rule above):", "",
-              "| gains | share given | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) | the loop's words |",
-              "|---|---|---|---|---|---|---|---|"]
-    for gains, share, r in m["partial"]:
+    lines += ["", "**Partial losses** (hover, motor 2 giving a share of its commanded thrust from 8 s; each gain "
+              "set on a model it flies; the loop's answer by the rule above):", "",
+              "| model | gains | share given | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) | the loop's words |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for name, gains, share, r in m["partial"]:
         words = r["what"].split(":")[0] if r["what"] else "-"
-        lines.append(f"| {gains} | {share:g} | {_row(r)} | {words} |")
+        lines.append(f"| {name} | {gains} | {share:g} | {_row(r)} | {words} |")
     lines += ["", "**Near the floor** (as-flown, Table 6, motor 3, in the paper flight's take-off and landing):", "",
               "| at (s) | height then (m) | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) |",
               "|---|---|---|---|---|---|---|"]
@@ -236,8 +276,11 @@ def markdown(m: dict, figure: str) -> str:
     rates = s["rates"]
     show = [k for k, r in enumerate(rates) if r in (-8.0, -4.0, 0.0, 2.0, 4.0, 8.0, 12.0, 16.0, 20.0, 24.0, 28.0, 32.0)]
     lines += ["", f"**The linearised loop** (spin_design.py: eq. 7 about the spin, the pair's torque through the "
-              f"motor time constant, held over one loop): the spectral radius of the loop closed by the scheduled "
-              f"gains, the worst over the as-flown file's Jp range ({d[17]:.2g} to {d[18]:.2g} kg m^2), pair 1-3, at "
+              f"motor time constant and the delay chain, held over one loop, the rate filter around eq. 7's "
+              f"prediction): the spectral radius of the loop closed by the scheduled gains, the worst over "
+              f"{len(sd.plants(d))} vehicles across the as-flown file's ranges (Jp {d.Jp_lo:.2g} to {d.Jp_hi:.2g} kg m^2, "
+              f"the motor time constant {1e3 * d.tau_lo:.0f} to {1e3 * d.tau_hi:.0f} ms, the delay chain "
+              f"{1e3 * d.delay_lo:.1f} to {1e3 * d.delay_hi:.1f} ms), pair 1-3, at "
               f"spin rates r (in the pair's direction) and the pair's rotor speed as a share of its hover one. Below 1 "
               f"the loop is stable. At r = 0 the axis along the pair is not turned (1: marginal; -: no gain solves "
               f"there, the nearest point's stand in): the spin must build.", "", "| rotor speed | " + " | ".join(f"r = {rates[k]:g}" for k in show) + " |",

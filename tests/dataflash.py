@@ -46,3 +46,19 @@ class DataFlash:
 
     def bytes(self) -> bytes:
         return bytes(self.buf)
+
+
+# ArduCopter 3.1's messages as its text dump writes them (Log.pde): MOT and ATT carry no time stamp
+FORMATS_31 = {"PARM": (129, "Nf", "Name,Value"), "IMU": (131, "Iffffff", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),
+              "MSG": (132, "Z", "Message"), "CURR": (9, "hIhhhf", "ThrOut,ThrInt,Volt,Curr,Vcc,CurrTot"),
+              "MOT": (11, "hhhh", "Mot1,Mot2,Mot3,Mot4"), "EV": (13, "B", "Id")}
+SIZES = {"B": 1, "h": 2, "H": 2, "I": 4, "f": 4, "c": 2, "C": 2, "N": 16, "Z": 64}
+
+
+def text_log(header: list[str], rows: list[tuple]) -> str:
+    """An ArduCopter 3.1 text dump: the header lines its CLI writes before the formats, the FMT lines,
+    then one line per (name, values...) of `rows`."""
+    lines = header + ["FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format"]
+    lines += [f"FMT, {tid}, {3 + sum(SIZES[c] for c in f)}, {name}, {f}, {cols}" for name, (tid, f, cols) in FORMATS_31.items()]
+    lines += [", ".join([name] + [str(v) for v in values]) for name, *values in rows]
+    return "\r\n".join(lines) + "\r\n"

@@ -1,6 +1,7 @@
 """The registry of causes (flightctl.sim.causes) against the contract's table of causes in
-measured-data.md: the same names and parameter names (with their units), and each cause's effect
-and diagnose candidate consistent with each other."""
+measured-data.md, followed by the project's own extensions, each in the table of docs/diagnose.md
+("Causes beyond the contract"): the same names in the same order and the same parameter names (with
+their units), and each cause's effect and diagnose candidate consistent with each other."""
 from __future__ import annotations
 
 import re
@@ -14,16 +15,17 @@ from flightctl.sim.world.model import Effect
 from real import need
 
 SPEC = Path(__file__).resolve().parents[2] / "shared" / "spec" / "measured-data.md"
+DOC = Path(__file__).resolve().parents[1] / "docs" / "diagnose.md"
 
 
 def _unit(text: str) -> str:
     return text.replace("·", " ").replace("–", "-").strip()
 
 
-def spec_table() -> dict[str, dict[str, str | None]]:
-    """{cause: {parameter: unit or None}} from the table 'Candidate extensions: names and parameters'."""
-    text = need(SPEC).read_text(encoding="utf-8")   # a missing contract fails in CI
-    section = text.split("## Candidate extensions", 1)[1].split("\n## ", 1)[0]
+def cause_table(text: str, heading: str) -> dict[str, dict[str, str | None]]:
+    """{cause: {parameter: unit or None}} from the first table under the `## heading...` section:
+    its first cell the cause, its last the parameters."""
+    section = text.split(f"## {heading}", 1)[1].split("\n## ", 1)[0]
     rows = section.split("|---|---|---|", 1)[1].strip().splitlines()   # the body, after the header
     table = {}
     for line in rows:
@@ -33,11 +35,25 @@ def spec_table() -> dict[str, dict[str, str | None]]:
         name = cells[0].strip("`")
         params = {}
         # groups like "`dx`, `dy` (m)", "`tau` (s)", "`motor` (1–4), `scale`"
-        for group in re.finditer(r"((?:`\w+`(?:,\s*)?)+)\s*(?:\(([^)]*)\))?", cells[2]):
+        for group in re.finditer(r"((?:`\w+`(?:,\s*)?)+)\s*(?:\(([^)]*)\))?", cells[-1]):
             for p in re.findall(r"`(\w+)`", group.group(1)):
                 params[p] = _unit(group.group(2)) if group.group(2) else None
         table[name] = params
     return table
+
+
+def spec_table() -> dict[str, dict[str, str | None]]:
+    """The contract's causes, from the table 'Candidate extensions: names and parameters'."""
+    return cause_table(need(SPEC).read_text(encoding="utf-8"), "Candidate extensions")   # a missing contract fails in CI
+
+
+def extension_table() -> dict[str, dict[str, str | None]]:
+    """The project's own causes, from docs/diagnose.md's table 'Causes beyond the contract'."""
+    return cause_table(DOC.read_text(encoding="utf-8"), "Causes beyond the contract")
+
+
+def all_causes() -> dict[str, dict[str, str | None]]:
+    return {**{c: p for c, p in spec_table().items() if c != "none"}, **extension_table()}
 
 
 def test_the_spec_table_is_read():
@@ -47,13 +63,19 @@ def test_the_spec_table_is_read():
     assert table["motor_weak"] == {"motor": "1-4", "scale": None}
 
 
-def test_registry_has_the_causes_of_the_contract_in_its_order():
-    table = spec_table()
-    assert list(causes.CAUSES) == [c for c in table if c != "none"]
+def test_the_extension_table_is_read_and_extends_the_contract():
+    ext, spec = extension_table(), spec_table()
+    assert ext and ext["gyro_lag"] == {"tau": "s"}
+    assert not set(ext) & set(spec), "a cause of the contract is not an extension"
 
 
-def test_registry_parameters_and_units_match_the_contract():
-    table = spec_table()
+def test_registry_has_the_causes_of_the_contract_in_its_order_then_the_extensions():
+    assert list(causes.CAUSES) == list(all_causes())
+    assert causes.EXTENSIONS == tuple(extension_table())
+
+
+def test_registry_parameters_and_units_match_the_tables():
+    table = all_causes()
     for name, cause in causes.CAUSES.items():
         assert list(cause.parameters) == list(table[name]), name
         for p, unit in table[name].items():

@@ -15,7 +15,7 @@ import pytest
 from flightctl.cli import main
 from flightctl.logfile import read_flight_log
 from flightctl.sim.logs import each_log, read_foreign
-from dataflash import DataFlash
+from dataflash import DataFlash, text_log
 
 pytest.importorskip("pymavlink")
 REAL = Path(__file__).parent / "data" / "ardupilot" / "backend_log_80k.bin"
@@ -27,6 +27,7 @@ FRAMES = {0: [(0, -1, 1), (0, 1, 1), (1, 0, -1), (-1, 0, -1)],                  
           12: [(-S, -S, -1), (S, -S, 1), (-S, S, 1), (S, S, -1)],                 # BF_X: RR, FR, RL, FL
           13: [(S, -S, 1), (S, S, -1), (-S, S, 1), (-S, -S, -1)],                 # DJI_X: FR, FL, RL, RR
           14: [(S, -S, 1), (-S, -S, -1), (-S, S, 1), (S, S, -1)]}                 # CW_X: FR, RR, RL, FL
+FRAMES[3] = [(x, y, -s) for x, y, s in FRAMES[1]]                                  # H: X with the spins reversed
 
 
 def rotors(table):
@@ -139,3 +140,143 @@ def test_a_log_that_never_armed_is_refused(flight, capsys):
     assert main(["log", "import", str(path), str(path.with_suffix(".csv"))]) == 2
     assert "never armed" in capsys.readouterr().err
     assert not path.with_suffix(".csv").exists()
+
+
+# ArduPilot's own example logs (tests/data/ardupilot/README.md): ArduCopter 3.0-3.1 text dumps of real flights
+EXAMPLES = REAL.parent
+
+
+@pytest.fixture(scope="module")
+def quad31():
+    """nan.log: ArduCopter V3.1.1 on a Pixhawk, FRAME 1 (X), IMU at 50 Hz, RCOU at 10 Hz."""
+    (e,) = each_log(str(EXAMPLES / "nan.log"))
+    assert e.reason is None, e.reason
+    return e.table
+
+
+def test_an_arducopter_3_1_quadrotor_is_read_as_its_frame_and_throttle_range_say(quad31):
+    t = quad31
+    assert t.meta["firmware"].startswith("ArduCopter V3.1.1")
+    assert np.allclose(rotors(t), FRAMES[1], atol=1e-4)                       # FRAME 1: X, today's FRAME_TYPE 1
+    assert t.meta["motor_outputs"].startswith("RCOU Chan1, Chan2, Chan3, Chan4")
+    assert t.meta["command_range"] == "1022 1997"                              # RC3_MIN, RC3_MAX
+    P = np.vstack([t[f"P{i}"] for i in range(1, 5)])
+    # armed and idle, each motor at RC3_MIN + MOT_SPIN_ARMED (100 us): the scale of the throttle channel's range
+    assert np.median(P) == pytest.approx(255 * 100 / (1997 - 1022), abs=0.01)
+    assert float(t.meta["rate_hz"]) == pytest.approx(50, abs=1) and float(t.meta["motor_rate_hz"]) == pytest.approx(10, abs=0.5)
+    assert "before 3.3" in t.meta["log_faster"] and "IMU_FAST" in t.meta["log_faster"]
+    rest = slice(0, 100)
+    assert t["acc_z"][rest].mean() == pytest.approx(9.8, abs=0.1)              # FRD's -g is our +g
+    assert t["battery_v"][0] == pytest.approx(15.32, abs=0.01)                # CURR's Volt: 1532 cV
+    assert t.meta["battery_cells"] == "4" and t.meta["gyro_filter"] == "biquad 30"
+
+
+def test_the_arducopter_3_1_log_never_left_the_ground_and_its_attitude_estimate_diverged(quad31):
+    """What the data show: with the throttle up, the gyro and the accelerometer agree that the vehicle
+    rolled about 25 deg to its left, the side the motor commands (through the X layout) push it; the
+    barometer never rose; the autopilot's own roll estimate (ATT) ran the other way to about 90 deg,
+    and its controller pushed against that until its crash check disarmed it."""
+    t = quad31
+    P = np.vstack([t[f"P{i}"] for i in range(1, 5)])
+    up = np.flatnonzero(P.mean(axis=0) > 30)
+    a, b = up[0], up[-1]
+    assert 4.0 < t["t"][b] - t["t"][a] < 6.0
+    roll_gyro = np.degrees(np.sum(t["gyro_x"][a:b] * np.diff(t["t"][a:b + 1])))
+    tilt = np.degrees(np.arctan2(t["acc_y"], t["acc_z"]))
+    roll_acc = tilt[b - 20:b].mean() - tilt[a - 30:a].mean()
+    assert -30 < roll_gyro < -20 and abs(roll_gyro - roll_acc) < 5             # the vehicle rolled left
+    y = np.array([r[1] for r in rotors(t)])
+    assert np.mean(y @ P[:, a:b]) < 0                                          # the motors push it left
+    assert np.degrees(t["roll"][b] - t["roll"][a]) > 80                       # ATT: right, to about 90 deg
+    h = t["height"]
+    assert np.nanmax(np.abs(h[a:b] - np.nanmean(h[:a]))) < 0.2                # the barometer: never off the ground
+    across = np.hypot(t["acc_x"], t["acc_y"])[b - 150:b].mean() / 9.80665      # the ground's push across the body
+    assert 0.35 < across < 0.5
+    lines = (EXAMPLES / "nan.log").read_text().splitlines()
+    assert lines.index("ERR, 12, 1") + 1 == lines.index("EV, 11", lines.index("ERR, 12, 1"))  # crash check, disarmed
+
+
+def test_diagnose_refuses_the_arducopter_3_1_log_and_says_how_to_log_faster(tmp_path, capsys):
+    out = tmp_path / "r.json"
+    assert main(["diagnose", str(EXAMPLES / "nan.log"), "--json", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "10.0 Hz" in err and "before 3.3" in err and "left the ground" in err, err
+    assert not out.exists()
+
+
+REFUSED = {"mechanical_fail.log": ("no IMU", "LOG_BITMASK 1854", "bit 7"),          # ArduCopter 3.1, quad X
+           "underpowered.log": ("LOG_BITMASK 830", "gyro (IMU) and the motor outputs"),  # ArduCopter 3.0.1
+           "robert_lefebvre_octo_PM.log": ("an octocopter", "Mot1..Mot8"),
+           "tradheli_brownout.log": ("a traditional helicopter", "GGain")}
+
+
+@pytest.mark.parametrize("name", sorted(REFUSED))
+def test_an_arducopter_3_log_is_refused_for_what_it_is(name, tmp_path, capsys):
+    out = tmp_path / "o.csv"
+    assert main(["log", "import", str(EXAMPLES / name), str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and all(w in err for w in REFUSED[name]), err
+    assert not out.exists()
+
+
+def test_the_corpus_of_ardupilot_logs_gives_one_row_per_log(tmp_path):
+    table = tmp_path / "ap.md"
+    assert main(["diagnose", "--corpus", str(EXAMPLES), "--table", str(table), "--jobs", "1", "--quiet"]) == 0
+    rows = {r.split("|")[1].strip(): r for r in table.read_text().splitlines()
+            if r.split("|")[1:2] and r.split("|")[1].strip().endswith((".log", ".bin"))}
+    assert set(rows) == {p.name for p in EXAMPLES.iterdir() if p.suffix in (".log", ".bin")}
+    for name, words in REFUSED.items():
+        assert all(w in rows[name] for w in words), rows[name]
+    assert "10.0 Hz" in rows["nan.log"] and "too short to judge" in rows["backend_log_80k.bin"]
+
+
+@pytest.mark.parametrize("frame", [0, 1, 3])
+def test_a_simulated_flight_written_as_an_arducopter_3_1_text_dump_comes_back(flight, frame, tmp_path):
+    """ArduCopter 3.1's MOT has no time stamp: each takes the time of the IMU line before it; FRAME is the
+    orientation (0 plus, 1 X, 3 H); the motors span RC3_MIN..RC3_MAX, drawn at random."""
+    log, _ = flight
+    rng = np.random.default_rng(31 + frame)
+    lo = float(rng.integers(980, 1120))
+    hi = float(rng.integers(1850, 2050))
+    rows = [("PARM", k, float(v)) for k, v in (("FRAME", frame), ("RC3_MIN", lo), ("RC3_MAX", hi), ("LOG_BITMASK", 1982))]
+    rows += [("MSG", "ArduCopter V3.1 (5c6503e2)"), ("EV", 10)]
+    ms = np.round((10.0 + log["t"]) * 1000).astype(int)
+    kept, pwm_rows = [], {}
+    for k in np.flatnonzero(np.diff(ms, prepend=-1) > 0):
+        g = (log["gyro_x"][k], -log["gyro_y"][k], -log["gyro_z"][k])
+        rows.append(("IMU", ms[k], *g, log["acc_x"][k], -log["acc_y"][k], -log["acc_z"][k]))
+        kept.append(k)
+        if len(kept) % 4 == 1:                                  # the motors at a quarter of the IMU's rate
+            pwm = [int(round(lo + log[f"P{m}"][k] / 255.0 * (hi - lo))) for m in range(1, 5)]
+            rows.append(("MOT", *pwm))
+            pwm_rows[ms[k]] = pwm
+            rows.append(("CURR", 400, 0, 1190, 750, 5000, 0.0))
+    path = tmp_path / "ac31.log"
+    path.write_text(text_log(["12", "", "ArduCopter V3.1 (5c6503e2)", "Free RAM: 1000", "APM 2"], rows), newline="")
+    (t,) = read_foreign(str(path))
+    assert np.allclose(rotors(t), FRAMES[frame], atol=1e-4)
+    assert t.meta["command_range"] == f"{lo:g} {hi:g}" and t.meta["firmware"] == "ArduCopter V3.1 (5c6503e2)"
+    assert np.allclose(t["t"], (ms[kept] - ms[kept][0]) / 1000.0)
+    for a in "xyz":
+        assert np.allclose(t[f"gyro_{a}"], log[f"gyro_{a}"][kept], rtol=1e-5, atol=1e-6)
+    times = np.array(sorted(pwm_rows))
+    last = times[np.searchsorted(times, ms[kept], side="right") - 1]     # each row holds the last MOT at or before it
+    for m in range(1, 5):
+        want = 255.0 * (np.array([pwm_rows[k][m - 1] for k in last]) - lo) / (hi - lo)
+        assert np.allclose(t[f"P{m}"], np.clip(want, 0, 255), atol=1e-3), m
+    assert np.nanmean(t["battery_v"]) == pytest.approx(11.9)                  # CURR's Volt in cV
+    assert float(t.meta["motor_rate_hz"]) < float(t.meta["rate_hz"]) / 3
+
+
+def test_a_damaged_arducopter_text_dump_is_read_up_to_its_damage_or_refused_in_one_line(tmp_path, capsys):
+    data = (EXAMPLES / "nan.log").read_bytes()
+    rng = np.random.default_rng(5)
+    for k in range(8):
+        cut = int(rng.integers(2000, len(data)))
+        junk = rng.integers(0, 256, int(rng.integers(1, 400)), dtype=np.uint8).tobytes()
+        path, out = tmp_path / f"d{k}.log", tmp_path / f"d{k}.csv"
+        path.write_bytes(data[:cut] + (junk + data[cut:] if k % 2 else b""))    # cut, or bytes pasted in
+        rc = main(["log", "import", str(path), str(out), "--quiet"])
+        err = capsys.readouterr().err
+        assert (rc == 0 and out.exists()) or (rc == 2 and err.count("\n") == 1 and str(path) in err
+                                              and not out.exists()), err

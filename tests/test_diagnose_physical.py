@@ -57,7 +57,7 @@ def test_the_declared_cell_count_bounds_the_nominal_voltage(foreign):
 
 def test_the_other_checks(foreign):
     ds = dataset(foreign)
-    for cause in ("motor_lag", "actuation_delay", "motor_dynamics"):
+    for cause in ("motor_lag", "actuation_delay", "motor_dynamics", "gyro_lag"):
         name = next(iter(CAUSES[cause].parameters))
         assert physical(ds, cause, **{name: 0.15}) is None
         assert "end of the 0-300 ms search" in physical(ds, cause, **{name: MAX_TIMING_S})

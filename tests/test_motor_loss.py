@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import random
 import re
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from flightctl.cli import main
@@ -26,6 +28,7 @@ from flightctl.control.spin import SpinController
 from flightctl.params import GAIN_SETS, load
 from flightctl.plans import PLANS
 from flightctl.safety import CRASH_TOUCHDOWN_SPEED
+from flightctl.sim import causes
 from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import SCENARIOS
 from flightctl.sim.world import faults
@@ -33,12 +36,15 @@ from flightctl.sim.world import faults
 ROOT = Path(__file__).resolve().parents[1]
 RNG = random.Random(28)
 MODELS = (None, "paper-as-flown")
+# each gain set on the models it flies: Table 4 limit-cycles on the as-flown file without any loss
+# (test_table4_does_not_fly_the_as_flown_file_so_no_loss_is_drawn_on_it)
+FLOWN = ((None, "table6"), (None, "table4"), ("paper-as-flown", "table6"))
 AIRBORNE = (1.0, 81.5)      # s: the paper flight is off the floor from 1 s to its touchdown near 81.7 s
 
 
 def _draws(n):
     return [(model, gains, RNG.randint(1, 4), round(RNG.uniform(*AIRBORNE), 2))
-            for model in MODELS for gains in GAIN_SETS for _ in range(n)]
+            for model, gains in FLOWN for _ in range(n)]
 
 
 ANYWHERE = _draws(1)
@@ -88,15 +94,15 @@ def test_a_loss_in_a_yaw_turn_against_the_pairs_spin_lands(tmp_path, motor, at):
     _lands_after_naming(rc, report, motor, at, 0.100)
 
 
-PARTIAL = [(gains, RNG.randint(1, 4), round(RNG.uniform(0.1, 0.7), 2), round(RNG.uniform(6.0, 18.0), 2))
-           for gains in GAIN_SETS for _ in range(2)]
+PARTIAL = [(model, gains, RNG.randint(1, 4), round(RNG.uniform(0.1, 0.7), 2), round(RNG.uniform(6.0, 18.0), 2))
+           for model, gains in (FLOWN[2], FLOWN[1]) for _ in range(2)]
 
 
-@pytest.mark.parametrize("gains,motor,share,at", PARTIAL)
-def test_a_partial_loss_is_named_with_its_share_and_the_vehicle_lands(tmp_path, gains, motor, share, at):
+@pytest.mark.parametrize("model,gains,motor,share,at", PARTIAL)
+def test_a_partial_loss_is_named_with_its_share_and_the_vehicle_lands(tmp_path, model, gains, motor, share, at):
     """A motor giving 10-70 % of its command, drawn: named with the share it gives (the loop is not
     told), within 200 ms where the rule sends it to the two-rotor mode, and landed either way."""
-    rc, report = _sim(tmp_path, "hover", f"motor_partial:motor={motor},share={share},at={at}", "paper-as-flown", gains)
+    rc, report = _sim(tmp_path, "hover", f"motor_partial:motor={motor},share={share},at={at}", model, gains)
     what = _lands_after_naming(rc, report, motor, at, 0.400)
     said = int(re.search(r"(\d+) % of its", what).group(1)) / 100.0
     weak = " weak " in what
@@ -105,25 +111,59 @@ def test_a_partial_loss_is_named_with_its_share_and_the_vehicle_lands(tmp_path, 
         assert share <= given + 0.05, (what, share)
     else:
         assert abs(given - share) < 0.15, (what, share)
-    assert weak == flown_on_four(dataclasses.replace(load("paper-as-flown"), gains=GAIN_SETS[gains]), motor, given)
+    assert weak == flown_on_four(dataclasses.replace(load(model), gains=GAIN_SETS[gains]), motor, given)
     named_at = next(e["t"] for e in report["events"] if e["what"] == what)
     assert weak or named_at <= at + 0.200         # the loop cannot hold attitude on four: named within 200 ms
 
 
-@pytest.mark.parametrize("name,scale", [("Jp", "lo"), ("Jp", "hi"), ("gamma1", 0.5), ("gamma1", 2.0),
-                                        ("g1", 0.5), ("g1", 2.0)])
+def _noise(told, end):
+    """The [sensors] values at one end of the file's ranges (0: bottom, 1: top)."""
+    return {name: (lo, hi)[end] for table, name, lo, hi in told.table_ranges if table == "sensors"}
+
+
+ENDS = [("Jp", "lo"), ("Jp", "hi"), ("gamma1", 0.5), ("gamma1", 2.0), ("g1", 0.5), ("g1", 2.0),
+        ("tau", "lo"), ("tau", "hi"), ("noise", 0), ("noise", 1), ("tau+noise+Jp", "worst")]
+
+
+@pytest.mark.parametrize("name,scale", ENDS)
 def test_the_plant_at_the_ends_of_its_ranges_still_lands(tmp_path, name, scale):
-    """The loop is told the as-flown file; the plant's Jp is at the ends of the file's range, its gamma1
-    or g1 halved or doubled: the spin goes where the true torques put it, the landing holds."""
+    """The loop is told the as-flown file; the plant's Jp, motor time constant (the design's span: the
+    file's, its top at the file's Jp) or IMU noise and vibration are at the ends of the file's ranges,
+    its gamma1 or g1 halved or doubled, or the slow motor, the light rotor and the noisy IMU at once:
+    the loss is named, the spin goes where the true torques put it, the landing holds."""
     told = load("paper-as-flown")
     a = told.airframe
-    value = (next(r for r in told.ranges if r[0] == "Jp")[1 if scale == "lo" else 2] if name == "Jp"
-             else getattr(a, name) * scale)
-    flight = fly(SCENARIOS["hover"](), told, tmp_path / "f.csv", faults=[faults.parse("motor_stop:motor=2,at=8")],
-                 plant_airframe=dataclasses.replace(a, **{name: value}))
+    d = spin_design.design_inputs(told)
+    plant, effects, flown = {}, (), told
+    if name in ("Jp", "tau+noise+Jp"):
+        plant["Jp"] = d.Jp_lo if scale in ("lo", "worst") else d.Jp_hi
+    if name in ("tau", "tau+noise+Jp"):
+        tau = d.tau_lo if scale == "lo" else d.tau_hi
+        effects = (causes.make("motor_dynamics", tau=tau, tau_down=tau),)
+    if name in ("noise", "tau+noise+Jp"):   # the simulated IMU reads [sensors]; the onboard code never does
+        flown = dataclasses.replace(told, sensors=dataclasses.replace(told.sensors, **_noise(told, 0 if scale == 0 else 1)))
+    if name in ("gamma1", "g1"):
+        plant[name] = getattr(a, name) * scale
+    flight = fly(SCENARIOS["hover"](), flown, tmp_path / "f.csv", faults=[faults.parse("motor_stop:motor=2,at=8")],
+                 effects=effects, plant_airframe=dataclasses.replace(a, **plant) if plant else None)
     assert flight.outcome == "landed upright", flight.outcome
     assert flight.result.reason.startswith("landed: motor 2 lost"), flight.result.reason
+    named = next(t for t, w in flight.result.events if w.startswith("motor 2 lost"))
+    assert 8.0 < named <= 8.1
     assert max(abs(v) for _, v in flight.touchdowns) < CRASH_TOUCHDOWN_SPEED
+
+
+def test_table4_does_not_fly_the_as_flown_file_so_no_loss_is_drawn_on_it(tmp_path):
+    """Why FLOWN leaves Table 4 on the as-flown file out: without any loss its hover at the file's
+    nominal values limit-cycles (docs/as-flown.md: it flies in part of the ranges), so it is never in the
+    calm flight the detector looks in. The day Table 4 flies this vehicle, this fails and the draws
+    take it back."""
+    flight = fly(SCENARIOS["hover"](), dataclasses.replace(load("paper-as-flown"), gains=GAIN_SETS["table4"]),
+                 tmp_path / "f.csv")
+    L = flight.log
+    held = (L["t"] > 8.0) & (L["t"] < 20.0)
+    assert max(np.ptp(L["true_roll"][held]), np.ptp(L["true_pitch"][held])) > math.radians(20.0)
+    assert not [w for _, w in flight.result.events if re.match(r"motor \d (lost|weak)", w)]
 
 
 def test_the_predicted_spin_is_the_balance_of_drag_and_reaction_torques():
@@ -149,11 +189,22 @@ def test_the_spin_settles_where_eq_6_balances_the_pair_now_that_the_airflow_term
 @pytest.mark.parametrize("airframe,why", [("gamma1 = 0.0\n", "beyond the gyro"), ("gamma1 = 1e-12\n", "beyond the gyro"),
                                           ("g1 = 0.0\ng2 = -0.01\n", "not positive")])
 def test_a_vehicle_on_which_the_two_rotor_mode_cannot_work_flies_without_it_and_says_so(tmp_path, airframe, why):
+    """It arms, says once why it has no two-rotor landing, and flies its plan; a motor it then loses is
+    still named, and without the mode the vehicle falls on the remaining three: a crash, said as such
+    (exit 1), never a traceback."""
     (tmp_path / "p.toml").write_text(airframe)
-    rc, report = _sim(tmp_path, "hover_low", "motor_stop:motor=1,at=30", str(tmp_path / "p.toml"))
-    assert rc == 0 and report["outcome"] == "landed upright"
+    out = tmp_path / "m.json"
+    argv = ["sim", "hover_low", "--log", str(tmp_path / "f.csv"), "--json", str(out), "--no-plot", "--quiet",
+            "--params", str(tmp_path / "p.toml")]
+    assert main(argv) == 0
+    report = json.loads(out.read_text())
+    assert report["outcome"] == "landed upright"
     said = [e["what"] for e in report["events"] if e["what"].startswith("no two-rotor landing")]
     assert len(said) == 1 and why in said[0], report["events"]
+    rc, report = _sim(tmp_path, "hover_low", "motor_stop:motor=1,at=10", str(tmp_path / "p.toml"))
+    named = [e for e in report["events"] if e["what"].startswith("motor 1 lost")]
+    assert named and 10.0 <= named[0]["t"] <= 10.1 and "no two-rotor mode" in named[0]["what"], report["events"]
+    assert rc == 1 and report["outcome"].startswith("crashed")
 
 
 def test_the_schedule_is_cached_on_disk_by_the_parameters_it_depends_on(tmp_path, monkeypatch):
@@ -213,6 +264,20 @@ def test_no_motor_is_named_when_none_is_lost(tmp_path, plan, model, effects):
     main(argv)
     events = [e["what"] for e in json.loads(out.read_text())["events"]]
     assert not [w for w in events if re.match(r"motor \d (lost|weak)", w)], events
+
+
+@pytest.mark.parametrize("gains,tau", [(g, t) for g in GAIN_SETS for t in ("lo", "hi")])
+def test_no_motor_is_named_with_the_imu_at_the_top_of_its_noise_and_the_motor_at_the_ends_of_its_range(tmp_path, gains, tau):
+    """No false alarm on the vehicle's noisiest IMU (every [sensors] range at its top: the rotors'
+    vibration on both sensors, the gyro's broadband noise) with the plant's motor time constant at either
+    end of the design's span, the loop told the file's nominal values: the paper flight, both gain sets."""
+    told = dataclasses.replace(load("paper-as-flown"), gains=GAIN_SETS[gains])
+    d = spin_design.design_inputs(told)
+    t = d.tau_lo if tau == "lo" else d.tau_hi
+    flown = dataclasses.replace(told, sensors=dataclasses.replace(told.sensors, **_noise(told, 1)))
+    flight = fly(SCENARIOS["paper"](), flown, tmp_path / "f.csv",
+                 effects=(causes.make("motor_dynamics", tau=t, tau_down=t),))
+    assert not [w for _, w in flight.result.events if re.match(r"motor \d (lost|weak)", w)], flight.result.events
 
 
 @pytest.mark.slow

@@ -2,8 +2,9 @@
 the gyro, the accelerometer and the thrusts it commanded one loop earlier (the mixer's, through the
 motor time constant the parameter file carries, if any). Eq. 7 turned around gives the roll and pitch
 torques the body felt, `J dw/dt + w x (J w + Jp Omega z_b)` (the gyro differenced), and the specific
-force along z_b the collective thrust; what the commanded thrusts predict (the "+" layout, eq. 25) is
-subtracted, both low-passed over FILTER_S, and their slow parts (BIAS_S: a centre of mass off the
+force along z_b the collective thrust; what the commanded thrusts predict (the "+" layout, eq. 25; the
+rotors' speeds, eq. 27, following them through the motor time constant) is subtracted, both low-passed over FILTER_S (two EMAs of half of it: the rotors' vibration lines and the
+gyro's noise, differenced, kept out), and their slow parts (BIAS_S: a centre of mass off the
 middle, a battery that sags, a weak motor) are taken away. A stopped rotor (or a lost propeller) i
 leaves its whole thrust missing: the torque residual points along its arm and the collective one is
 down by its thrust; a weak one (a failing ESC, a chipped propeller) leaves part of it missing. The
@@ -14,7 +15,8 @@ for tens of milliseconds, but not in the collective (the two sides of an axis ch
 directions); and the count only starts in calm flight (the body rates, low-passed, below CALM): a
 vehicle already tumbling is not read as a lost rotor. It looks at any height: a vehicle resting on
 the floor has the floor carrying weight, the collective residual the other way; a touchdown's jolt
-(JOLT above the commanded thrusts) holds the count off for JOLT_S (a hop, legs settling).
+(the low-passed collective residual JOLT above the commanded thrusts) holds the count off for JOLT_S
+(a hop, legs settling).
 """
 from __future__ import annotations
 
@@ -24,10 +26,11 @@ from flightctl.control.spin_design import effect_value, motor_time_constant
 from flightctl.hal import ImuSample
 from flightctl.params import Params
 
-FILTER_S = 0.01          # s: the residuals' low-pass
+FILTER_S = 0.01          # s: the residuals' low-pass (two EMAs of FILTER_S / 2)
 BIAS_S = 0.5             # s: their slow part, followed while no motor is suspected
-THRESHOLD = 0.6          # of the suspected motor's commanded thrust, missing in torque and in collective, ...
-LOOPS = 9                # ... for this many loops (20 ms) in a row: lost
+THRESHOLD = 0.45         # of the suspected motor's commanded thrust, missing in torque and in collective (above
+#                          1 - TRIM: a stopping rotor named this early is never flown on four), ...
+LOOPS = 5                # ... for this many loops (11 ms) in a row: lost
 WEAK = 0.15              # missing at least this share ...
 WEAK_LOOPS = 45          # ... for this many loops (100 ms) in a row: named with its share
 CALM = 1.0               # rad/s: |p| + |q| low-passed over CALM_S: the count starts only below this
@@ -60,8 +63,8 @@ class MotorLossDetector:
     `fast` whether the fast test named it (its rotor may still be running down: at least that share).
     `accept()`: the loop flies on with that motor (a weak one): its missing thrust becomes part of
     the residuals' slow part."""
-    __slots__ = ("km", "kf", "kb", "kc", "fl", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
-                 "strong", "missing", "fast", "damp", "hold", "jolt_loops", "p", "q", "half", "quiet", "ic1", "Jxx", "Jyy", "Jp", "jx",
+    __slots__ = ("km", "kf", "kb", "kc", "fl", "sx", "sy", "sz", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
+                 "strong", "missing", "fast", "seen", "damp", "hold", "jolt_loops", "p", "q", "half", "quiet", "ic1", "c1", "w", "Jxx", "Jyy", "Jp", "jx",
                  "jy", "l", "iM", "M", "il")
 
     def __init__(self, params: Params, tau_motor: float | None = None):
@@ -69,22 +72,24 @@ class MotorLossDetector:
         dt = a.dt
         tau = motor_time_constant(params) if tau_motor is None else tau_motor
         self.km = dt / (tau + dt)
-        self.kf, self.kb, self.kc = dt / (FILTER_S + dt), dt / (BIAS_S + dt), dt / (CALM_S + dt)
+        self.kf, self.kb, self.kc = dt / (0.5 * FILTER_S + dt), dt / (BIAS_S + dt), dt / (CALM_S + dt)
         self.half = 0.5 * a.B              # a commanded thrust counts as at least this (near-idle rotors)
         # a collective drop (N) at most this cannot be WEAK of any motor's thrust (each counts as
         # at least `half`): no motor is suspected, and the loop need not look at each (most loops)
         self.quiet = WEAK * self.half
         # the airframe's constants of eq. 7, 9 and 27, bound once (the loop reads them every period)
-        self.ic1, self.Jxx, self.Jyy, self.Jp = 1.0 / a.c1, a.Jxx, a.Jyy, a.Jp
+        self.c1, self.ic1, self.Jxx, self.Jyy, self.Jp = a.c1, 1.0 / a.c1, a.Jxx, a.Jyy, a.Jp
         self.jx, self.jy = a.Jzz - a.Jyy, a.Jxx - a.Jzz
         # the roll and pitch damping of the rotors' airflow the file carries (rotor_inflow: 2 k l^2 of the
         # thrust changes and the hub moment, for four rotors at hover): torque the rotors gave, too
         self.damp = 2.0 * effect_value(params, "rotor_inflow", "k") * a.l * a.l + effect_value(params, "rotor_inflow", "hub")
         self.l, self.il, self.M, self.iM = a.l, 1.0 / a.l, a.M, 1.0 / a.M
         self.fl = [0.0, 0.0, 0.0, 0.0]
+        self.w = [0.0, 0.0, 0.0, 0.0]
         self.count = [0, 0, 0, 0]
         self.strong = [0, 0, 0, 0]
         self.missing, self.fast = 0.0, False
+        self.seen = 0.0          # the largest missing share any motor showed this loop in calm flight
         self.jolt_loops = int(JOLT_S / dt + 0.5)
         self.reset(a.B)
 
@@ -92,24 +97,32 @@ class MotorLossDetector:
         """At take-off: the rotors at f0 each, nothing suspected."""
         for i in range(4):
             self.fl[i] = f0
+            self.w[i] = sqrt(f0 * self.ic1)
             self.count[i] = self.strong[i] = 0
-        self.rx = self.ry = self.rz = self.bx = self.by = self.bz = 0.0
+        self.rx = self.ry = self.rz = self.bx = self.by = self.bz = self.sx = self.sy = self.sz = 0.0
         self.calm = 0.0
         self.hold = 0
         self.p = self.q = None
 
     def update(self, s: ImuSample, f: list[float], dt: float) -> int:
-        fl, km = self.fl, self.km
-        f0 = fl[0] = fl[0] + km * (f[0] - fl[0])    # the thrusts now, from the commands (one loop late)
-        f1 = fl[1] = fl[1] + km * (f[1] - fl[1])
-        f2 = fl[2] = fl[2] + km * (f[2] - fl[2])
-        f3 = fl[3] = fl[3] + km * (f[3] - fl[3])
+        # the rotors' speeds now (eq. 27), from the thrusts commanded one loop earlier through the motor
+        # time constant (the speed lags, as the plant's motor_dynamics has it), and their thrusts
+        w, km, ic1, c1 = self.w, self.km, self.ic1, self.c1
+        w0 = w[0] = w[0] + km * (sqrt(f[0] * ic1) - w[0])
+        w1 = w[1] = w[1] + km * (sqrt(f[1] * ic1) - w[1])
+        w2 = w[2] = w[2] + km * (sqrt(f[2] * ic1) - w[2])
+        w3 = w[3] = w[3] + km * (sqrt(f[3] * ic1) - w[3])
+        fl = self.fl
+        f0 = fl[0] = c1 * w0 * w0
+        f1 = fl[1] = c1 * w1 * w1
+        f2 = fl[2] = c1 * w2 * w2
+        f3 = fl[3] = c1 * w3 * w3
         p, q, r = s.gx, s.gy, s.gz
         if self.p is None:
             self.p, self.q = p, q
             return 0
-        ic1, l = self.ic1, self.l
-        Om = -sqrt(f0 * ic1) + sqrt(f1 * ic1) - sqrt(f2 * ic1) + sqrt(f3 * ic1)   # eq. 9 with eq. 27
+        l = self.l
+        Om = -w0 + w1 - w2 + w3                      # eq. 9
         JpOm = self.Jp * Om
         # eq. 7 turned around: the torque the body felt, less the one the commanded thrusts give
         d = self.damp
@@ -117,22 +130,27 @@ class MotorLossDetector:
         ty = self.Jyy * (q - self.q) / dt + p * r * self.jy - p * JpOm + d * q - l * (f2 - f0)
         tz = s.az - (f0 + f1 + f2 + f3) * self.iM
         self.p, self.q = p, q
-        kf = self.kf
-        rx = self.rx = self.rx + kf * (tx - self.rx)
-        ry = self.ry = self.ry + kf * (ty - self.ry)
-        rz = self.rz = self.rz + kf * (tz - self.rz)
+        kf = self.kf                               # two EMAs of FILTER_S / 2: a critically damped low-pass
+        sx = self.sx = self.sx + kf * (tx - self.sx)
+        sy = self.sy = self.sy + kf * (ty - self.sy)
+        sz = self.sz = self.sz + kf * (tz - self.sz)
+        rx = self.rx = self.rx + kf * (sx - self.rx)
+        ry = self.ry = self.ry + kf * (sy - self.ry)
+        rz = self.rz = self.rz + kf * (sz - self.rz)
         self.calm += self.kc * ((p if p > 0 else -p) + (q if q > 0 else -q) - self.calm)
         count, strong = self.count, self.strong
         fall = (self.bz - rz) * self.M             # the collective thrust missing (N)
-        if tz > JOLT:                              # the floor pushing up: a touchdown
+        if rz > JOLT:                              # the floor pushing up: a touchdown (low-passed: not the
+            #                                      rotors' vibration on the accelerometer)
             self.hold = self.jolt_loops
         elif self.hold > 0:
             self.hold -= 1
         if self.hold or fall <= self.quiet:   # on the floor the floor carries weight: no fall
             count[0] = count[1] = count[2] = count[3] = strong[0] = strong[1] = strong[2] = strong[3] = 0
+            self.seen = 0.0
         else:
             ex, ey = rx - self.bx, ry - self.by
-            lost, half, calm = 0, self.half, self.calm < CALM
+            lost, half, calm, seen = 0, self.half, self.calm < CALM, 0.0
             il = self.il
             # the missing torque of motor i lies along its arm: +y for 1, -x for 2, -y for 3, +x for 4
             for i in range(4):
@@ -144,6 +162,8 @@ class MotorLossDetector:
                 drop = fall / fi
                 if drop < share:
                     share = drop
+                if calm and share > seen:
+                    seen = share
                 if WEAK < share < HIGH and (calm or count[i] > 0):
                     count[i] += 1
                     strong[i] = strong[i] + 1 if share > THRESHOLD and calm else 0
@@ -151,6 +171,7 @@ class MotorLossDetector:
                         lost, self.missing, self.fast = i + 1, share, strong[i] >= LOOPS
                 else:
                     count[i] = strong[i] = 0
+            self.seen = seen
             if lost:
                 return lost
             if count[0] or count[1] or count[2] or count[3]:

@@ -38,18 +38,29 @@ class SpinController:
     """The loop's controller after a motor is lost: `start(lost, ...)` once, `step(...)` every loop.
     `why_not`: why the two-rotor mode cannot work on this vehicle ('' when it can)."""
     __slots__ = ("a", "tau_m", "r_bar", "why_not", "sched", "rates", "r0", "nk", "hstep", "nj", "pair",
-                 "off", "sign", "e", "u_act", "u", "counts", "idle", "yaw", "w", "kw", "Jp", "vx", "vy",
-                 "amax", "kv", "g", "K")
+                 "off", "sign", "e", "u_act", "u_prev", "counts", "idle", "yaw", "w", "kw", "Jp", "vx", "vy",
+                 "amax", "kv", "g", "K", "ng", "chain", "phi", "ga", "gb", "m", "a_rate", "ph", "qh", "fresh",
+                 "jx", "jy", "ex", "ey", "bx", "by", "d")
 
     def __init__(self, params: Params, tau_motor: float | None = None):
         a = self.a = params.airframe
         d = spin_design.design_inputs(params, tau_motor)
-        self.tau_m = d[16]
+        self.tau_m = d.tau
         self.why_not = spin_design.unusable(d)
         self.r_bar = spin_design.equilibrium_spin(d)
         self.kw = a.dt / self.tau_m if self.tau_m > a.dt else 1.0   # the rotors' speeds per loop
         self.idle = count_from_thrust(0.0, a.h1, a.h2)   # the dead zone's edge: no thrust, the ESC armed
         self.Jp, self.g = a.Jp, a.g
+        # the design's model, as the loop runs it: the pair's torque through the motor time constant and
+        # the delay chain (tau_{k+1} = phi tau_k + ga u_{k-m-1} + gb u_{k-m}), the commands still in the
+        # chain, and the rate filter around eq. 7's prediction (spin_design.closed_loop)
+        self.phi, self.ga, self.gb, self.m = spin_design.torque_model(d.tau, d.dt, d.delay)
+        self.ng = spin_design.gain_count(d)
+        self.chain = [0.0] * spin_design.slots(d)        # u_{k-1}, u_{k-2}, ...
+        self.a_rate = spin_design.rate_filter(d)
+        self.jx, self.jy = (a.Jzz - a.Jyy) / a.Jxx, (a.Jzz - a.Jxx) / a.Jyy
+        self.bx, self.by = 1.0 / a.Jxx, 1.0 / a.Jyy
+        self.ex = self.ey = 0.0
         self.sched = None
         if not self.why_not:          # once per vehicle: at start-up, never in the air (cached on disk)
             s = spin_design.load(d)
@@ -62,8 +73,9 @@ class SpinController:
         self.w = [0.0, 0.0, 0.0, 0.0]   # the rotors' speeds (eq. 27), through the motor time constant
         self.e = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]   # the world's x, y and up in the body
         self.counts = [0, 0, 0, 0]
-        self.K = [0.0, 0.0, 0.0, 0.0, 0.0]
+        self.K = [0.0] * self.ng
         self.pair = None
+        self.d = d
 
     def start(self, lost: int, roll: float, pitch: float, yaw: float, f: list[float]) -> None:
         """Motor `lost` (1..4) is gone: stop it and the one across, fly on the other two; `f` the
@@ -82,7 +94,15 @@ class SpinController:
         e[0], e[1], e[2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr   # world x
         e[3], e[4], e[5] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr   # world y
         e[6], e[7], e[8] = -sp, cp * sr, cp * cr                                     # world up: n
-        self.u_act = self.u = 0.0
+        # the pair's torque across its arm now, from the four-rotor mixer's last thrusts (eq. 25), and the
+        # commands still in the delay chain: those thrusts too
+        tq = self.a.l * c1 * ((self.w[2] ** 2 - self.w[0] ** 2) if keep == (0, 2) else (self.w[1] ** 2 - self.w[3] ** 2))
+        self.u_act = self.u_prev = tq
+        for k in range(len(self.chain)):
+            self.chain[k] = tq
+        dx, dy = spin_design.damping(self.d, keep)
+        self.ex, self.ey = dx / self.a.Jxx, dy / self.a.Jyy
+        self.fresh = True
         self.vx = self.vy = 0.0
         self.yaw = yaw
 
@@ -108,7 +128,7 @@ class SpinController:
         a, b, c = (1.0 - fh) * (1.0 - fk), (1.0 - fh) * fk, fh * (1.0 - fk)
         dd = fh * fk
         K = self.K
-        for m in range(5):
+        for m in range(self.ng):
             K[m] = a * A[m] + b * B[m] + c * C[m] + dd * D[m]
         return K
 
@@ -147,16 +167,40 @@ class SpinController:
         gi = 1.0 / self.g
         dx = (bx * e[0] + by * e[3]) * gi + nx
         dy = (bx * e[1] + by * e[4]) * gi + ny
-        # the pair's torque: the gains at the spin rate and the rotors' momentum now
+        # the body rates through the rate filter: an EMA around eq. 7's prediction from the last loop (the
+        # pair's torque over it, the gyroscopic coupling of the spin and the rotors' momentum, the damping)
+        w = self.w
+        if self.fresh:
+            self.ph, self.qh, self.fresh = p, q, False
+        else:
+            ph, qh, t_mid = self.ph, self.qh, 0.5 * (self.u_prev + self.u_act)
+            H = self.Jp * (-w[0] + w[1] - w[2] + w[3])
+            if self.pair == (0, 2):
+                pp = ph + dt * (-(self.jx * r + H * self.bx) * qh - self.ex * ph)
+                qp = qh + dt * ((self.jy * r + H * self.by) * ph - self.ey * qh + t_mid * self.by)
+            else:
+                pp = ph + dt * (-(self.jx * r + H * self.bx) * qh - self.ex * ph + t_mid * self.bx)
+                qp = qh + dt * ((self.jy * r + H * self.by) * ph - self.ey * qh)
+            ar = self.a_rate
+            self.ph, self.qh = pp + ar * (p - pp), qp + ar * (q - qp)
+        # the pair's torque: the gains at the spin rate and the rotors' momentum now, on the state the
+        # design has (the filtered rates, the thrust axis, the modelled torque, the commands in the chain)
         K = self.gains(r)
-        if self.tau_m > 0.0:
-            self.u_act += (self.u - self.u_act) * dt / self.tau_m
-        u = -(K[0] * p + K[1] * q + K[2] * dx + K[3] * dy + K[4] * self.u_act)
+        chain = self.chain
+        u = -(K[0] * self.ph + K[1] * self.qh + K[2] * dx + K[3] * dy + K[4] * self.u_act)
+        for k in range(len(chain)):
+            u -= K[5 + k] * chain[k]
         F = F / (nz if nz > 0.5 else 0.5)        # along the thrust axis, tilted from the vertical
         F = F if F > 0.0 else 0.0
-        lim = a.l * F * 0.5                        # each rotor's thrust stays >= 0
+        lim = a.l * F                              # each rotor's thrust stays >= 0
         u = lim if u > lim else -lim if u < -lim else u
-        self.u = u
+        # the modelled torque at the next loop (through the delay chain and the motor time constant)
+        m = self.m
+        self.u_prev = self.u_act
+        self.u_act = self.phi * self.u_act + self.ga * chain[m] + self.gb * (chain[m - 1] if m > 0 else u)
+        for k in range(len(chain) - 1, 0, -1):
+            chain[k] = chain[k - 1]
+        chain[0] = u
         i, j = self.pair
         half, d = 0.5 * F, u / (2.0 * a.l)
         # pair (1, 3): tau_theta = l (f3 - f1); pair (2, 4): tau_phi = l (f2 - f4)
@@ -171,7 +215,7 @@ class SpinController:
         o1, o2 = self.off
         counts[o1] = counts[o2] = self.idle
         # the rotors' speeds (eq. 27) follow through the motor time constant: their momentum for the gains
-        w, k, c1 = self.w, self.kw, a.c1
+        k, c1 = self.kw, a.c1
         w[i] += k * (sqrt(fi / c1) - w[i])
         w[j] += k * (sqrt(fj / c1) - w[j])
         w[o1] -= k * w[o1]

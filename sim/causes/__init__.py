@@ -1,14 +1,16 @@
-"""The causes: every candidate extension of measured-data.md, one module each, holding side by side
-its plant effect (an `Effect` on the seam of `flightctl.sim.world.model`) and its diagnose fit (a
-`Candidate` of `flightctl.sim.identify.diagnose.candidate`).
+"""The causes: every candidate extension of measured-data.md, then the project's own (docs/diagnose.md,
+"Causes beyond the contract"), one module each, holding side by side its plant effect (an `Effect` on
+the seam of `flightctl.sim.world.model`; a sensor effect acts on the simulated IMU) and its diagnose
+fit (a `Candidate` of `flightctl.sim.identify.diagnose.candidate`).
 
 `CAUSES` maps each name to its `Cause`: the effect class, the candidate class, the parameters with
 their units, and a one-line description. `flightctl sim --effect` builds effects with `parse`, the
 tests with `make`, and `flightctl diagnose` runs every candidate in this order.
 
 Adding a cause: a module here with its `Effect` and its `Candidate` (whose `effect` names it), one
-line in `_FITS` below, a row in measured-data.md's table of causes (tests/test_causes.py checks that
-the two agree), a unit test of the effect and a hidden-effect case (tests/test_diagnose_cases.py).
+line in `_FITS` below, a row in docs/diagnose.md's table of the causes beyond the contract (after the
+contract's, whose table is measured-data.md's; tests/test_causes.py checks that the registry and the two
+tables agree), a unit test of the effect and a hidden-effect case (tests/test_diagnose_cases.py).
 Importing the registry costs no scipy (the fits import it when they run): `flightctl sim` starts fast.
 """
 from __future__ import annotations
@@ -17,7 +19,7 @@ import math
 from dataclasses import dataclass
 
 from flightctl.errors import InputError
-from flightctl.sim.causes import (actuation_delay, battery_sag, com_offset, ground_effect, linear_yaw_drag,
+from flightctl.sim.causes import (actuation_delay, battery_sag, com_offset, ground_effect, gyro_lag, linear_yaw_drag,
                                   motor_dynamics, motor_lag, motor_weak, rotor_drag, rotor_inflow)
 from flightctl.sim.identify.diagnose.candidate import Candidate
 from flightctl.sim.world.model import Effect, Parameter
@@ -42,8 +44,11 @@ _FITS = (motor_lag.MotorLagFit, actuation_delay.ActuationDelayFit, ground_effect
          battery_sag.BatterySagFit, linear_yaw_drag.LinearYawDragFit, rotor_drag.RotorDragFit,
          com_offset.ComOffsetFit, motor_weak.MotorWeakFit, rotor_inflow.RotorInflowFit,
          motor_dynamics.MotorDynamicsFit)
+# the project's own causes, after the contract's (docs/diagnose.md, "Causes beyond the contract")
+_EXTENSION_FITS = (gyro_lag.GyroLagFit,)
 
-CAUSES: dict[str, Cause] = {c.name: c for c in map(Cause.of, _FITS)}
+CAUSES: dict[str, Cause] = {c.name: c for c in map(Cause.of, _FITS + _EXTENSION_FITS)}
+EXTENSIONS: tuple[str, ...] = tuple(f.effect.cause for f in _EXTENSION_FITS)
 
 
 def make(cause: str, **parameters: float) -> Effect:

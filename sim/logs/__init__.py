@@ -49,11 +49,12 @@ def kind(path: str) -> str | None:
     suffix = Path(path).suffix.lower()
     if suffix not in FOREIGN_SUFFIXES:
         return None
-    head = read_bytes(path)[:64]          # a regular, readable file (errors.read_bytes), and its magic
+    head = read_bytes(path)[:4096]        # a regular, readable file (errors.read_bytes), and its magic
     if head.startswith(b"H Product:Blackbox"):
         return "blackbox"
     if suffix in (".txt", ".log"):
-        if suffix == ".log" and head.startswith(b"FMT,"):
+        from flightctl.sim.logs.dataflash import preamble
+        if suffix == ".log" and preamble(head) is not None:     # FMT lines, after a dump's few header lines
             return "dataflash-text"
         return None                          # a text file of this project's kind (measured-data.md)
     if not head:

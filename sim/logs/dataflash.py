@@ -9,6 +9,7 @@ The vehicle: the firmware (ArduCopter, ArduPlane, ...), FRAME_CLASS and FRAME_TY
 motor positions and spins (AP_MotorsMatrix: motor angle from the nose, clockwise positive seen from
 above; its yaw factor is the spin). The motors: SERVOn_FUNCTION 33-36 are motors 1-4, their pulses
 in RCOU's Cn, mapped onto 0-255 over MOT_PWM_MIN..MAX (RC3_MIN..MAX when those are 0, as ArduCopter does).
+ArduCopter before FRAME_CLASS (3.0-3.4: FRAME, MOT, CURR, TimeMS) is read as `arducopter3` describes.
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ import re
 import numpy as np
 
 from flightctl.errors import InputError
+from flightctl.sim.logs import arducopter3
 from flightctl.sim.logs.common import Imported, Stream, rate_notes
 
 FRD = np.array([[1.0], [-1.0], [-1.0]])
@@ -42,21 +44,54 @@ QUAD_FRAMES = {
 }
 RATE_NOTE = ("set LOG_BITMASK's IMU_FAST (and RCOUT) bits, or INS_RAW_LOG_OPT for "
              "the raw gyro (GYR)")
+OLD_RATE_NOTE = ("ArduCopter before 3.3 logs IMU in its 50 Hz loop and the motor outputs in its 10 Hz loop, "
+                 "whatever LOG_BITMASK says: with a newer firmware, ")
 WANTED = ["PARM", "MSG", "VER", "IMU", "GYR", "ACC", "RCOU", "RCO2", "RCO3", "BAT", "BARO", "RFND", "ATT", "RATE",
-          "ESC", "ARM", "EV"]
+          "ESC", "ARM", "EV", "MOT", "CURR", "CTUN"]
+ARMED_EVENTS = (10, 11)               # EV's ARMED and DISARMED (ArduCopter's LogEvent, the same since 3.0)
+PREAMBLE_LINES = 8                    # a text dump opens with a few lines (log number, firmware, board) before FMT
+
+
+def preamble(head: bytes) -> list[str] | None:
+    """The lines before the first FMT line of a DataFlash text log (ArduCopter's dump writes the log's
+    number, the firmware, free RAM and the board there), or None when `head` is not such a log."""
+    lines = head.decode("latin-1").splitlines()
+    for k, line in enumerate(lines[:PREAMBLE_LINES + 1]):
+        if line.startswith("FMT,"):
+            return [s.strip() for s in lines[:k] if s.strip()]
+    return None
+
+
+def _text_reader():
+    from pymavlink import DFReader
+
+    class Text(DFReader.DFReader_text):
+        """pymavlink's text reader; ArduCopter 3.0's GPS message (a time of week `Time`, no week) fails its
+        clock (a TypeError in its GPS time): the boot times this reader uses are the messages' own."""
+        def init_clock(self):
+            try:
+                super().init_clock()
+            except TypeError:
+                self.clock = None
+                self._rewind(keep_messages=True)
+    return Text
 
 
 def _read(path: str, text: bool):
+    """(parameters, messages by type, formats by name, texts: the preamble and MSG lines). Each message
+    gets `boot_s`: its TimeUS or TimeMS in s, else (ArduCopter 3.0-3.1 write MOT, ATT, CTUN without one)
+    that of the last message before it that has one."""
     try:
         from pymavlink import DFReader
     except ImportError:
         raise InputError(f"{path}: reading an ArduPilot log needs the logs extra: pip install '.[logs]' "
                          "(from the checkout)") from None
     try:
-        r = (DFReader.DFReader_text if text else DFReader.DFReader_binary)(path, zero_time_base=False)
+        r = (_text_reader() if text else DFReader.DFReader_binary)(path, zero_time_base=False)
     except Exception as e:
         raise InputError(f"{path}: not a readable DataFlash log ({type(e).__name__}: {e})") from None
     msgs: dict[str, list] = {k: [] for k in WANTED}
+    boot = None
     while True:
         try:
             m = r.recv_match(type=WANTED)
@@ -65,13 +100,26 @@ def _read(path: str, text: bool):
             break
         if m is None:
             break
+        us, ms = getattr(m, "TimeUS", None), getattr(m, "TimeMS", None)     # (GPS, whose TimeMS is its week's, is not read)
+        boot = us * 1e-6 if us is not None else ms * 1e-3 if ms is not None else boot
+        m.boot_s = boot
         msgs[m.get_type()].append(m)
-    return r.params, msgs
+    texts = [str(getattr(m, "Message", "")) for m in msgs["MSG"]]
+    if text:
+        with open(path, "rb") as f:
+            texts += preamble(f.read(4096)) or []
+    formats = {f.name: f for f in r.formats.values()}
+    return r.params, msgs, formats, texts
 
 
 def _col(ms: list, name: str, instance: int | None = None, key: str = "I") -> np.ndarray:
     ms = [m for m in ms if instance is None or getattr(m, key, 0) == instance]
     return np.array([getattr(m, name) for m in ms], dtype=float)
+
+
+def _t(ms: list) -> np.ndarray:
+    """The messages' boot times (s)."""
+    return np.array([np.nan if m.boot_s is None else m.boot_s for m in ms], dtype=float)
 
 
 def _pick(ms: list, key: str) -> list:
@@ -82,42 +130,68 @@ def _pick(ms: list, key: str) -> list:
     return [m for m in ms if getattr(m, key) == first]
 
 
-def _firmware(msgs) -> str:
+def _firmware(msgs, texts: list[str]) -> str:
     for m in msgs["VER"]:
         fws = getattr(m, "FWS", "")
         if fws:
             return str(fws)
-    for m in msgs["MSG"]:
-        text = str(getattr(m, "Message", ""))
+    for text in texts:
         if re.match(r"Ardu\w+ V\d", text) or text.startswith(("ArduCopter", "ArduPlane", "ArduRover", "ArduSub", "Rover")):
             return text
     return ""
 
 
-def _vehicle(p: dict, firmware: str, imp: Imported) -> tuple[str, str]:
-    """(`rotors` metadata, its source) of a quadrotor; InputError naming what it is otherwise."""
+def _version(firmware: str) -> tuple[int, int]:
+    m = re.search(r"V(\d+)\.(\d+)", firmware)
+    return (int(m[1]), int(m[2])) if m else (0, 0)
+
+
+def _vehicle(p: dict, firmware: str, formats: dict, texts: list[str], imp: Imported) -> None:
+    """InputError naming what the vehicle is when it is not a quadrotor."""
     low = firmware.lower()
     if "plane" in low:
         imp.fail(f"{firmware}: " + ("a QuadPlane (VTOL, Q_ENABLE = 1)" if p.get("Q_ENABLE") else "a fixed wing")
                  + ", not a quadrotor: diagnose knows quadrotors (4)")
     if low.startswith(("rover", "ardurover", "ardusub", "antennatracker", "blimp")):
         imp.fail(f"{firmware}: not a multirotor: diagnose knows quadrotors (4)")
+    if arducopter3.is_legacy(p):
+        cls, name, why = arducopter3.frame_class(p, formats, texts)
+        if cls is not None and cls != QUAD:
+            imp.fail(f"{firmware or 'ArduCopter'}: {name or FRAME_CLASSES.get(cls, 'not a quadrotor')} ({why}), not a "
+                     "quadrotor: diagnose knows quadrotors (4)")
+        imp.meta["frame_class_source"] = why or ("not in the log (ArduCopter before 3.2 is built for one frame): a "
+                                                 "quadrotor if no more than four outputs move")
+        return
     cls = int(p.get("FRAME_CLASS", QUAD))
     if cls != QUAD:
         imp.fail(f"FRAME_CLASS = {cls}: {FRAME_CLASSES.get(cls, 'not a quadrotor')}, not a quadrotor: diagnose "
                  "knows quadrotors (4)")
-    ftype = int(p.get("FRAME_TYPE", 1))
+
+
+def _rotors(p: dict, imp: Imported) -> tuple[str, str]:
+    """(`rotors` metadata, its source) of the quadrotor's FRAME_TYPE (FRAME before FRAME_CLASS)."""
+    legacy = arducopter3.is_legacy(p)
+    ftype = arducopter3.frame_type(p, imp) if legacy else int(p.get("FRAME_TYPE", 1))
     if ftype not in QUAD_FRAMES:
         imp.fail(f"FRAME_TYPE = {ftype}: a quad frame whose geometry (V, V-tail, A-tail, Y4, no-yaw-torque) this "
                  "reader does not take")
     name, motors = QUAD_FRAMES[ftype]
     rotors = "; ".join(f"{math.cos(a * DEG):.4f} {-math.sin(a * DEG):.4f} {s:+d}" for a, s in motors)
-    source = (f"ArduPilot's QUAD/{name} (FRAME_CLASS 1, FRAME_TYPE {ftype}; AP_MotorsMatrix): motors 1-4 at "
+    what = (f"FRAME {int(p['FRAME'])}; ArduCopter 3.x's AP_MotorsQuad" if legacy
+            else f"FRAME_CLASS 1, FRAME_TYPE {ftype}; AP_MotorsMatrix")
+    source = (f"ArduPilot's QUAD/{name} ({what}): motors 1-4 at "
               + ", ".join(f"{a:+d} deg {'CCW' if s > 0 else 'CW'}" for a, s in motors) + " from the nose, clockwise positive")
     return rotors, source
 
 
-def _motors(p: dict, msgs, imp: Imported) -> Stream:
+def _outputs(p: dict, msgs, imp: Imported) -> tuple[list[tuple[str, str]], str, str]:
+    """([(message, field) of motors 1-4], which outputs in words, esc_order) from SERVOn_FUNCTION, or
+    ArduCopter 3.x's fixed outputs 1-4."""
+    if arducopter3.is_legacy(p):
+        msg, fields = arducopter3.outputs(p, msgs, imp)
+        if not msg:
+            imp.fail("no MOT or RCOU messages: " + arducopter3.unlogged(p, True, False))
+        return [(msg, f) for f in fields], f"{msg} {', '.join(fields)} (ArduCopter 3.x: motors 1-4 on outputs 1-4)", "0 1 2 3"
     chan = {}
     for name, value in p.items():
         m = re.fullmatch(r"SERVO(\d+)_FUNCTION", name)
@@ -131,42 +205,53 @@ def _motors(p: dict, msgs, imp: Imported) -> Stream:
                  "four motors: diagnose knows quadrotors (4)")
     if sorted(chan) != [1, 2, 3, 4]:
         imp.fail(f"SERVOn_FUNCTION assigns motors {sorted(chan)}: motors 1-4 are needed")
-    rows = []
+    out = []
     for m in range(1, 5):
         c = chan[m]
         msg = "RCOU" if c <= 14 else "RCO2" if c <= 18 else "RCO3"
         ms = msgs[msg]
         if not ms or not hasattr(ms[0], f"C{c}"):
             imp.fail(f"no {msg}.C{c} (motor {m} on SERVO{c}): the motor commands were not logged")
-        rows.append((_col(ms, "TimeUS") * 1e-6, _col(ms, f"C{c}")))
+        out.append((msg, f"C{c}"))
+    outputs = ", ".join(f"SERVO{chan[m]}" for m in range(1, 5))
+    return out, f"RCOU {outputs} (SERVOn_FUNCTION 33-36 = motors 1-4)", " ".join(str(chan[m] - 1) for m in range(1, 5))
+
+
+def _motors(p: dict, msgs, imp: Imported) -> Stream:
+    fields, outputs, esc_order = _outputs(p, msgs, imp)
+    rows = [(_t(msgs[msg]), _col(msgs[msg], f)) for msg, f in fields]
     t = rows[0][0]
     raw = np.vstack([np.interp(t, tr, v) if tr.size != t.size else v for tr, v in rows])
     lo, hi = float(p.get("MOT_PWM_MIN", 0) or 0), float(p.get("MOT_PWM_MAX", 0) or 0)
     source = "MOT_PWM_MIN/MAX"
     if not 0 < lo < hi:
         lo, hi = float(p.get("RC3_MIN", 1000) or 1000), float(p.get("RC3_MAX", 2000) or 2000)
-        source = "RC3_MIN/MAX (MOT_PWM_MIN/MAX are 0: ArduCopter then uses the throttle channel's range)"
+        source = ("RC3_MIN/MAX (ArduCopter 3.x drives its motors over the throttle channel's range)"
+                  if arducopter3.is_legacy(p) else
+                  "RC3_MIN/MAX (MOT_PWM_MIN/MAX are 0: ArduCopter then uses the throttle channel's range)")
     P = 255.0 * (raw - lo) / (hi - lo)
     clipped = int(((P < 0) | (P > 255)).any(axis=0).sum())
+    name = fields[0][0]
     if clipped:
-        imp.notes.append(f"{clipped} RCOU samples outside {source.split(' ')[0]} (stopped or disarmed) clipped to 0-255")
-    outputs = ", ".join(f"SERVO{chan[m]}" for m in range(1, 5))
-    imp.meta["motor_outputs"] = f"RCOU {outputs} (SERVOn_FUNCTION 33-36 = motors 1-4); {source} {lo:g}-{hi:g} us"
+        imp.notes.append(f"{clipped} {name} samples outside {source.split(' ')[0]} (stopped or disarmed) clipped to 0-255")
+    imp.meta["motor_outputs"] = f"{outputs}; {source} {lo:g}-{hi:g} us"
     imp.meta["command_range"] = f"{lo:g} {hi:g}"
-    imp.meta["command"] = f"P = 255 (pwm - {lo:g}) / ({hi:g} - {lo:g}): RCOU {outputs} over {source.split(' ')[0]}"
-    imp.meta["esc_order"] = " ".join(str(chan[m] - 1) for m in range(1, 5))
-    return Stream("RCOU", t, np.clip(P, 0.0, 255.0), held=True)
+    imp.meta["command"] = f"P = 255 (pwm - {lo:g}) / ({hi:g} - {lo:g}): {outputs.split(' (')[0]} over {source.split(' ')[0]}"
+    imp.meta["esc_order"] = esc_order
+    return Stream(name, t, np.clip(P, 0.0, 255.0), held=True)
 
 
-def read(path: str, text: bool = False) -> Imported:
-    p, msgs = _read(path, text)
-    imp = Imported(path, {}, {}, [])
-    if "_damage" in msgs:
-        imp.notes.append(f"damaged: read up to {msgs['_damage'][0]}")
-    firmware = _firmware(msgs)
-    rotors, source = _vehicle(p, firmware, imp)
-    if msgs["ARM"] and not any(getattr(m, "ArmState", 0) for m in msgs["ARM"]):
-        imp.fail("never armed: the motors did not run in this log (ARM messages)")
+def _armed(msgs) -> bool | None:
+    """Whether the log shows the vehicle armed (ARM, else EV's ARMED or DISARMED); None when it has neither."""
+    if msgs["ARM"]:
+        return any(getattr(m, "ArmState", 0) for m in msgs["ARM"])
+    if msgs["EV"]:
+        return any(getattr(m, "Id", 0) in ARMED_EVENTS for m in msgs["EV"])
+    return None
+
+
+def _gyro(p: dict, msgs, imp: Imported) -> tuple[bool, str, str]:
+    """The gyro and accelerometer streams; (filtered by the autopilot, the gyro's source, the accelerometer's)."""
     gyr = _pick(msgs["GYR"], "I")
     imu = _pick(msgs["IMU"], "I")
     if len(gyr) >= 10 and len(_pick(msgs["ACC"], "I")) >= 10:
@@ -177,41 +262,87 @@ def read(path: str, text: bool = False) -> Imported:
         a = np.vstack([_col(acc, f"Acc{a}") for a in "XYZ"])
         post = int(p.get("INS_RAW_LOG_OPT", 0) or 0) & 4
         gsource = "GYR (the raw high-rate gyro samples" + (", after the filters: INS_RAW_LOG_OPT bit 2)" if post else ")")
-        asource, filtered = "ACC", bool(post)
+        filtered = bool(post)
+        asource = "ACC"
     elif imu:
-        tg = ta = _col(imu, "TimeUS") * 1e-6
+        if not (hasattr(imu[0], "TimeUS") or hasattr(imu[0], "TimeMS")):
+            imp.fail("IMU without a time stamp (ArduCopter 3.0 logs none with it): the gyro's sample times are unknown")
+        tg = ta = _t(imu)
         g = np.vstack([_col(imu, f"Gyr{a}") for a in "XYZ"])
         a = np.vstack([_col(imu, f"Acc{a}") for a in "XYZ"])
         gsource, asource, filtered = "IMU (the filtered gyro the controller uses)", "IMU", True
     else:
-        imp.fail("no IMU or GYR messages: the gyro was not logged")
+        motors = any(msgs[k] for k in ("RCOU", "MOT"))
+        imp.fail("no IMU or GYR messages: " + arducopter3.unlogged(p, False, motors))
     imp.streams["gyro"] = Stream(gsource.split(" ")[0], tg, g * FRD)
     imp.streams["acc"] = Stream("accelerometer", ta, a * FRD)
-    imp.streams["motors"] = _motors(p, msgs, imp)
-    rate_notes(imp, "motor commands (RCOU)", RATE_NOTE)
-    _measurements(p, msgs, imp)
+    return filtered, gsource, asource
+
+
+def _filters(p: dict, firmware: str, texts: list[str], filtered: bool, imp: Imported) -> tuple[str, str]:
+    """(gyro_filter, acc_filter): INS_GYRO_FILTER, INS_ACCEL_FILTER (biquads); ArduCopter 3.0-3.1 on a
+    PX4 board: INS_MPU6K_FILTER, else the PX4 driver's 30 Hz two-pole low-pass at its 100 Hz IMU rate."""
+    if not filtered:
+        return "none", "none"
+    if arducopter3.is_legacy(p):
+        hz = float(p.get("INS_MPU6K_FILTER", 0) or 0)
+        px4 = any(t.startswith("PX4") for t in texts)
+        if px4 and _version(firmware) in ((3, 0), (3, 1)):
+            hz = hz or 30.0
+            return f"biquad {hz:g}", f"biquad {hz:g}"
+        imp.notes.append("the IMU's low-pass (INS_MPU6K_FILTER, the sensor driver's default at 0) is not declared")
+        return "none", "none"
     gf, af = float(p.get("INS_GYRO_FILTER", 0) or 0), float(p.get("INS_ACCEL_FILTER", 0) or 0)
+    return (f"biquad {gf:g}" if gf > 0 else "none"), (f"biquad {af:g}" if af > 0 else "none")
+
+
+def read(path: str, text: bool = False) -> Imported:
+    p, msgs, formats, texts = _read(path, text)
+    imp = Imported(path, {}, {}, [])
+    if "_damage" in msgs:
+        imp.notes.append(f"damaged: read up to {msgs['_damage'][0]}")
+    firmware = _firmware(msgs, texts)
+    _vehicle(p, firmware, formats, texts, imp)
+    if _armed(msgs) is False:
+        imp.fail("never armed: the motors did not run in this log (" + ("ARM" if msgs["ARM"] else "EV") + " messages)")
+    filtered, gsource, asource = _gyro(p, msgs, imp)
+    rotors, source = _rotors(p, imp)
+    imp.streams["motors"] = _motors(p, msgs, imp)
+    old = arducopter3.is_legacy(p) and _version(firmware) < (3, 3)
+    rate_notes(imp, f"motor commands ({imp.streams['motors'].name})", (OLD_RATE_NOTE if old else "") + RATE_NOTE)
+    _measurements(p, msgs, imp)
+    gyro_filter, acc_filter = _filters(p, firmware, texts, filtered, imp)
     notches = "harmonic notch (INS_HNTCH_ENABLE)" if p.get("INS_HNTCH_ENABLE") else "none"
     imp.meta.update({
         "vehicle": "foreign", "format": "ardupilot dataflash", "source": path, "firmware": firmware,
-        "craft": "", "rotors": rotors, "rotors_source": source,
-        "gyro_source": gsource, "gyro_filter": f"biquad {gf:g}" if filtered and gf > 0 else "none",
-        "gyro_notches": notches, "acc_source": asource,
-        "acc_filter": f"biquad {af:g}" if filtered and af > 0 else "none",
+        "craft": "", "rotors": rotors, "rotors_source": source, "gyro_source": gsource, "gyro_filter": gyro_filter,
+        "gyro_notches": notches, "acc_source": asource, "acc_filter": acc_filter,
     })
     return imp
 
 
-def _measurements(p: dict, msgs, imp: Imported) -> None:
+def _battery(msgs, imp: Imported) -> None:
+    """BAT's Volt and Curr (V, A), else ArduCopter 3.x's CURR (V x 100 and A x 100 in its integer fields)."""
     bat = _pick(msgs["BAT"], "Inst")
-    if bat:
-        tb = _col(bat, "TimeUS") * 1e-6
-        v = _col(bat, "Volt")
-        ok = v > 0.5
-        imp.streams["battery_v"] = Stream("BAT Volt", tb[ok], v[None, ok])
-        cur = _col(bat, "Curr")
+    name = "BAT"
+    if not bat and msgs["CURR"] and hasattr(msgs["CURR"][0], "Volt"):
+        bat, name = msgs["CURR"], "CURR"
+    if not bat:
+        return
+    fmt = dict(zip(bat[0].fmt.columns, bat[0].fmt.format))
+    scale = {k: 0.01 if fmt.get(k, "f") in "hHiI" else 1.0 for k in ("Volt", "Curr")}
+    tb = _t(bat)
+    v = _col(bat, "Volt") * scale["Volt"]
+    ok = v > 0.5
+    imp.streams["battery_v"] = Stream(f"{name} Volt", tb[ok], v[None, ok])
+    if hasattr(bat[0], "Curr"):
+        cur = _col(bat, "Curr") * scale["Curr"]
         if np.any(cur > 0):
-            imp.streams["current"] = Stream("BAT Curr", tb, cur[None])
+            imp.streams["current"] = Stream(f"{name} Curr", tb, cur[None])
+
+
+def _measurements(p: dict, msgs, imp: Imported) -> None:
+    _battery(msgs, imp)
     vmax = float(p.get("MOT_BAT_VOLT_MAX", 0) or 0)
     if vmax > 0:
         imp.meta["battery_cells"] = str(max(1, round(vmax / 4.2)))
@@ -219,29 +350,33 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
     baro = _pick(msgs["BARO"], "I")
     imp.meta["height_source"] = "none"
     if baro:
-        imp.streams["height"] = Stream("BARO Alt (above the ground at boot)", _col(baro, "TimeUS") * 1e-6,
-                                       _col(baro, "Alt")[None])
+        imp.streams["height"] = Stream("BARO Alt (above the ground at boot)", _t(baro), _col(baro, "Alt")[None])
+        imp.meta["height_source"] = "baro"
+    elif msgs["CTUN"] and hasattr(msgs["CTUN"][0], "BarAlt"):
+        ctun = msgs["CTUN"]
+        imp.streams["height"] = Stream("CTUN BarAlt (the barometer above the ground at boot)", _t(ctun),
+                                       _col(ctun, "BarAlt")[None])
         imp.meta["height_source"] = "baro"
     rf = [m for m in msgs["RFND"] if getattr(m, "Orient", 25) == 25 and getattr(m, "Stat", 4) == 4]
     if rf:
         dist = _col(rf, "Dist")
-        imp.streams["range"] = Stream("RFND Dist (downward)", _col(rf, "TimeUS") * 1e-6, dist[None])
+        imp.streams["range"] = Stream("RFND Dist (downward)", _t(rf), dist[None])
     att = msgs["ATT"]
     if att:
         e = np.vstack([_col(att, k) for k in ("Roll", "Pitch", "Yaw")]) * DEG
         e[2] = np.unwrap(e[2])
-        imp.streams["attitude"] = Stream("ATT", _col(att, "TimeUS") * 1e-6, e * FRD)
+        imp.streams["attitude"] = Stream("ATT", _t(att), e * FRD)
     rate = msgs["RATE"]
     if rate:
         sp = np.vstack([_col(rate, k) for k in ("RDes", "PDes", "YDes")]) * DEG
-        imp.streams["setpoint"] = Stream("RATE RDes/PDes/YDes", _col(rate, "TimeUS") * 1e-6, sp * FRD)
+        imp.streams["setpoint"] = Stream("RATE RDes/PDes/YDes", _t(rate), sp * FRD)
     order = [int(k) for k in imp.meta.pop("esc_order").split()]
     esc = msgs["ESC"]
     if esc and hasattr(esc[0], "RPM"):
         inst = {i: [m for m in esc if getattr(m, "Instance", -1) == i] for i in order}
         if all(inst[i] for i in order):
-            t = _col(inst[order[0]], "TimeUS") * 1e-6
-            w = np.vstack([np.interp(t, _col(inst[i], "TimeUS") * 1e-6, _col(inst[i], "RPM")) for i in order])
+            t = _t(inst[order[0]])
+            w = np.vstack([np.interp(t, _t(inst[i]), _col(inst[i], "RPM")) for i in order])
             if np.any(w != 0):
                 imp.streams["omega"] = Stream("ESC RPM", t, np.abs(w) * 2.0 * math.pi / 60.0)
                 imp.meta["omega_source"] = (f"ESC telemetry RPM of instances {', '.join(map(str, order))} (the motors' "

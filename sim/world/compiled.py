@@ -112,9 +112,9 @@ def compiled_copy(fn, allocates: bool = False, **dependencies):
 
 
 # The effects the compiled plant carries, by their wrench hooks' codes (`layout`); a model with any other
-# effect integrates in plain Python (Plant._rk4).
+# effect integrates in plain Python (Plant._rk4). `gyro_lag` acts on the simulated IMU, not the plant.
 INFLOW, REACTION, DRAG = 1, 2, 3
-COMPILED_CAUSES = ("rotor_inflow", "motor_dynamics", "rotor_drag", "actuation_delay")
+COMPILED_CAUSES = ("rotor_inflow", "motor_dynamics", "rotor_drag", "actuation_delay", "gyro_lag")
 # q: the parameters of `stage`, by index
 # (_ROOT: sqrt(c1 / B), a rotor's `airflow_root` per rad/s of its speed)
 _C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _H1, _H2, _JP, _ROOT, _RIGID = range(16)

@@ -58,6 +58,8 @@ class SimMpu9250:
         self._started = False             # the DLPF stage has its first read
         compiled = chip_frame_compiled()
         self._frame, self._arrays = compiled or chip_frame, compiled is not None
+        # sensor effects that change what the gyro reports (`Effect.gyro`: an undeclared filter)
+        self._gyro_effects = tuple(e for e in world.plant.model.effects if e.uses_gyro)
         if self._arrays:                             # compiled, it takes arrays (the same values)
             self._s, self._c = np.array(self._s), np.array(self._c)
         self._reset()
@@ -132,6 +134,15 @@ class SimMpu9250:
             elif ak_reg < len(self.ak) and ak_reg != reg.AK_WIA:
                 self.ak[ak_reg] = self.regs[reg.I2C_SLV0_DO]
 
+    def _gyro_effect(self, dt: float) -> None:
+        """The gyro's output registers through each sensor effect (`Effect.gyro`), in rad/s."""
+        lsb = self._g_lsb
+        rates = [v / lsb for v in _GYRO_WORDS.unpack_from(self.regs, _BURST + 8)]
+        for e in self._gyro_effects:
+            rates = e.gyro(dt, *rates)
+        for k, v in enumerate(rates):
+            put16(self.regs, _BURST + 8 + 2 * k, v * lsb)
+
     def _copy_ext(self) -> None:
         start, n = self.regs[reg.I2C_SLV0_REG], self._slv0_read
         self.regs[reg.EXT_SENS_DATA_00:reg.EXT_SENS_DATA_00 + n] = self.ak[start:start + n]
@@ -153,6 +164,8 @@ class SimMpu9250:
         self._frame(self._regs, self._s, self._c, normal.array if self._arrays else normal.values, i,
                     fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t, dt, self.die_temperature(t), self._started)
         self._started = True
+        if self._gyro_effects:
+            self._gyro_effect(dt)
         self._mag_count += 1
         if self._slv0_read and self.ak[reg.AK_CNTL1] and self._mag_count >= self.MAG_EVERY:
             self._mag_count = 0   # the AK8963 measures at 100 Hz (continuous mode 2)
@@ -178,6 +191,7 @@ _S_WALK, _S_PHASE, N_CHIP_STATE = 6, 9, 13
  _C_A0, _C_AC, _C_G0, _C_GC, _C_ZC, _C_ZS, _C_KVG, _C_TCG2, _C_G_DELAY, _C_H2, _C_H3, _C_BB, _C_YAW,
  N_CHIP_CONST) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14, 17, 20, 23, 27, 31, 32, 33, 34, 35, 36, 37, 38)
 _BURST = reg.ACCEL_XOUT_H
+_GYRO_WORDS = struct.Struct(">3h")   # the gyro's three words in the burst, from _BURST + 8
 
 
 def chip_die(noise: SensorNoise, airframe, rng) -> tuple[list, list]:

@@ -133,6 +133,11 @@ class Effect:
     - `wrench(t, x, f, vb, force, torque)`: adds a body-frame force and torque (lists of three),
       given the thrusts `f` and the body-frame velocity `vb`.
 
+    A sensor effect (`uses_gyro`) changes what the IMU reports, not the plant: the simulated chip
+    (`SimMpu9250`) passes each read's body rates through `gyro(dt, p, q, r) -> (p, q, r)` (dt after
+    the last read), after its own noise and filter, so that the driver, the controller and the log
+    all see it; the model never calls it.
+
     The model calls `attach(airframe, offset)` once before use: `self.a` is then the airframe.
     """
     cause = "none"
@@ -144,7 +149,7 @@ class Effect:
     n_states = 0
     offset = 0
     delay = 0.0
-    uses_rotor = uses_scale = uses_wrench = False
+    uses_rotor = uses_scale = uses_wrench = uses_gyro = False
     state_dependent = False   # its `scale` reads the state (the model then cannot cache the forces)
     a: Airframe | None = None
 
@@ -156,6 +161,9 @@ class Effect:
 
     def initial_states(self, f_cmd: list[float]) -> list[float]:
         return []
+
+    def gyro(self, dt: float, p: float, q: float, r: float) -> tuple[float, float, float]:
+        return p, q, r
 
     def command(self, f_cmd: list[float]) -> None:
         """A rotor effect's view of each new input, before the `rotor` calls that take these

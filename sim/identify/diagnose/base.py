@@ -39,7 +39,7 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.params import Airframe
 from flightctl.physics import G, thrust_from_command
-from flightctl.sim.identify.diagnose.data import FileData, Layout
+from flightctl.sim.identify.diagnose.data import BARO_CLIMB_M, FileData, Layout
 from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, THRUST_CHANNELS, DataSet, Vehicle
 from flightctl.sim.identify.diagnose.rotorspeed import hover_gains
 from flightctl.sim.identify.diagnose.scoring import linear_stats, reparametrized, solve
@@ -292,9 +292,14 @@ def _free_t(st, c: int, counts, jackknife_sd) -> float:
 def _shown(ds: DataSet, slow: str | None) -> str:
     """Why a log may not show an axis, in its own numbers: the motor commands logged too slowly (`slow`),
     else how much flight it holds and how much the rotors moved each axis in it (each axis' rotor
-    thrust difference, low-passed as the data are, in % of the total thrust: its standard deviation)."""
+    thrust difference, low-passed as the data are, in % of the total thrust: its standard deviation).
+    A barometer that never rose BARO_CLIMB_M while the motors ran adds that the vehicle may not have flown."""
+    climbs = [f.baro_climb for f in ds.files if f.baro_climb is not None]
+    ground = (f"; and its barometer rose at most {max(climbs):.2f} m while the motors ran: the vehicle may never "
+              f"have left the ground" if climbs and len(climbs) == len(ds.files) and max(climbs) < BARO_CLIMB_M
+              else "")
     if slow is not None:
-        return slow
+        return slow + ground
     F = [thrust_from_command(f.P, 1.0, 0.0) for f in ds.files]
     lay = ds.vehicle.layout
     x, y = np.asarray(lay.x)[:, None], np.asarray(lay.y)[:, None]
@@ -304,7 +309,7 @@ def _shown(ds: DataSet, slow: str | None) -> str:
              "pitch": ds.flat_filtered([(-x * Fi).sum(axis=0) for Fi in F]), "thrust": total}
     spread = ", ".join(f"{a} {100.0 * float(np.std(v)) / level:.2g} %" for a, v in moved.items())
     return (f"too little of it in the flight: {ds.seconds:.1f} s in the air, in which the rotors' thrust "
-            f"differences moved {spread} of the total thrust (standard deviation)")
+            f"differences moved {spread} of the total thrust (standard deviation)" + ground)
 
 
 def yaw_identified(vehicle: Vehicle) -> bool:

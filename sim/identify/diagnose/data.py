@@ -35,6 +35,10 @@ THROTTLE_SHARE = 0.5
 # taken for flight, a thrust that moves nothing, leaves no effectiveness to identify.
 HOVER_SHARE = 0.9
 SMOOTH_S = 0.5
+# A barometer is too coarse to time a take-off (its noise and the rotors' wash move it by a few tenths
+# of a metre), but one that never rose this far above its level at rest while the motors ran says that
+# the vehicle may never have left the ground: said beside a refusal (base._shown), never a verdict.
+BARO_CLIMB_M = 0.5
 HEIGHT_SOURCES = ("mocap", "rangefinder")   # heights good to a few cm: they also give the airborne test
 FOREIGN_COLUMNS = ("height", "current", "omega1", "omega2", "omega3", "omega4")
 FILTER_KINDS = ("pt1", "pt2", "pt3", "biquad")
@@ -113,6 +117,7 @@ class FileData:
     omega: np.ndarray | None = None   # (4, n) measured rotor speed (rad/s) when logged
     battery_cells: int | None = None  # the pack's cell count when the log says it (`# battery_cells:`)
     notes: list[str] = field(default_factory=list)
+    baro_climb: float | None = None   # m: how far a coarse height (a barometer) rose while the motors ran
 
 
 def _rotations(t, gyro, R0):
@@ -234,9 +239,19 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, notes: list[str]):
                      f"{THROTTLE_SHARE:g} of its median, from the first time it reaches {HOVER_SHARE:g} of it "
                      f"(averaged over {SMOOTH_S:g} s: the take-off) to the last (the landing)")
     omega = None
+    baro = None
+    if "height" in table and meta.get("height_source", "") not in HEIGHT_SOURCES and running.any():
+        h = table["height"]
+        rest = h[:int(np.argmax(running))]
+        rest = rest[np.isfinite(rest)]
+        flying = h[up | running]
+        flying = flying[np.isfinite(flying)]
+        if flying.size:
+            level = float(np.median(rest)) if rest.size else float(np.percentile(flying, 2))
+            baro = float(np.percentile(flying, 95)) - level
     if all(f"omega{i}" in table for i in range(1, 5)):
         omega = np.vstack([table[f"omega{i}"] for i in range(1, 5)])
-    return layout, up, z, omega
+    return layout, up, z, omega, baro
 
 
 def _between_take_off_and_landing(t: np.ndarray, mean_p: np.ndarray, level: float) -> np.ndarray:
@@ -300,9 +315,9 @@ def load_file(table: Table, a: Airframe) -> FileData:
         ok = np.isfinite(bv)
         bv = np.interp(t, t[ok], bv[ok])
     if foreign:
-        layout, up, z, omega = _foreign(table, P, Rm, notes)
+        layout, up, z, omega, baro = _foreign(table, P, Rm, notes)
     else:
-        layout, omega = Layout.plus(a.l), None
+        layout, omega, baro = Layout.plus(a.l), None, None
         z = _levelled_range(t, table["range"], Rm)
         if np.isfinite(z).any():
             up = on & (np.nan_to_num(z, nan=-1.0) > Z_AIRBORNE)
@@ -321,4 +336,4 @@ def load_file(table: Table, a: Airframe) -> FileData:
         if (i1 - i0) * dt_nom >= MIN_STRETCH_S:
             keep[i0:i1] = True
     return FileData(table.path, t, P, gyro, acc, bv, z, Rm, keep, on, layout, foreign, gyro_filter, acc_filter,
-                    omega, _cells(table), notes)
+                    omega, _cells(table), notes, baro)

@@ -212,6 +212,29 @@ class DataSet:
         else:
             self.base_free = self._free(None)
 
+    def add_gyro_filter(self, b, a) -> None:
+        """A first-order gyro filter (b, a), y_k = b0 x_k - a1 y_(k-1), that the log does not declare (a
+        `gyro_lag`, folded into the model or tried): the model's gyro channels go through it as through
+        the declared ones (`_sense`), and its rates (`wmid`, in the coupling, rotor-momentum and
+        yaw-drag terms) are the logged gyro corrected by its exact inverse, x_k = (y_k + a1 y_(k-1)) / b0,
+        the correction x - y low-passed (zero-phase, at twice the residual's low-pass: products of
+        rates reach that band from there) so that the inverse's amplified noise stays out; the base
+        is recomputed."""
+        from scipy import signal
+        stage = _sos([(b, a)])
+        self._sensor = [(stage if g is None else np.vstack([g, stage]), acc) for g, acc in self._sensor]
+        smooth = signal.butter(2, min(2.0 * self.lowpass_hz, 0.4 * self.fs), fs=self.fs, output="sos")
+        wmid = []
+        for w in self.wmid:
+            x = np.zeros_like(w)
+            x[:, 1:-1] = (w[:, 1:-1] + a[1] * w[:, :-2]) / b[0] - w[:, 1:-1]
+            x = signal.sosfiltfilt(smooth, x, axis=1)
+            x[:, -1] = 0.0
+            wmid.append(w + x)
+        self.wmid = wmid
+        self.w = self.flat(wmid)
+        self.rebase()
+
     def carry(self, cause: str, parameters: dict, delta: np.ndarray) -> None:
         """Add a carried effect's filtered prediction change `delta` (C, n) at `parameters` to the
         base model (a cause carried twice: both terms, the later parameters)."""
@@ -291,11 +314,12 @@ class DataSet:
         y, _ = signal.sosfilt(self.sos, y[:, ::-1], axis=-1, zi=zi * y[None, :, -1:])
         return y[:, ::-1][:, pad:-pad]
 
-    def predict_file(self, i, D, scale=None, torque_extra=None, force_extra=None) -> Pred:
+    def predict_file(self, i, D, scale=None, torque_extra=None, force_extra=None, rates=None) -> Pred:
         """The model's channels for file i from the rotors' drive D (K, 4, n) (`drive`): eq. 7 with the
         torques of the rotor layout (eq. 25's structure), the rotor torque of eq. 28, the rotor
         momentum of eq. 9 (speed from eq. 27) and the yaw drag of eq. 6. `scale` (4, n) multiplies
-        thrust and torque of each rotor; `torque_extra` (3, n) and `force_extra` (2, n) add a body wrench."""
+        thrust and torque of each rotor; `torque_extra` (3, n) and `force_extra` (2, n) add a body wrench;
+        `rates` (3, n) are the body rates of the period's middle in place of the logged gyro's (`wmid`)."""
         v = self.vehicle
         a, lay = v.a, v.layout
         F = D[0]
@@ -313,7 +337,7 @@ class DataSet:
                 unit[k, 2], unit[k, 5] = -(s * a.g1 * d).sum(axis=0) / a.Jzz, d.sum(axis=0) / a.M
         if torque_extra is not None:
             tphi, ttheta, tpsi = tphi + torque_extra[0], ttheta + torque_extra[1], tpsi + torque_extra[2]
-        p, q, r = self.wmid[i]
+        p, q, r = self.wmid[i] if rates is None else rates
         hz = 0.0
         if a.Jp:
             w = rotor_speed(F, a.c1)                                            # eq. 27

@@ -84,6 +84,10 @@ def text(d: Diagnosis) -> str:
         L.append(f"    median command in flight P = {bm['median_P']['value']}; rotors: {bm['layout']['source']}")
     else:
         L.append(f"  base model: the paper's{' with ' + base if base else ''}")
+    if (gn := rep["data"]["gyro_noise"]) is not None:
+        L.append(f"  gyro noise in flight, above {gn['above_hz']:g} Hz (not a cause; beside the parameter file's [sensors]): "
+                 + ", ".join(f"{k} {v:.3g}" for k, v in gn["rms"].items()) + " rad/s rms, as white noise per read "
+                 + ", ".join(f"{k} {v:.3g}" for k, v in gn["white_per_read"].items()) + " rad/s")
     L.append("")
     L.append(f"  {'candidate':<16} {'parameters':<34} {'gain':>8} {'t':>7}  {'best channel (gain, t)':<24} named?")
     for c in rep["candidates"]:

@@ -188,7 +188,8 @@ class Diagnosis:
                            {"identified": False, "what": "this project's airframe (conventions.md or --params)"}),
             "data": {"files": [f.path for f in self.ds.files], "airborne_s": round(self.ds.seconds, 2),
                      "lowpass_hz": self.lowpass_hz, "base_effects": self.carried,
-                     "battery_v": (None if (v := pack_range(self.ds.files)) is None else [round(x, 2) for x in v])},
+                     "battery_v": (None if (v := pack_range(self.ds.files)) is None else [round(x, 2) for x in v]),
+                     "gyro_noise": gyro_noise(self.ds.files)},
             "notes": list(dict.fromkeys(self.notes)),   # a note said twice (two passes) once
         }
         seen = set()
@@ -208,6 +209,34 @@ class Diagnosis:
         if self.validation is not None:
             out["validation"] = self.validation
         return out
+
+
+# The gyro's noise is reported from its part above this frequency: far above the rigid body's motion that
+# the prediction models (the 12 Hz low-pass), below the Nyquist frequency of the slowest log it is given for.
+GYRO_NOISE_HZ = 60.0
+
+
+def gyro_noise(files) -> dict | None:
+    """The logged gyro's noise in flight, per axis (rad/s): the rms of its part above GYRO_NOISE_HZ
+    (a zero-phase 4th-order Butterworth high-pass over each file, taken on the airborne rows), and that
+    as white noise per read (over the share of the band above the cut). Not a cause (docs/diagnose.md,
+    "More noise is not a cause here"): a level to set beside the parameter file's `[sensors]`. None for
+    logs slower than 2.5 times the cut."""
+    from scipy import signal
+    high, white = [], []
+    for f in files:
+        fs = 1.0 / float(np.median(np.diff(f.t)))
+        if fs < 2.5 * GYRO_NOISE_HZ or not f.airborne.any():
+            continue
+        sos = signal.butter(4, GYRO_NOISE_HZ, btype="highpass", fs=fs, output="sos")
+        g = np.nan_to_num(f.gyro - np.nanmean(f.gyro, axis=1, keepdims=True))
+        h = signal.sosfiltfilt(sos, g, axis=1)[:, f.airborne]
+        high.append(h)
+        white.append(h / math.sqrt(1.0 - 2.0 * GYRO_NOISE_HZ / fs))
+    if not high:
+        return None
+    rms = lambda parts: [round(float(v), 5) for v in np.sqrt(np.mean(np.concatenate(parts, axis=1) ** 2, axis=1))]
+    return {"above_hz": GYRO_NOISE_HZ, "rms": dict(zip("pqr", rms(high))), "white_per_read": dict(zip("pqr", rms(white)))}
 
 
 def _files(tables: list[Table], a: Airframe, notes: list[str], progress):
