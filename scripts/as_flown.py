@@ -39,7 +39,7 @@ NO_LOAD_A = (0.0, 0.4)      # A: no-load current of a ~900 KV motor of this clas
 ESC_PULSE_S = (1.0e-3, 1.2e-3)   # s: an RC ESC's input runs 1.0-2.0 ms; its motor starts at 1.0-1.2 ms
 ESC_FULL_S = 2.0e-3         # s: full throttle
 LOADED = 0.8                # the loaded motor turns at ~80 % of KV x V
-K_OVER_M = (0.3, 0.6)       # 1/s: rotor drag over mass measured on quadrotors (issue 17's review, docs/as-flown.md)
+K_OVER_M = (0.3, 0.6)       # 1/s: rotor drag over mass measured on quadrotors (docs/as-flown.md)
 TAU_TILT_AIR = 8192 / 450.0 # s, the in-flight accelerometer correction: 8192 dt, long beside M/k (docs/estimator.md)
 
 
