@@ -94,7 +94,7 @@ BLOCKS = (
     Block("diagnose-pairs", "docs/diagnose.md", *marked("diagnose_pairs"),
           SCRIPT + ("scripts/diagnose_pairs.py", "--pairs", "30", "--doc", "{doc}"), minutes=40),
     Block("diagnose-sweep", "docs/diagnose.md", *marked("diagnose_sweep"),
-          SCRIPT + ("scripts/diagnose_sweep.py", "--doc", "{doc}"), minutes=15),
+          SCRIPT + ("scripts/diagnose_sweep.py", "--doc", "{doc}"), minutes=6),
     Block("tune-table", "docs/tune.md", *marked("tune procedure"), FLIGHTCTL + ("tune", "--out", "{tmp}/t.toml", "--doc", "{doc}"),
           minutes=0.5),
     Block("tune-strict", "docs/tune.md", *marked("tune strict"),
