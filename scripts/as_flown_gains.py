@@ -18,7 +18,7 @@ from pathlib import Path
 
 from flightctl.cli import main as flightctl
 from flightctl.params import load
-from flightctl.sim.docs import write_block
+from flightctl.sim.docs import publish
 
 BEGIN, END = "<!-- as-flown gains: begin -->", "<!-- as-flown gains: end -->"
 TERMS = ("rotor_inflow", "motor_lag", "motor_dynamics", "rotor_drag", "actuation_delay")
@@ -78,10 +78,7 @@ def main(argv=None) -> int:
             t = [float(r.split(",", 1)[0]) for r in rows[1:]]
             flight = {"seconds": t[-1] - t[0]}
             bare, carried = diagnose(log), diagnose(log, "--params", "paper-as-flown")
-    text = table(flight, bare, carried)
-    print(text)
-    if args.doc and not write_block(args.doc, BEGIN, END, text):
-        raise SystemExit(f"{args.doc}: no {BEGIN} ... {END} markers")
+    publish(table(flight, bare, carried), args.doc, BEGIN, END)
     return 0
 
 

@@ -20,9 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flightctl.sim.docs import write_block
-from flightctl.sim.pool import run_all
-from flightctl.sim.progress import Progress
+from flightctl.sim.docs import publish
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))       # the tests' drawing and tolerances: one definition
@@ -109,21 +107,12 @@ def main(argv=None) -> int:
         ap.error("--seeds and --jobs: at least 1")
     if args.doc is not None and not args.doc.is_file():
         ap.error(f"--doc {args.doc}: no such file")
-    todo = cases(args.seeds)
-    bar = Progress(len(todo), "diagnose_sweep ")
-
-    def done(k: int, row: dict) -> None:
-        bar.step(f"seed {row['seed']}: hidden {row['cause']} -> named {row['named']}: "
-                 f"{'ok' if row['ok'] else 'WRONG'}")
-    try:
-        rows = run_all(judge, todo, args.jobs, done)
-    except KeyboardInterrupt:
-        print("diagnose_sweep: interrupted; nothing written", file=sys.stderr)
+    from diagnose_pairs import sweep
+    rows = sweep("diagnose_sweep", judge, cases(args.seeds), args.jobs,
+                 lambda r: f"seed {r['seed']}: hidden {r['cause']} -> named {r['named']}: {'ok' if r['ok'] else 'WRONG'}")
+    if rows is None:
         return 130
-    text = summary(rows)
-    print(text)
-    if args.doc and not write_block(args.doc, BEGIN, END, text):
-        raise SystemExit(f"{args.doc}: no {BEGIN} ... {END} markers")
+    publish(summary(rows), args.doc, BEGIN, END)
     return 0
 
 

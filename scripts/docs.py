@@ -127,7 +127,7 @@ FIGURES = (
     Figure("paper-as-flown", ("docs/paper-as-flown.png",),
            FLIGHTCTL + ("sim", "paper", "--params", "paper-as-flown", "--log", "{tmp}/f.csv", "--plot", "{out}",
                         "--quiet")),
-    Figure("motor-loss", ("docs/motor-loss.png",), SCRIPT + ("scripts/motor_loss.py", "--out", "{out}")),
+    Figure("motor-loss-figure", ("docs/motor-loss.png",), SCRIPT + ("scripts/motor_loss.py", "--out", "{out}")),
     Figure("tune", ("docs/tune.png",), FLIGHTCTL + ("tune", "--out", "{tmp}/t.toml", "--plot", "{out}"), minutes=1),
     Figure("tune-robust", ("docs/tune-robust.png", "docs/tune-robust-grid.png"),
            FLIGHTCTL + ("tune", "--params", "paper-as-flown", "--robust", "40", "--seed", "1", "--out",

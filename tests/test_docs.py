@@ -40,6 +40,14 @@ def test_every_block_is_in_its_file_once_and_every_marker_is_registered():
         assert all((ROOT / name).is_file() for name in f.files), f.id
 
 
+def test_every_block_and_figure_has_its_own_id():
+    """`scripts/docs.py --write` and `--check` pick by id: a figure named like a block hid the block
+    from both (the motor-loss block of docs/safety.md was never rewritten)."""
+    ids = [x.id for x in DOCS.BLOCKS + DOCS.FIGURES]
+    assert len(ids) == len(set(ids)), sorted(i for i in ids if ids.count(i) > 1)
+    assert {x.id for x in DOCS.pick([], quick=False)} == set(ids)
+
+
 @pytest.mark.parametrize("b", QUICK, ids=[b.id for b in QUICK])
 def test_a_quick_block_is_what_its_command_writes_now(b):
     assert DOCS.fresh(b) == DOCS.current(b), f"python scripts/docs.py --write {b.id}"
