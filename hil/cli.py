@@ -215,6 +215,7 @@ def demo_main(args) -> int:
                 def end_on_touchdown(i: int) -> None:   # the loop idles out a landing's margin: not here
                     events = loop.result.events
                     if events and events[-1][1].startswith("landed"):
+                        loop.stop_reason = "landed"      # the flight's end, not a Ctrl-C
                         stop.set()
                 loop.on_tick = end_on_touchdown
                 result = loop.result

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flightctl.sim.docs import write_block
+from flightctl.sim.docs import publish
 from flightctl.sim.pool import run_all
 from flightctl.sim.progress import Progress
 
@@ -76,22 +76,26 @@ def main(argv=None) -> int:
     if args.pairs < 1 or args.first < 0 or args.jobs < 1:
         ap.error("--pairs and --jobs: at least 1; --first: a seed from 0")
     seeds = list(range(args.first, args.first + args.pairs))
-    bar = Progress(len(seeds), "diagnose_pairs ")
 
-    def done(k: int, row: dict) -> None:
-        bar.step(f"seed {row['seed']}: hidden {', '.join(row['hidden'])} -> named "
-                 f"{', '.join(row['named']) or 'nothing'} ({row['airborne_s']:.0f} s airborne): {row['verdict']}")
-    try:
-        rows = run_all(judge, seeds, args.jobs, done)
-    except KeyboardInterrupt:
-        print("diagnose_pairs: interrupted; nothing written", file=sys.stderr)
+    def describe(row: dict) -> str:
+        return (f"seed {row['seed']}: hidden {', '.join(row['hidden'])} -> named {', '.join(row['named']) or 'nothing'} "
+                f"({row['airborne_s']:.0f} s airborne): {row['verdict']}")
+    rows = sweep("diagnose_pairs", judge, seeds, args.jobs, describe)
+    if rows is None:
         return 130
-    text = summary(rows, args.first)
-    print(text)
-    if args.doc and not write_block(args.doc, BEGIN, END, text):
-        raise SystemExit(f"{args.doc}: no {BEGIN} ... {END} markers")
+    publish(summary(rows, args.first), args.doc, BEGIN, END)
     return 0
 
+
+def sweep(name: str, fn, jobs: list, n: int, describe) -> list | None:
+    """`fn(job)` for every job in `n` processes, a progress line per job (`describe(row)`); None after
+    Ctrl-C, said in one line."""
+    bar = Progress(len(jobs), f"{name} ")
+    try:
+        return run_all(fn, jobs, n, lambda k, row: bar.step(describe(row)))
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted; nothing written", file=sys.stderr)
+        return None
 
 if __name__ == "__main__":
     sys.exit(main())

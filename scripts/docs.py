@@ -12,9 +12,10 @@ reads and replaces them), never by hand. A block is one of:
 - printed: the command's standard output is the block (in a code fence where `fence`);
 - written: the command rewrites the block in the file itself (`{doc}`: the file, `{dir}`: its folder);
   checked on a copy of the file in a temporary folder;
-- measured on a machine: the speed figures of scripts/benchmark.py vary with the machine and its
-  load; the block says when and where they were measured, and the check holds only its form (the
-  stamp line, the table's header and rows), never its numbers.
+- measured on a machine: the speed figures of scripts/benchmark.py and the HIL link's latency of
+  scripts/hil_latency.py vary with the machine and its load; the block says when and where they were
+  measured, and the check holds only its form (the stamp line, the table's header and rows), never
+  its numbers.
 A figure is a PNG its command draws; checked against a fresh drawing (the same size, at most 1 % of
 its pixels different: the fonts of another machine's matplotlib move a few).
 tests/test_docs.py re-runs every block and figure (the long ones under `-m slow`) and fails when
@@ -75,6 +76,8 @@ BLOCKS = (
           minutes=6),
     Block("benchmark", "README.md", *marked("benchmark"), SCRIPT + ("scripts/benchmark.py", "--markdown"),
           minutes=5, measured=True),
+    Block("hil-latency", "docs/hil.md", *marked("hil latency"), SCRIPT + ("scripts/hil_latency.py", "--markdown"),
+          minutes=4, measured=True),
     Block("fault-matrix", "docs/safety.md", "<!-- fault matrix: begin (written by `flightctl sim faults`) -->",
           "<!-- fault matrix: end -->", FLIGHTCTL + ("sim", "faults", "--json", "{tmp}/faults.json", "--doc", "{doc}"),
           minutes=3, verdict=True),
@@ -87,12 +90,16 @@ BLOCKS = (
     Block("as-flown-monte-carlo", "docs/as-flown.md", "<!-- as-flown monte carlo begin -->",
           "<!-- as-flown monte carlo end -->",
           SCRIPT + ("scripts/as_flown_mc.py", "--from", "docs/as-flown-mc.json", "--doc", "{doc}")),
+    Block("as-flown-gains", "docs/as-flown.md", *marked("as-flown gains"),
+          SCRIPT + ("scripts/as_flown_gains.py", "--doc", "{doc}"), minutes=0.5),
     Block("paper-facts", "README.md", "<!-- paper facts begin -->", "<!-- paper facts end -->",
           SCRIPT + ("scripts/as_flown_mc.py", "--from", "docs/as-flown-mc.json", "--readme", "{doc}")),
     Block("real-data", "docs/identification.md", "<!-- real-data:begin -->", "<!-- real-data:end -->",
           FLIGHTCTL + ("identify", "real-data", "--out", "{dir}"), minutes=1),
     Block("diagnose-pairs", "docs/diagnose.md", *marked("diagnose_pairs"),
           SCRIPT + ("scripts/diagnose_pairs.py", "--pairs", "30", "--doc", "{doc}"), minutes=40),
+    Block("diagnose-sweep", "docs/diagnose.md", *marked("diagnose_sweep"),
+          SCRIPT + ("scripts/diagnose_sweep.py", "--doc", "{doc}"), minutes=6),
     Block("tune-table", "docs/tune.md", *marked("tune procedure"), FLIGHTCTL + ("tune", "--out", "{tmp}/t.toml", "--doc", "{doc}"),
           minutes=0.5),
     Block("tune-strict", "docs/tune.md", *marked("tune strict"),
@@ -100,6 +107,10 @@ BLOCKS = (
     Block("tune-robust-table", "docs/tune.md", *marked("tune robust"),
           FLIGHTCTL + ("tune", "--params", "paper-as-flown", "--robust", "40", "--seed", "1", "--out", "{tmp}/r.toml",
                        "--doc", "{doc}"), minutes=4),
+    Block("open-question-table", "docs/diagnose.md", *marked("open question"),
+          SCRIPT + ("scripts/open_question.py", "--table")),
+    Block("open-question-as-flown-table", "docs/diagnose.md", *marked("open question as-flown"),
+          SCRIPT + ("scripts/open_question.py", "--out", "docs/open-question-as-flown.png", "--table")),
     analyze("analyze-base-table4", "analyze base table4", "--gains", "table4", "--estimator", "truth",
             "--estimator", "flight", "--estimator", "paper"),
     analyze("analyze-base-table6", "analyze base table6", "--gains", "table6", "--estimator", "truth",
@@ -116,7 +127,7 @@ FIGURES = (
     Figure("paper-as-flown", ("docs/paper-as-flown.png",),
            FLIGHTCTL + ("sim", "paper", "--params", "paper-as-flown", "--log", "{tmp}/f.csv", "--plot", "{out}",
                         "--quiet")),
-    Figure("motor-loss", ("docs/motor-loss.png",), SCRIPT + ("scripts/motor_loss.py", "--out", "{out}")),
+    Figure("motor-loss-figure", ("docs/motor-loss.png",), SCRIPT + ("scripts/motor_loss.py", "--out", "{out}")),
     Figure("tune", ("docs/tune.png",), FLIGHTCTL + ("tune", "--out", "{tmp}/t.toml", "--plot", "{out}"), minutes=1),
     Figure("tune-robust", ("docs/tune-robust.png", "docs/tune-robust-grid.png"),
            FLIGHTCTL + ("tune", "--params", "paper-as-flown", "--robust", "40", "--seed", "1", "--out",
@@ -197,21 +208,25 @@ def same_picture(a: Path, b: Path, share: float = 0.01) -> bool:
     return x.shape == y.shape and float(np.mean(np.any(np.abs(x - y) > 8, axis=2))) <= share
 
 
-def benchmark_form(text: str) -> list[str]:
-    """What is wrong with the form of a measured block (empty: it is the benchmark's output)."""
+def measured_form(b: Block, text: str) -> list[str]:
+    """What is wrong with the form of a measured block (empty: it is its script's output). The script
+    (the block's command's scripts/NAME.py) defines its STAMP line and its table's HEADER."""
+    import importlib
     import re
 
-    import benchmark
+    script = importlib.import_module(Path(b.command[1]).stem)
     lines = text.strip("\n").splitlines()
     problems = []
-    stamp = re.escape(benchmark.STAMP).replace(r"\{date\}", r"\d{4}-\d\d-\d\d").replace(r"\{machine\}", r".+")
+    stamp = re.escape(script.STAMP).replace(r"\{date\}", r"\d{4}-\d\d-\d\d").replace(r"\{machine\}", r".+")
     if not lines or not re.fullmatch(stamp, lines[0]):
-        problems.append(f"the first line is not the benchmark's stamp: {lines[:1]}")
-    if tuple(lines[2:4]) != benchmark.HEADER:
-        problems.append("no benchmark table header")
+        problems.append(f"the first line is not the stamp of {b.command[1]}: {lines[:1]}")
+    if tuple(lines[2:4]) != script.HEADER:
+        problems.append(f"no table header of {b.command[1]}")
     rows = lines[4:]
-    if not rows or not all(re.fullmatch(r"\| [^|]+ \| [^|]+ \| [^|]+ \|", r) for r in rows):
-        problems.append("rows that are not (what | figure | target)")
+    cell = r" [^|]+ \|"
+    columns = script.HEADER[0].count("|") - 1
+    if not rows or not all(re.fullmatch(r"\|" + cell * columns, r) for r in rows):
+        problems.append(f"rows that are not the {columns} columns of {script.HEADER[0]}")
     return problems
 
 
@@ -248,7 +263,7 @@ def main(argv=None) -> int:
             if args.write:
                 write(x)
             elif x.measured:
-                differ += [f"{x.id}: {p}" for p in benchmark_form(current(x))]
+                differ += [f"{x.id}: {p}" for p in measured_form(x, current(x))]
             elif fresh(x) != current(x):
                 differ.append(f"{x.id}: {x.file} differs from what `{' '.join(x.command)}` writes now")
         elif args.write:

@@ -9,6 +9,8 @@ noise seeds (60 degrees = crash). Writes the figure and the numbers beside it (.
 
     python scripts/open_question.py [--out docs/open-question.png] [--quick]
     python scripts/open_question.py --params paper-as-flown --out docs/open-question-as-flown.png --seeds 1
+    python scripts/open_question.py [--out ...] --table     the numbers of the .json beside the figure, as
+                                                            Markdown tables (docs/diagnose.md's blocks)
 
 On a model that already carries `motor_dynamics` (the as-flown file), the motor-lag sweep replaces its
 time constant instead of adding a second lag.
@@ -62,9 +64,13 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="docs/open-question.png", help="the figure (PNG); its numbers go beside it as .json")
     ap.add_argument("--quick", action="store_true", help="three sizes per effect (a smoke run)")
     ap.add_argument("--replot", action="store_true", help="redraw the figure from the .json beside it")
+    ap.add_argument("--table", action="store_true", help="print the .json beside the figure as Markdown tables")
     ap.add_argument("--params", help="parameter file or shipped name (default: the paper's base model)")
     ap.add_argument("--seeds", type=int, default=len(SEEDS), help="noise seeds per case (default 3)")
     args = ap.parse_args(argv)
+    if args.table:
+        print(table(json.loads(Path(args.out).with_suffix(".json").read_text())))
+        return 0
     if args.replot:
         plot(json.loads(Path(args.out).with_suffix(".json").read_text()), args.out)
         return 0
@@ -84,6 +90,25 @@ def main(argv=None) -> int:
     Path(args.out).with_suffix(".json").write_text(json.dumps(results, indent=1) + "\n")
     plot(results, args.out)
     return 0
+
+
+def table(results: dict) -> str:
+    """The largest roll or pitch angle of each case, per effect size: one Markdown table per effect."""
+    head = {"truth": "truth", "flight": "flight", "paper": "paper"}
+    out = []
+    for cause in SIZES_MS:
+        rows = [results[f"{cause}|{gains}|{path}"] for gains, path in CASES]
+        out += [f"{cause} {PARAM[cause]} [ms] | " + " | ".join(f"{g}, {head[p]}" for g, p in CASES),
+                "|".join(["---"] * (len(CASES) + 1))]
+        out[-2] = f"| {out[-2]} |"
+        out[-1] = f"|{out[-1]}|"
+        for size in rows[0]:
+            cells = ["crash" if r[size] >= CRASH_DEG else f"{r[size]:.1f}" for r in rows]
+            out.append(f"| {size} | " + " | ".join(cells) + " |")
+        out.append("")
+    out.append(f"The largest true roll or pitch angle in degrees over the step (`crash`: {CRASH_DEG:g} or more); "
+               "truth: perfect state feedback; flight, paper: the full onboard path with that estimator.")
+    return "\n".join(out)
 
 
 def plot(results: dict, out: str) -> None:

@@ -36,3 +36,11 @@ def write_block(path: str | Path, begin: str, end: str, body: str) -> bool:
         return False
     write_atomic(path, new)
     return True
+
+
+def publish(text: str, doc: str | Path | None, begin: str, end: str) -> None:
+    """A script's block: print `text`, and with `doc` write it between the markers of that file
+    (SystemExit naming them when the file has none)."""
+    print(text)
+    if doc and not write_block(doc, begin, end, text):
+        raise SystemExit(f"{doc}: no {begin} ... {end} markers")

@@ -23,6 +23,14 @@ def demo(tmp_path, *args, rc=0):
     return json.loads(out.read_text())
 
 
+def test_a_demo_long_enough_to_land_lands_and_exits_0(tmp_path):
+    """From 12 s the plan comes down (demo_plan); the loop is stopped at its touchdown, which is the
+    flight's end, not an interruption (exit 130 was printed with "interrupted" after a good landing)."""
+    d = demo(tmp_path, "--seconds", "12", "--link", "pty")
+    assert d["outcome"].startswith("landed") and not d["crashed"], d["outcome"]
+    assert d["final_alt_m"] < 0.1 < d["max_alt_m"]
+
+
 def test_the_demo_flies_over_a_pty_pair_and_loses_no_frame(tmp_path):
     d = demo(tmp_path, "--seconds", "1.5", "--link", "pty")
     assert d["frames_lost"] == 0 and d["frames_sent"] > 2 * 450 * 2
