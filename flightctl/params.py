@@ -384,7 +384,7 @@ def dumps(params: Params, sources: dict[str, str] | None = None, tables=("gains"
     the parameters' own, `Params.source`). A vehicle file leaves out [gains] so that `--gains` chooses
     them. `plain`: the values only, no comments."""
     sources = sources or {}
-    lines = [] if plain else ["# flightctl parameter file (SI units; see conventions.md)"]
+    lines = [] if plain else ["# flightctl parameter file (SI units; see docs/conventions.md)"]
 
     def emit(obj):
         for f in dataclasses.fields(obj):

@@ -102,7 +102,7 @@ def parse_steps(text: str, max_p: float) -> list[float]:
 def parse_motors(text: str) -> list[int]:
     motors = [s.strip() for s in text.split(",") if s.strip()]
     if not motors or any(m not in ("1", "2", "3", "4") for m in motors) or len(set(motors)) != len(motors):
-        raise InputError(f"--motors {text!r}: motors are numbered 1..4 (conventions.md), each once")
+        raise InputError(f"--motors {text!r}: motors are numbered 1..4 (docs/conventions.md), each once")
     return [int(m) for m in motors]
 
 

@@ -131,7 +131,7 @@ def main(argv: list[str]) -> int:
     if not args.logs:
         raise InputError("name the flight logs to diagnose, or a folder of them with --corpus DIR")
     if args.json is None:
-        raise InputError("--json REPORT.json is required (measured-data.md)")
+        raise InputError("--json REPORT.json is required (its keys: docs/diagnose.md)")
     progress = Progress(args.quiet)
     t0 = time.perf_counter()
     params = paramfile.load(args.params)

@@ -53,14 +53,14 @@ class Layout:
     y: tuple[float, ...]
     spin: tuple[float, ...]
     unit: str = "m"
-    source: str = "conventions.md"
+    source: str = "docs/conventions.md"
 
     @classmethod
     def plus(cls, l: float) -> "Layout":
         """The paper's "+" layout (conventions.md, eq. 25): motor 1 North, 2 West, 3 South, 4 East;
         1 and 3 clockwise."""
         return cls((l, 0.0, -l, 0.0), (0.0, l, 0.0, -l), (-1.0, 1.0, -1.0, 1.0), "m",
-                   "conventions.md (the paper's + layout, eq. 25)")
+                   "docs/conventions.md (the paper's + layout, eq. 25)")
 
     @classmethod
     def parse(cls, text: str, source: str, fail) -> "Layout":

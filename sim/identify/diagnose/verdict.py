@@ -185,7 +185,7 @@ class Diagnosis:
             "base_model": ({"identified": True, "what": "identified from the flight (docs/real-flights.md); "
                             "the candidates' parameters are per unit mass (kg), inertia (kg m^2) and arm length",
                             **v.identification} if v.identified else
-                           {"identified": False, "what": "this project's airframe (conventions.md or --params)"}),
+                           {"identified": False, "what": "this project's airframe (docs/conventions.md or --params)"}),
             "data": {"files": [f.path for f in self.ds.files], "airborne_s": round(self.ds.seconds, 2),
                      "lowpass_hz": self.lowpass_hz, "base_effects": self.carried,
                      "battery_v": (None if (v := pack_range(self.ds.files)) is None else [round(x, 2) for x in v]),
