@@ -291,6 +291,16 @@ def test_the_crash_of_the_arducopter_3_3_log_is_not_taken_as_flight():
     assert float(note.split(" s with")[0]) == pytest.approx(on_its_back, abs=0.5), note
 
 
+def test_an_arducopter_3_log_whose_rcou_names_no_pulses_is_refused_by_name(tmp_path, capsys):
+    data = CRASH.read_bytes()
+    assert data.count(b"TimeMS,Ch1,Ch2,Ch3,Ch4") == 1
+    edited = tmp_path / "renamed.bin"
+    edited.write_bytes(data.replace(b"TimeMS,Ch1,Ch2,Ch3,Ch4", b"TimeMS,Pw1,Pw2,Pw3,Pw4"))
+    assert main(["log", "import", str(edited), str(tmp_path / "o.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Pw1" in err and "no output pulses" in err, err
+
+
 def test_taken_as_flight_the_crash_hides_the_vehicle_from_diagnose(tmp_path, capsys, monkeypatch):
     """Without the specific-force test (data.CONTACT_ACC_Z at minus infinity) the 14 s on its back are
     airborne, and the base model's roll and pitch effectiveness are no longer told from zero."""

@@ -100,14 +100,17 @@ def unlogged(p: dict, gyro: bool, motors: bool) -> str:
 
 def outputs(p: dict, msgs: dict, imp: Imported) -> tuple[str, list[str]]:
     """(the message of the motor pulses, its fields for motors 1-4): MOT's Mot1..4, else RCOU's first four
-    pulse fields (Chan, Ch or C and the output's number, as its FMT names them); InputError when outputs 5-8 move while armed with no auxiliary function (RCn_FUNCTION
-    0): more motors than four."""
+    pulse fields (Chan, Ch or C and the output's number, as its FMT names them); InputError when outputs
+    5-8 move while armed with no auxiliary function (RCn_FUNCTION 0): more motors than four."""
     if msgs["MOT"]:
         return "MOT", [f"Mot{m}" for m in range(1, 5)]
     rc = msgs["RCOU"]
     if not rc:
         return "", []
-    chan = next(pre for pre in RCOU_FIELDS if f"{pre}1" in rc[0].fmt.columns)
+    chan = next((pre for pre in RCOU_FIELDS if f"{pre}1" in rc[0].fmt.columns), None)
+    if chan is None:
+        imp.fail(f"RCOU's fields ({', '.join(rc[0].fmt.columns)}) name no output pulses (Chan1, Ch1 or C1): the "
+                 "motor commands are not in this log")
     lo, hi = float(p.get("RC3_MIN", 1000)), float(p.get("RC3_MAX", 2000))
     moving = []
     for c in range(5, 9):
