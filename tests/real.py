@@ -1,6 +1,6 @@
 """The shared real data (../shared/data/real/flights, never copied here) for the tests: where it is,
 and the rule that CI never skips a real-data test (the environment variable CI set: a missing folder
-fails)."""
+fails); and the rewriting of a real log's CSV that hides an effect in it (the hidden-effect tests)."""
 from __future__ import annotations
 
 import os
@@ -31,3 +31,16 @@ def rows_and_header(csv_text: str) -> tuple[list[str], list[str], list[list[str]
 def write(meta: list[str], names: list[str], rows: list[list[str]], path: Path) -> Path:
     path.write_text("\n".join(meta + [",".join(names)] + [",".join(r) for r in rows]) + "\n")
     return path
+
+
+def delay_fit(report: dict) -> float:
+    """The actuation delay the first round fitted (named or not)."""
+    return next(c for c in report["candidates"] if c["cause"] == "actuation_delay")["parameters"]["delay"]
+
+
+def delayed(names: list[str], rows: list[list[str]], shift: int) -> None:
+    """Each row logs the command of the row `shift` later: the motors act after the log says."""
+    for j in (names.index(f"P{i}") for i in range(1, 5)):
+        cells = [r[j] for r in rows]
+        for r, v in zip(rows, cells[shift:] + cells[-1:] * shift):
+            r[j] = v

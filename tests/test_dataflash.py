@@ -1,10 +1,13 @@
 """ArduPilot's DataFlash log through `flightctl.sim.logs.dataflash` (docs/log-import.md): a real
 ArduCopter log (tests/data/ardupilot, GPL-3.0-or-later) read with what its parameters say, edited to
-be what it is not (a hexacopter, a plane) and refused by name; and this project's simulated flights
+be what it is not (a hexacopter, a plane) and refused by name; a real ArduCopter 3.3 flight that ends
+in a crash (log171.bin, CC BY-SA 3.0) read with its own field names, judged by diagnose without the
+crash, and a delay drawn at random and shifted into it found; and this project's simulated flights
 written as ArduCopter logs (tests/dataflash.py, read back through pymavlink) with the motor outputs,
 the frame and the ESC telemetry drawn at random: every sample comes back where the log put it."""
 from __future__ import annotations
 
+import json
 import math
 import struct
 from pathlib import Path
@@ -14,8 +17,11 @@ import pytest
 
 from flightctl.cli import main
 from flightctl.logfile import read_flight_log
+from flightctl.params import Airframe
+from flightctl.sim.identify.diagnose.data import load_file
 from flightctl.sim.logs import each_log, read_foreign
 from dataflash import DataFlash, text_log
+from real import delay_fit, delayed, rows_and_header, write as write_csv
 
 pytest.importorskip("pymavlink")
 REAL = Path(__file__).parent / "data" / "ardupilot" / "backend_log_80k.bin"
@@ -228,6 +234,130 @@ def test_the_corpus_of_ardupilot_logs_gives_one_row_per_log(tmp_path):
     for name, words in REFUSED.items():
         assert all(w in rows[name] for w in words), rows[name]
     assert "10.0 Hz" in rows["nan.log"] and "too short to judge" in rows["backend_log_80k.bin"]
+    judged = rows["log171.bin"].split("|")
+    assert judged[5].strip() == "none" and judged[8].strip() == "" and "APM:Copter V3.3-dev" in judged[2]
+    assert judged[7].strip().startswith("t: roll 5, pitch 6, yaw 7, thrust 8")   # docs/log-import.md
+
+
+# log171.bin (README.md): ArduCopter 3.3-dev, QUAD/X, IMU and RCOU at 50 Hz, 2.5 min in the air; then a
+# crash, and 14 s on its back with its motors running until the log ends
+CRASH = EXAMPLES / "log171.bin"
+G = 9.80665
+
+
+def _raw(path: Path) -> dict:
+    """The log's own IMU (instance 0) and RCOU rows through pymavlink: {name: (n, k) array, time in s first}."""
+    from pymavlink import DFReader
+    r = DFReader.DFReader_binary(str(path))
+    rows = {"IMU": [], "RCOU": []}
+    while (m := r.recv_match(type=list(rows))) is not None:
+        fields = ("AccX", "AccY", "AccZ") if m.get_type() == "IMU" else ("Ch1", "Ch2", "Ch3", "Ch4")
+        rows[m.get_type()].append([m.TimeMS * 1e-3] + [getattr(m, f) for f in fields])
+    return {k: np.array(v) for k, v in rows.items()}
+
+
+def test_an_arducopter_3_3_log_is_read_with_its_own_field_names_and_filters():
+    (e,) = each_log(str(CRASH))
+    t = e.table
+    assert t.meta["firmware"] == "APM:Copter V3.3-dev (ae3192b8)"                # 3.2-3.4 named themselves APM:Copter
+    assert np.allclose(rotors(t), FRAMES[1], atol=1e-4)                          # FRAME 1: X
+    assert t.meta["motor_outputs"].startswith("RCOU Ch1, Ch2, Ch3, Ch4") and t.meta["command_range"] == "1000 1900"
+    assert t.meta["gyro_filter"] == t.meta["acc_filter"] == "biquad 20"         # INS_GYRO_FILTER, INS_ACCEL_FILTER
+    assert float(t.meta["rate_hz"]) == pytest.approx(50, abs=1) and float(t.meta["motor_rate_hz"]) == pytest.approx(50, abs=1)
+    raw = _raw(CRASH)["RCOU"]
+    P = np.vstack([t[f"P{i}"] for i in range(1, 5)])
+    k = np.rint(np.interp(raw[:, 0], t["t"] + raw[0, 0], np.arange(t["t"].size))).astype(int)
+    ok = np.abs(t["t"][k] + raw[0, 0] - raw[:, 0]) < 1e-3                      # each RCOU row at its own time
+    assert ok.mean() > 0.99
+    expected = np.clip(255.0 * (raw[ok, 1:] - 1000.0) / 900.0, 0.0, 255.0).T
+    assert np.allclose(P[:, k[ok]], expected, atol=1e-3)
+
+
+def test_the_crash_of_the_arducopter_3_3_log_is_not_taken_as_flight():
+    """The rows on its back with the motors running (the accelerometer's +g along FRD's z, the rotors'
+    thrust can only give -z) are left out of the air, and no row after the crash's impact (past 5 g)
+    is in it; the note says how long, as the log's own data count it."""
+    raw = _raw(CRASH)
+    imu, rc = raw["IMU"], raw["RCOU"]
+    crash = imu[np.linalg.norm(imu[:, 1:], axis=1) > 5 * G, 0][0]
+    running = np.interp(imu[:, 0], rc[:, 0], (rc[:, 1:] > 1000 + 9).all(axis=1).astype(float)) > 0.5
+    on_its_back = float(((imu[:, 3] > 0) & running).sum() * np.median(np.diff(imu[:, 0])))
+    assert crash == pytest.approx(239.2, abs=0.1) and 13.0 < on_its_back < 15.0  # the log's own story (README.md)
+    (e,) = each_log(str(CRASH))
+    f = load_file(e.table, Airframe())
+    t0 = imu[0, 0]
+    assert f.airborne.sum() * 0.02 > 140.0 and f.t[f.airborne].max() + t0 < crash
+    note = next(n for n in f.notes if "on its side or its back" in n)
+    assert float(note.split(" s with")[0]) == pytest.approx(on_its_back, abs=0.5), note
+
+
+def test_an_arducopter_3_log_whose_rcou_names_no_pulses_is_refused_by_name(tmp_path, capsys):
+    data = CRASH.read_bytes()
+    assert data.count(b"TimeMS,Ch1,Ch2,Ch3,Ch4") == 1
+    edited = tmp_path / "renamed.bin"
+    edited.write_bytes(data.replace(b"TimeMS,Ch1,Ch2,Ch3,Ch4", b"TimeMS,Pw1,Pw2,Pw3,Pw4"))
+    assert main(["log", "import", str(edited), str(tmp_path / "o.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Pw1" in err and "no output pulses" in err, err
+
+
+def test_taken_as_flight_the_crash_hides_the_vehicle_from_diagnose(tmp_path, capsys, monkeypatch):
+    """Without the specific-force test (data.CONTACT_ACC_Z at minus infinity) the 14 s on its back are
+    airborne, and the base model's roll and pitch effectiveness are no longer told from zero."""
+    from flightctl.sim.identify.diagnose import data
+    monkeypatch.setattr(data, "CONTACT_ACC_Z", -np.inf)
+    assert main(["diagnose", str(CRASH), "--json", str(tmp_path / "r.json"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "does not identify the vehicle's roll and pitch effectiveness" in err, err
+
+
+@pytest.fixture(scope="module")
+def crash_csv(tmp_path_factory):
+    """log171.bin imported as this project's CSV, and its diagnosis."""
+    tmp = tmp_path_factory.mktemp("log171")
+    csv = tmp / "log171.csv"
+    assert main(["log", "import", str(CRASH), str(csv), "--quiet"]) == 0
+    out = tmp / "r.json"
+    assert main(["diagnose", str(csv), "--json", str(out), "--quiet"]) == 0
+    return csv, json.loads(out.read_text())
+
+
+def test_diagnose_judges_the_arducopter_3_3_flight_on_a_base_model_that_its_data_confirm(tmp_path, crash_csv):
+    """From the .bin as from its CSV: no cause named, on a base model whose roll, pitch, yaw and thrust
+    effectiveness are positive and significant (the X layout and the RCOU order confirmed by the data)."""
+    out = tmp_path / "r.json"
+    assert main(["diagnose", str(CRASH), "--json", str(out), "--quiet"]) == 0
+    report = json.loads(out.read_text())
+    assert report["causes"] == [] == crash_csv[1]["causes"]                                                # nothing named on top of the base model
+    base = report["base_model"]
+    for k in ("k_p", "k_q", "k_r", "k_z"):                                     # roll, pitch, yaw, thrust: positive, t >= 2
+        assert base[k]["value"] > 2.0 * base[k]["stderr"], (k, base[k])
+    assert 140.0 < report["data"]["airborne_s"] < 170.0
+    lo, hi = report["data"]["battery_v"]
+    assert 14.5 < lo < hi < 16.6                                                 # CURR: 16.5 V at rest, a 4S pack
+
+
+@pytest.mark.parametrize("seed", [1, 5])
+def test_a_delay_shifted_into_the_arducopter_3_3_flight_is_found_on_top_of_its_own(crash_csv, tmp_path, seed):
+    """A delay of 10-150 ms drawn at random, not told to the diagnosis: the commands logged `shift` rows
+    (20 ms each at 50 Hz) before the motors act on them. The first round fits it within 5 ms (10 % above
+    50 ms) on top of the log's own timing; from two rows on it is also named, as actuation_delay."""
+    csv, report = crash_csv
+    meta, names, rows = rows_and_header(csv.read_text())
+    rng = np.random.default_rng(2700 + seed)
+    d = float(rng.uniform(0.010, 0.150))
+    dt = float(np.median(np.diff([float(r[0]) for r in rows])))
+    shift = int(round(d / dt))
+    delayed(names, rows, shift)
+    out = tmp_path / "d.json"
+    assert main(["diagnose", str(write_csv(meta, names, rows, tmp_path / "delayed.csv")), "--json", str(out), "--quiet"]) == 0
+    hidden = json.loads(out.read_text())
+    expected = delay_fit(report) + shift * dt
+    tolerance = max(0.005, 0.1 * shift * dt)
+    assert abs(delay_fit(hidden) - expected) <= tolerance, (d, delay_fit(report), delay_fit(hidden))
+    named = {c["cause"]: c["parameters"] for c in hidden["causes"]}
+    if shift >= 2:
+        assert abs(named["actuation_delay"]["delay"] - expected) <= tolerance, (d, named)
 
 
 @pytest.mark.parametrize("frame", [0, 1, 3])

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from flightctl.cli import main
-from real import FLIGHTS, need, rows_and_header, write
+from real import FLIGHTS, delay_fit, delayed, need, rows_and_header, write
 
 LOGS = {"LOG00230": "indiflight/LOG00230.BFL", "LOG00259": "indiflight/LOG00259.BFL",
         "LOG00037": "betaflight/LOG00037.BFL", "btfl_002": "betaflight/btfl_002.bbl"}
@@ -56,19 +56,6 @@ def imported(name: str, tmp) -> tuple:
     text, report = _cache[name]
     meta, names, rows = rows_and_header(text)
     return meta, names, rows, report
-
-
-def delay_fit(report: dict) -> float:
-    """The actuation delay the first round fitted (named or not)."""
-    return next(c for c in report["candidates"] if c["cause"] == "actuation_delay")["parameters"]["delay"]
-
-
-def delayed(names, rows, shift: int):
-    """Each row logs the command of the row `shift` later: the motors act after the log says."""
-    for j in (names.index(f"P{i}") for i in range(1, 5)):
-        cells = [r[j] for r in rows]
-        for r, v in zip(rows, cells[shift:] + cells[-1:] * shift):
-            r[j] = v
 
 
 def weakened(names, rows, h2: float, motor: int, scale: float):

@@ -9,8 +9,9 @@
   motor positions and spins (AP_MotorsQuad::setup_motors) are those of today's FRAME_TYPE 0, 1 and 3, and
   any other value is taken as X there (10-13, the NEW_ frames, included).
 - Motors 1-4 on outputs 1-4, driven over the throttle channel's range: RC3_MIN (+ THR_MIN when flying)
-  to RC3_MAX (AP_MotorsMatrix::output_armed). Their pulses are in MOT (Mot1.., 3.0 and 3.1) or RCOU
-  (Chan1.., from 3.1.1).
+  to RC3_MAX (AP_MotorsMatrix::output_armed). Their pulses are in MOT (Mot1.., 3.0 and 3.1) or RCOU,
+  whose fields were renamed twice: Chan1..8 from 3.1.1, Ch1.. in the 3.3 development builds of 2015
+  (RCOU "Ihhhh": TimeMS, Ch1..Ch4), C1.. from 3.3 (TimeUS): the log's own FMT says which.
 - LOG_BITMASK (defines.h): bit 7 IMU (logged in the 50 Hz loop), bit 10 MOTORS, RCOUT from 3.1 (the 10 Hz
   loop), whatever the main loop's rate; LOG_BITMASK's IMU_FAST (bit 18) came with 3.3.
 - CURR's Volt and Curr are V x 100 and A x 100 in int16 fields (Log_Write_Current); CTUN's BarAlt is the
@@ -33,6 +34,7 @@ MOTOR_COUNTS = {3: (7, "a tricopter"), 4: (1, "a quadrotor"), 6: (2, "a hexacopt
 ORIENTATION = {0: 0, 1: 1, 3: 3}              # FRAME to today's FRAME_TYPE: plus, X, H
 UNTAKEN = {2: "V", 4: "V-tail", 5: "A-tail"}
 LOG_IMU, LOG_MOTORS = 7, 10                   # LOG_BITMASK bits
+RCOU_FIELDS = ("Chan", "Ch", "C")             # RCOU's output n is Chan<n> (3.1.1-3.2), Ch<n> (3.3-dev), C<n> (3.3)
 
 
 def is_legacy(p: dict) -> bool:
@@ -97,15 +99,18 @@ def unlogged(p: dict, gyro: bool, motors: bool) -> str:
 
 
 def outputs(p: dict, msgs: dict, imp: Imported) -> tuple[str, list[str]]:
-    """(the message of the motor pulses, its fields for motors 1-4): MOT's Mot1..4, else RCOU's Chan1..4
-    (C1..4 from 3.3); InputError when outputs 5-8 move while armed with no auxiliary function (RCn_FUNCTION
-    0): more motors than four."""
+    """(the message of the motor pulses, its fields for motors 1-4): MOT's Mot1..4, else RCOU's first four
+    pulse fields (Chan, Ch or C and the output's number, as its FMT names them); InputError when outputs
+    5-8 move while armed with no auxiliary function (RCn_FUNCTION 0): more motors than four."""
     if msgs["MOT"]:
         return "MOT", [f"Mot{m}" for m in range(1, 5)]
     rc = msgs["RCOU"]
     if not rc:
         return "", []
-    chan = "Chan" if hasattr(rc[0], "Chan1") else "C"
+    chan = next((pre for pre in RCOU_FIELDS if f"{pre}1" in rc[0].fmt.columns), None)
+    if chan is None:
+        imp.fail(f"RCOU's fields ({', '.join(rc[0].fmt.columns)}) name no output pulses (Chan1, Ch1 or C1): the "
+                 "motor commands are not in this log")
     lo, hi = float(p.get("RC3_MIN", 1000)), float(p.get("RC3_MAX", 2000))
     moving = []
     for c in range(5, 9):

@@ -136,8 +136,8 @@ def _firmware(msgs, texts: list[str]) -> str:
         if fws:
             return str(fws)
     for text in texts:
-        if re.match(r"Ardu\w+ V\d", text) or text.startswith(("ArduCopter", "ArduPlane", "ArduRover", "ArduSub", "Rover")):
-            return text
+        if re.match(r"(Ardu|APM:)\w+ V\d", text) or text.startswith(("ArduCopter", "ArduPlane", "ArduRover", "ArduSub", "Rover")):
+            return text                 # ("APM:Copter V3.3-dev": the name of 3.2 to 3.4)
     return ""
 
 
@@ -152,7 +152,7 @@ def _vehicle(p: dict, firmware: str, formats: dict, texts: list[str], imp: Impor
     if "plane" in low:
         imp.fail(f"{firmware}: " + ("a QuadPlane (VTOL, Q_ENABLE = 1)" if p.get("Q_ENABLE") else "a fixed wing")
                  + ", not a quadrotor: diagnose knows quadrotors (4)")
-    if low.startswith(("rover", "ardurover", "ardusub", "antennatracker", "blimp")):
+    if low.startswith(("rover", "ardurover", "apm:rover", "ardusub", "antennatracker", "blimp")):
         imp.fail(f"{firmware}: not a multirotor: diagnose knows quadrotors (4)")
     if arducopter3.is_legacy(p):
         cls, name, why = arducopter3.frame_class(p, formats, texts)
@@ -280,11 +280,12 @@ def _gyro(p: dict, msgs, imp: Imported) -> tuple[bool, str, str]:
 
 
 def _filters(p: dict, firmware: str, texts: list[str], filtered: bool, imp: Imported) -> tuple[str, str]:
-    """(gyro_filter, acc_filter): INS_GYRO_FILTER, INS_ACCEL_FILTER (biquads); ArduCopter 3.0-3.1 on a
-    PX4 board: INS_MPU6K_FILTER, else the PX4 driver's 30 Hz two-pole low-pass at its 100 Hz IMU rate."""
+    """(gyro_filter, acc_filter): INS_GYRO_FILTER, INS_ACCEL_FILTER (biquads: the two-pole low-pass of
+    every IMU sample, from ArduCopter 3.3); before them, ArduCopter 3.0-3.1 on a PX4 board:
+    INS_MPU6K_FILTER, else the PX4 driver's 30 Hz two-pole low-pass at its 100 Hz IMU rate."""
     if not filtered:
         return "none", "none"
-    if arducopter3.is_legacy(p):
+    if arducopter3.is_legacy(p) and "INS_GYRO_FILTER" not in p:
         hz = float(p.get("INS_MPU6K_FILTER", 0) or 0)
         px4 = any(t.startswith("PX4") for t in texts)
         if px4 and _version(firmware) in ((3, 0), (3, 1)):

@@ -35,6 +35,12 @@ THROTTLE_SHARE = 0.5
 # taken for flight, a thrust that moves nothing, leaves no effectiveness to identify.
 HOVER_SHARE = 0.9
 SMOOTH_S = 0.5
+# A rotor's thrust is along the body's +z only, and a multirotor's drag is a small part of its weight at
+# the speeds it flies: clear of the ground, the specific force along the body's z (the accelerometer's
+# acc_z, z up) is the rotors' thrust over the mass, not below zero. Averaged over SMOOTH_S, one below
+# zero is a contact force: the vehicle on its side (0) or its back (-g) with its motors running, as
+# after a crash (tests/data/ardupilot/log171.bin: 14 s on its back at full command), not flight.
+CONTACT_ACC_Z = 0.0
 # A barometer is too coarse to time a take-off (its noise and the rotors' wash move it by a few tenths
 # of a metre), but one that never rose this far above its level at rest while the motors ran says that
 # the vehicle may never have left the ground: said beside a refusal (base._shown), never a verdict.
@@ -213,11 +219,12 @@ def _levelled_range(t, rng, Rm):
     return z
 
 
-def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, notes: list[str]):
+def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, acc_z: np.ndarray, notes: list[str]):
     """A log of another vehicle (docs/real-flights.md): its rotor layout from the metadata, its height
     above the ground (a precise logged height, else a downward range levelled), and its airborne rows:
     all four motors running, the mean command at least THROTTLE_SHARE of its median while they run,
-    and above Z_AIRBORNE when the height is known."""
+    above Z_AIRBORNE when the height is known, and not on its side or back (`acc_z`, the body-z
+    specific force, averaged over SMOOTH_S at least CONTACT_ACC_Z)."""
     meta = table.meta
     if "rotors" not in meta:
         table.fail("# vehicle: foreign without a '# rotors:' line: the rotor layout is unknown")
@@ -231,10 +238,17 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, notes: list[str]):
     mean_p = P.mean(axis=0)
     hover = float(np.median(mean_p[running])) if running.any() else 0.0
     up = running & (mean_p >= THROTTLE_SHARE * hover)
+    contact = _smoothed(table["t"], acc_z) < CONTACT_ACC_Z
+    if (up & contact).any():
+        dt = float(np.median(np.diff(table["t"])))
+        notes.append(f"{(up & contact).sum() * dt:.1f} s with the motors running and the body-z specific force "
+                     f"(acc_z, averaged over {SMOOTH_S:g} s) below {CONTACT_ACC_Z:g} m/s^2, which the rotors cannot "
+                     f"give: on its side or its back (a contact force), not airborne")
+        up &= ~contact
     if np.isfinite(z).any():
         up &= np.nan_to_num(z, nan=-1.0) > Z_AIRBORNE
     elif up.any():
-        up &= _between_take_off_and_landing(table["t"], mean_p, HOVER_SHARE * hover)
+        up &= _between_take_off_and_landing(table["t"], np.where(contact, 0.0, mean_p), HOVER_SHARE * hover)
         notes.append(f"no precise height: airborne taken as all motors running with the mean command at least "
                      f"{THROTTLE_SHARE:g} of its median, from the first time it reaches {HOVER_SHARE:g} of it "
                      f"(averaged over {SMOOTH_S:g} s: the take-off) to the last (the landing)")
@@ -254,13 +268,17 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, notes: list[str]):
     return layout, up, z, omega, baro
 
 
+def _smoothed(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """x averaged over SMOOTH_S (a centred moving mean of the rows; of all of them in a shorter log)."""
+    width = min(t.size, max(1, int(round(SMOOTH_S / float(np.median(np.diff(t))))))) if t.size > 1 else 1
+    return np.convolve(np.nan_to_num(x), np.ones(width) / width, mode="same")
+
+
 def _between_take_off_and_landing(t: np.ndarray, mean_p: np.ndarray, level: float) -> np.ndarray:
     """(n,) bool: the rows from the first time the mean command, averaged over SMOOTH_S, reaches `level`
     to the last time it does (HOVER_SHARE: before and after, the vehicle is taken as on the ground)."""
     n = t.size
-    width = max(1, int(round(SMOOTH_S / float(np.median(np.diff(t)))))) if n > 1 else 1
-    smooth = np.convolve(mean_p, np.ones(width) / width, mode="same")
-    high = np.flatnonzero(smooth >= level)
+    high = np.flatnonzero(_smoothed(t, mean_p) >= level)
     out = np.zeros(n, bool)
     if high.size:
         out[high[0]:high[-1] + 1] = True
@@ -315,7 +333,7 @@ def load_file(table: Table, a: Airframe) -> FileData:
         ok = np.isfinite(bv)
         bv = np.interp(t, t[ok], bv[ok])
     if foreign:
-        layout, up, z, omega, baro = _foreign(table, P, Rm, notes)
+        layout, up, z, omega, baro = _foreign(table, P, Rm, acc[2], notes)
     else:
         layout, omega, baro = Layout.plus(a.l), None, None
         z = _levelled_range(t, table["range"], Rm)
