@@ -168,14 +168,28 @@ def com_of_gains(gains, layout: Layout) -> tuple[float, float, float]:
     return float(d[0]), float(d[1]), share
 
 
+def yaw_trim_of_gains(gains, layout: Layout) -> tuple[float, float]:
+    """(split, share): how much more thrust (a share of the mean) the counter-clockwise rotors give in hover
+    than the clockwise ones, and the share of the gains' pattern it explains. The yaw loop holds a yaw
+    torque in hover (a motor mounted tilted, propellers of another drag) by letting one spin direction's
+    pair push harder (eq. 6's reaction torques): a pattern of the spins, not of the positions, so no
+    centre of mass and no single weak motor."""
+    g = np.asarray(gains, float) - np.mean(gains)
+    s = np.asarray(layout.spin, float)
+    a = float(g @ s / (s @ s))
+    total = float(g @ g)
+    return 2.0 * a, (a * a * float(s @ s) / total if total > 0 else 0.0)
+
+
 def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None) -> dict:
     """What the pattern of the rotors' thrusts in hover is (`hover_gains`, with their jackknife standard
     errors): {"verdict", "why", "thrust_gain", "speed_thrust_gain", "com"}. A weak motor and a centre of
     mass off the middle leave the same pattern in hover; the log's rotor speeds tell them apart: the
     thrust each rotor's speed gives (eq. 27) is its motor's part, the rest of the pattern is the centre
-    of mass's (linear in the rotors' positions) or a propeller's. verdict: "none"; "weak motor" (the
-    slowest rotor for its command, CURVE_TOL below the common curve, with its thrust in hover below the
-    mean); "centre of mass" (what the speeds leave is a front/rear or left/right pattern); both; "rotor"
+    of mass's (linear in the rotors' positions), a yaw trim's (a pattern of the spins,
+    `yaw_trim_of_gains`) or a propeller's. verdict: "none"; "weak motor" (the slowest rotor for its
+    command, CURVE_TOL below the common curve, with its thrust in hover below the mean); "centre of
+    mass" (what the speeds leave is a front/rear or left/right pattern); "yaw trim"; both; "rotor"
     (what the speeds leave is no centre of mass's pattern: a propeller that gives another thrust at its
     speed); "not told apart" (a pattern, and no rotor speeds in the log)."""
     g = np.asarray(gains, float)
@@ -187,21 +201,30 @@ def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None) -> di
         return bool(np.any((np.abs(r - 1.0) > GAIN_TOL) & (np.abs(r - 1.0) > 2.0 * sd)))
 
     def com(r, what):
+        """(the centre of mass's share, the yaw trim's share, the words for the larger)."""
         dx, dy, share = com_of_gains(r, layout)
+        split, yaw = yaw_trim_of_gains(r, layout)
         out["com"] = {"dx": round(dx, 4), "dy": round(dy, 4), "share": round(share, 3), "unit": unit}
+        out["yaw_trim"] = {"ccw_minus_cw": round(split, 4), "share": round(yaw, 3)}
+        if yaw > share:
+            more = "more" if split > 0 else "less"
+            return share, yaw, (f"{what} a pattern of the spins: the counter-clockwise rotors give {100 * abs(split):.0f} % "
+                                f"{more} thrust than the clockwise ones ({100 * yaw:.0f} % of it), the trim of a yaw "
+                                "torque the loop holds (a motor mounted tilted, propellers of another drag), not a "
+                                "centre of mass")
         side = "front/rear" if abs(dx) >= abs(dy) else "left/right"
-        return share, (f"{what} a {side} pattern, the hover trim of a centre of mass at ({dx:+.3f}, {dy:+.3f}) "
-                       f"{unit} ({100 * share:.0f} % of it)")
+        return share, yaw, (f"{what} a {side} pattern, the hover trim of a centre of mass at ({dx:+.3f}, {dy:+.3f}) "
+                            f"{unit} ({100 * share:.0f} % of it)")
 
     if speeds is None or speeds.get("speed_gain") is None:
-        share, text = com(g, "the thrusts in hover are")
+        _, yaw, text = com(g, "the thrusts in hover are")
         if not pattern(g):
             out.update(verdict="none", why=f"every rotor's thrust in hover is the mean's within {GAIN_TOL:g} or two "
                                            "of its standard errors")
         else:
             out.update(verdict="not told apart",
-                       why=f"{text}; without rotor speeds in the log a weak motor and a centre of mass off the middle "
-                           "look the same in hover")
+                       why=f"{text}; without rotor speeds in the log a weak motor, a centre of mass off the middle and "
+                           "a yaw trim look the same in hover")
         return out
     s = np.asarray(speeds["speed_gain"], float)
     q = s * s / np.mean(s * s)                 # the thrust each rotor's speed gives (eq. 27), against the mean
@@ -215,10 +238,13 @@ def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None) -> di
                    "less thrust in hover: a weak motor")
     rest = g / q
     rest = rest / rest.mean()
-    share, text = com(rest, "what the speeds leave is")
+    share, yaw, text = com(rest, "what the speeds leave is")
     if pattern(rest):
         if share >= 0.5:
             found.append("centre of mass")
+            why.append(f"{text}: the rotors turn on their speed-per-command curve there, so not a weak motor")
+        elif yaw >= 0.5:
+            found.append("yaw trim")
             why.append(f"{text}: the rotors turn on their speed-per-command curve there, so not a weak motor")
         else:
             found.append("rotor")
