@@ -117,11 +117,11 @@ def margins() -> list[tuple[str, float, float]]:
     loop_module.MotorLossDetector = Watched
     try:
         for name, spec in MODELS:
-            worst = [0.0, 0.0]
-            for plan in PLANS:
-                for gains in GAIN_SETS:
+            for gains in GAIN_SETS:
+                worst = [0.0, 0.0]
+                for plan in PLANS:
                     worst = np.maximum(worst, flight(params_of(spec, gains), (), None, plan, 1))
-            rows.append((f"every plan, {name} model, both gain sets", *worst))
+                rows.append((f"every plan, {name} model, {gains}", *worst))
         base = causes.load_vehicle("paper-as-flown")
         n = MC_DRAWS
         drawn = draw(base, n, 28)
@@ -267,11 +267,13 @@ def markdown(m: dict, figure: str) -> str:
     for at, r in m["low"]:
         lines.append(f"| {at:g} | {r['z0']:.2f} | {_row(r)} |")
     if m["margins"]:
-        lines += ["", f"**No false alarm.** The detector's largest missing share held for {ml.LOOPS} loops and for "
+        lines += ["", f"**False alarms.** The detector's largest missing share held for {ml.LOOPS} loops and for "
                   f"{ml.WEAK_LOOPS} loops in calm flight without a loss, against THRESHOLD {ml.THRESHOLD} and WEAK "
-                  f"{ml.WEAK}:", "", f"| flights | held {ml.LOOPS} loops | held {ml.WEAK_LOOPS} loops |", "|---|---|---|"]
+                  f"{ml.WEAK} (at or above either, a motor can be named that was not lost):", "",
+                  f"| flights | held {ml.LOOPS} loops | held {ml.WEAK_LOOPS} loops | a false alarm possible |",
+                  "|---|---|---|---|"]
         for what, a, b in m["margins"]:
-            lines.append(f"| {what} | {a:.3f} | {b:.3f} |")
+            lines.append(f"| {what} | {a:.3f} | {b:.3f} | {'yes' if a >= ml.THRESHOLD or b >= ml.WEAK else 'no'} |")
     s = m["schedule"]
     rates = s["rates"]
     show = [k for k, r in enumerate(rates) if r in (-8.0, -4.0, 0.0, 2.0, 4.0, 8.0, 12.0, 16.0, 20.0, 24.0, 28.0, 32.0)]
