@@ -44,8 +44,8 @@ from flightctl.loop import LAND_LEVEL_S, LAND_SLACK_S, LAND_SPEED, LOST_ALT_S, M
 from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
 from flightctl.sim.sweeps import onboard as ob
 from flightctl.sim.world.devices import EARTH_FIELD_T, SimGpio
-from flightctl.sim.world.imu import _BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, AMBIENT_C, SimMpu9250, _i16, chip_frame
-from flightctl.sim.world.compiled import commanded, forces, rk4, work
+from flightctl.sim.world.imu import _BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, _C_PERIOD, AMBIENT_C, SimMpu9250, _i16, chip_frame
+from flightctl.sim.world.compiled import attitude_trig, commanded, forces, rk4, work
 from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VX, VY, VZ, Z, rotation_from_trig
 from flightctl.sim.world.plant import CONTACT_S
 
@@ -220,10 +220,13 @@ def held_command(w):
     return w[c], w[c + 1], w[c + 2], w[c + 3], w[c + 4], w[c + 5], w[c + 6], w[c + 7]
 
 
-def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: float, wk) -> bool:
+def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: float, held: float, temp: float,
+              wk) -> bool:
     """`SimMpu9250._sample` at t (the plant's specific force, rates, rotors) and `Mpu9250.read` of the
-    burst, with the chip's nine normals e[ie:ie + 9] and the magnetometer's three e[im:im + 3]; the
-    sample in w[W_S:], the gyro less the calibration's bias. False: the frame is refused."""
+    burst, with the chip's nine normals e[ie:ie + 9] and the magnetometer's three e[im:im + 3], `held`
+    = t % the chip's output period and the die's temperature at t (the same for every vehicle: `fly`
+    finds them once a period); the sample in w[W_S:], the gyro less the calibration's bias. False: the
+    frame is refused."""
     f, _, force, _, rw = forces(x, held_command(w), codes, q, wk)
     w[W_LIFT] = force[2] + f[0] + f[1] + f[2] + f[3]    # the floor's test at this state, for this command
     for j in range(4):
@@ -240,13 +243,11 @@ def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: flo
     if dt > 0.0 and dt != w[W_KDT]:
         w[W_KDT] = dt
         cc[_C_KA], cc[_C_KG] = 1.0 - exp(-dt / cc[_C_A_DELAY]), 1.0 - exp(-dt / cc[_C_G_DELAY])
-    temp = AMBIENT_C if k[WARM_RISE] == 0.0 else AMBIENT_C + k[WARM_RISE] * (1.0 - exp((0.0 - t) / k[WARM_TAU]))
     chip_frame(regs, cs, cc, e, ie, fx, fy, fz, x[P], x[Q], x[R], f[0], f[1], f[2], f[3], rw[0], rw[1], rw[2], rw[3],
-               t, dt, temp, w[W_READS] > 0.0)
+               held, dt, temp, w[W_READS] > 0.0)
     w[W_READS] += 1.0
     if int(w[W_READS]) % MAG_EVERY == 1 % MAG_EVERY:   # reads 1, 5, 9...: the AK8963's sample
-        sf, cf, st, ct, sp, cp = sin(x[PHI]), cos(x[PHI]), sin(x[THETA]), cos(x[THETA]), sin(x[PSI]), cos(x[PSI])
-        rm = rotation_from_trig(sf, cf, st, ct, sp, cp)
+        rm = rotation_from_trig(*attitude_trig(x, 0, wk))   # the attitude's, remembered by `forces` above
         bx = rm[0] * BN + rm[3] * BW + rm[6] * BU
         by = rm[1] * BN + rm[4] * BW + rm[7] * BU
         bz = rm[2] * BN + rm[5] * BW + rm[8] * BU
@@ -338,6 +339,11 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, NORM, AT, UNI, S
     dt, t_arm = k[DT], k[T_ARM]
     cnt = np.zeros(4, dtype=np.int64)
     wk = work(X.shape[1])
+    held, temp = np.empty(n), np.empty(n)    # each period's, the same for every vehicle: found once
+    for step in range(n):
+        t = (i0 + step + 1) * dt
+        held[step] = t % CC[0, _C_PERIOD]
+        temp[step] = AMBIENT_C if k[WARM_RISE] == 0.0 else AMBIENT_C + k[WARM_RISE] * (1.0 - exp((0.0 - t) / k[WARM_TAU]))
     for v in range(X.shape[0]):
         x, w, e, kc, q, ring, regs, cs, cc = X[v], W[v], E[v], KC[v], Q[v], RING[v], REGS[v], CS[v], CC[v]
         uni = UNI[v]
@@ -351,7 +357,8 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, NORM, AT, UNI, S
                 w[W_REASON], w[W_DONE] = DIVERGED, 1.0
                 break
             sonar_edges(w, t)
-            if chip_read(x, w, q, codes, regs, cs, cc, NORM[v], AT[step, 0], AT[step, 1], jump, k, t, wk):
+            if chip_read(x, w, q, codes, regs, cs, cc, NORM[v], AT[step, 0], AT[step, 1], jump, k, t, held[step],
+                         temp[step], wk):
                 w[W_BAD] = 0.0
             else:
                 w[W_BAD] += 1.0
@@ -499,7 +506,7 @@ def compiled_fly():
               plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held),
               sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
               chip_read=cc(chip_read, forces=at, held_command=held, chip_frame=imu.chip_frame_compiled(), word=cc(word),
-                           rotation_from_trig=plant["rotation_from_trig"], i16=cc(i16, _i16=cc(imu._i16))),
+                           rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"], i16=cc(i16, _i16=cc(imu._i16))),
               land=cc(land, ob_landing_start=o["landing_start"]), landing_setpoint=cc(landing_setpoint),
               ob_step=o["step"], ob_on_range=o["on_range"], ob_tilt=o["tilt"], ob_heading=o["heading"],
               ob_set_reference=o["set_reference"], ob_arm=o["arm"])
