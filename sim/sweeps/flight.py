@@ -34,7 +34,7 @@ Plain Python on arrays: sim/world/compiled.py compiles it (`compiled_fly`), or i
 from __future__ import annotations
 
 import functools
-from math import atan2, cos, exp, inf, log, nan, pi, sin, sqrt
+from math import atan2, copysign, cos, exp, inf, log, nan, pi, sin, sqrt
 
 import numpy as np
 
@@ -67,14 +67,16 @@ AK_LSB = 1.0 / reg.AK_TESLA_PER_LSB
 # plan: its start, the setpoints then, its ramp; the plan's end, why it stopped); the judge's figures
 # (the largest true tilt, the fastest touchdown, the highest and the last true altitude, the log's rows);
 # the command the plant applies (after the delay), its thrusts and speeds (`commanded`), and the rotors'
-# vertical force at the state now for the command it was found with (the chip's read: the floor's test).
+# vertical force at the state now for the command it was found with (the chip's read: the floor's test);
+# on the floor, whether the rotor states are the fixed point of the held command's step (`plant_period`)
+# and whether the rotors' thrusts and speeds kept for the chip (W_FW: f, then w) are at this state.
 (W_GROUND, W_T_STOP, W_VZ_STOP, W_NEXT, W_HEAD, W_T_LAST, W_KDT, W_READS, W_MAG, W_GOOD, W_PREV, W_HAS_GOOD,
  W_HAS_PREV, W_BAD, W_S, W_WAITING, W_RISE_T, W_FALL_T, W_RISE, W_LAST_EDGE, W_TRIGGER, W_RESULT, W_HAS_RESULT,
  W_U, W_GAUSS, W_HAS_GAUSS, W_ARMED, W_FLYING, W_LANDING, W_BLIND, W_LAST_ECHO, W_T_TOUCH, W_MAX_ALT, W_CAL,
  W_CAL_N, W_CAL_MAG, W_GYRO_BIAS, W_LAND_T, W_LAND_SP, W_LAND_RAMP, W_DURATION, W_REASON, W_DONE, W_TILT,
- W_TOUCHDOWN, W_Z_MAX, W_Z_END, W_ROWS, W_UAPP, W_CMD, W_LIFT, W_LIFT_AT, N_W) = \
+ W_TOUCHDOWN, W_Z_MAX, W_Z_END, W_ROWS, W_UAPP, W_CMD, W_LIFT, W_LIFT_AT, W_STILL, W_FSTILL, W_FW, N_W) = \
     (0, 1, 2, 3, 7, 8, 9, 10, 11, 14, 21, 28, 29, 30, 31, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53,
-     54, 55, 56, 57, 58, 65, 66, 67, 70, 71, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 88, 96, 97, 101)
+     54, 55, 56, 57, 58, 65, 66, 67, 70, 71, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 88, 96, 97, 101, 102, 103, 111)
 # why the loop stopped (w[W_REASON]): still flying, the plan's end (landed or not), a crash by the estimate,
 # the IMU's frames bad, no touchdown by the landing's end, never left the ground, the plant diverged
 RUNNING, ENDED, CRASH, IMU_BAD, NO_TOUCHDOWN, NEVER_LEFT, DIVERGED = range(7)
@@ -180,6 +182,7 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
         for j in range(8):
             w[W_CMD + j] = cmd[j]
         w[W_UAPP], w[W_UAPP + 1], w[W_UAPP + 2], w[W_UAPP + 3] = u1, u2, u3, u4
+        w[W_STILL] = w[W_FSTILL] = 0.0
     cmd = held_command(w)
     dt = k[DT]
     t_end = (i - 1) * dt + 1 * (dt / 1)
@@ -191,13 +194,19 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
             f, _, force, _, _ = forces(x, cmd, codes, q, wk)
             lift = force[2] + f[0] + f[1] + f[2] + f[3]
         ground = not lift / k[M_] > k[G_]
-    if not (ground and x.shape[0] == N_RIGID):
+    if not (ground and (x.shape[0] == N_RIGID or w[W_STILL] != 0.0)):
         rk4(x, cmd, codes, q, dt / 1, wk, ground)
         y = 4 * x.shape[0]                   # where `rk4` leaves the new state
+        if ground:                           # a step that gives the rotor states back gives them every time
+            still = True
+            for j in range(N_RIGID, x.shape[0]):
+                if not (wk[y + j] == x[j] and copysign(1.0, wk[y + j]) == copysign(1.0, x[j])):
+                    still = False
+            w[W_STILL] = 1.0 if still else 0.0
         for j in range(N_RIGID if ground else 0, x.shape[0]):
             x[j] = wk[y + j]
         if not ground:
-            w[W_GROUND] = 0.0
+            w[W_GROUND] = w[W_STILL] = w[W_FSTILL] = 0.0
             s = 0.0
             for j in range(x.shape[0]):
                 s += x[j]
@@ -227,10 +236,18 @@ def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: flo
     = t % the chip's output period and the die's temperature at t (the same for every vehicle: `fly`
     finds them once a period); the sample in w[W_S:], the gyro less the calibration's bias. False: the
     frame is refused."""
-    f, _, force, _, rw = forces(x, held_command(w), codes, q, wk)
-    w[W_LIFT] = force[2] + f[0] + f[1] + f[2] + f[3]    # the floor's test at this state, for this command
-    for j in range(4):
-        w[W_LIFT_AT + j] = w[W_UAPP + j]
+    if w[W_FSTILL] != 0.0:               # on the floor, at the state and command of the last read
+        c = W_FW
+        f, rw = (w[c], w[c + 1], w[c + 2], w[c + 3]), (w[c + 4], w[c + 5], w[c + 6], w[c + 7])
+        force = (0.0, 0.0, 0.0)
+    else:
+        f, _, force, _, rw = forces(x, held_command(w), codes, q, wk)
+        w[W_LIFT] = force[2] + f[0] + f[1] + f[2] + f[3]    # the floor's test at this state, for this command
+        for j in range(4):
+            w[W_LIFT_AT + j] = w[W_UAPP + j]
+            w[W_FW + j], w[W_FW + 4 + j] = f[j], rw[j]
+        if w[W_GROUND] != 0.0 and w[W_STILL] != 0.0:
+            w[W_FSTILL] = 1.0                 # nothing moves until the command changes
     t_stop, vz = w[W_T_STOP], w[W_VZ_STOP]
     stopping = -vz / CONTACT_S if 0.0 <= t - t_stop < CONTACT_S else 0.0
     if w[W_GROUND] != 0.0:
