@@ -234,12 +234,12 @@ def held_command(w):
 
 
 def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: float, held: float, temp: float,
-              wk) -> bool:
+              gains, wk) -> bool:
     """`SimMpu9250._sample` at t (the plant's specific force, rates, rotors) and `Mpu9250.read` of the
     burst, with the chip's nine normals e[ie:ie + 9] and the magnetometer's three e[im:im + 3], `held`
-    = t % the chip's output period and the die's temperature at t (the same for every vehicle: `fly`
-    finds them once a period); the sample in w[W_S:], the gyro less the calibration's bias. False: the
-    frame is refused."""
+    = t % the chip's output period, the die's temperature at t and `gains` (the read interval from the
+    last period and the DLPF stage's gains for it), the same for every vehicle: `fly` finds them once a
+    period; the sample in w[W_S:], the gyro less the calibration's bias. False: the frame is refused."""
     if w[W_FSTILL] != 0.0:               # on the floor, at the state and command of the last read
         c = W_FW
         f, rw = (w[c], w[c + 1], w[c + 2], w[c + 3]), (w[c + 4], w[c + 5], w[c + 6], w[c + 7])
@@ -263,7 +263,10 @@ def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: flo
     w[W_T_LAST] = t
     if dt > 0.0 and dt != w[W_KDT]:
         w[W_KDT] = dt
-        cc[_C_KA], cc[_C_KG] = 1.0 - exp(-dt / cc[_C_A_DELAY]), 1.0 - exp(-dt / cc[_C_G_DELAY])
+        if dt == gains[0]:                # the period's interval, whose gains `fly` found for every vehicle
+            cc[_C_KA], cc[_C_KG] = gains[1], gains[2]
+        else:
+            cc[_C_KA], cc[_C_KG] = 1.0 - exp(-dt / cc[_C_A_DELAY]), 1.0 - exp(-dt / cc[_C_G_DELAY])
     chip_frame(regs, cs, cc, e, ie, fx, fy, fz, x[P], x[Q], x[R], f[0], f[1], f[2], f[3], rw[0], rw[1], rw[2], rw[3],
                held, dt, temp, w[W_READS] > 0.0)
     w[W_READS] += 1.0
@@ -376,9 +379,13 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
     wk = work(X.shape[1])
     e9 = np.empty(12)                        # a read's normals: the chip's nine, the magnetometer's three
     held, temp = np.empty(n), np.empty(n)    # each period's, the same for every vehicle: found once
+    gains = np.empty((n, 3))
     for step in range(n):
         t = (i0 + step + 1) * dt
         held[step] = t % CC[0, _C_PERIOD]
+        h = t - (i0 + step) * dt
+        gains[step, 0] = h
+        gains[step, 1], gains[step, 2] = 1.0 - exp(-h / CC[0, _C_A_DELAY]), 1.0 - exp(-h / CC[0, _C_G_DELAY])
         temp[step] = AMBIENT_C if k[WARM_RISE] == 0.0 else AMBIENT_C + k[WARM_RISE] * (1.0 - exp((0.0 - t) / k[WARM_TAU]))
     for v in range(X.shape[0]):
         x, w, e, kc, q, ring, regs, cs, cc = X[v], W[v], E[v], KC[v], Q[v], RING[v], REGS[v], CS[v], CC[v]
@@ -396,7 +403,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
             normals(gen, w, e9, 0, 9)
             if i % MAG_EVERY == 1 % MAG_EVERY:      # read i's magnetometer sample (`chip_read`)
                 normals(gen, w, e9, 9, 3)
-            if chip_read(x, w, q, codes, regs, cs, cc, e9, 0, 9, jump, k, t, held[step], temp[step], wk):
+            if chip_read(x, w, q, codes, regs, cs, cc, e9, 0, 9, jump, k, t, held[step], temp[step], gains[step], wk):
                 w[W_BAD] = 0.0
             else:
                 w[W_BAD] += 1.0
