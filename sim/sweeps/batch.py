@@ -143,15 +143,16 @@ class _Vehicles:
         self.normal = fl.generators([np.random.default_rng(s) for s in seeds])   # each chip's `NoisePool`
         self.rng = []             # each vehicle's `World.rng`, whose `random()`s the loop takes from uni
         self.uni = np.zeros((n, uniforms))
+        noise = SensorNoise()
         for v, seed in enumerate(seeds):
             drawn = {key: float(val[v]) for key, val in draws.items()}
-            p = drawn_params(params, drawn) if drawn else params
+            p = drawn_params(params, drawn, effects=False) if drawn else params
             if gains is not None:
                 p = dataclasses.replace(p, gains=gains[v])
             self.kc[v] = ob.constants(p, structure)
             r = random.Random(seed)                 # `World.rng`: the sonar's tick, the chip's die, the power monitor
             r.randrange(1 << 32)
-            s, c = chip_die(vehicle_noise(SensorNoise(), p.sensors), p.airframe, r)
+            s, c = chip_die(vehicle_noise(noise, p.sensors), p.airframe, r)
             self.cs[v], self.cc[v] = s, c
             for _ in range(template["start_draws"]):
                 r.gauss(0.0, 1.0)
