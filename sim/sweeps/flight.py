@@ -169,11 +169,13 @@ def sonar_trigger(w, x, uni, k, t: float) -> None:
 def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -> bool:
     """`Plant.advance` over the loop period ending at i dt: the delayed command, the floor, one RK4 step,
     a touchdown. False if the state is no longer finite (`Diverged`)."""
-    head = (int(w[W_HEAD]) + 1) % nring
+    head = int(w[W_HEAD]) + 1                # the ring's indices mod nring (>= 2), without a division
+    head = head - nring if head >= nring else head
     w[W_HEAD] = head
     for j in range(4):
         ring[head, j] = w[W_NEXT + j]
-    old, new = (head + 1) % nring, (head + 2) % nring
+    old = head + 1 - nring if head + 1 >= nring else head + 1
+    new = old + 1 - nring if old + 1 >= nring else old + 1
     if frac != 0.0:
         u1 = ring[old, 0] * frac + ring[new, 0] * (1.0 - frac)
         u2 = ring[old, 1] * frac + ring[new, 1] * (1.0 - frac)
@@ -380,7 +382,10 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
     e9 = np.empty(12)                        # a read's normals: the chip's nine, the magnetometer's three
     held, temp = np.empty(n), np.empty(n)    # each period's, the same for every vehicle: found once
     gains = np.empty((n, 3))
+    power, sonar = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.bool_)   # the periods of their reads
     for step in range(n):
+        power[step] = (i0 + step + 1) % int(k[POWER_EVERY]) == 0
+        sonar[step] = (i0 + step + 1) % int(k[SONAR_EVERY]) == 0
         t = (i0 + step + 1) * dt
         held[step] = t % CC[0, _C_PERIOD]
         h = t - (i0 + step) * dt
@@ -410,10 +415,10 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
                 if w[W_BAD] > MAX_BAD_IMU_FRAMES:
                     w[W_REASON], w[W_DONE] = IMU_BAD, 1.0
                     break
-            if i % int(k[POWER_EVERY]) == 0:                 # the power monitor's read
+            if power[step]:                                  # the power monitor's read
                 for _ in range(int(k[INA_DRAWS])):
                     gauss(w, uni, 0.0, 1.0)
-            if i % int(k[SONAR_EVERY]) == 0:
+            if sonar[step]:
                 sonar_trigger(w, x, uni, k, t)
             has_echo = w[W_HAS_RESULT] != 0.0
             echo = w[W_RESULT]
