@@ -32,7 +32,7 @@ from flightctl.sim.sweeps import onboard as ob
 from flightctl.sim.world.board import SIM_CALIBRATE_S
 
 GROUP = 256          # vehicles whose arrays are set up and flown together
-CHUNK = 225          # loop periods flown per call of the compiled loop (the random numbers drawn between)
+CHUNK = 225          # loop periods flown per call of the compiled loop (the uniforms refilled between)
 LAND_MARGIN_S = 45.0   # s past the plan's end a loop's own landing may take (its ramp and slack)
 
 
