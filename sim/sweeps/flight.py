@@ -44,7 +44,8 @@ from flightctl.loop import LAND_LEVEL_S, LAND_SLACK_S, LAND_SPEED, LOST_ALT_S, M
 from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
 from flightctl.sim.sweeps import onboard as ob
 from flightctl.sim.world.devices import EARTH_FIELD_T, NoisePool, SimGpio
-from flightctl.sim.world.imu import _BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, _C_PERIOD, AMBIENT_C, SimMpu9250, _i16, chip_frame
+from flightctl.sim.world.imu import (_BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, _C_PERIOD, AMBIENT_C, SimMpu9250,
+                                    _i16, chip_frame)
 from flightctl.sim.world.compiled import attitude_trig, commanded, forces, rk4, work
 from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VX, VY, VZ, Z, rotation_from_trig
 from flightctl.sim.world.plant import CONTACT_S
@@ -391,7 +392,8 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
         h = t - (i0 + step) * dt
         gains[step, 0] = h
         gains[step, 1], gains[step, 2] = 1.0 - exp(-h / CC[0, _C_A_DELAY]), 1.0 - exp(-h / CC[0, _C_G_DELAY])
-        temp[step] = AMBIENT_C if k[WARM_RISE] == 0.0 else AMBIENT_C + k[WARM_RISE] * (1.0 - exp((0.0 - t) / k[WARM_TAU]))
+        rise = k[WARM_RISE]
+        temp[step] = AMBIENT_C if rise == 0.0 else AMBIENT_C + rise * (1.0 - exp((0.0 - t) / k[WARM_TAU]))
     for v in range(X.shape[0]):
         x, w, e, kc, q, ring, regs, cs, cc = X[v], W[v], E[v], KC[v], Q[v], RING[v], REGS[v], CS[v], CC[v]
         uni, gen = UNI[v], GEN[v]
@@ -556,7 +558,8 @@ def compiled_fly():
               plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held),
               sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
               chip_read=cc(chip_read, forces=at, held_command=held, chip_frame=imu.chip_frame_compiled(), word=cc(word),
-                           rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"], i16=cc(i16, _i16=cc(imu._i16))),
+                           rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],
+                           i16=cc(i16, _i16=cc(imu._i16))),
               land=cc(land, ob_landing_start=o["landing_start"]), landing_setpoint=cc(landing_setpoint),
               ob_step=o["step"], ob_on_range=o["on_range"], ob_tilt=o["tilt"], ob_heading=o["heading"],
               ob_set_reference=o["set_reference"], ob_arm=o["arm"])

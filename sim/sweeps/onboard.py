@@ -70,8 +70,8 @@ def estimate_trig(e):
     `on_range` and `estimate` ask for the same angles (remembered, the sign of a zero included; a cosine
     of 0, which no float angle has, says none are: a state of zeros)."""
     roll, pitch = e[ROLL], e[PITCH]
-    if not (e[CR] != 0.0 and roll == e[T_ROLL] and pitch == e[T_PITCH] and copysign(1.0, roll) == copysign(1.0, e[T_ROLL])
-            and copysign(1.0, pitch) == copysign(1.0, e[T_PITCH])):
+    if not (e[CR] != 0.0 and roll == e[T_ROLL] and pitch == e[T_PITCH]
+            and copysign(1.0, roll) == copysign(1.0, e[T_ROLL]) and copysign(1.0, pitch) == copysign(1.0, e[T_PITCH])):
         e[T_ROLL], e[T_PITCH] = roll, pitch
         e[SR], e[CR], e[SP], e[CP] = sin(roll), cos(roll), sin(pitch), cos(pitch)
     return e[SR], e[CR], e[SP], e[CP]
@@ -273,6 +273,7 @@ def compiled_functions(cc):
     trig = cc(estimate_trig)
     est = cc(estimate, heading_from_mag=heading, remainder=rem, estimate_trig=trig)
     return {"step": cc(step, estimate=est, pid=pid_c, landing_step=land, count_from_thrust=count, estimate_trig=trig),
-            "on_range": cc(on_range, pid=pid_c, estimate_trig=trig), "tilt": cc(tilt, tilt_from_accel=cc(estimator.tilt_from_accel)),
+            "on_range": cc(on_range, pid=pid_c, estimate_trig=trig),
+            "tilt": cc(tilt, tilt_from_accel=cc(estimator.tilt_from_accel)),
             "heading": heading, "reset": cc(reset), "set_reference": cc(set_reference), "arm": cc(arm),
             "landing_start": cc(landing_start)}
