@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import gc
 import math
 import random
 from dataclasses import dataclass
@@ -31,8 +32,7 @@ from flightctl.sim.sweeps import onboard as ob
 from flightctl.sim.world.board import SIM_CALIBRATE_S
 
 GROUP = 256          # vehicles whose arrays are set up and flown together
-CHUNK = 225          # loop periods flown per call of the compiled loop (the random numbers drawn between)
-NOISE_BLOCK = 1 << 16  # `NoisePool`'s block
+CHUNK = 225          # loop periods flown per call of the compiled loop (the uniforms refilled between)
 LAND_MARGIN_S = 45.0   # s past the plan's end a loop's own landing may take (its ramp and slack)
 
 
@@ -140,18 +140,19 @@ class _Vehicles:
         self.kc = np.zeros((n, ob.N_K))
         self.regs = np.zeros((n, 128), dtype=np.uint8)
         self.cs, self.cc = np.zeros((n, N_CHIP_STATE)), np.zeros((n, N_CHIP_CONST))
-        self.normal = [np.random.default_rng(s) for s in seeds]
+        self.normal = fl.generators([np.random.default_rng(s) for s in seeds])   # each chip's `NoisePool`
         self.rng = []             # each vehicle's `World.rng`, whose `random()`s the loop takes from uni
         self.uni = np.zeros((n, uniforms))
+        noise = SensorNoise()
         for v, seed in enumerate(seeds):
             drawn = {key: float(val[v]) for key, val in draws.items()}
-            p = drawn_params(params, drawn) if drawn else params
+            p = drawn_params(params, drawn, effects=False) if drawn else params
             if gains is not None:
                 p = dataclasses.replace(p, gains=gains[v])
             self.kc[v] = ob.constants(p, structure)
             r = random.Random(seed)                 # `World.rng`: the sonar's tick, the chip's die, the power monitor
             r.randrange(1 << 32)
-            s, c = chip_die(vehicle_noise(SensorNoise(), p.sensors), p.airframe, r)
+            s, c = chip_die(vehicle_noise(noise, p.sensors), p.airframe, r)
             self.cs[v], self.cc[v] = s, c
             for _ in range(template["start_draws"]):
                 r.gauss(0.0, 1.0)
@@ -160,29 +161,6 @@ class _Vehicles:
             self.rng.append(r)
             self.uni[v] = [r.random() for _ in range(uniforms)]
         self.cc[:, template["registered"]] = template["values"]
-        self.pool = (0, 0)        # `NoisePool`: its block and index
-        self.raw = 0              # the normals each vehicle's generator has given so far
-
-    def normals(self, first_read: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """The chip's normals of reads first_read .. first_read + n - 1, nine a read, and the
-        magnetometer's three (reads 1, 5, 9...), each vehicle's stream as `NoisePool` draws them (its
-        blocks: a read whose numbers would cross one's end starts the next): (the normals, a row per
-        vehicle; where each read's nine and three start in it, (n, 2), the same for every vehicle)."""
-        block, i = self.pool
-        at = np.zeros((n, 2), dtype=np.int64)
-        for j in range(n):
-            for lo, count in ((0, 9), (1, 3)) if (first_read + j) % fl.MAG_EVERY == 1 % fl.MAG_EVERY else ((0, 9),):
-                if i + count > NOISE_BLOCK:
-                    block, i = block + 1, 0
-                at[j, lo] = block * NOISE_BLOCK + i - self.raw
-                i += count
-        self.pool = (block, i)
-        hi = block * NOISE_BLOCK + i
-        raw = np.empty((self.n, hi - self.raw))
-        for v, gen in enumerate(self.normal):
-            gen.standard_normal(out=raw[v])
-        self.raw = hi
-        return raw, at
 
     def refill(self) -> None:
         """The uniforms each vehicle used since the last refill, drawn anew behind the ones left."""
@@ -217,7 +195,19 @@ def _judge(w: np.ndarray, g: float) -> tuple[str, bool, bool]:
 
 
 def _fly_group(job) -> tuple:
-    """One group of vehicles flown to their ends (or to `until`, s of plan)."""
+    """One group of vehicles flown to their ends (or to `until`, s of plan), without the cyclic garbage
+    collector: the set-up makes thousands of short-lived objects, and each of the collector's passes
+    it sets off walks numba's and numpy's long-lived ones, for nothing (nothing here makes a cycle)."""
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        return _fly_group_now(job)
+    finally:
+        if collecting:
+            gc.enable()
+
+
+def _fly_group_now(job) -> tuple:
     params, plan, draws, gains, seeds, record, until, structure = job
     a = params.airframe
     dt = a.dt
@@ -242,9 +232,8 @@ def _fly_group(job) -> tuple:
     i0 = 0
     while i0 < i_end and not veh.w[:, fl.W_DONE].all():
         n = min(CHUNK, i_end - i0)
-        normals, at = veh.normals(i0 + 1, n)
         run(veh.x, veh.w, veh.e, veh.kc, veh.q, veh.codes, veh.ring, veh.nring, veh.frac, veh.regs, veh.cs, veh.cc,
-            normals, at, veh.uni, np.ascontiguousarray(sp[i0 + 1:i0 + 1 + n]), rec, k, template["jump"],
+            veh.normal, veh.uni, np.ascontiguousarray(sp[i0 + 1:i0 + 1 + n]), rec, k, template["jump"],
             i0, n, i_arm, rec0)
         veh.refill()
         i0 += n

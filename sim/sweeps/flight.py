@@ -23,7 +23,7 @@ Each loop period, in the order of `flightctl.loop.FlightLoop` against the simula
   the accelerometer confirms the floor), the plan's end; the motors take the counts while flying.
 
 Random numbers: each vehicle's chip draws its normals from the same generator, in the same order, as
-the single simulator's `NoisePool` of the same seed (`normals`), and its sonar and power monitor from
+the single simulator's `NoisePool` of the same seed (`normals`, in the loop), and its sonar and power monitor from
 the same Mersenne Twister as its `World.rng` (`uniforms`, Python's `random.gauss` on them): a vehicle
 flown here with seed s is the vehicle `flightctl sim` flies with seed s (tests/test_batch.py).
 Left out: the motor-loss detector (a healthy vehicle), a low battery, the stalls and the log's and
@@ -34,7 +34,7 @@ Plain Python on arrays: sim/world/compiled.py compiles it (`compiled_fly`), or i
 from __future__ import annotations
 
 import functools
-from math import atan2, cos, exp, inf, log, nan, pi, sin, sqrt
+from math import atan2, copysign, cos, exp, inf, log, nan, pi, sin, sqrt
 
 import numpy as np
 
@@ -43,15 +43,17 @@ from flightctl.drivers.hcsr04 import MAX_RANGE_M, MIN_RANGE_M, US_PER_M, WATCHDO
 from flightctl.loop import LAND_LEVEL_S, LAND_SLACK_S, LAND_SPEED, LOST_ALT_S, MAX_BAD_IMU_FRAMES, TOUCHDOWN_ALT, TOUCHDOWN_S
 from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
 from flightctl.sim.sweeps import onboard as ob
-from flightctl.sim.world.devices import EARTH_FIELD_T, SimGpio
-from flightctl.sim.world.imu import _BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, AMBIENT_C, SimMpu9250, _i16, chip_frame
-from flightctl.sim.world.compiled import commanded, forces, rk4, work
+from flightctl.sim.world.devices import EARTH_FIELD_T, NoisePool, SimGpio
+from flightctl.sim.world.imu import (_BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, _C_PERIOD, AMBIENT_C, SimMpu9250,
+                                    _i16, chip_frame)
+from flightctl.sim.world.compiled import attitude_trig, commanded, forces, rk4, work
 from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VX, VY, VZ, Z, rotation_from_trig
 from flightctl.sim.world.plant import CONTACT_S
 
 ECHO_DELAY_S, NO_ECHO_S = SimGpio.ECHO_DELAY_S, SimGpio.NO_ECHO_S
 WATCHDOG_S = WATCHDOG_MS / 1000.0
 MAG_EVERY = SimMpu9250.MAG_EVERY
+NOISE_BLOCK = NoisePool.BLOCK
 TWOPI = 2.0 * pi
 BN, BW, BU = EARTH_FIELD_T
 AK_LSB = 1.0 / reg.AK_TESLA_PER_LSB
@@ -67,14 +69,19 @@ AK_LSB = 1.0 / reg.AK_TESLA_PER_LSB
 # plan: its start, the setpoints then, its ramp; the plan's end, why it stopped); the judge's figures
 # (the largest true tilt, the fastest touchdown, the highest and the last true altitude, the log's rows);
 # the command the plant applies (after the delay), its thrusts and speeds (`commanded`), and the rotors'
-# vertical force at the state now for the command it was found with (the chip's read: the floor's test).
+# vertical force at the state now for the command it was found with (the chip's read: the floor's test);
+# on the floor, whether the rotor states are the fixed point of the held command's step (`plant_period`)
+# and whether the rotors' thrusts and speeds kept for the chip (W_FW: f, then w) are at this state; the
+# chip's position in its `NoisePool` block.
 (W_GROUND, W_T_STOP, W_VZ_STOP, W_NEXT, W_HEAD, W_T_LAST, W_KDT, W_READS, W_MAG, W_GOOD, W_PREV, W_HAS_GOOD,
  W_HAS_PREV, W_BAD, W_S, W_WAITING, W_RISE_T, W_FALL_T, W_RISE, W_LAST_EDGE, W_TRIGGER, W_RESULT, W_HAS_RESULT,
  W_U, W_GAUSS, W_HAS_GAUSS, W_ARMED, W_FLYING, W_LANDING, W_BLIND, W_LAST_ECHO, W_T_TOUCH, W_MAX_ALT, W_CAL,
  W_CAL_N, W_CAL_MAG, W_GYRO_BIAS, W_LAND_T, W_LAND_SP, W_LAND_RAMP, W_DURATION, W_REASON, W_DONE, W_TILT,
- W_TOUCHDOWN, W_Z_MAX, W_Z_END, W_ROWS, W_UAPP, W_CMD, W_LIFT, W_LIFT_AT, N_W) = \
+ W_TOUCHDOWN, W_Z_MAX, W_Z_END, W_ROWS, W_UAPP, W_CMD, W_LIFT, W_LIFT_AT, W_STILL, W_FSTILL, W_FW, W_POOL,
+ N_W) = \
     (0, 1, 2, 3, 7, 8, 9, 10, 11, 14, 21, 28, 29, 30, 31, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53,
-     54, 55, 56, 57, 58, 65, 66, 67, 70, 71, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 88, 96, 97, 101)
+     54, 55, 56, 57, 58, 65, 66, 67, 70, 71, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 88, 96, 97, 101, 102, 103, 111,
+     112)
 # why the loop stopped (w[W_REASON]): still flying, the plan's end (landed or not), a crash by the estimate,
 # the IMU's frames bad, no touchdown by the landing's end, never left the ground, the plant diverged
 RUNNING, ENDED, CRASH, IMU_BAD, NO_TOUCHDOWN, NEVER_LEFT, DIVERGED = range(7)
@@ -163,11 +170,13 @@ def sonar_trigger(w, x, uni, k, t: float) -> None:
 def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -> bool:
     """`Plant.advance` over the loop period ending at i dt: the delayed command, the floor, one RK4 step,
     a touchdown. False if the state is no longer finite (`Diverged`)."""
-    head = (int(w[W_HEAD]) + 1) % nring
+    head = int(w[W_HEAD]) + 1                # the ring's indices mod nring (>= 2), without a division
+    head = head - nring if head >= nring else head
     w[W_HEAD] = head
     for j in range(4):
         ring[head, j] = w[W_NEXT + j]
-    old, new = (head + 1) % nring, (head + 2) % nring
+    old = head + 1 - nring if head + 1 >= nring else head + 1
+    new = old + 1 - nring if old + 1 >= nring else old + 1
     if frac != 0.0:
         u1 = ring[old, 0] * frac + ring[new, 0] * (1.0 - frac)
         u2 = ring[old, 1] * frac + ring[new, 1] * (1.0 - frac)
@@ -180,6 +189,7 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
         for j in range(8):
             w[W_CMD + j] = cmd[j]
         w[W_UAPP], w[W_UAPP + 1], w[W_UAPP + 2], w[W_UAPP + 3] = u1, u2, u3, u4
+        w[W_STILL] = w[W_FSTILL] = 0.0
     cmd = held_command(w)
     dt = k[DT]
     t_end = (i - 1) * dt + 1 * (dt / 1)
@@ -191,13 +201,19 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
             f, _, force, _, _ = forces(x, cmd, codes, q, wk)
             lift = force[2] + f[0] + f[1] + f[2] + f[3]
         ground = not lift / k[M_] > k[G_]
-    if not (ground and x.shape[0] == N_RIGID):
+    if not (ground and (x.shape[0] == N_RIGID or w[W_STILL] != 0.0)):
         rk4(x, cmd, codes, q, dt / 1, wk, ground)
         y = 4 * x.shape[0]                   # where `rk4` leaves the new state
+        if ground:                           # a step that gives the rotor states back gives them every time
+            still = True
+            for j in range(N_RIGID, x.shape[0]):
+                if not (wk[y + j] == x[j] and copysign(1.0, wk[y + j]) == copysign(1.0, x[j])):
+                    still = False
+            w[W_STILL] = 1.0 if still else 0.0
         for j in range(N_RIGID if ground else 0, x.shape[0]):
             x[j] = wk[y + j]
         if not ground:
-            w[W_GROUND] = 0.0
+            w[W_GROUND] = w[W_STILL] = w[W_FSTILL] = 0.0
             s = 0.0
             for j in range(x.shape[0]):
                 s += x[j]
@@ -220,14 +236,25 @@ def held_command(w):
     return w[c], w[c + 1], w[c + 2], w[c + 3], w[c + 4], w[c + 5], w[c + 6], w[c + 7]
 
 
-def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: float, wk) -> bool:
+def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: float, held: float, temp: float,
+              gains, wk) -> bool:
     """`SimMpu9250._sample` at t (the plant's specific force, rates, rotors) and `Mpu9250.read` of the
-    burst, with the chip's nine normals e[ie:ie + 9] and the magnetometer's three e[im:im + 3]; the
-    sample in w[W_S:], the gyro less the calibration's bias. False: the frame is refused."""
-    f, _, force, _, rw = forces(x, held_command(w), codes, q, wk)
-    w[W_LIFT] = force[2] + f[0] + f[1] + f[2] + f[3]    # the floor's test at this state, for this command
-    for j in range(4):
-        w[W_LIFT_AT + j] = w[W_UAPP + j]
+    burst, with the chip's nine normals e[ie:ie + 9] and the magnetometer's three e[im:im + 3], `held`
+    = t % the chip's output period, the die's temperature at t and `gains` (the read interval from the
+    last period and the DLPF stage's gains for it), the same for every vehicle: `fly` finds them once a
+    period; the sample in w[W_S:], the gyro less the calibration's bias. False: the frame is refused."""
+    if w[W_FSTILL] != 0.0:               # on the floor, at the state and command of the last read
+        c = W_FW
+        f, rw = (w[c], w[c + 1], w[c + 2], w[c + 3]), (w[c + 4], w[c + 5], w[c + 6], w[c + 7])
+        force = (0.0, 0.0, 0.0)
+    else:
+        f, _, force, _, rw = forces(x, held_command(w), codes, q, wk)
+        w[W_LIFT] = force[2] + f[0] + f[1] + f[2] + f[3]    # the floor's test at this state, for this command
+        for j in range(4):
+            w[W_LIFT_AT + j] = w[W_UAPP + j]
+            w[W_FW + j], w[W_FW + 4 + j] = f[j], rw[j]
+        if w[W_GROUND] != 0.0 and w[W_STILL] != 0.0:
+            w[W_FSTILL] = 1.0                 # nothing moves until the command changes
     t_stop, vz = w[W_T_STOP], w[W_VZ_STOP]
     stopping = -vz / CONTACT_S if 0.0 <= t - t_stop < CONTACT_S else 0.0
     if w[W_GROUND] != 0.0:
@@ -239,14 +266,15 @@ def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: flo
     w[W_T_LAST] = t
     if dt > 0.0 and dt != w[W_KDT]:
         w[W_KDT] = dt
-        cc[_C_KA], cc[_C_KG] = 1.0 - exp(-dt / cc[_C_A_DELAY]), 1.0 - exp(-dt / cc[_C_G_DELAY])
-    temp = AMBIENT_C if k[WARM_RISE] == 0.0 else AMBIENT_C + k[WARM_RISE] * (1.0 - exp((0.0 - t) / k[WARM_TAU]))
+        if dt == gains[0]:                # the period's interval, whose gains `fly` found for every vehicle
+            cc[_C_KA], cc[_C_KG] = gains[1], gains[2]
+        else:
+            cc[_C_KA], cc[_C_KG] = 1.0 - exp(-dt / cc[_C_A_DELAY]), 1.0 - exp(-dt / cc[_C_G_DELAY])
     chip_frame(regs, cs, cc, e, ie, fx, fy, fz, x[P], x[Q], x[R], f[0], f[1], f[2], f[3], rw[0], rw[1], rw[2], rw[3],
-               t, dt, temp, w[W_READS] > 0.0)
+               held, dt, temp, w[W_READS] > 0.0)
     w[W_READS] += 1.0
     if int(w[W_READS]) % MAG_EVERY == 1 % MAG_EVERY:   # reads 1, 5, 9...: the AK8963's sample
-        sf, cf, st, ct, sp, cp = sin(x[PHI]), cos(x[PHI]), sin(x[THETA]), cos(x[THETA]), sin(x[PSI]), cos(x[PSI])
-        rm = rotation_from_trig(sf, cf, st, ct, sp, cp)
+        rm = rotation_from_trig(*attitude_trig(x, 0, wk))   # the attitude's, remembered by `forces` above
         bx = rm[0] * BN + rm[3] * BW + rm[6] * BU
         by = rm[1] * BN + rm[4] * BW + rm[7] * BU
         bz = rm[2] * BN + rm[5] * BW + rm[8] * BU
@@ -325,22 +353,50 @@ def landing_setpoint(w, t_plan: float, j: int) -> float:
     return start + (0.0 - start) * 0.5 * (1.0 - cos(pi * s))
 
 
-def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, NORM, AT, UNI, SP, REC, k, jump, i0: int, n: int,
+def normals(gen, w, e, at: int, count: int) -> None:
+    """`NoisePool.index(count)` of the vehicle's chip and its numbers into e[at:at + count], drawn here
+    from the vehicle's own generator (numba's `standard_normal` is NumPy's, number for number): a read
+    whose numbers would cross the pool's block skips the block's rest, drawn and unused, as the pool's
+    next block starts where the last one ended. w[W_POOL]: the position in the block."""
+    i = int(w[W_POOL])
+    if i + count > NOISE_BLOCK:
+        for _ in range(NOISE_BLOCK - i):
+            gen.standard_normal()
+        i = 0
+    for j in range(count):
+        e[at + j] = gen.standard_normal()
+    w[W_POOL] = i + count
+
+
+def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, REC, k, jump, i0: int, n: int,
         i_arm: int, rec0: int) -> None:
     """Loop periods i0 + 1 .. i0 + n of every vehicle (rows of the arrays): X the plants' states, W the
     world's and loop's (`w`), E and KC the controllers' (sim/sweeps/onboard.py), Q the plants' constants
     (sim/world/compiled.py `layout_rows`), RING and NRING, FRAC the delayed commands, REGS, CS, CC the
-    chips' registers, state and constants, NORM their normals (a row per vehicle) and AT where each
-    period's are in it ((n, 2): the chip's nine, the magnetometer's three), UNI the Mersenne
+    chips' registers, state and constants, GEN their numpy generators (`NoisePool`'s), UNI the Mersenne
     Twisters' uniforms, SP the plan's setpoints per period from i0 + 1, REC the judged record (rows
     from period rec0 on: true and estimated roll, pitch, yaw), k the shared constants (`N_WORLD`), jump the
     driver's limits per word. The loop arms at period i_arm."""
     dt, t_arm = k[DT], k[T_ARM]
     cnt = np.zeros(4, dtype=np.int64)
     wk = work(X.shape[1])
+    e9 = np.empty(12)                        # a read's normals: the chip's nine, the magnetometer's three
+    held, temp = np.empty(n), np.empty(n)    # each period's, the same for every vehicle: found once
+    gains = np.empty((n, 3))
+    power, sonar = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.bool_)   # the periods of their reads
+    for step in range(n):
+        power[step] = (i0 + step + 1) % int(k[POWER_EVERY]) == 0
+        sonar[step] = (i0 + step + 1) % int(k[SONAR_EVERY]) == 0
+        t = (i0 + step + 1) * dt
+        held[step] = t % CC[0, _C_PERIOD]
+        h = t - (i0 + step) * dt
+        gains[step, 0] = h
+        gains[step, 1], gains[step, 2] = 1.0 - exp(-h / CC[0, _C_A_DELAY]), 1.0 - exp(-h / CC[0, _C_G_DELAY])
+        rise = k[WARM_RISE]
+        temp[step] = AMBIENT_C if rise == 0.0 else AMBIENT_C + rise * (1.0 - exp((0.0 - t) / k[WARM_TAU]))
     for v in range(X.shape[0]):
         x, w, e, kc, q, ring, regs, cs, cc = X[v], W[v], E[v], KC[v], Q[v], RING[v], REGS[v], CS[v], CC[v]
-        uni = UNI[v]
+        uni, gen = UNI[v], GEN[v]
         nring, frac = NRING[v], FRAC[v]
         for step in range(n):
             if w[W_DONE] != 0.0:
@@ -351,17 +407,20 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, NORM, AT, UNI, S
                 w[W_REASON], w[W_DONE] = DIVERGED, 1.0
                 break
             sonar_edges(w, t)
-            if chip_read(x, w, q, codes, regs, cs, cc, NORM[v], AT[step, 0], AT[step, 1], jump, k, t, wk):
+            normals(gen, w, e9, 0, 9)
+            if i % MAG_EVERY == 1 % MAG_EVERY:      # read i's magnetometer sample (`chip_read`)
+                normals(gen, w, e9, 9, 3)
+            if chip_read(x, w, q, codes, regs, cs, cc, e9, 0, 9, jump, k, t, held[step], temp[step], gains[step], wk):
                 w[W_BAD] = 0.0
             else:
                 w[W_BAD] += 1.0
                 if w[W_BAD] > MAX_BAD_IMU_FRAMES:
                     w[W_REASON], w[W_DONE] = IMU_BAD, 1.0
                     break
-            if i % int(k[POWER_EVERY]) == 0:                 # the power monitor's read
+            if power[step]:                                  # the power monitor's read
                 for _ in range(int(k[INA_DRAWS])):
                     gauss(w, uni, 0.0, 1.0)
-            if i % int(k[SONAR_EVERY]) == 0:
+            if sonar[step]:
                 sonar_trigger(w, x, uni, k, t)
             has_echo = w[W_HAS_RESULT] != 0.0
             echo = w[W_RESULT]
@@ -495,11 +554,24 @@ def compiled_fly():
     g = cc(gauss, uniform=u)
     at = plant["forces"]
     held = cc(held_command)
-    return cc(fly, allocates=True, work=plant["work"],
+    return cc(fly, allocates=True, work=plant["work"], normals=cc(normals, allocates=True),
               plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held),
               sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
               chip_read=cc(chip_read, forces=at, held_command=held, chip_frame=imu.chip_frame_compiled(), word=cc(word),
-                           rotation_from_trig=plant["rotation_from_trig"], i16=cc(i16, _i16=cc(imu._i16))),
+                           rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],
+                           i16=cc(i16, _i16=cc(imu._i16))),
               land=cc(land, ob_landing_start=o["landing_start"]), landing_setpoint=cc(landing_setpoint),
               ob_step=o["step"], ob_on_range=o["on_range"], ob_tilt=o["tilt"], ob_heading=o["heading"],
               ob_set_reference=o["set_reference"], ob_arm=o["arm"])
+
+
+def generators(gens: list) -> list:
+    """The vehicles' numpy generators as `fly` takes them: a numba typed List where it is compiled (whose
+    generators are the same objects: their state moves on in numpy's), else the list."""
+    if compiled_fly() is None:
+        return gens
+    from numba.typed import List
+    typed = List()
+    for g in gens:            # (an append each: half the cost of List(gens))
+        typed.append(g)
+    return typed

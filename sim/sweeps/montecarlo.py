@@ -91,15 +91,17 @@ def drawn_airframe(airframe, draws: dict, k=None):
     return dataclasses.replace(airframe, **values) if values else airframe
 
 
-def drawn_params(params, drawn: dict):
-    """The vehicle of one draw (floats): the parameter file with its airframe, its tables and its
-    effects' parameters at their drawn values."""
+def drawn_params(params, drawn: dict, effects: bool = True):
+    """The vehicle of one draw (floats): the parameter file with its airframe, its tables and (unless
+    not `effects`: the batch draws them as arrays, `batch.with_draws`) its effects' parameters at their
+    drawn values."""
     from flightctl.params import EffectSpec
     tables = {t: dataclasses.replace(getattr(params, t), **{n: v for (c, n), v in drawn.items() if c == t})
               for t in TABLES}
-    effects = tuple(EffectSpec(e.cause, tuple((k, drawn.get((e.cause, k), v)) for k, v in e.parameters), e.source,
-                               e.ranges) for e in params.effects)
-    return dataclasses.replace(params, airframe=drawn_airframe(params.airframe, drawn), effects=effects, **tables)
+    if effects:
+        tables["effects"] = tuple(EffectSpec(e.cause, tuple((k, drawn.get((e.cause, k), v)) for k, v in e.parameters),
+                                             e.source, e.ranges) for e in params.effects)
+    return dataclasses.replace(params, airframe=drawn_airframe(params.airframe, drawn), **tables)
 
 
 def _fly(job: tuple) -> dict:

@@ -14,7 +14,7 @@ same PWM counts, count for count, and the same estimates. The equations it share
 """
 from __future__ import annotations
 
-from math import atan2, cos, exp, pi, sin, sqrt
+from math import atan2, copysign, cos, exp, pi, sin, sqrt
 
 from flightctl.control.controller import MAX_CORRECT_DT
 from flightctl.control.estimator import heading_from_mag, tilt_from_accel
@@ -23,16 +23,18 @@ from flightctl.control.landing import (ACCEL_TAU, FALLING_ACCEL, FALLING_SPEED, 
 from flightctl.control.mixer import MIN_TILT_COSINE, count_from_thrust
 from flightctl.physics import G
 from flightctl.safety import LEFT_GROUND_ALT
+from flightctl.sim.world.model import remainder
 
 TWO_PI = 2.0 * pi
 
 # e: one vehicle's controller state. The estimator (roll, pitch, yaw, their rates for the D terms, the
 # filtered gyro, the in-flight gyro bias, the D path's EMA gain and its dt, in flight, the references
-# of the calibration), the PIDs' integrals, u_z, the altitude task, the vertical estimate, the landing.
+# of the calibration), the PIDs' integrals, u_z, the altitude task, the vertical estimate, the landing,
+# the thrusts; the roll and pitch whose sines and cosines follow (`estimate_trig`).
 (ROLL, PITCH, YAW, DROLL, DPITCH, DYAW, EP, EQ, ER, BX, BY, A_RATE, RATE_DT, IN_FLIGHT, ROLL_BIAS, PITCH_BIAS,
  YAW_BIAS, USE_MAG, I_Z, I_PHI, I_THETA, I_PSI, UZ, ALT, ALT_PREV, ALT_SP, ALT_T, VZ, VV, VB, VA, LANDING_ON,
  L_TRIM, L_UZ, L_SPEED, L_INTEGRAL, L_ALOW, L_TSTILL, L_TRETRY, L_VFEEL, L_TSTALLED, L_FEELING, L_LANDED,
- L_DESCENDING, F1, F2, F3, F4, N_E) = range(49)
+ L_DESCENDING, F1, F2, F3, F4, T_ROLL, T_PITCH, SR, CR, SP, CP, N_E) = range(55)
 # k: its constants: the gains of eq. 24 (kp, ki, kd per axis z, phi, theta, psi), Table 5's filters and
 # the in-flight correction's, the D path's time constant, the structure (1: "paper"), the airframe's
 # B (eq. 25), eq. 26's h1 and h2, the sonar's period, the landing's M / 4 and M G / 4
@@ -63,6 +65,18 @@ def reset(e) -> None:
     e[ALT_T] = -1.0    # no echo yet (`alt_t` None)
 
 
+def estimate_trig(e):
+    """(sin, cos) of the estimate's roll and pitch: `step` finds them for its new estimate, and the next
+    `on_range` and `estimate` ask for the same angles (remembered, the sign of a zero included; a cosine
+    of 0, which no float angle has, says none are: a state of zeros)."""
+    roll, pitch = e[ROLL], e[PITCH]
+    if not (e[CR] != 0.0 and roll == e[T_ROLL] and pitch == e[T_PITCH]
+            and copysign(1.0, roll) == copysign(1.0, e[T_ROLL]) and copysign(1.0, pitch) == copysign(1.0, e[T_PITCH])):
+        e[T_ROLL], e[T_PITCH] = roll, pitch
+        e[SR], e[CR], e[SP], e[CP] = sin(roll), cos(roll), sin(pitch), cos(pitch)
+    return e[SR], e[CR], e[SP], e[CP]
+
+
 def set_reference(e, roll_bias: float, pitch_bias: float, yaw_bias: float, use_mag: bool) -> None:
     """`AttitudeEstimator.set_reference`: the calibration's biases and heading; the estimate restarts."""
     e[ROLL_BIAS], e[PITCH_BIAS], e[YAW_BIAS], e[USE_MAG] = roll_bias, pitch_bias, yaw_bias, 1.0 if use_mag else 0.0
@@ -80,7 +94,7 @@ def pid(e, k, at: int, setpoint: float, y: float, dy: float, dt: float, angle: b
     """`Pid.update` (eq. 24) of the axis whose kp is k[at] and integral e[at - KP_Z + I_Z]."""
     err = setpoint - y
     if angle:
-        err = (err + pi) % TWO_PI - pi
+        err = remainder(err + pi, TWO_PI) - pi
     lim = k[B]
     slot = I_Z + (at - KP_Z) // 3
     i = e[slot] + k[at + 1] * err * dt
@@ -92,7 +106,7 @@ def pid(e, k, at: int, setpoint: float, y: float, dy: float, dt: float, angle: b
 def estimate(e, k, gx, gy, gz, ax, ay, az, mx, my, mz, mag_fresh: bool, dt: float) -> None:
     """`AttitudeEstimator.update`."""
     roll, pitch, yaw = e[ROLL], e[PITCH], e[YAW]
-    sr, cr, sp, cp = sin(roll), cos(roll), sin(pitch), cos(pitch)
+    sr, cr, sp, cp = estimate_trig(e)
     paper = k[PAPER] != 0.0
     if paper:
         a = k[A_EMA]
@@ -132,11 +146,11 @@ def estimate(e, k, gx, gy, gz, ax, ay, az, mx, my, mz, mag_fresh: bool, dt: floa
         e[BY] -= ki * (ep * cr)
     if e[USE_MAG] != 0.0 and mag_fresh:
         yaw_mag = heading_from_mag(mx, my, mz, roll_g + e[ROLL_BIAS], pitch_g + e[PITCH_BIAS]) - e[YAW_BIAS]
-        yaw_g += (1.0 - k[A_YAW]) * ((yaw_mag - yaw_g + pi) % TWO_PI - pi)
-    yaw_g = (yaw_g + pi) % TWO_PI - pi
+        yaw_g += (1.0 - k[A_YAW]) * (remainder(yaw_mag - yaw_g + pi, TWO_PI) - pi)
+    yaw_g = remainder(yaw_g + pi, TWO_PI) - pi
     if paper:
         rate_roll, rate_pitch = (roll_g - roll) / dt, (pitch_g - pitch) / dt
-        rate_yaw = ((yaw_g - yaw + pi) % TWO_PI - pi) / dt
+        rate_yaw = (remainder(yaw_g - yaw + pi, TWO_PI) - pi) / dt
     e[DROLL], e[DPITCH], e[DYAW] = rate_roll, rate_pitch, rate_yaw
     e[ROLL], e[PITCH], e[YAW] = roll_g, pitch_g, yaw_g
 
@@ -189,7 +203,8 @@ def on_range(e, k, distance: float, t: float) -> None:
     dt = t - e[ALT_T] if e[ALT_T] >= 0.0 else k[SONAR_PERIOD]
     e[ALT_T] = t
     if distance == distance:
-        e[ALT] = alt = distance * cos(e[ROLL]) * cos(e[PITCH])
+        _, cr, _, cp = estimate_trig(e)
+        e[ALT] = alt = distance * cr * cp
         if dt > 0.0:
             h = dt if dt < MAX_CORRECT_DT else MAX_CORRECT_DT
             r = alt - e[VZ]
@@ -211,8 +226,8 @@ def step(e, k, gx, gy, gz, ax, ay, az, mx, my, mz, mag_fresh: bool, dt: float, r
     estimate(e, k, gx, gy, gz, ax, ay, az, mx, my, mz, mag_fresh, dt)
     e[ALT_SP] = alt_sp
     roll, pitch = e[ROLL], e[PITCH]
-    cp = cos(pitch)                     # `Vertical.predict`
-    a = e[VA] = -sin(pitch) * ax + sin(roll) * cp * ay + cos(roll) * cp * az - G - e[VB]
+    sr, cr, sp, cp = estimate_trig(e)   # `Vertical.predict`
+    a = e[VA] = -sp * ax + sr * cp * ay + cr * cp * az - G - e[VB]
     if a > IMPACT:
         e[VZ] = e[VV] = 0.0
     else:
@@ -224,7 +239,7 @@ def step(e, k, gx, gy, gz, ax, ay, az, mx, my, mz, mag_fresh: bool, dt: float, r
     uphi = pid(e, k, KP_PHI, roll_sp, roll, e[DROLL], dt, False)
     utheta = pid(e, k, KP_THETA, pitch_sp, pitch, e[DPITCH], dt, False)
     upsi = pid(e, k, KP_PSI, yaw_sp, e[YAW], e[DYAW], dt, True)
-    c = cos(roll) * cos(pitch)          # `Mixer.mix`: eq. 25, each f within [0, 2B], eq. 26 inverted
+    c = cr * cp                         # `Mixer.mix`: eq. 25, each f within [0, 2B], eq. 26 inverted
     base = k[B] + e[UZ] / (c if c > MIN_TILT_COSINE else MIN_TILT_COSINE)
     fmax, h1, h2 = 2.0 * k[B], k[H1], k[H2]
     for i in range(4):
@@ -252,10 +267,13 @@ def compiled_functions(cc):
     from flightctl.control import estimator, mixer
     count = cc(mixer.count_from_thrust, command_from_thrust=cc(physics.command_from_thrust))
     heading = cc(estimator.heading_from_mag)
-    pid_c = cc(pid)
+    rem = cc(remainder)
+    pid_c = cc(pid, remainder=rem)
     land = cc(landing_step)
-    est = cc(estimate, heading_from_mag=heading)
-    return {"step": cc(step, estimate=est, pid=pid_c, landing_step=land, count_from_thrust=count),
-            "on_range": cc(on_range, pid=pid_c), "tilt": cc(tilt, tilt_from_accel=cc(estimator.tilt_from_accel)),
+    trig = cc(estimate_trig)
+    est = cc(estimate, heading_from_mag=heading, remainder=rem, estimate_trig=trig)
+    return {"step": cc(step, estimate=est, pid=pid_c, landing_step=land, count_from_thrust=count, estimate_trig=trig),
+            "on_range": cc(on_range, pid=pid_c, estimate_trig=trig),
+            "tilt": cc(tilt, tilt_from_accel=cc(estimator.tilt_from_accel)),
             "heading": heading, "reset": cc(reset), "set_reference": cc(set_reference), "arm": cc(arm),
             "landing_start": cc(landing_start)}

@@ -342,7 +342,7 @@ def model_forces():
 @functools.cache
 def functions() -> dict:
     """The plant's functions compiled, each call bound to a compiled copy: `rk4`, `forces`, `period`,
-    `commanded` (and the batched simulator's `rotation_from_trig`); empty when compilation is off."""
+    `commanded` (and the batched simulator's `rotation_from_trig`, `attitude_trig`); empty when compilation is off."""
     if not enabled():
         return {}
     from flightctl import physics
@@ -376,4 +376,4 @@ def functions() -> dict:
     once(x, 0.0, 0.0, 0.0, 0.0, codes, q, 1e-3, False, np.empty(N_OUT))
     alone(x, 0.0, 0.0, 0.0, 0.0, codes, q)
     return {"rk4": step, "forces": at, "forces_of": alone, "period": once, "commanded": command, "work": scratch,
-            "rotation_from_trig": m["rotation_from_trig"]}
+            "rotation_from_trig": m["rotation_from_trig"], "attitude_trig": trig}

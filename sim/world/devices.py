@@ -104,8 +104,9 @@ def vehicle_noise(noise: SensorNoise, sensors) -> SensorNoise:
 
 class NoisePool:
     """Standard normal numbers drawn in blocks by numpy: the per-sample cost of `next()` is an index."""
+    BLOCK = 1 << 16
 
-    def __init__(self, seed: int, block: int = 1 << 16):
+    def __init__(self, seed: int, block: int = BLOCK):
         self._gen = np.random.default_rng(seed)
         self._block = block
         self._refill()

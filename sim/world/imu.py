@@ -17,6 +17,7 @@ import numpy as np
 
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.physics import G
+from flightctl.sim.world.model import remainder
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -162,7 +163,8 @@ class SimMpu9250:
         normal = w.normal
         i = normal.index(9)
         self._frame(self._regs, self._s, self._c, normal.array if self._arrays else normal.values, i,
-                    fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t, dt, self.die_temperature(t), self._started)
+                    fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t % float(self._c[_C_PERIOD]), dt,
+                    self.die_temperature(t), self._started)
         self._started = True
         if self._gyro_effects:
             self._gyro_effect(dt)
@@ -222,11 +224,12 @@ def chip_die(noise: SensorNoise, airframe, rng) -> tuple[list, list]:
     return s, c
 
 
-def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t, dt, temp, started):
+def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, held, dt, temp, started):
     """The MPU-9250's burst registers (ACCEL_XOUT_H on, big-endian int16) for the true specific force
-    (fx, fy, fz) and rates (p, q, r) at time t, dt after the last read, the rotors' thrusts f and speeds
-    w, the die at temp (degC), with the chip's state s and constants c (`SimMpu9250`; `started`: not
-    the first read) and nine standard normal numbers e[i:i + 9]:
+    (fx, fy, fz) and rates (p, q, r) at time t, dt after the last read, `held` = t % c[_C_PERIOD] s after
+    the chip's last output sample (the caller's: the batch finds it once a period for all its vehicles),
+    the rotors' thrusts f and speeds w, the die at temp (degC), with the chip's state s and constants c
+    (`SimMpu9250`; `started`: not the first read) and nine standard normal numbers e[i:i + 9]:
 
     - the DLPF's first-order stage on the rigid-body signals (gains c[_C_KA], c[_C_KG] for dt);
     - the zero-rate offset's random walk, variance K^2 dt over the time since the last sample;
@@ -252,7 +255,7 @@ def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3
         s[_S_WALK + 2] += k * e[i + 8]
     d = temp - AMBIENT_C
     if c[_C_KV] != 0.0 or c[_C_KVG] != 0.0:
-        vx, vy, vz, vp, vq, vr = vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, t, dt)
+        vx, vy, vz, vp, vq, vr = vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, held, dt)
         fx, fy, fz, p, q, r = fx + vx, fy + vy, fz + vz, p + vp, q + vq, r + vr
     a_lsb, g_lsb, sa, sg = c[_C_A_LSB], c[_C_G_LSB], c[_C_SA], c[_C_SG]
     bb = c[_C_BB] * (f1 + f2 + f3 + f4)       # the frame's broadband rate noise, rms per read
@@ -266,24 +269,24 @@ def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3
     put16(regs, _BURST + 12, (r + c[_C_G0 + 2] + s[_S_WALK + 2] + c[_C_GC + 2] * d + sr * e[i + 5]) * g_lsb)
 
 
-def vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, t, dt):
+def vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, held, dt):
     """The rotors' vibration in the output registers: (ax, ay, az) m/s^2 and (p, q, r) rad/s. Each
     rotor's speed from its thrust (eq. 27, so a rotor lag is followed), lines at 1, 2 and 3 times it
     (c[_C_H2], c[_C_H3] of the 1/rev), the amplitude in proportion to the thrust, taken at the chip's
     last output sample (SMPLRT_DIV) and through each sensor's DLPF as a first-order low-pass with the
     register map's bandwidth and delay; each rotor's angle advances in s. On the accelerometer the
     imbalance force turns with the rotor in x-y (eq. 9's sense) and bends its arm in z; on the gyro
-    the bending arm rocks the frame in roll and pitch (and yaw, by c[_C_YAW]), with each arm's phase."""
+    the bending arm rocks the frame in roll and pitch (and yaw, by c[_C_YAW]), with each arm's phase;
+    `held`: s since the last output sample."""
     kv, kg, tc2, tg2 = c[_C_KV], c[_C_KVG], c[_C_TC2], c[_C_TCG2]
     h2, h3, yaw = c[_C_H2], c[_C_H3], c[_C_YAW]
-    held = t % c[_C_PERIOD]
     back_a, back_g = held + c[_C_A_DELAY], held + c[_C_G_DELAY]   # how long ago each entered its register
     vx = vy = vz = vp = vq = vr = 0.0
     thrusts, speeds = (f1, f2, f3, f4), (w1, w2, w3, w4)
     for j in range(4):
         fi, om = thrusts[j], speeds[j]
         if fi > 0.0:
-            th = s[_S_PHASE + j] = (s[_S_PHASE + j] + om * dt) % _TAU
+            th = s[_S_PHASE + j] = remainder(s[_S_PHASE + j] + om * dt, _TAU)
             zc, zs, spin = c[_C_ZC + j], c[_C_ZS + j], SPIN[j]
             for sensor in range(2):
                 k0, t2 = (kv, tc2) if sensor == 0 else (kg, tg2)
@@ -325,7 +328,7 @@ def chip_frame_compiled():
     if not compiled.enabled():
         return None
     c = compiled.compiled_copy
-    frame = c(chip_frame, vibration=c(vibration), put16=c(put16, _i16=c(_i16)))
+    frame = c(chip_frame, vibration=c(vibration, remainder=c(remainder)), put16=c(put16, _i16=c(_i16)))
     # compiled (or loaded from the cache) now, not at a first read that a simulation paced by the wall
     # clock would see as a stall
     zeros = np.zeros(N_CHIP_CONST)

@@ -34,6 +34,20 @@ def _trig(v):
     return np if isinstance(v, np.ndarray) else math
 
 
+def remainder(x: float, y: float) -> float:
+    """Python's x % y for y > 0, to the bit, without fmod's division where x is within y of [0, y):
+    fmod(x, y) is then x (or x - y, exact by Sterbenz's lemma) and CPython's sign rule adds y to a
+    negative one (`float_rem`); anything else goes to %. For the compiled loops (an angle's wrap,
+    a rotor's phase), where a call of fmod costs more than the rest of the wrap."""
+    if 0.0 < x < y:
+        return x
+    if y <= x < y + y:
+        return x - y
+    if -y < x < 0.0:
+        return x + y
+    return x % y
+
+
 def body_torques(f1, f2, f3, f4, t1, t2, t3, t4, l: float):
     """Roll, pitch and yaw torques of the "+" configuration (conventions.md, eq. 25 layout)."""
     return l * (f2 - f4), l * (f3 - f1), t1 - t2 + t3 - t4
