@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 
 from flightctl.boards import MIN_BATTERY_V, BoardUnavailable
+from flightctl.drivers import pulses
 from flightctl.drivers.hcsr04 import HcSr04
 from flightctl.drivers.ina219 import Ina219
 from flightctl.drivers.mpu9250 import Mpu9250
@@ -22,6 +23,9 @@ from flightctl.errors import InputError, number, read_toml
 RESERVED_PINS = {2: "I2C SDA", 3: "I2C SCL", 7: "SPI CE1", 8: "SPI CE0", 9: "SPI MISO", 10: "SPI MOSI",
                  11: "SPI SCLK", 14: "UART TX", 15: "UART RX"}
 GPIO = ("BCM GPIO", 0, 31)
+# the [esc] pulse keys of both boards (their defaults: drivers/pulses.py); `check_pulses` below
+STOP_US = ("us", 500, 1500, "stop pulse: zero thrust, keeps the ESCs armed", pulses.STOP_US)
+MAX_US = ("us", 1000, 2200, "longest pulse; on-times are clamped to [stop_us, max_us]", pulses.MAX_US)
 
 
 def key(unit: str, lo, hi, doc: str, default=dataclasses.MISSING):
@@ -126,6 +130,12 @@ def check_pins(where: str, esc_pins, sonar: SonarConfig, what: str = "esc.pins")
             raise InputError(f"{where}: GPIO {p} is the {RESERVED_PINS[p]} pin")
     if len(set(pins)) != len(pins):
         raise InputError(f"{where}: a GPIO is used twice among {what} and the sonar pins: {pins}")
+
+
+def check_pulses(where: str, esc) -> None:
+    """The [esc] section's stop pulse shorter than its longest pulse."""
+    if not esc.stop_us < esc.max_us:
+        raise InputError(f"{where}: esc: need stop_us < max_us, got {esc.stop_us} and {esc.max_us}")
 
 
 def closer(closers: list):

@@ -7,7 +7,7 @@
 The board file has a schema, like the parameters: every key has a type, a unit, a range and a
 description (the dataclasses below). The shipped flightctl/boards/pi.toml holds the wiring of the
 reference quadcopter; a board file given with --board-file replaces the keys it names; a key that
-neither gives takes the schema's default (the ESC timings are the ESC driver's own, drivers/esc.py;
+neither gives takes the schema's default (the ESC timings are the ESC drivers' own, drivers/pulses.py and esc.py;
 the battery threshold is every board's, flightctl/boards/__init__.py). Every problem is one line naming the key.
 
 The ESC output is started first, so the ESCs see the stop pulse as early as possible; then the IMU
@@ -21,14 +21,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, missing_module
-from flightctl.boards.boardfile import (GPIO, ChecksConfig, ImuConfig, PowerConfig, SonarConfig,
-                                        check_pins, closer, key, load_sections, start_sensors)
+from flightctl.boards.boardfile import (GPIO, MAX_US, STOP_US, ChecksConfig, ImuConfig, PowerConfig, SonarConfig,
+                                        check_pins, check_pulses, closer, key, load_sections, start_sensors)
 from flightctl.clock import WallClock
 from flightctl.drivers import esc
 from flightctl.drivers.esc import EscError, PigpioEsc
 from flightctl.drivers.ina219 import PowerMonitorError
 from flightctl.drivers.mpu9250 import ImuError
-from flightctl.errors import InputError
 from flightctl.hal import Hal
 from flightctl.params import Params
 
@@ -45,8 +44,8 @@ class PigpioConfig:
 @dataclass(frozen=True)
 class EscConfig:
     pins: tuple[int, ...] = key(*GPIO, "the four ESC signals, motor 1 (N), 2 (W), 3 (S), 4 (E)")
-    stop_us: int = key("us", 500, 1500, "stop pulse: zero thrust, keeps the ESCs armed", esc.STOP_US)
-    max_us: int = key("us", 1000, 2200, "longest pulse; on-times are clamped to [stop_us, max_us]", esc.MAX_US)
+    stop_us: int = key(*STOP_US)
+    max_us: int = key(*MAX_US)
     deadman_ms: int = key("ms", 20, 1000, "pigpiod stops the motors this long after the last command",
                           esc.DEADMAN_MS)
     tolerance_hz: float = key("Hz", 0.05, 5.0, "arming is refused if the measured output is further from "
@@ -79,8 +78,7 @@ def load_board(path: str | Path | None = None) -> BoardConfig:
 def _check(c: BoardConfig) -> None:
     """What the ranges of single keys cannot say."""
     check_pins(c.path, c.esc.pins, c.sonar)
-    if not c.esc.stop_us < c.esc.max_us:
-        raise InputError(f"{c.path}: esc: need stop_us < max_us, got {c.esc.stop_us} and {c.esc.max_us}")
+    check_pulses(c.path, c.esc)
 
 
 def connect_pigpio(config: BoardConfig):

@@ -25,8 +25,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, missing_module
-from flightctl.boards.boardfile import (GPIO, ChecksConfig, ImuConfig, PowerConfig, SonarConfig, check_pins,
-                                        closer, key, load_sections, start_sensors)
+from flightctl.boards.boardfile import (GPIO, MAX_US, STOP_US, ChecksConfig, ImuConfig, PowerConfig, SonarConfig,
+                                        check_pins, check_pulses, closer, key, load_sections, start_sensors)
 from flightctl.clock import WallClock
 from flightctl.drivers import pulses
 from flightctl.drivers.gpio_cdev import CdevGpio, GpioBusy
@@ -55,8 +55,8 @@ class PwmConfig:
 
 @dataclass(frozen=True)
 class EscConfig:
-    stop_us: int = key("us", 500, 1500, "stop pulse: zero thrust, keeps the ESCs armed", pulses.STOP_US)
-    max_us: int = key("us", 1000, 2200, "longest pulse; on-times are clamped to [stop_us, max_us]", pulses.MAX_US)
+    stop_us: int = key(*STOP_US)
+    max_us: int = key(*MAX_US)
     deadman_ms: int = key("ms", 20, 1000, "the dead-man process stops the motors this long after the last "
                           "command", pulses.DEADMAN_MS)
 
@@ -97,8 +97,7 @@ def load_board(path: str | Path | None = None) -> Pi5Config:
             if RP1_PWM0_CHANNEL[pin] != channel:
                 raise InputError(f"{name}: pwm: GPIO {pin} is the RP1's PWM0 channel {RP1_PWM0_CHANNEL[pin]}, "
                                  f"not channel {channel}")
-    if not c.esc.stop_us < c.esc.max_us:
-        raise InputError(f"{name}: esc: need stop_us < max_us, got {c.esc.stop_us} and {c.esc.max_us}")
+    check_pulses(name, c.esc)
     return c
 
 
