@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import glob
 import importlib
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -125,7 +126,7 @@ def open_gpio_chip(name: str):
 
 
 def open_pi5_board(params: Params, config_path: str | Path | None = None, *, pwm_root: str = SYSFS_PWM,
-                   pwm_fs=None, gpio_chip=None, spi=None, smbus=None, clock=None,
+                   pwm_fs=os, gpio_chip=None, spi=None, smbus=None, clock=None,
                    config: Pi5Config | None = None) -> Board:
     config = config if config is not None else load_board(config_path)
     for library, given in (("gpiod", gpio_chip), ("spidev", spi), ("smbus2", smbus)):
@@ -136,9 +137,8 @@ def open_pi5_board(params: Params, config_path: str | Path | None = None, *, pwm
     close = closer(closers)
     try:
         p, e = config.pwm, config.esc
-        kw = {} if pwm_fs is None else {"fs": pwm_fs}
         motors = SysfsPwmEsc(p.chip, p.channels, a.esc_pwm_hz, e.stop_us, e.max_us, e.deadman_ms,
-                             pins=p.pins, root=pwm_root, **kw)
+                             pins=p.pins, root=pwm_root, fs=pwm_fs)
         closers.append(motors.close)
         motors.start()
         if gpio_chip is None:
@@ -173,10 +173,9 @@ def stop_motors(params: Params, options: BoardOptions) -> str:
     and unexported (the lines low: no signal, zero thrust). The unit's ExecStopPost."""
     config = load_board(options.board_file)
     devices = options.devices
-    kw = {} if devices.get("pwm_fs") is None else {"fs": devices["pwm_fs"]}
     try:
         done = release(devices.get("pwm_root", SYSFS_PWM), config.pwm.chip, config.pwm.channels,
-                       config.esc.stop_us, **kw)
+                       config.esc.stop_us, fs=devices.get("pwm_fs", os))
     except EscError as e:
         raise BoardUnavailable(str(e)) from e
     if not done:
