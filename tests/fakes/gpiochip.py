@@ -36,8 +36,10 @@ from datetime import timedelta
 import gpiod
 from gpiod.line import Bias, Clock, Direction, Drive, Edge, Value
 
-ECHO_DELAY_NS = 450_000
-NS_PER_M = 5_831_000
+from fakes import HCSR04_ECHO_DELAY_US, HCSR04_US_PER_M
+
+ECHO_DELAY_NS = int(HCSR04_ECHO_DELAY_US * 1000)
+NS_PER_M = int(HCSR04_US_PER_M * 1000)
 FAR_NS = 38_000_000
 MIN_TRIGGER_NS = 10_000
 _RISING, _FALLING = gpiod.EdgeEvent.Type.RISING_EDGE.value, gpiod.EdgeEvent.Type.FALLING_EDGE.value

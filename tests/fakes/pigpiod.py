@@ -38,13 +38,13 @@ from dataclasses import dataclass, field
 
 import pigpio
 
+from fakes import HCSR04_ECHO_DELAY_US, HCSR04_US_PER_M
+
 CMD = struct.Struct("IIII")
 REPORT = struct.Struct("HHII")
 MAX_WAVES = 250
 MAX_SCRIPTS = 32
 MAX_HANDLES = 32
-ECHO_DELAY_US = 450.0
-US_PER_M = 5831.0
 
 C = {name[8:]: value for name, value in vars(pigpio).items() if name.startswith("_PI_CMD_")}
 EXT_CMDS = {C["WVAG"], C["WVAS"], C["TRIG"], C["PROC"], C["PROCR"], C["PROCU"], C["HP"], C["WVCHA"]}
@@ -344,10 +344,10 @@ class FakePigpiod:
             self._push(now + p2, p1, 1 - level)
             s = self.sonar
             if s is not None and p1 == s.trigger:
-                rise = now + p2 + ECHO_DELAY_US
+                rise = now + p2 + HCSR04_ECHO_DELAY_US
                 if s.mode == "echo":
                     self._push(rise, s.echo, 1)
-                    self._push(rise + s.distance_m * US_PER_M, s.echo, 0)
+                    self._push(rise + s.distance_m * HCSR04_US_PER_M, s.echo, 0)
                 elif s.mode == "stuck" and not self.levels >> s.echo & 1:
                     self._push(rise, s.echo, 1)
             return 0, b""
