@@ -23,6 +23,7 @@ from flightctl.errors import InputError, number, read_toml
 RESERVED_PINS = {2: "I2C SDA", 3: "I2C SCL", 7: "SPI CE1", 8: "SPI CE0", 9: "SPI MISO", 10: "SPI MOSI",
                  11: "SPI SCLK", 14: "UART TX", 15: "UART RX"}
 GPIO = ("BCM GPIO", 0, 31)
+CALIBRATE_S = 60.0          # s sitting still before arming on the vehicle: the paper's 60 s
 # the [esc] pulse keys of both boards (their defaults: drivers/pulses.py); `check_pulses` below
 STOP_US = ("us", 500, 1500, "stop pulse: zero thrust, keeps the ESCs armed", pulses.STOP_US)
 MAX_US = ("us", 1000, 2200, "longest pulse; on-times are clamped to [stop_us, max_us]", pulses.MAX_US)

@@ -21,8 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, missing_module
-from flightctl.boards.boardfile import (GPIO, MAX_US, STOP_US, ChecksConfig, ImuConfig, PowerConfig, SonarConfig,
-                                        check_pins, check_pulses, closer, key, load_sections, start_sensors)
+from flightctl.boards.boardfile import (CALIBRATE_S, GPIO, MAX_US, STOP_US, ChecksConfig, ImuConfig, PowerConfig,
+                                        SonarConfig, check_pins, check_pulses, closer, key, load_sections,
+                                        start_sensors)
 from flightctl.clock import WallClock
 from flightctl.drivers import esc
 from flightctl.drivers.esc import EscError, PigpioEsc
@@ -32,7 +33,6 @@ from flightctl.hal import Hal
 from flightctl.params import Params
 
 DEFAULT_BOARD_FILE = "pi.toml"
-PI_CALIBRATE_S = 60.0          # s sitting still before arming: the paper's 60 s
 
 
 @dataclass(frozen=True)
@@ -110,7 +110,7 @@ def open_pi_board(params: Params, config_path: str | Path | None = None, *, pi=N
         close()
         raise
     hal = Hal(imu=imu, motors=motors, rangefinder=sonar, power=power, clock=clock or WallClock(a.dt))
-    return Board(hal, "pi", config.checks.min_battery_v, PI_CALIBRATE_S, close,
+    return Board(hal, "pi", config.checks.min_battery_v, CALIBRATE_S, close,
                  meta={"board_file": config.path, "esc_pins": str(list(config.esc.pins)), **imu.filters()})
 
 

@@ -26,8 +26,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, missing_module
-from flightctl.boards.boardfile import (GPIO, MAX_US, STOP_US, ChecksConfig, ImuConfig, PowerConfig, SonarConfig,
-                                        check_pins, check_pulses, closer, key, load_sections, start_sensors)
+from flightctl.boards.boardfile import (CALIBRATE_S, GPIO, MAX_US, STOP_US, ChecksConfig, ImuConfig, PowerConfig,
+                                        SonarConfig, check_pins, check_pulses, closer, key, load_sections,
+                                        start_sensors)
 from flightctl.clock import WallClock
 from flightctl.drivers import pulses
 from flightctl.drivers.gpio_cdev import CdevGpio, GpioBusy
@@ -40,7 +41,6 @@ from flightctl.hal import Hal
 from flightctl.params import Params
 
 DEFAULT_BOARD_FILE = "pi5.toml"
-PI5_CALIBRATE_S = 60.0                  # s sitting still before arming: the paper's 60 s
 RP1_PWM0 = "1f00098000.pwm"             # the RP1's PWM0 (rp1.dtsi: pwm@98000)
 # the header GPIOs of the RP1's PWM0 channels (RP1 peripherals datasheet; pinctrl-rp1: GPIO 12, 13 at
 # function a0, 14, 15 at a0, 18, 19 at a3)
@@ -152,7 +152,7 @@ def open_pi5_board(params: Params, config_path: str | Path | None = None, *, pwm
         close()
         raise
     hal = Hal(imu=imu, motors=motors, rangefinder=sonar, power=power, clock=clock or WallClock(a.dt))
-    return Board(hal, "pi5", config.checks.min_battery_v, PI5_CALIBRATE_S, close,
+    return Board(hal, "pi5", config.checks.min_battery_v, CALIBRATE_S, close,
                  meta={"board_file": config.path, "esc_pwm": f"{p.chip} channels {list(p.channels)}",
                        "esc_pins": str(list(p.pins)), **imu.filters()})
 
