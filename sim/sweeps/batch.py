@@ -207,13 +207,20 @@ def _fly_group(job) -> tuple:
             gc.enable()
 
 
+def _arm_and_record(dt: float, record: tuple[float, float] | None) -> tuple[int, int]:
+    """(the loop period that arms, after the calibration's SIM_CALIBRATE_S on the floor; the first
+    period of the judged record over `record`, s since arming, 0 without one)."""
+    i_arm = next(i for i in range(1, 10 ** 7) if i * dt >= SIM_CALIBRATE_S)
+    return i_arm, (i_arm + int(round(record[0] / dt)) if record else 0)
+
+
 def _fly_group_now(job) -> tuple:
     params, plan, draws, gains, seeds, record, until, structure = job
     a = params.airframe
     dt = a.dt
     template = _template(params)
     k = _world_constants(params, plan, template, dt)
-    i_arm = next(i for i in range(1, 10 ** 7) if i * dt >= SIM_CALIBRATE_S)
+    i_arm, rec0 = _arm_and_record(dt, record)
     end_s = plan.duration + LAND_MARGIN_S if until is None else until
     i_end = i_arm + int(math.ceil(end_s / dt)) + 1
     # the most uniforms a vehicle takes in a chunk: the sonar's dropout and jitter at each trigger (a
@@ -225,7 +232,6 @@ def _fly_group_now(job) -> tuple:
     for i in range(i_arm + 1, i_end + 1):
         t = i * dt - SIM_CALIBRATE_S
         sp[i] = plan.at(t) if t <= plan.duration else plan.at(plan.duration)
-    rec0 = i_arm + int(round(record[0] / dt)) if record else 0
     rows = int(round((record[1] - record[0]) / dt)) + 1 if record else 0
     rec = np.full((veh.n, rows, fl.N_REC), np.nan)
     run = fl.compiled_fly() or fl.fly
@@ -294,8 +300,8 @@ def simulate(params: Params, plan: Plan, n: int, draws: dict[tuple[str, str], np
     judged = [j for part in parts for j in part[0]]
     rec = np.concatenate([part[1] for part in parts], axis=0)
     dt = params.airframe.dt
-    i_arm = next(i for i in range(1, 10 ** 7) if i * dt >= SIM_CALIBRATE_S)
-    t = (i_arm + int(round(record[0] / dt)) + np.arange(rec.shape[1])) * dt - SIM_CALIBRATE_S if record else np.zeros(0)
+    _, rec0 = _arm_and_record(dt, record)
+    t = (rec0 + np.arange(rec.shape[1])) * dt - SIM_CALIBRATE_S if record else np.zeros(0)
     names = ("true_roll", "true_pitch", "true_yaw", "roll", "pitch", "yaw")
     log = {"t": t, **{name: np.ascontiguousarray(rec[:, :, j].T) for j, name in enumerate(names)}}
     return BatchFlight([j[0] for j in judged], np.array([j[1] for j in judged]), np.array([j[2] for j in judged]),

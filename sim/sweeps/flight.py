@@ -38,6 +38,7 @@ from math import atan2, copysign, cos, exp, inf, log, nan, pi, sin, sqrt
 
 import numpy as np
 
+from flightctl.control.estimator import tilt_from_accel
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.drivers.hcsr04 import MAX_RANGE_M, MIN_RANGE_M, US_PER_M, WATCHDOG_MS
 from flightctl.loop import LAND_LEVEL_S, LAND_SLACK_S, LAND_SPEED, LOST_ALT_S, MAX_BAD_IMU_FRAMES, TOUCHDOWN_ALT, TOUCHDOWN_S
@@ -192,7 +193,7 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
         w[W_STILL] = w[W_FSTILL] = 0.0
     cmd = held_command(w)
     dt = k[DT]
-    t_end = (i - 1) * dt + 1 * (dt / 1)
+    t_end = (i - 1) * dt + dt                # `Plant.advance`'s t0 + j h, at one substep
     ground = False
     if w[W_GROUND] != 0.0:
         if u1 == w[W_LIFT_AT] and u2 == w[W_LIFT_AT + 1] and u3 == w[W_LIFT_AT + 2] and u4 == w[W_LIFT_AT + 3]:
@@ -202,7 +203,7 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
             lift = force[2] + f[0] + f[1] + f[2] + f[3]
         ground = not lift / k[M_] > k[G_]
     if not (ground and (x.shape[0] == N_RIGID or w[W_STILL] != 0.0)):
-        rk4(x, cmd, codes, q, dt / 1, wk, ground)
+        rk4(x, cmd, codes, q, dt, wk, ground)
         y = 4 * x.shape[0]                   # where `rk4` leaves the new state
         if ground:                           # a step that gives the rotor states back gives them every time
             still = True
@@ -432,7 +433,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
             write = False
             sp = (0.0, 0.0, 0.0, 0.0)
             if w[W_ARMED] == 0.0:
-                roll, pitch = ob_tilt(ax, ay, az)          # `Calibration.add`
+                roll, pitch = tilt_from_accel(ax, ay, az)  # `Calibration.add` (eq. 30-31)
                 c = W_CAL
                 w[c] += gx
                 w[c + 1] += gy
@@ -534,11 +535,9 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
                 break
 
 
-
-
 # the onboard controller's functions (sim/sweeps/onboard.py), bound to their compiled copies by `compiled_fly`
-ob_step, ob_on_range, ob_tilt, ob_heading, ob_set_reference, ob_arm, ob_landing_start = (
-    ob.step, ob.on_range, ob.tilt, ob.heading_from_mag, ob.set_reference, ob.arm, ob.landing_start)
+ob_step, ob_on_range, ob_heading, ob_set_reference, ob_arm, ob_landing_start = (
+    ob.step, ob.on_range, ob.heading_from_mag, ob.set_reference, ob.arm, ob.landing_start)
 
 
 @functools.cache
@@ -561,7 +560,7 @@ def compiled_fly():
                            rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],
                            i16=cc(i16, _i16=cc(imu._i16))),
               land=cc(land, ob_landing_start=o["landing_start"]), landing_setpoint=cc(landing_setpoint),
-              ob_step=o["step"], ob_on_range=o["on_range"], ob_tilt=o["tilt"], ob_heading=o["heading"],
+              ob_step=o["step"], ob_on_range=o["on_range"], tilt_from_accel=o["tilt"], ob_heading=o["heading"],
               ob_set_reference=o["set_reference"], ob_arm=o["arm"])
 
 
