@@ -354,9 +354,8 @@ def main(argv=None) -> int:
     draw_figure(m, args.out)
     print(f"figure -> {args.out}")
     if args.doc:
-        from flightctl.sim.docs import write_block
-        if not write_block(args.doc, BEGIN, END, text):
-            raise SystemExit(f"the markers {BEGIN} ... {END} are not in {args.doc}")
+        from flightctl.sim.docs import write_or_exit
+        write_or_exit(args.doc, BEGIN, END, text)
         print(f"{args.doc}: the motor-loss block rewritten")
     return 0
 

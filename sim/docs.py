@@ -38,9 +38,15 @@ def write_block(path: str | Path, begin: str, end: str, body: str) -> bool:
     return True
 
 
+def write_or_exit(path: str | Path, begin: str, end: str, body: str) -> None:
+    """`write_block` for a script: SystemExit naming the markers when the file has none."""
+    if not write_block(path, begin, end, body):
+        raise SystemExit(f"{path}: no {begin} ... {end} markers")
+
+
 def publish(text: str, doc: str | Path | None, begin: str, end: str) -> None:
     """A script's block: print `text`, and with `doc` write it between the markers of that file
-    (SystemExit naming them when the file has none)."""
+    (`write_or_exit`)."""
     print(text)
-    if doc and not write_block(doc, begin, end, text):
-        raise SystemExit(f"{doc}: no {begin} ... {end} markers")
+    if doc:
+        write_or_exit(doc, begin, end, text)
