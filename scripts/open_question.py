@@ -94,14 +94,11 @@ def main(argv=None) -> int:
 
 def table(results: dict) -> str:
     """The largest roll or pitch angle of each case, per effect size: one Markdown table per effect."""
-    head = {"truth": "truth", "flight": "flight", "paper": "paper"}
     out = []
     for cause in SIZES_MS:
         rows = [results[f"{cause}|{gains}|{path}"] for gains, path in CASES]
-        out += [f"{cause} {PARAM[cause]} [ms] | " + " | ".join(f"{g}, {head[p]}" for g, p in CASES),
-                "|".join(["---"] * (len(CASES) + 1))]
-        out[-2] = f"| {out[-2]} |"
-        out[-1] = f"|{out[-1]}|"
+        out += [f"| {cause} {PARAM[cause]} [ms] | " + " | ".join(f"{g}, {p}" for g, p in CASES) + " |",
+                "|" + "|".join(["---"] * (len(CASES) + 1)) + "|"]
         for size in rows[0]:
             cells = ["crash" if r[size] >= CRASH_DEG else f"{r[size]:.1f}" for r in rows]
             out.append(f"| {size} | " + " | ".join(cells) + " |")
