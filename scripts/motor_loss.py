@@ -146,12 +146,13 @@ def margins() -> list[tuple[str, float, float]]:
 def limit_cycle() -> dict:
     """Table 4 on the as-flown file without a loss: the hover's roll and pitch peak-to-peak once at
     height, and the share of those loops in calm flight (where the detector looks)."""
-    fl = fly(SCENARIOS["hover"](), params_of("paper-as-flown", "table4"), os.devnull, seed=0)
+    params = params_of("paper-as-flown", "table4")
+    fl = fly(SCENARIOS["hover"](), params, os.devnull, seed=0)
     L = fl.log
     held = (L["t"] > 8.0) & (L["t"] < 20.0)
     ptp = max(float(np.ptp(L["true_roll"][held])), float(np.ptp(L["true_pitch"][held])))
     rates = np.abs(L["gyro_x"][held]) + np.abs(L["gyro_y"][held])
-    k = 2.2222e-3 / (ml.CALM_S + 2.2222e-3)
+    k = ml.MotorLossDetector(params).kc      # the detector's own low-pass of |p| + |q| over CALM_S
     calm, c = [], 0.0
     for v in rates:
         c += k * (v - c)
