@@ -89,7 +89,7 @@ def margins() -> list[tuple[str, float, float]]:
     ranges."""
     from flightctl.loop import FlightLoop
     from flightctl.plans import PLANS
-    from flightctl.sim.sweeps.montecarlo import draw, drawn_params
+    from flightctl.sim.sweeps.montecarlo import draw, drawn_params, one_draw
     from flightctl.sim.world.board import SIM_CALIBRATE_S, sim_board
     import flightctl.loop as loop_module
     seen: list[float] = []
@@ -128,7 +128,7 @@ def margins() -> list[tuple[str, float, float]]:
         for top in (False, True):
             worst = [0.0, 0.0]
             for k in range(n):
-                d = {key: float(v[k]) for key, v in drawn.items()}
+                d = one_draw(drawn, k)
                 for gains in GAIN_SETS:
                     params = drawn_params(causes.load_vehicle("paper-as-flown", GAIN_SETS[gains]), d)
                     if top:

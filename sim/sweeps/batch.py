@@ -107,7 +107,7 @@ class _Vehicles:
     """The arrays of `flight.fly` for vehicles with their parameters, draws and seeds, at power-on."""
 
     def __init__(self, params: Params, draws: dict, gains, seeds, template: dict, structure: str, uniforms: int):
-        from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params
+        from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params, one_draw
         from flightctl.sim.world import compiled
         from flightctl.sim.world.devices import SensorNoise, vehicle_noise
         from flightctl.sim.world.imu import N_CHIP_CONST, N_CHIP_STATE, chip_die
@@ -145,7 +145,7 @@ class _Vehicles:
         self.uni = np.zeros((n, uniforms))
         noise = SensorNoise()
         for v, seed in enumerate(seeds):
-            drawn = {key: float(val[v]) for key, val in draws.items()}
+            drawn = one_draw(draws, v)
             p = drawn_params(params, drawn, effects=False) if drawn else params
             if gains is not None:
                 p = dataclasses.replace(p, gains=gains[v])

@@ -85,9 +85,14 @@ def draw(params, n: int, seed: int = 0) -> dict:
     return out
 
 
-def drawn_airframe(airframe, draws: dict, k=None):
-    """The airframe with its drawn values: draw k of each (a float), or all (arrays, the batch)."""
-    values = {name: (v if k is None else float(v[k])) for (c, name), v in draws.items() if c == AIRFRAME}
+def one_draw(draws: dict, k: int) -> dict:
+    """Draw k of `draw`'s arrays: (cause, parameter) -> a float."""
+    return {key: float(v[k]) for key, v in draws.items()}
+
+
+def drawn_airframe(airframe, draws: dict):
+    """The airframe with its drawn values: one draw's floats (`one_draw`), or all (arrays, the batch)."""
+    values = {name: v for (c, name), v in draws.items() if c == AIRFRAME}
     return dataclasses.replace(airframe, **values) if values else airframe
 
 
@@ -131,7 +136,7 @@ def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, j
         raise InputError(f"--monte-carlo: {spec or 'the reference airframe'} carries no ranges "
                          "(range.NAME = [lo, hi] in its [[effect]] tables; --params paper-as-flown has them)")
     drawn = draw(params, n, seed)
-    draws = [{k: float(v[i]) for k, v in drawn.items()} for i in range(n)]
+    draws = [one_draw(drawn, i) for i in range(n)]
     jobs_list = [(spec, scenario, g, d, seed + k) for k, d in enumerate(draws) for g in GAINS]
 
     def done(k: int, r: dict) -> None:          # as each flight finishes (sim/pool.py)
