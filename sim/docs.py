@@ -11,6 +11,11 @@ from pathlib import Path
 from flightctl.errors import read_text, write_atomic
 
 
+def table(header, rows) -> list[str]:
+    """A Markdown table's lines: the header's cells, its rule, then each row's cells (strings)."""
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + ["| " + " | ".join(r) + " |" for r in rows]
+
+
 def block(text: str, begin: str, end: str) -> str | None:
     """The text between the line `begin` and the line `end` (without them), None when they are not
     both there, once each and in that order."""
