@@ -11,6 +11,11 @@ from pathlib import Path
 from flightctl.errors import read_text, write_atomic
 
 
+def marked(name: str) -> tuple[str, str]:
+    """The begin and end markers of the block `name`: `<!-- NAME: begin -->`, `<!-- NAME: end -->`."""
+    return f"<!-- {name}: begin -->", f"<!-- {name}: end -->"
+
+
 def table(header, rows) -> list[str]:
     """A Markdown table's lines: the header's cells, its rule, then each row's cells (strings)."""
     return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + ["| " + " | ".join(r) + " |" for r in rows]
