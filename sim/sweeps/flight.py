@@ -49,7 +49,7 @@ from flightctl.sim.world.imu import (_BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_K
                                     _i16, chip_frame)
 from flightctl.sim.world.compiled import attitude_trig, commanded, forces, rk4, work
 from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VX, VY, VZ, Z, rotation_from_trig
-from flightctl.sim.world.plant import CONTACT_S
+from flightctl.sim.world.plant import CONTACT_S, time_weighted
 
 ECHO_DELAY_S, NO_ECHO_S = SimGpio.ECHO_DELAY_S, SimGpio.NO_ECHO_S
 WATCHDOG_S = WATCHDOG_MS / 1000.0
@@ -179,10 +179,8 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
     old = head + 1 - nring if head + 1 >= nring else head + 1
     new = old + 1 - nring if old + 1 >= nring else old + 1
     if frac != 0.0:
-        u1 = ring[old, 0] * frac + ring[new, 0] * (1.0 - frac)
-        u2 = ring[old, 1] * frac + ring[new, 1] * (1.0 - frac)
-        u3 = ring[old, 2] * frac + ring[new, 2] * (1.0 - frac)
-        u4 = ring[old, 3] * frac + ring[new, 3] * (1.0 - frac)
+        u1, u2 = time_weighted(ring[old, 0], ring[new, 0], frac), time_weighted(ring[old, 1], ring[new, 1], frac)
+        u3, u4 = time_weighted(ring[old, 2], ring[new, 2], frac), time_weighted(ring[old, 3], ring[new, 3], frac)
     else:
         u1, u2, u3, u4 = ring[new, 0], ring[new, 1], ring[new, 2], ring[new, 3]
     if not (u1 == w[W_UAPP] and u2 == w[W_UAPP + 1] and u3 == w[W_UAPP + 2] and u4 == w[W_UAPP + 3]):
@@ -554,7 +552,8 @@ def compiled_fly():
     at = plant["forces"]
     held = cc(held_command)
     return cc(fly, allocates=True, work=plant["work"], normals=cc(normals, allocates=True),
-              plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held),
+              plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held,
+                              time_weighted=cc(time_weighted)),
               sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
               chip_read=cc(chip_read, forces=at, held_command=held, chip_frame=imu.chip_frame_compiled(), word=cc(word),
                            rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],
