@@ -25,7 +25,6 @@ import numpy as np
 
 from flightctl.params import Gains, Params
 from flightctl.plans.plan import Plan
-from flightctl.safety import LEFT_GROUND_ALT, crash_reason
 from flightctl.sim.pool import run_all
 from flightctl.sim.sweeps import flight as fl
 from flightctl.sim.sweeps import onboard as ob
@@ -177,21 +176,12 @@ class _Vehicles:
 
 def _judge(w: np.ndarray, g: float) -> tuple[str, bool, bool]:
     """sim/flights/run.py's `judge` on the loop's figures: (outcome, crashed, flew)."""
-    from flightctl.sim.flights.run import ON_GROUND
+    from flightctl.sim.flights.run import judge_figures
     if w[fl.W_ROWS] == 0:
         return "never armed", False, False
-    z_end, z_max, tilt = w[fl.W_Z_END], w[fl.W_Z_MAX], w[fl.W_TILT]
-    speed = w[fl.W_TOUCHDOWN]
-    if not math.isfinite(z_end) or z_end > ON_GROUND:
-        speed = max(speed, math.sqrt(2 * g * max(z_end, 0.0)) if math.isfinite(z_end) else math.inf)
-    why = crash_reason(tilt if math.isfinite(tilt) else math.nan, speed)
-    if w[fl.W_REASON] == fl.CRASH and why is None:
-        why = f"tilt past {math.degrees(fl.CRASH_TILT):.0f} degrees"
-    if why is not None:
-        return f"crashed: {why}", True, bool(z_max >= LEFT_GROUND_ALT)
-    if not z_max >= LEFT_GROUND_ALT:
-        return f"never left the ground (highest {z_max:.2f} m)", False, False
-    return "landed upright", False, True
+    stopped = f"tilt past {math.degrees(fl.CRASH_TILT):.0f} degrees" if w[fl.W_REASON] == fl.CRASH else None
+    return judge_figures(float(w[fl.W_Z_END]), float(w[fl.W_Z_MAX]), float(w[fl.W_TILT]), float(w[fl.W_TOUCHDOWN]),
+                         stopped, g)
 
 
 def _fly_group(job) -> tuple:
