@@ -88,7 +88,7 @@ def derive(params: Params = Params()) -> dict:
             "g2_range": tuple(i * kt for i in NO_LOAD_A), "h2_range": h2_range, "h1_range": h1_range,
             "p_full": p_full, "f_full": f_full, "w_max": w_max, "f_full_nominal": a.h1 * (p_full - a.h2) ** 2,
             "p_hover": a.h2 + math.sqrt(B / a.h1), "p_mixer_top": a.h2 + math.sqrt(2 * B / a.h1),
-            "esc_frame": frame, "dt": 1.0 / a.loop_hz, **sensors_derived(a)}
+            "esc_frame": frame, "dt": 1.0 / a.loop_hz, **sensors_derived(a, omega_h)}
 
 
 # --- the IMU in flight: what the paper's filter tuning says of its gyro (sec. 4.4.4, Table 5) ---
@@ -110,9 +110,9 @@ def ema_pass(n: float) -> float:
     return math.sqrt(alpha / (2.0 - alpha))
 
 
-def sensors_derived(a) -> dict:
-    """The gyro's broadband noise from Table 5's tuning, and the frame's rocking under a rotor's imbalance."""
-    omega_h = math.sqrt(a.M * a.g / 4 / a.c1)
+def sensors_derived(a, omega_h: float) -> dict:
+    """The gyro's broadband noise from Table 5's tuning, and the frame's rocking under a rotor's
+    imbalance at the hover speed omega_h (rad/s, `derive`'s)."""
     force = IMBALANCE * omega_h ** 2                 # N, rotating at 1/rev
     rock = force * HUB_HEIGHT / (a.Jxx * omega_h)    # rad/s: the rigid frame's roll rate at 1/rev
     # the filtered rate stayed within 0.01 at 128 periods, not at 64: as an rms, the raw rms lies in

@@ -18,9 +18,9 @@ from pathlib import Path
 
 from flightctl.cli import main as flightctl
 from flightctl.params import load
-from flightctl.sim.docs import publish
+from flightctl.sim.docs import marked, publish
 
-BEGIN, END = "<!-- as-flown gains: begin -->", "<!-- as-flown gains: end -->"
+BEGIN, END = marked("as-flown gains")
 TERMS = ("rotor_inflow", "motor_lag", "motor_dynamics", "rotor_drag", "actuation_delay")
 SEED = 7
 

@@ -16,6 +16,7 @@ import json
 import statistics
 from pathlib import Path
 
+from flightctl.sim.docs import write_or_exit
 from flightctl.sim.progress import Progress
 from flightctl.sim.sweeps import montecarlo
 
@@ -89,17 +90,11 @@ def facts(result: dict) -> str:
         f"{100 * s['table6']['settles']:.0f} % (Table 4: {100 * s['table4']['settles']:.0f} %) |"])
 
 
-def _between(path: Path, begin: str, end: str, block: str) -> None:
-    from flightctl.sim.docs import write_block
-    if not write_block(path, begin, end, block):
-        raise SystemExit(f"{path}: the markers {begin} ... {end} are not there")
-
-
 def write_doc(result: dict, doc: Path | None = DOC, readme: Path | None = README) -> None:
     if doc is not None:
-        _between(doc, BEGIN, END, render(result))
+        write_or_exit(doc, BEGIN, END, render(result))
     if readme is not None:
-        _between(readme, FACTS_BEGIN, FACTS_END, facts(result))
+        write_or_exit(readme, FACTS_BEGIN, FACTS_END, facts(result))
 
 
 def main() -> None:

@@ -18,14 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from flightctl.sim.docs import publish
+from flightctl.sim.docs import marked, publish
 from flightctl.sim.pool import run_all
 from flightctl.sim.progress import Progress
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))       # the tests' drawing and tolerances: one definition
 
-BEGIN, END = "<!-- diagnose_pairs: begin -->", "<!-- diagnose_pairs: end -->"
+BEGIN, END = marked("diagnose_pairs")
 
 
 def judge(seed: int) -> dict:

@@ -20,13 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-from flightctl.sim.docs import publish
+from flightctl.sim.docs import marked, publish
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))       # the tests' drawing and tolerances: one definition
 sys.path.insert(0, str(ROOT / "scripts"))
 
-BEGIN, END = "<!-- diagnose_sweep: begin -->", "<!-- diagnose_sweep: end -->"
+BEGIN, END = marked("diagnose_sweep")
 
 
 def cases(seeds: int) -> list[tuple[str, int]]:

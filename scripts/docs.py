@@ -31,6 +31,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from flightctl.sim.docs import marked
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
 
@@ -61,10 +63,6 @@ class Figure:
     files: tuple[str, ...]        # the PNGs the command draws, relative to the checkout
     command: tuple[str, ...]      # {out} is the first file's path, {tmp} a scratch folder
     minutes: float = 0.1
-
-
-def marked(name: str) -> tuple[str, str]:
-    return f"<!-- {name}: begin -->", f"<!-- {name}: end -->"
 
 
 def analyze(id_: str, name: str, *args: str) -> Block:

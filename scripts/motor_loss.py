@@ -89,7 +89,7 @@ def margins() -> list[tuple[str, float, float]]:
     ranges."""
     from flightctl.loop import FlightLoop
     from flightctl.plans import PLANS
-    from flightctl.sim.sweeps.montecarlo import draw, drawn_params
+    from flightctl.sim.sweeps.montecarlo import draw, drawn_params, one_draw
     from flightctl.sim.world.board import SIM_CALIBRATE_S, sim_board
     import flightctl.loop as loop_module
     seen: list[float] = []
@@ -128,7 +128,7 @@ def margins() -> list[tuple[str, float, float]]:
         for top in (False, True):
             worst = [0.0, 0.0]
             for k in range(n):
-                d = {key: float(v[k]) for key, v in drawn.items()}
+                d = one_draw(drawn, k)
                 for gains in GAIN_SETS:
                     params = drawn_params(causes.load_vehicle("paper-as-flown", GAIN_SETS[gains]), d)
                     if top:
@@ -146,12 +146,13 @@ def margins() -> list[tuple[str, float, float]]:
 def limit_cycle() -> dict:
     """Table 4 on the as-flown file without a loss: the hover's roll and pitch peak-to-peak once at
     height, and the share of those loops in calm flight (where the detector looks)."""
-    fl = fly(SCENARIOS["hover"](), params_of("paper-as-flown", "table4"), os.devnull, seed=0)
+    params = params_of("paper-as-flown", "table4")
+    fl = fly(SCENARIOS["hover"](), params, os.devnull, seed=0)
     L = fl.log
     held = (L["t"] > 8.0) & (L["t"] < 20.0)
     ptp = max(float(np.ptp(L["true_roll"][held])), float(np.ptp(L["true_pitch"][held])))
     rates = np.abs(L["gyro_x"][held]) + np.abs(L["gyro_y"][held])
-    k = 2.2222e-3 / (ml.CALM_S + 2.2222e-3)
+    k = ml.MotorLossDetector(params).kc      # the detector's own low-pass of |p| + |q| over CALM_S
     calm, c = [], 0.0
     for v in rates:
         c += k * (v - c)
@@ -354,9 +355,8 @@ def main(argv=None) -> int:
     draw_figure(m, args.out)
     print(f"figure -> {args.out}")
     if args.doc:
-        from flightctl.sim.docs import write_block
-        if not write_block(args.doc, BEGIN, END, text):
-            raise SystemExit(f"the markers {BEGIN} ... {END} are not in {args.doc}")
+        from flightctl.sim.docs import write_or_exit
+        write_or_exit(args.doc, BEGIN, END, text)
         print(f"{args.doc}: the motor-loss block rewritten")
     return 0
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from flightctl.params import TABLE4, EffectSpec, load
 from flightctl.sim import causes
+from flightctl.sim.docs import table as markdown_table
 from flightctl.sim.progress import Progress
 from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import SCENARIOS
@@ -94,17 +95,12 @@ def main(argv=None) -> int:
 
 def table(results: dict) -> str:
     """The largest roll or pitch angle of each case, per effect size: one Markdown table per effect."""
-    head = {"truth": "truth", "flight": "flight", "paper": "paper"}
     out = []
     for cause in SIZES_MS:
         rows = [results[f"{cause}|{gains}|{path}"] for gains, path in CASES]
-        out += [f"{cause} {PARAM[cause]} [ms] | " + " | ".join(f"{g}, {head[p]}" for g, p in CASES),
-                "|".join(["---"] * (len(CASES) + 1))]
-        out[-2] = f"| {out[-2]} |"
-        out[-1] = f"|{out[-1]}|"
-        for size in rows[0]:
-            cells = ["crash" if r[size] >= CRASH_DEG else f"{r[size]:.1f}" for r in rows]
-            out.append(f"| {size} | " + " | ".join(cells) + " |")
+        out += markdown_table([f"{cause} {PARAM[cause]} [ms]", *(f"{g}, {p}" for g, p in CASES)],
+                              [[str(size), *("crash" if r[size] >= CRASH_DEG else f"{r[size]:.1f}" for r in rows)]
+                               for size in rows[0]])
         out.append("")
     out.append(f"The largest true roll or pitch angle in degrees over the step (`crash`: {CRASH_DEG:g} or more); "
                "truth: perfect state feedback; flight, paper: the full onboard path with that estimator.")

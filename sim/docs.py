@@ -11,6 +11,16 @@ from pathlib import Path
 from flightctl.errors import read_text, write_atomic
 
 
+def marked(name: str) -> tuple[str, str]:
+    """The begin and end markers of the block `name`: `<!-- NAME: begin -->`, `<!-- NAME: end -->`."""
+    return f"<!-- {name}: begin -->", f"<!-- {name}: end -->"
+
+
+def table(header, rows) -> list[str]:
+    """A Markdown table's lines: the header's cells, its rule, then each row's cells (strings)."""
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + ["| " + " | ".join(r) + " |" for r in rows]
+
+
 def block(text: str, begin: str, end: str) -> str | None:
     """The text between the line `begin` and the line `end` (without them), None when they are not
     both there, once each and in that order."""
@@ -38,9 +48,15 @@ def write_block(path: str | Path, begin: str, end: str, body: str) -> bool:
     return True
 
 
+def write_or_exit(path: str | Path, begin: str, end: str, body: str) -> None:
+    """`write_block` for a script: SystemExit naming the markers when the file has none."""
+    if not write_block(path, begin, end, body):
+        raise SystemExit(f"{path}: no {begin} ... {end} markers")
+
+
 def publish(text: str, doc: str | Path | None, begin: str, end: str) -> None:
     """A script's block: print `text`, and with `doc` write it between the markers of that file
-    (SystemExit naming them when the file has none)."""
+    (`write_or_exit`)."""
     print(text)
-    if doc and not write_block(doc, begin, end, text):
-        raise SystemExit(f"{doc}: no {begin} ... {end} markers")
+    if doc:
+        write_or_exit(doc, begin, end, text)

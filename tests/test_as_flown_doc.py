@@ -4,24 +4,16 @@ shares are its draws' outcomes counted; and under `-m slow` a small Monte Carlo,
 same script, renders a block of the same shape."""
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from flightctl.sim.docs import block as _block
+from script import load
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("as_flown_mc", ROOT / "scripts" / "as_flown_mc.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def _block(text: str, begin: str, end: str) -> str:
-    return text.split(begin, 1)[1].split(end, 1)[0].strip("\n")
+    return load("as_flown_mc")
 
 
 def test_the_docs_and_the_readme_hold_what_the_committed_monte_carlo_renders():

@@ -5,25 +5,17 @@ blocks are re-run here; the long ones, and the figures, under `-m slow` (the pai
 about 40 min on two cores). The benchmark's speed figures are the machine's: only their form is checked."""
 from __future__ import annotations
 
-import importlib.util
 import re
-import sys
 from pathlib import Path
 
 import pytest
 
+from script import load
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _docs():
-    spec = importlib.util.spec_from_file_location("docs_registry", ROOT / "scripts" / "docs.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod              # (its dataclasses look their module up)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-DOCS = _docs()
+DOCS = load("docs", "docs_registry")
 QUICK = [b for b in DOCS.BLOCKS if b.minutes < 1 and not b.measured]
 LONG = [b for b in DOCS.BLOCKS if b.minutes >= 1 and not b.measured]
 

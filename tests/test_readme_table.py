@@ -3,20 +3,18 @@ under `-m slow`; the default run recomputes a few rows drawn at random (seeded) 
 the table's shape."""
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from script import load
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("paper_comparison", ROOT / "scripts" / "paper_comparison.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load("paper_comparison")
 
 
 def _readme_rows(header: str) -> list[str]:

@@ -116,4 +116,3 @@ def write_doc(doc: Path, table: str) -> bool:
     """Replace the table between BEGIN and END in `doc`; False when the markers are absent."""
     from flightctl.sim.docs import write_block
     return write_block(doc, BEGIN, END, table)
-    return True

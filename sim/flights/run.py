@@ -51,16 +51,25 @@ def judge(result: FlightResult, log: Table, touchdowns, g: float) -> tuple[str, 
     z = log["true_z"]
     tilt = float(np.max(np.maximum(np.abs(log["true_roll"]), np.abs(log["true_pitch"]))))
     speed = max((abs(vz) for _, vz in touchdowns), default=0.0)
-    if not math.isfinite(float(z[-1])) or z[-1] > ON_GROUND:         # the motors stopped above the floor
-        fall = math.sqrt(2 * g * max(float(z[-1]), 0.0)) if math.isfinite(float(z[-1])) else math.inf
-        speed = max(speed, fall)
-    why = crash_reason(tilt, speed) if math.isfinite(tilt) else crash_reason(math.nan, speed)
-    if result.reason.startswith("stopped: crash") and why is None:
-        why = result.reason.removeprefix("stopped: crash").strip(" ()")
+    stopped = result.reason.removeprefix("stopped: crash").strip(" ()") if result.reason.startswith("stopped: crash") \
+        else None
+    return judge_figures(float(z[-1]), float(np.nanmax(z)), tilt, speed, stopped, g)
+
+
+def judge_figures(z_end: float, z_max: float, tilt: float, speed: float, stopped: str | None,
+                  g: float) -> tuple[str, bool, bool]:
+    """`judge` on a flight's figures: its last and highest true altitude, its largest true tilt, its
+    fastest touchdown, and why the loop stopped for a crash of its own (None: it did not); the
+    batched simulator (sim/sweeps/batch.py) judges its vehicles with it too."""
+    if not math.isfinite(z_end) or z_end > ON_GROUND:             # the motors stopped above the floor
+        speed = max(speed, math.sqrt(2 * g * max(z_end, 0.0)) if math.isfinite(z_end) else math.inf)
+    why = crash_reason(tilt if math.isfinite(tilt) else math.nan, speed)
+    if why is None:
+        why = stopped
     if why is not None:
-        return f"crashed: {why}", True, bool(np.nanmax(z) >= LEFT_GROUND_ALT)
-    if not np.nanmax(z) >= LEFT_GROUND_ALT:
-        return f"never left the ground (highest {float(np.nanmax(z)):.2f} m)", False, False
+        return f"crashed: {why}", True, bool(z_max >= LEFT_GROUND_ALT)
+    if not z_max >= LEFT_GROUND_ALT:
+        return f"never left the ground (highest {z_max:.2f} m)", False, False
     return "landed upright", False, True
 
 

@@ -18,6 +18,7 @@ from flightctl.errors import InputError, write_atomic
 from flightctl.logfile import BENCH_COLUMNS, read_table
 from flightctl.params import Airframe
 from flightctl.physics import G
+from flightctl.sim.docs import table as _table
 from flightctl.sim.identify.fits import rms
 from flightctl.sim.identify.propeller import torque_from_power
 
@@ -272,10 +273,6 @@ def verdicts(res: dict) -> list[str]:
             lines.append(f"{split}: {ext} beats {base} in {np.sum(e < b)} of {len(b)} files, "
                          f"median gain 1 - RMSE_ext / RMSE_base = {np.median(1 - e / b):.2f}")
     return lines
-
-
-def _table(header: list[str], rows: list[list[str]]) -> list[str]:
-    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + ["| " + " | ".join(r) + " |" for r in rows]
 
 
 def markdown(res: dict, data: str | None) -> str:

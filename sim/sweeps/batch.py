@@ -25,7 +25,6 @@ import numpy as np
 
 from flightctl.params import Gains, Params
 from flightctl.plans.plan import Plan
-from flightctl.safety import LEFT_GROUND_ALT, crash_reason
 from flightctl.sim.pool import run_all
 from flightctl.sim.sweeps import flight as fl
 from flightctl.sim.sweeps import onboard as ob
@@ -107,7 +106,7 @@ class _Vehicles:
     """The arrays of `flight.fly` for vehicles with their parameters, draws and seeds, at power-on."""
 
     def __init__(self, params: Params, draws: dict, gains, seeds, template: dict, structure: str, uniforms: int):
-        from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params
+        from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params, one_draw
         from flightctl.sim.world import compiled
         from flightctl.sim.world.devices import SensorNoise, vehicle_noise
         from flightctl.sim.world.imu import N_CHIP_CONST, N_CHIP_STATE, chip_die
@@ -145,7 +144,7 @@ class _Vehicles:
         self.uni = np.zeros((n, uniforms))
         noise = SensorNoise()
         for v, seed in enumerate(seeds):
-            drawn = {key: float(val[v]) for key, val in draws.items()}
+            drawn = one_draw(draws, v)
             p = drawn_params(params, drawn, effects=False) if drawn else params
             if gains is not None:
                 p = dataclasses.replace(p, gains=gains[v])
@@ -177,21 +176,12 @@ class _Vehicles:
 
 def _judge(w: np.ndarray, g: float) -> tuple[str, bool, bool]:
     """sim/flights/run.py's `judge` on the loop's figures: (outcome, crashed, flew)."""
-    from flightctl.sim.flights.run import ON_GROUND
+    from flightctl.sim.flights.run import judge_figures
     if w[fl.W_ROWS] == 0:
         return "never armed", False, False
-    z_end, z_max, tilt = w[fl.W_Z_END], w[fl.W_Z_MAX], w[fl.W_TILT]
-    speed = w[fl.W_TOUCHDOWN]
-    if not math.isfinite(z_end) or z_end > ON_GROUND:
-        speed = max(speed, math.sqrt(2 * g * max(z_end, 0.0)) if math.isfinite(z_end) else math.inf)
-    why = crash_reason(tilt if math.isfinite(tilt) else math.nan, speed)
-    if w[fl.W_REASON] == fl.CRASH and why is None:
-        why = f"tilt past {math.degrees(fl.CRASH_TILT):.0f} degrees"
-    if why is not None:
-        return f"crashed: {why}", True, bool(z_max >= LEFT_GROUND_ALT)
-    if not z_max >= LEFT_GROUND_ALT:
-        return f"never left the ground (highest {z_max:.2f} m)", False, False
-    return "landed upright", False, True
+    stopped = f"tilt past {math.degrees(fl.CRASH_TILT):.0f} degrees" if w[fl.W_REASON] == fl.CRASH else None
+    return judge_figures(float(w[fl.W_Z_END]), float(w[fl.W_Z_MAX]), float(w[fl.W_TILT]), float(w[fl.W_TOUCHDOWN]),
+                         stopped, g)
 
 
 def _fly_group(job) -> tuple:
@@ -207,13 +197,20 @@ def _fly_group(job) -> tuple:
             gc.enable()
 
 
+def _arm_and_record(dt: float, record: tuple[float, float] | None) -> tuple[int, int]:
+    """(the loop period that arms, after the calibration's SIM_CALIBRATE_S on the floor; the first
+    period of the judged record over `record`, s since arming, 0 without one)."""
+    i_arm = next(i for i in range(1, 10 ** 7) if i * dt >= SIM_CALIBRATE_S)
+    return i_arm, (i_arm + int(round(record[0] / dt)) if record else 0)
+
+
 def _fly_group_now(job) -> tuple:
     params, plan, draws, gains, seeds, record, until, structure = job
     a = params.airframe
     dt = a.dt
     template = _template(params)
     k = _world_constants(params, plan, template, dt)
-    i_arm = next(i for i in range(1, 10 ** 7) if i * dt >= SIM_CALIBRATE_S)
+    i_arm, rec0 = _arm_and_record(dt, record)
     end_s = plan.duration + LAND_MARGIN_S if until is None else until
     i_end = i_arm + int(math.ceil(end_s / dt)) + 1
     # the most uniforms a vehicle takes in a chunk: the sonar's dropout and jitter at each trigger (a
@@ -225,7 +222,6 @@ def _fly_group_now(job) -> tuple:
     for i in range(i_arm + 1, i_end + 1):
         t = i * dt - SIM_CALIBRATE_S
         sp[i] = plan.at(t) if t <= plan.duration else plan.at(plan.duration)
-    rec0 = i_arm + int(round(record[0] / dt)) if record else 0
     rows = int(round((record[1] - record[0]) / dt)) + 1 if record else 0
     rec = np.full((veh.n, rows, fl.N_REC), np.nan)
     run = fl.compiled_fly() or fl.fly
@@ -294,8 +290,8 @@ def simulate(params: Params, plan: Plan, n: int, draws: dict[tuple[str, str], np
     judged = [j for part in parts for j in part[0]]
     rec = np.concatenate([part[1] for part in parts], axis=0)
     dt = params.airframe.dt
-    i_arm = next(i for i in range(1, 10 ** 7) if i * dt >= SIM_CALIBRATE_S)
-    t = (i_arm + int(round(record[0] / dt)) + np.arange(rec.shape[1])) * dt - SIM_CALIBRATE_S if record else np.zeros(0)
+    _, rec0 = _arm_and_record(dt, record)
+    t = (rec0 + np.arange(rec.shape[1])) * dt - SIM_CALIBRATE_S if record else np.zeros(0)
     names = ("true_roll", "true_pitch", "true_yaw", "roll", "pitch", "yaw")
     log = {"t": t, **{name: np.ascontiguousarray(rec[:, :, j].T) for j, name in enumerate(names)}}
     return BatchFlight([j[0] for j in judged], np.array([j[1] for j in judged]), np.array([j[2] for j in judged]),

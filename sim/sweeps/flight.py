@@ -38,6 +38,7 @@ from math import atan2, copysign, cos, exp, inf, log, nan, pi, sin, sqrt
 
 import numpy as np
 
+from flightctl.control.estimator import tilt_from_accel
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.drivers.hcsr04 import MAX_RANGE_M, MIN_RANGE_M, US_PER_M, WATCHDOG_MS
 from flightctl.loop import LAND_LEVEL_S, LAND_SLACK_S, LAND_SPEED, LOST_ALT_S, MAX_BAD_IMU_FRAMES, TOUCHDOWN_ALT, TOUCHDOWN_S
@@ -48,7 +49,7 @@ from flightctl.sim.world.imu import (_BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_K
                                     _i16, chip_frame)
 from flightctl.sim.world.compiled import attitude_trig, commanded, forces, rk4, work
 from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VX, VY, VZ, Z, rotation_from_trig
-from flightctl.sim.world.plant import CONTACT_S
+from flightctl.sim.world.plant import CONTACT_S, time_weighted
 
 ECHO_DELAY_S, NO_ECHO_S = SimGpio.ECHO_DELAY_S, SimGpio.NO_ECHO_S
 WATCHDOG_S = WATCHDOG_MS / 1000.0
@@ -178,10 +179,8 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
     old = head + 1 - nring if head + 1 >= nring else head + 1
     new = old + 1 - nring if old + 1 >= nring else old + 1
     if frac != 0.0:
-        u1 = ring[old, 0] * frac + ring[new, 0] * (1.0 - frac)
-        u2 = ring[old, 1] * frac + ring[new, 1] * (1.0 - frac)
-        u3 = ring[old, 2] * frac + ring[new, 2] * (1.0 - frac)
-        u4 = ring[old, 3] * frac + ring[new, 3] * (1.0 - frac)
+        u1, u2 = time_weighted(ring[old, 0], ring[new, 0], frac), time_weighted(ring[old, 1], ring[new, 1], frac)
+        u3, u4 = time_weighted(ring[old, 2], ring[new, 2], frac), time_weighted(ring[old, 3], ring[new, 3], frac)
     else:
         u1, u2, u3, u4 = ring[new, 0], ring[new, 1], ring[new, 2], ring[new, 3]
     if not (u1 == w[W_UAPP] and u2 == w[W_UAPP + 1] and u3 == w[W_UAPP + 2] and u4 == w[W_UAPP + 3]):
@@ -192,7 +191,7 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
         w[W_STILL] = w[W_FSTILL] = 0.0
     cmd = held_command(w)
     dt = k[DT]
-    t_end = (i - 1) * dt + 1 * (dt / 1)
+    t_end = (i - 1) * dt + dt                # `Plant.advance`'s t0 + j h, at one substep
     ground = False
     if w[W_GROUND] != 0.0:
         if u1 == w[W_LIFT_AT] and u2 == w[W_LIFT_AT + 1] and u3 == w[W_LIFT_AT + 2] and u4 == w[W_LIFT_AT + 3]:
@@ -202,7 +201,7 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
             lift = force[2] + f[0] + f[1] + f[2] + f[3]
         ground = not lift / k[M_] > k[G_]
     if not (ground and (x.shape[0] == N_RIGID or w[W_STILL] != 0.0)):
-        rk4(x, cmd, codes, q, dt / 1, wk, ground)
+        rk4(x, cmd, codes, q, dt, wk, ground)
         y = 4 * x.shape[0]                   # where `rk4` leaves the new state
         if ground:                           # a step that gives the rotor states back gives them every time
             still = True
@@ -432,7 +431,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
             write = False
             sp = (0.0, 0.0, 0.0, 0.0)
             if w[W_ARMED] == 0.0:
-                roll, pitch = ob_tilt(ax, ay, az)          # `Calibration.add`
+                roll, pitch = tilt_from_accel(ax, ay, az)  # `Calibration.add` (eq. 30-31)
                 c = W_CAL
                 w[c] += gx
                 w[c + 1] += gy
@@ -534,11 +533,9 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
                 break
 
 
-
-
 # the onboard controller's functions (sim/sweeps/onboard.py), bound to their compiled copies by `compiled_fly`
-ob_step, ob_on_range, ob_tilt, ob_heading, ob_set_reference, ob_arm, ob_landing_start = (
-    ob.step, ob.on_range, ob.tilt, ob.heading_from_mag, ob.set_reference, ob.arm, ob.landing_start)
+ob_step, ob_on_range, ob_heading, ob_set_reference, ob_arm, ob_landing_start = (
+    ob.step, ob.on_range, ob.heading_from_mag, ob.set_reference, ob.arm, ob.landing_start)
 
 
 @functools.cache
@@ -555,13 +552,14 @@ def compiled_fly():
     at = plant["forces"]
     held = cc(held_command)
     return cc(fly, allocates=True, work=plant["work"], normals=cc(normals, allocates=True),
-              plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held),
+              plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held,
+                              time_weighted=cc(time_weighted)),
               sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
               chip_read=cc(chip_read, forces=at, held_command=held, chip_frame=imu.chip_frame_compiled(), word=cc(word),
                            rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],
                            i16=cc(i16, _i16=cc(imu._i16))),
               land=cc(land, ob_landing_start=o["landing_start"]), landing_setpoint=cc(landing_setpoint),
-              ob_step=o["step"], ob_on_range=o["on_range"], ob_tilt=o["tilt"], ob_heading=o["heading"],
+              ob_step=o["step"], ob_on_range=o["on_range"], tilt_from_accel=o["tilt"], ob_heading=o["heading"],
               ob_set_reference=o["set_reference"], ob_arm=o["arm"])
 
 

@@ -27,14 +27,11 @@ import math
 
 import numpy as np
 
+from flightctl.control.pid import wrap
 from flightctl.sim.flights.metrics import SETTLED_DEG, TRUE
 
 RING_AFTER_S = 1.0     # s after the step: the step's own rise and first overshoot are over
 HELD_S = 1.0           # s: the held error over the step's last second
-
-
-def _wrap(e):
-    return (e + np.pi) % (2 * np.pi) - np.pi
 
 
 def step_figures(log, steps, t_arm: float) -> list[dict]:
@@ -54,16 +51,16 @@ def step_figures(log, steps, t_arm: float) -> list[dict]:
             out.append({"channel": s.channel, "ringing": np.full(shape, math.inf), "damping": np.full(shape, math.nan),
                         "held": np.full(shape, math.nan), "bias": np.full(shape, math.nan)})
             continue
-        e = _wrap(true[ring] - s.end)
+        e = wrap(true[ring] - s.end)
         change = s.end - s.start
-        progress = _wrap(true[whole] - s.start) / change
+        progress = wrap(true[whole] - s.start) / change
         overshoot = np.maximum(np.max(progress, axis=0) - 1.0, 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             ln = np.log(np.where(overshoot > 0, overshoot, 1.0))
             zeta = np.where(overshoot > 0, np.maximum(-ln / np.sqrt(np.pi ** 2 + ln ** 2), 0.0), 1.0)
         out.append({"channel": s.channel, "ringing": np.degrees(np.ptp(e, axis=0)), "damping": zeta,
-                    "held": np.degrees(np.mean(_wrap(est[last] - s.end), axis=0)),
-                    "bias": np.degrees(np.mean(_wrap(true[last] - est[last]), axis=0))})
+                    "held": np.degrees(np.mean(wrap(est[last] - s.end), axis=0)),
+                    "bias": np.degrees(np.mean(wrap(true[last] - est[last]), axis=0))})
     return out
 
 

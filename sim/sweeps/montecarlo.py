@@ -85,9 +85,14 @@ def draw(params, n: int, seed: int = 0) -> dict:
     return out
 
 
-def drawn_airframe(airframe, draws: dict, k=None):
-    """The airframe with its drawn values: draw k of each (a float), or all (arrays, the batch)."""
-    values = {name: (v if k is None else float(v[k])) for (c, name), v in draws.items() if c == AIRFRAME}
+def one_draw(draws: dict, k: int) -> dict:
+    """Draw k of `draw`'s arrays: (cause, parameter) -> a float."""
+    return {key: float(v[k]) for key, v in draws.items()}
+
+
+def drawn_airframe(airframe, draws: dict):
+    """The airframe with its drawn values: one draw's floats (`one_draw`), or all (arrays, the batch)."""
+    values = {name: v for (c, name), v in draws.items() if c == AIRFRAME}
     return dataclasses.replace(airframe, **values) if values else airframe
 
 
@@ -131,7 +136,7 @@ def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, j
         raise InputError(f"--monte-carlo: {spec or 'the reference airframe'} carries no ranges "
                          "(range.NAME = [lo, hi] in its [[effect]] tables; --params paper-as-flown has them)")
     drawn = draw(params, n, seed)
-    draws = [{k: float(v[i]) for k, v in drawn.items()} for i in range(n)]
+    draws = [one_draw(drawn, i) for i in range(n)]
     jobs_list = [(spec, scenario, g, d, seed + k) for k, d in enumerate(draws) for g in GAINS]
 
     def done(k: int, r: dict) -> None:          # as each flight finishes (sim/pool.py)
@@ -142,15 +147,15 @@ def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, j
     results = run_all(_fly, jobs_list, jobs or os.cpu_count() or 1, done if progress is not None else None)
     rows = [{"draw": {f"{c}.{name}": v for (c, name), v in d.items()},
              **{g: results[2 * k + j] for j, g in enumerate(GAINS)}} for k, d in enumerate(draws)]
-    return _result(spec, scenario, n, seed, spans, rows, ("flies", "lands", "settles"))
+    return _result(spec, scenario, n, seed, spans, rows)
 
 
-def _result(spec, scenario, n, seed, spans, rows, whats, **extra) -> dict:
+def _result(spec, scenario, n, seed, spans, rows, **extra) -> dict:
     """The report of a Monte Carlo: the shares per gain set, and paired, draw by draw, the verdicts."""
     from flightctl.sim.sweeps import judge
     for r in rows:
         r.update(judge.verdict(r["table4"], r["table6"]))
-    share = {g: {what: sum(r[g][what] for r in rows) / n for what in whats} for g in GAINS}
+    share = {g: {what: sum(r[g][what] for r in rows) / n for what in ("flies", "lands", "settles")} for g in GAINS}
     paired = {"table6 settles, table4 not": sum(r["table6"]["settles"] and not r["table4"]["settles"] for r in rows),
               "table4 settles, table6 not": sum(r["table4"]["settles"] and not r["table6"]["settles"] for r in rows),
               "table6 beats table4": sum(r["table6 beats table4"] for r in rows) / n,
@@ -211,7 +216,7 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
                       "settles": bool(settled[k]), "outcome": flight.outcome[k],
                       **(judge.summary(mine) if flies[k] and mine else {"score": None})}
         rows.append(row)
-    return _result(spec, scenario, n, seed, spans, rows, ("flies", "lands", "settles"),
+    return _result(spec, scenario, n, seed, spans, rows,
                    simulator="batched simulator (sim/sweeps/batch.py): each draw's vehicle flown as the full onboard "
                              "path flies it, from power-on to its landing, compiled")
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 from math import atan2, copysign, cos, exp, pi, sin, sqrt
 
 from flightctl.control.controller import MAX_CORRECT_DT
-from flightctl.control.estimator import heading_from_mag, tilt_from_accel
+from flightctl.control.estimator import heading_from_mag
 from flightctl.control.landing import (ACCEL_TAU, FALLING_ACCEL, FALLING_SPEED, IMPACT, KI, KV, LANDED_ACCEL,
                                        LANDED_S, LANDED_THRUST, RAMP, RETRY_S, STALLED_S, STALLED_SPEED, TOUCH_ALT, W)
 from flightctl.control.mixer import MIN_TILT_COSINE, count_from_thrust
@@ -56,13 +56,6 @@ def constants(params, structure: str = "flight") -> list[float]:
     k[B], k[H1], k[H2], k[SONAR_PERIOD] = a.B, a.h1, a.h2, 1.0 / a.sonar_hz
     k[M4], k[LAND_B] = a.M / 4.0, a.M * G / 4.0
     return k
-
-
-def reset(e) -> None:
-    """A new controller: `FlightController.__init__` (the estimator's references at zero, no landing)."""
-    for i in range(N_E):
-        e[i] = 0.0
-    e[ALT_T] = -1.0    # no echo yet (`alt_t` None)
 
 
 def estimate_trig(e):
@@ -255,11 +248,6 @@ def step(e, k, gx, gy, gz, ax, ay, az, mx, my, mz, mag_fresh: bool, dt: float, r
         counts[i] = count_from_thrust(fi, h1, h2)
 
 
-def tilt(ax: float, ay: float, az: float):
-    """Eq. 30-31 (`tilt_from_accel`), for the calibration."""
-    return tilt_from_accel(ax, ay, az)
-
-
 def compiled_functions(cc):
     """The functions above compiled with `cc` (`compiled.compiled_copy`), each call bound to a compiled
     copy; the onboard functions they call (eq. 26 inverted, eq. 30-32) compiled from their one source."""
@@ -274,6 +262,6 @@ def compiled_functions(cc):
     est = cc(estimate, heading_from_mag=heading, remainder=rem, estimate_trig=trig)
     return {"step": cc(step, estimate=est, pid=pid_c, landing_step=land, count_from_thrust=count, estimate_trig=trig),
             "on_range": cc(on_range, pid=pid_c, estimate_trig=trig),
-            "tilt": cc(tilt, tilt_from_accel=cc(estimator.tilt_from_accel)),
-            "heading": heading, "reset": cc(reset), "set_reference": cc(set_reference), "arm": cc(arm),
+            "tilt": cc(estimator.tilt_from_accel),
+            "heading": heading, "set_reference": cc(set_reference), "arm": cc(arm),
             "landing_start": cc(landing_start)}

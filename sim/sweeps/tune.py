@@ -356,11 +356,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.plot:
         output_file(args.plot, "--plot", ".png")
     if args.doc:
-        from flightctl.sim.docs import block
-        name = "tune robust" if args.robust else "tune strict" if args.strict else "tune procedure"
-        if not Path(args.doc).is_file() or block(Path(args.doc).read_text(), f"<!-- {name}: begin -->",
-                                                 f"<!-- {name}: end -->") is None:
-            raise InputError(f"--doc {args.doc}: no block <!-- {name}: begin --> ... <!-- {name}: end --> in it")
+        from flightctl.sim.docs import block, marked
+        begin, end = marked("tune robust" if args.robust else "tune strict" if args.strict else "tune procedure")
+        if not Path(args.doc).is_file() or block(Path(args.doc).read_text(), begin, end) is None:
+            raise InputError(f"--doc {args.doc}: no block {begin} ... {end} in it")
     params = causes.load_vehicle(args.params)
     if params.effects:
         print("flightctl tune: the plant carries " + ", ".join(e.cause for e in params.effects)
@@ -413,12 +412,12 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {name:<16} flies {100 * g['flies']:3.0f} %, holds {100 * g['holds']:3.0f} %, median score "
                   + ("- (most crash)" if g["score"] is None else f"{g['score']:.2f}"))
     if args.doc:
-        from flightctl.sim.docs import write_block
-        shown = ["flightctl tune"] + [a for a in (argv if argv is not None else sys.argv[1:])]
+        from flightctl.sim.docs import marked, write_block
+        shown = ["flightctl tune", *(argv if argv is not None else sys.argv[1:])]
         skip = {"--out", "--json", "--plot", "--doc"}
         words = [w for k, w in enumerate(shown) if w not in skip and (k == 0 or shown[k - 1] not in skip)]
         name, body = doc_block(found, args.strict, " ".join(words))
-        write_block(args.doc, f"<!-- {name}: begin -->", f"<!-- {name}: end -->", body)
+        write_block(args.doc, *marked(name), body)
         print(f"  {name} -> {args.doc}")
     if args.plot:
         plot(params, gains, args.plot)

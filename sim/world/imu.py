@@ -41,7 +41,6 @@ class SimMpu9250:
     is the register map's delay of the configured filter (2.9 ms for the gyro at DLPF_CFG = 1, 1.88 ms
     for the accelerometer at A_DLPF_CFG = 1), updated at each read; the driver declares the same
     stages in the flight log (`Mpu9250.filters`), so that diagnose models what the chip did."""
-    _HEAD = struct.Struct(">7h")
     _MAG = struct.Struct("<3hB")
     MAG_EVERY = 4   # burst reads per magnetometer sample: 450 Hz / 4, near the AK8963's 100 Hz
     AMBIENT_C = AMBIENT_C
@@ -346,5 +345,3 @@ def _i16(v: float) -> int:
     if v != v:
         raise ValueError("a NaN register value")
     return int(v + 0.5) if v >= 0.0 else -int(0.5 - v)
-
-

@@ -4,7 +4,7 @@ The controller holds its commands for one loop period (zero-order hold), so the 
 each period in `substeps` RK4 steps (SUBSTEPS by default) with the input constant across a step. An
 actuation delay d holds the command of d earlier: it changes once per period, d mod dt into it. The
 plant applies, over the period, the two commands' average weighted by the time each holds
-(`delayed`, shared with sim/sweeps/batch.py): the same impulse, correct to second order in dt at any d
+(`delayed`): the same impulse, correct to second order in dt at any d
 (exact for a whole number of periods), at the cost of one RK4 step where splitting the period
 would take two. Time is counted
 in integers, loop periods, and computed from them (`t = n dt` plus the offset within one), never
@@ -40,10 +40,16 @@ from flightctl.sim.world import compiled
 from flightctl.sim.world.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Forces, Model, P
 
 
+def time_weighted(before: float, now: float, frac: float) -> float:
+    """One command over a period whose first `frac` holds `before` and the rest `now`: their average
+    weighted by time (the batched simulator's compiled loop, sim/sweeps/flight.py, takes it too)."""
+    return before * frac + now * (1.0 - frac)
+
+
 def delayed(before, now, frac: float):
-    """The input over a period whose first `frac` holds the command `before` and the rest `now`:
-    their average weighted by time (floats or arrays alike)."""
-    return tuple(b * frac + c * (1.0 - frac) for b, c in zip(before, now))
+    """The input over a period whose first `frac` holds the command `before` and the rest `now`,
+    each entry `time_weighted`."""
+    return tuple(time_weighted(b, c, frac) for b, c in zip(before, now))
 
 
 class Plant:

@@ -169,9 +169,8 @@ def run_one(row: Row) -> Row:
 
 
 def table(rows: list[Row]) -> str:
-    lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
-    lines += ["| " + " | ".join(r.cells()) + " |" for r in rows]
-    return "\n".join(lines)
+    from flightctl.sim.docs import table as markdown_table
+    return "\n".join(markdown_table(COLUMNS, [r.cells() for r in rows]))
 
 
 def write_table(path: Path, text: str) -> None:
