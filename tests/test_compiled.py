@@ -114,7 +114,6 @@ def test_a_model_with_another_effect_stays_plain():
     assert compiled.layout(Model(a, (causes.make("ground_effect", rotor_radius=0.15),))) is None
     twice = (causes.make("rotor_drag", k=1.0), causes.make("rotor_drag", k=0.5))
     assert compiled.layout(Model(a, twice)) is None
-    assert compiled.layout(Model(a, (), vector=True)) is None
     assert Plant(Model(a, (causes.make("ground_effect", rotor_radius=0.15),)), a.dt)._period is None
 
 

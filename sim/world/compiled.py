@@ -140,7 +140,7 @@ def layout_rows(model, n: int):
 def _layout(model):
     """(codes, q as a list of values) of `layout`."""
     causes = [e.cause for e in model.effects]
-    if (model.vector or len(set(causes)) < len(causes)
+    if (len(set(causes)) < len(causes)
             or not set(causes) <= set(COMPILED_CAUSES)):
         return None
     a = model.a

@@ -9,9 +9,8 @@ One signature for the base model and every extension: `Model.f(t, x, u) -> xdot`
 (position and velocity inertial, x North, y West, z Up; Z-Y-X Euler angles; body rates), and the
 input is `u = (P1, P2, P3, P4, battery_v)`: the command values of eq. 26 and the battery voltage.
 `Model.f` is scalar code (the simulator's inner loop); the functions before it take numpy arrays
-too, so that fits evaluate the same equations on many samples at once. `Model(..., vector=True)`
-evaluates the same `f` on many vehicles at once (sim/sweeps/batch.py): each entry of `x` and `u` is then an
-array over the vehicles, and the effects' hooks, plain arithmetic on their elements, run unchanged. The propeller and yaw-drag
+too, so that fits evaluate the same equations on many samples at once (the batched simulator flies
+many vehicles through the compiled copy, sim/world/compiled.py). The propeller and yaw-drag
 equations (eq. 6, 26-28) live in `flightctl.physics`, shared with the onboard mixer and the fits.
 """
 from __future__ import annotations
@@ -201,13 +200,8 @@ class Forces(NamedTuple):
 class Model:
     """The base model with extensions bound: `f(t, x, u)` is the one model signature."""
 
-    def __init__(self, airframe: Airframe, effects: tuple[Effect, ...] = (), bearing: bool = False,
-                 vector: bool = False):
+    def __init__(self, airframe: Airframe, effects: tuple[Effect, ...] = (), bearing: bool = False):
         self.a = airframe
-        # vector: x is (n, N) and u a tuple of five (N,) arrays, one column per vehicle; a new input
-        # is a new tuple (the caches below compare the input by identity, not by value)
-        self.vector = vector
-        self._sin, self._cos = (np.sin, np.cos) if vector else (sin, cos)
         self.effects = tuple(effects)
         n = N_RIGID
         for e in self.effects:
@@ -240,8 +234,8 @@ class Model:
     def _commanded(self, u) -> list[float]:
         """The commanded thrusts of eq. 26, computed once per input (by value: a list changed in
         place is a new input); the rotor effects see each new input first in their `command` hook."""
-        key = u if self.vector else tuple(u)
-        if key is not self._command_u and (self.vector or key != self._command_u):
+        key = tuple(u)
+        if key != self._command_u:
             a = self.a
             h1, h2 = a.h1, a.h2
             self._command_u = key
@@ -254,8 +248,8 @@ class Model:
     def _per_input(self, t, x, u):
         """(forces, aggregate) of a cacheable model, whose forces depend on the input only: computed
         once per input (by value: a list changed in place must not return stale forces)."""
-        key = u if self.vector else tuple(u)
-        if key is not self._cached_u and (self.vector or key != self._cached_u):
+        key = tuple(u)
+        if key != self._cached_u:
             rotors = self._forces(t, x, u)
             self._cached_u, self._cached = key, (rotors, self._aggregate(rotors))
         return self._cached
@@ -309,7 +303,6 @@ class Model:
         (fast); the functions above it take arrays too, for fitting and for the batched simulator."""
         xdot = [0.0] * self.n   # the rotor effects write their own states' derivatives (beyond N_RIGID)
         phi, theta, psi = x[6], x[7], x[8]
-        sin, cos = self._sin, self._cos
         sf, cf, st, ct, sp, cp = sin(phi), cos(phi), sin(theta), cos(theta), sin(psi), cos(psi)
         if self._cacheable:
             fx, fy, fz, tau_phi, tau_theta, tau_psi, Omega = self._per_input(t, x, u)[1]
