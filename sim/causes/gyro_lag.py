@@ -23,8 +23,7 @@ from __future__ import annotations
 import copy
 import math
 
-import numpy as np
-
+from flightctl.sim.causes.motor_lag import MotorLagFit
 from flightctl.sim.identify.diagnose.candidate import MAX_TIMING_S, GridCandidate, too_short_to_time
 from flightctl.sim.identify.diagnose.dataset import Change
 from flightctl.sim.world.model import Effect, Parameter
@@ -90,7 +89,7 @@ class GyroLagFit(GridCandidate):
     effect = GyroLag
     changes_thrust = dynamic = True    # folded into the base model's sensing, first; timed by the commands
     explains = "angular acceleration the model predicts from the commands (rad/s^2)"
-    grid = np.concatenate([[0.0], np.geomspace(0.002, MAX_TIMING_S, 40)])
+    grid = MotorLagFit.grid
     physical_check = GYRO_LAG_CHECK
 
     def delta(self, tau):
