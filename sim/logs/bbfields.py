@@ -43,15 +43,16 @@ def kind_of(firmware: str) -> str:
     return "unknown"
 
 
-def _lowpass(h: dict, stem: str, dyn_note: list[str]) -> str | None:
-    """One low-pass stage of Betaflight 4.3+ (and INDIflight) names: `<stem>_static_hz`, its dynamic
-    range `<stem>_dyn_hz` [min, max] (its lowest cut-off, at the lowest throttle, is declared), `<stem>_type`."""
+def _lowpass(h: dict, stem: str, dyn_note: list[str], static: str = "_static_hz") -> str | None:
+    """One low-pass stage: its cut-off `<stem><static>` (Betaflight 4.3+ and INDIflight `gyro_lpf1_static_hz`,
+    before 4.3 `gyro_lowpass_hz`), its dynamic range `<stem>_dyn_hz` [min, max] (its lowest cut-off, at
+    the lowest throttle, is declared), its type `<stem>_type`."""
     kind = LOWPASS_TYPES.get(int(h.get(f"{stem}_type", 0) or 0), "pt1")
     dyn = h.get(f"{stem}_dyn_hz")
     if isinstance(dyn, list) and dyn and dyn[0]:
         dyn_note.append(f"{stem}_dyn_hz {dyn}: its lowest cut-off {dyn[0]} Hz (at the lowest throttle) declared")
         return f"{kind} {dyn[0]:g}"
-    hz = h.get(f"{stem}_static_hz")
+    hz = h.get(f"{stem}{static}")
     return f"{kind} {hz:g}" if hz else None
 
 
@@ -64,16 +65,7 @@ def filters(h: dict) -> tuple[str, str, str]:
     if "gyro_lpf1_static_hz" in h or "gyro_lpf1_dyn_hz" in h:
         chain = [s for s in (_lowpass(h, "gyro_lpf1", notes), _lowpass(h, "gyro_lpf2", notes)) if s]
     elif "gyro_lowpass_hz" in h:
-        chain = []
-        dyn = h.get("gyro_lowpass_dyn_hz")
-        kind = LOWPASS_TYPES.get(int(h.get("gyro_lowpass_type", 0) or 0), "pt1")
-        if isinstance(dyn, list) and dyn and dyn[0]:
-            chain.append(f"{kind} {dyn[0]:g}")
-            notes.append(f"gyro_lowpass_dyn_hz {dyn}: its lowest cut-off {dyn[0]} Hz (at the lowest throttle) declared")
-        elif h.get("gyro_lowpass_hz"):
-            chain.append(f"{kind} {h['gyro_lowpass_hz']:g}")
-        if h.get("gyro_lowpass2_hz"):
-            chain.append(f"{LOWPASS_TYPES.get(int(h.get('gyro_lowpass2_type', 0) or 0), 'pt1')} {h['gyro_lowpass2_hz']:g}")
+        chain = [s for s in (_lowpass(h, "gyro_lowpass", notes, "_hz"), _lowpass(h, "gyro_lowpass2", notes, "_hz")) if s]
     else:                                                  # INAV: gyro_lpf_hz, its type not in the header
         chain = [f"pt1 {h['gyro_lpf_hz']:g}"] if h.get("gyro_lpf_hz") else []
         if chain:
