@@ -14,7 +14,7 @@ import re
 import numpy as np
 
 from flightctl.physics import G
-from flightctl.sim.logs.common import Imported, Stream, euler_from_frd_ned
+from flightctl.sim.logs.common import Imported, Stream, command_p, euler_from_frd_ned
 
 QUAD_X = ((-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0))   # motors 1-4: rear right, front right,
 QUAD_X_SPIN = (-1.0, 1.0, 1.0, -1.0)                               # rear left, front left; 1 and 4 clockwise
@@ -154,12 +154,9 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
     imp.streams["acc"] = Stream("acc", t, acc / one_g * G)
     lo, hi = (float(v) for v in h.get("motorOutput", [0, 2047])[:2])
     raw = np.vstack([a[:, col[m]] for m in motors])
-    P = 255.0 * (raw - lo) / (hi - lo)
-    clipped = int(((P < 0) | (P > 255)).any(axis=0).sum())
-    if clipped:
-        imp.notes.append(f"{clipped} rows with a motor command outside motorOutput [{lo:g}, {hi:g}] "
-                         "(stopped or disarmed: 0) clipped to 0-255")
-    imp.streams["motors"] = Stream("motors", t, np.clip(P, 0.0, 255.0), held=True)
+    P = command_p(imp, raw, lo, hi, f"rows with a motor command outside motorOutput [{lo:g}, {hi:g}] (stopped or "
+                  "disarmed: 0)")
+    imp.streams["motors"] = Stream("motors", t, P, held=True)
     _battery(imp, h, a, col, t, kind, ver)
     _rotor_speeds(imp, h, a, col, t, field, debug, kind)
     _tracking(imp, a, col, t, field, hires, kind)

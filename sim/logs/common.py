@@ -98,6 +98,16 @@ def rate_notes(imp: Imported, motors: str, how: str) -> None:
         imp.meta["log_faster"] = how
 
 
+def command_p(imp: Imported, raw: np.ndarray, lo, hi, outside: str) -> np.ndarray:
+    """The motor commands `raw` (4, n) as P on 0-255 over [lo, hi] (scalars, or (4, 1) per motor),
+    clipped; a note "N `outside` clipped to 0-255" when N samples had a command outside the range."""
+    P = 255.0 * (raw - lo) / (hi - lo)
+    clipped = int(((P < 0) | (P > 255)).any(axis=0).sum())
+    if clipped:
+        imp.notes.append(f"{clipped} {outside} clipped to 0-255")
+    return np.clip(P, 0.0, 255.0)
+
+
 def _on(t: np.ndarray, s: Stream) -> np.ndarray:
     """Stream s on the times t: held (last sample at or before) for commands; for measurements
     interpolated, empty across its own long gaps and outside its span."""
