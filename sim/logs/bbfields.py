@@ -14,12 +14,11 @@ import re
 import numpy as np
 
 from flightctl.physics import G
-from flightctl.sim.logs.common import Imported, Stream, command_p, euler_from_frd_ned
+from flightctl.sim.logs.common import DEG, Imported, Stream, command_p, euler_from_frd_ned
 
 QUAD_X = ((-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0))   # motors 1-4: rear right, front right,
 QUAD_X_SPIN = (-1.0, 1.0, 1.0, -1.0)                               # rear left, front left; 1 and 4 clockwise
 ROTOR_NAMES = {1: "a single rotor", 2: "a bicopter", 3: "a tricopter", 6: "a hexacopter", 8: "an octocopter"}
-DEG = math.pi / 180.0
 RPM = 2.0 * math.pi / 60.0
 LOWPASS_TYPES = {0: "pt1", 1: "biquad", 2: "pt2", 3: "pt3"}        # Betaflight's lowpass_type enum
 # Betaflight's debug modes (debugType_e): GYRO_SCALED holds the gyro before its filters (deg/s) up to

@@ -37,6 +37,8 @@ MIN_ROWS = 10
 ISLAND_GAP_S = 1.0       # a few rows cut off from the log by a gap this long at its start or end are not data
 ISLAND_SHARE = 0.01      # ... when they are under this share of the rows
 CELL_FULL_V = 4.2        # a LiPo cell at full charge: the cell count of a resting pack is ceil(V / 4.2)
+FRD = np.array([[1.0], [-1.0], [-1.0]])     # body FRD (or earth NED) to ours (conventions.md): y and z change sign
+DEG = math.pi / 180.0
 
 
 @dataclass

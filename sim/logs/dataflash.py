@@ -20,10 +20,8 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.sim.logs import arducopter3
-from flightctl.sim.logs.common import Imported, Stream, command_p, rate_notes
+from flightctl.sim.logs.common import CELL_FULL_V, DEG, FRD, Imported, Stream, command_p, rate_notes
 
-FRD = np.array([[1.0], [-1.0], [-1.0]])
-DEG = math.pi / 180.0
 MOTOR_FUNCTION = 33                    # SERVOn_FUNCTION of motor 1 (33-44: motors 1-12)
 FRAME_CLASSES = {0: "an undefined frame", 2: "a hexacopter", 3: "an octocopter", 4: "an octo-quad (coaxial)",
                  5: "a Y6", 6: "a helicopter", 7: "a tricopter", 8: "a single-rotor vehicle", 9: "a coaxial copter",
@@ -343,8 +341,8 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
     _battery(msgs, imp)
     vmax = float(p.get("MOT_BAT_VOLT_MAX", 0) or 0)
     if vmax > 0:
-        imp.meta["battery_cells"] = str(max(1, round(vmax / 4.2)))
-        imp.meta["battery_cells_source"] = f"MOT_BAT_VOLT_MAX {vmax:g} V over 4.2 V a cell"
+        imp.meta["battery_cells"] = str(max(1, round(vmax / CELL_FULL_V)))
+        imp.meta["battery_cells_source"] = f"MOT_BAT_VOLT_MAX {vmax:g} V over {CELL_FULL_V:g} V a cell"
     baro = _pick(msgs["BARO"], "I")
     imp.meta["height_source"] = "none"
     if baro:
