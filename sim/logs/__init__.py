@@ -144,7 +144,7 @@ def each_log(path: str, index: int | None = None, progress=None) -> list[LogEntr
         a, b = spans[i - 1]
         name = f"{path}#{i}" if n > 1 else path
         start = time.perf_counter()
-        entry = _entry(i, name, lambda: blackbox.read(path, i, data[a:b], a, len(data), name), progress)
+        entry = _entry(i, name, lambda: blackbox.read(path, data[a:b], a, len(data), name), progress)
         if n > 1:
             say(f"log {i} of {n}: " + (entry.reason or f"{entry.seconds:.1f} s, motors running {entry.running_s:.1f} s")
                 + f" ({time.perf_counter() - start:.1f} s)")
