@@ -10,6 +10,7 @@ in the `logs` extra (orangebox is GPL-3.0: an optional extra only).
 """
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -96,9 +97,12 @@ def _guarded(name: str, fn):
         raise InputError(f"{name}: damaged or unreadable log ({type(e).__name__}: {e})") from None
 
 
-def _reason(e: InputError, name: str) -> str:
-    text = str(e)
-    return text[len(name) + 2:] if text.startswith(f"{name}: ") else text
+def reason(error: str, path: str) -> str:
+    """An InputError's line without the file's path (`PATH: `, `PATH#k: `, or so with the file's name):
+    the reason a log was skipped or refused, where the row or the list names the log."""
+    for p in (path, Path(path).name):
+        error = re.sub(rf"^{re.escape(p)}(#\d+)?: ", "", error)
+    return error
 
 
 def _entry(index: int, name: str, read, progress) -> LogEntry:
@@ -108,7 +112,7 @@ def _entry(index: int, name: str, read, progress) -> LogEntry:
         text = _guarded(name, lambda: flight_text(imp, progress))
         table = to_table(text, name)
     except InputError as e:
-        return LogEntry(index, None, _reason(e, name), 0.0)
+        return LogEntry(index, None, reason(str(e), name), 0.0)
     from flightctl.sim.identify.diagnose.data import IDLE_P
     t = table["t"]
     P = np.vstack([table[f"P{i}"] for i in range(1, 5)])
