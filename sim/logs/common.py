@@ -18,7 +18,7 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import FLIGHT_COLUMNS, FlightLogWriter, Table, read_flight_log
-from flightctl.sim.identify.diagnose.data import IDLE_P       # a motor runs above 1 % of its range
+from flightctl.sim.identify.diagnose.data import all_running   # all four motors above 1 % of their range
 from flightctl.sim.identify.diagnose.dataset import DYNAMIC_MIN_HZ   # what diagnose needs to time and to follow
 
 AXES = ("x", "y", "z")
@@ -163,7 +163,7 @@ def battery_cells(imp: Imported, P: np.ndarray | None = None) -> None:
         return
     s = imp.streams["battery_v"]
     motors = imp.streams["motors"]
-    running = (motors.values > IDLE_P).all(axis=0)
+    running = all_running(motors.values)
     start = motors.t[np.argmax(running)] if running.any() else np.inf
     rest = s.values[0, s.t < start]
     v = float(np.median(rest if rest.size else s.values[0, :10]))
