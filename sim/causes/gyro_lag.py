@@ -23,9 +23,9 @@ from __future__ import annotations
 import copy
 import math
 
-import numpy as np
-
-from flightctl.sim.identify.diagnose.candidate import MAX_TIMING_S, GridCandidate, too_short_to_time
+from flightctl.sim.causes.motor_lag import MotorLagFit
+from flightctl.sim.identify.diagnose.candidate import (MAX_TIMING_S, GridCandidate, timing_not_physical,
+                                                       too_short_to_time)
 from flightctl.sim.identify.diagnose.dataset import Change
 from flightctl.sim.world.model import Effect, Parameter
 
@@ -90,7 +90,7 @@ class GyroLagFit(GridCandidate):
     effect = GyroLag
     changes_thrust = dynamic = True    # folded into the base model's sensing, first; timed by the commands
     explains = "angular acceleration the model predicts from the commands (rad/s^2)"
-    grid = np.concatenate([[0.0], np.geomspace(0.002, MAX_TIMING_S, 40)])
+    grid = MotorLagFit.grid
     physical_check = GYRO_LAG_CHECK
 
     def delta(self, tau):
@@ -108,8 +108,5 @@ class GyroLagFit(GridCandidate):
         return too_short_to_time(result, self.ds)
 
     def physical(self, result):
-        tau = result.parameters["tau"]
-        if tau >= MAX_TIMING_S * 0.995:
-            return (f"{tau * 1e3:.0f} ms is at the end of the 0-{1e3 * MAX_TIMING_S:.0f} ms search: no gyro filter "
-                    "lags that long (the commands and the rates the log shows do not match in time)")
-        return None
+        return timing_not_physical(result, "no gyro filter lags that long (the commands and the rates the log shows "
+                                           "do not match in time)")

@@ -10,6 +10,7 @@ in the `logs` extra (orangebox is GPL-3.0: an optional extra only).
 """
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +19,7 @@ import numpy as np
 
 from flightctl.errors import InputError, read_bytes
 from flightctl.logfile import Table
+from flightctl.sim.identify.diagnose.data import all_running
 from flightctl.sim.logs.common import EXTRA as EXTRA_COLUMNS
 from flightctl.sim.logs.common import Imported, flight_text, to_table
 
@@ -96,9 +98,12 @@ def _guarded(name: str, fn):
         raise InputError(f"{name}: damaged or unreadable log ({type(e).__name__}: {e})") from None
 
 
-def _reason(e: InputError, name: str) -> str:
-    text = str(e)
-    return text[len(name) + 2:] if text.startswith(f"{name}: ") else text
+def reason(error: str, path: str) -> str:
+    """An InputError's line without the file's path (`PATH: `, `PATH#k: `, or so with the file's name):
+    the reason a log was skipped or refused, where the row or the list names the log."""
+    for p in (path, Path(path).name):
+        error = re.sub(rf"^{re.escape(p)}(#\d+)?: ", "", error)
+    return error
 
 
 def _entry(index: int, name: str, read, progress) -> LogEntry:
@@ -108,11 +113,9 @@ def _entry(index: int, name: str, read, progress) -> LogEntry:
         text = _guarded(name, lambda: flight_text(imp, progress))
         table = to_table(text, name)
     except InputError as e:
-        return LogEntry(index, None, _reason(e, name), 0.0)
-    from flightctl.sim.identify.diagnose.data import IDLE_P
+        return LogEntry(index, None, reason(str(e), name), 0.0)
     t = table["t"]
-    P = np.vstack([table[f"P{i}"] for i in range(1, 5)])
-    running = (P > IDLE_P).all(axis=0)
+    running = all_running(np.vstack([table[f"P{i}"] for i in range(1, 5)]))
     running_s = float(np.sum(np.diff(t)[running[:-1]])) if t.size > 1 else 0.0
     return LogEntry(index, table, None, float(t[-1] - t[0]), text, running_s)
 
@@ -144,7 +147,7 @@ def each_log(path: str, index: int | None = None, progress=None) -> list[LogEntr
         a, b = spans[i - 1]
         name = f"{path}#{i}" if n > 1 else path
         start = time.perf_counter()
-        entry = _entry(i, name, lambda: blackbox.read(path, i, data[a:b], a, len(data), name), progress)
+        entry = _entry(i, name, lambda: blackbox.read(path, data[a:b], a, len(data), name), progress)
         if n > 1:
             say(f"log {i} of {n}: " + (entry.reason or f"{entry.seconds:.1f} s, motors running {entry.running_s:.1f} s")
                 + f" ({time.perf_counter() - start:.1f} s)")

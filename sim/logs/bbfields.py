@@ -14,12 +14,11 @@ import re
 import numpy as np
 
 from flightctl.physics import G
-from flightctl.sim.logs.common import Imported, Stream, euler_from_frd_ned
+from flightctl.sim.logs.common import DEG, Imported, Stream, command_p, euler_from_frd_ned
 
 QUAD_X = ((-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0))   # motors 1-4: rear right, front right,
 QUAD_X_SPIN = (-1.0, 1.0, 1.0, -1.0)                               # rear left, front left; 1 and 4 clockwise
 ROTOR_NAMES = {1: "a single rotor", 2: "a bicopter", 3: "a tricopter", 6: "a hexacopter", 8: "an octocopter"}
-DEG = math.pi / 180.0
 RPM = 2.0 * math.pi / 60.0
 LOWPASS_TYPES = {0: "pt1", 1: "biquad", 2: "pt2", 3: "pt3"}        # Betaflight's lowpass_type enum
 # Betaflight's debug modes (debugType_e): GYRO_SCALED holds the gyro before its filters (deg/s) up to
@@ -43,15 +42,16 @@ def kind_of(firmware: str) -> str:
     return "unknown"
 
 
-def _lowpass(h: dict, stem: str, dyn_note: list[str]) -> str | None:
-    """One low-pass stage of Betaflight 4.3+ (and INDIflight) names: `<stem>_static_hz`, its dynamic
-    range `<stem>_dyn_hz` [min, max] (its lowest cut-off, at the lowest throttle, is declared), `<stem>_type`."""
+def _lowpass(h: dict, stem: str, dyn_note: list[str], static: str = "_static_hz") -> str | None:
+    """One low-pass stage: its cut-off `<stem><static>` (Betaflight 4.3+ and INDIflight `gyro_lpf1_static_hz`,
+    before 4.3 `gyro_lowpass_hz`), its dynamic range `<stem>_dyn_hz` [min, max] (its lowest cut-off, at
+    the lowest throttle, is declared), its type `<stem>_type`."""
     kind = LOWPASS_TYPES.get(int(h.get(f"{stem}_type", 0) or 0), "pt1")
     dyn = h.get(f"{stem}_dyn_hz")
     if isinstance(dyn, list) and dyn and dyn[0]:
         dyn_note.append(f"{stem}_dyn_hz {dyn}: its lowest cut-off {dyn[0]} Hz (at the lowest throttle) declared")
         return f"{kind} {dyn[0]:g}"
-    hz = h.get(f"{stem}_static_hz")
+    hz = h.get(f"{stem}{static}")
     return f"{kind} {hz:g}" if hz else None
 
 
@@ -64,16 +64,7 @@ def filters(h: dict) -> tuple[str, str, str]:
     if "gyro_lpf1_static_hz" in h or "gyro_lpf1_dyn_hz" in h:
         chain = [s for s in (_lowpass(h, "gyro_lpf1", notes), _lowpass(h, "gyro_lpf2", notes)) if s]
     elif "gyro_lowpass_hz" in h:
-        chain = []
-        dyn = h.get("gyro_lowpass_dyn_hz")
-        kind = LOWPASS_TYPES.get(int(h.get("gyro_lowpass_type", 0) or 0), "pt1")
-        if isinstance(dyn, list) and dyn and dyn[0]:
-            chain.append(f"{kind} {dyn[0]:g}")
-            notes.append(f"gyro_lowpass_dyn_hz {dyn}: its lowest cut-off {dyn[0]} Hz (at the lowest throttle) declared")
-        elif h.get("gyro_lowpass_hz"):
-            chain.append(f"{kind} {h['gyro_lowpass_hz']:g}")
-        if h.get("gyro_lowpass2_hz"):
-            chain.append(f"{LOWPASS_TYPES.get(int(h.get('gyro_lowpass2_type', 0) or 0), 'pt1')} {h['gyro_lowpass2_hz']:g}")
+        chain = [s for s in (_lowpass(h, "gyro_lowpass", notes, "_hz"), _lowpass(h, "gyro_lowpass2", notes, "_hz")) if s]
     else:                                                  # INAV: gyro_lpf_hz, its type not in the header
         chain = [f"pt1 {h['gyro_lpf_hz']:g}"] if h.get("gyro_lpf_hz") else []
         if chain:
@@ -162,12 +153,9 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
     imp.streams["acc"] = Stream("acc", t, acc / one_g * G)
     lo, hi = (float(v) for v in h.get("motorOutput", [0, 2047])[:2])
     raw = np.vstack([a[:, col[m]] for m in motors])
-    P = 255.0 * (raw - lo) / (hi - lo)
-    clipped = int(((P < 0) | (P > 255)).any(axis=0).sum())
-    if clipped:
-        imp.notes.append(f"{clipped} rows with a motor command outside motorOutput [{lo:g}, {hi:g}] "
-                         "(stopped or disarmed: 0) clipped to 0-255")
-    imp.streams["motors"] = Stream("motors", t, np.clip(P, 0.0, 255.0), held=True)
+    P = command_p(imp, raw, lo, hi, f"rows with a motor command outside motorOutput [{lo:g}, {hi:g}] (stopped or "
+                  "disarmed: 0)")
+    imp.streams["motors"] = Stream("motors", t, P, held=True)
     _battery(imp, h, a, col, t, kind, ver)
     _rotor_speeds(imp, h, a, col, t, field, debug, kind)
     _tracking(imp, a, col, t, field, hires, kind)

@@ -111,9 +111,9 @@ def frames(parser, offset: int, size: int) -> tuple[list[str], np.ndarray, list[
     return names, np.array(rows, dtype=float).reshape(len(rows), width), notes
 
 
-def read(path: str, index: int, chunk: bytes, offset: int, size: int, name: str):
-    """Log `index` of a blackbox file (its bytes `chunk`, at `offset` in a file of `size` bytes) as an
-    `Imported`, or InputError naming why it cannot be read."""
+def read(path: str, chunk: bytes, offset: int, size: int, name: str):
+    """One log of the blackbox file `path` (its bytes `chunk`, at `offset` in a file of `size` bytes;
+    `name` the log's in messages) as an `Imported`, or InputError naming why it cannot be read."""
     from flightctl.sim.logs import bbfields
     why = frameless(chunk)
     if why:

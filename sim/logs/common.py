@@ -18,7 +18,7 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import FLIGHT_COLUMNS, FlightLogWriter, Table, read_flight_log
-from flightctl.sim.identify.diagnose.data import IDLE_P       # a motor runs above 1 % of its range
+from flightctl.sim.identify.diagnose.data import all_running   # all four motors above 1 % of their range
 from flightctl.sim.identify.diagnose.dataset import DYNAMIC_MIN_HZ   # what diagnose needs to time and to follow
 
 AXES = ("x", "y", "z")
@@ -37,6 +37,8 @@ MIN_ROWS = 10
 ISLAND_GAP_S = 1.0       # a few rows cut off from the log by a gap this long at its start or end are not data
 ISLAND_SHARE = 0.01      # ... when they are under this share of the rows
 CELL_FULL_V = 4.2        # a LiPo cell at full charge: the cell count of a resting pack is ceil(V / 4.2)
+FRD = np.array([[1.0], [-1.0], [-1.0]])     # body FRD (or earth NED) to ours (conventions.md): y and z change sign
+DEG = math.pi / 180.0
 
 
 @dataclass
@@ -98,6 +100,16 @@ def rate_notes(imp: Imported, motors: str, how: str) -> None:
         imp.meta["log_faster"] = how
 
 
+def command_p(imp: Imported, raw: np.ndarray, lo, hi, outside: str) -> np.ndarray:
+    """The motor commands `raw` (4, n) as P on 0-255 over [lo, hi] (scalars, or (4, 1) per motor),
+    clipped; a note "N `outside` clipped to 0-255" when N samples had a command outside the range."""
+    P = 255.0 * (raw - lo) / (hi - lo)
+    clipped = int(((P < 0) | (P > 255)).any(axis=0).sum())
+    if clipped:
+        imp.notes.append(f"{clipped} {outside} clipped to 0-255")
+    return np.clip(P, 0.0, 255.0)
+
+
 def _on(t: np.ndarray, s: Stream) -> np.ndarray:
     """Stream s on the times t: held (last sample at or before) for commands; for measurements
     interpolated, empty across its own long gaps and outside its span."""
@@ -151,7 +163,7 @@ def battery_cells(imp: Imported, P: np.ndarray | None = None) -> None:
         return
     s = imp.streams["battery_v"]
     motors = imp.streams["motors"]
-    running = (motors.values > IDLE_P).all(axis=0)
+    running = all_running(motors.values)
     start = motors.t[np.argmax(running)] if running.any() else np.inf
     rest = s.values[0, s.t < start]
     v = float(np.median(rest if rest.size else s.values[0, :10]))

@@ -20,10 +20,8 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.sim.logs import arducopter3
-from flightctl.sim.logs.common import Imported, Stream, rate_notes
+from flightctl.sim.logs.common import CELL_FULL_V, DEG, FRD, Imported, Stream, command_p, rate_notes
 
-FRD = np.array([[1.0], [-1.0], [-1.0]])
-DEG = math.pi / 180.0
 MOTOR_FUNCTION = 33                    # SERVOn_FUNCTION of motor 1 (33-44: motors 1-12)
 FRAME_CLASSES = {0: "an undefined frame", 2: "a hexacopter", 3: "an octocopter", 4: "an octo-quad (coaxial)",
                  5: "a Y6", 6: "a helicopter", 7: "a tricopter", 8: "a single-rotor vehicle", 9: "a coaxial copter",
@@ -229,16 +227,13 @@ def _motors(p: dict, msgs, imp: Imported) -> Stream:
         source = ("RC3_MIN/MAX (ArduCopter 3.x drives its motors over the throttle channel's range)"
                   if arducopter3.is_legacy(p) else
                   "RC3_MIN/MAX (MOT_PWM_MIN/MAX are 0: ArduCopter then uses the throttle channel's range)")
-    P = 255.0 * (raw - lo) / (hi - lo)
-    clipped = int(((P < 0) | (P > 255)).any(axis=0).sum())
     name = fields[0][0]
-    if clipped:
-        imp.notes.append(f"{clipped} {name} samples outside {source.split(' ')[0]} (stopped or disarmed) clipped to 0-255")
+    P = command_p(imp, raw, lo, hi, f"{name} samples outside {source.split(' ')[0]} (stopped or disarmed)")
     imp.meta["motor_outputs"] = f"{outputs}; {source} {lo:g}-{hi:g} us"
     imp.meta["command_range"] = f"{lo:g} {hi:g}"
     imp.meta["command"] = f"P = 255 (pwm - {lo:g}) / ({hi:g} - {lo:g}): {outputs.split(' (')[0]} over {source.split(' ')[0]}"
     imp.meta["esc_order"] = esc_order
-    return Stream(name, t, np.clip(P, 0.0, 255.0), held=True)
+    return Stream(name, t, P, held=True)
 
 
 def _armed(msgs) -> bool | None:
@@ -346,8 +341,8 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
     _battery(msgs, imp)
     vmax = float(p.get("MOT_BAT_VOLT_MAX", 0) or 0)
     if vmax > 0:
-        imp.meta["battery_cells"] = str(max(1, round(vmax / 4.2)))
-        imp.meta["battery_cells_source"] = f"MOT_BAT_VOLT_MAX {vmax:g} V over 4.2 V a cell"
+        imp.meta["battery_cells"] = str(max(1, round(vmax / CELL_FULL_V)))
+        imp.meta["battery_cells_source"] = f"MOT_BAT_VOLT_MAX {vmax:g} V over {CELL_FULL_V:g} V a cell"
     baro = _pick(msgs["BARO"], "I")
     imp.meta["height_source"] = "none"
     if baro:

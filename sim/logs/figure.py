@@ -11,6 +11,7 @@ import re
 import numpy as np
 
 from flightctl.logfile import Table
+from flightctl.sim.logs.common import GAP_PERIODS   # a line breaks across a gap in the rows as a stream's does
 from flightctl.sim.plots import empty_panel, figure, legend
 
 STREAM = re.compile(r"(.+?) rate_hz=([\d.]+) samples=(\d+) gaps=(\d+) longest_gap_s=([\d.]+)")
@@ -20,7 +21,6 @@ STRIPS = (("commands P (0-255)", ("P1", "P2", "P3", "P4")),
           ("battery (V, A)", ("battery_v", "current")),
           ("height (m; baro from its first reading)", ("height", "alt", "range")),
           ("rotor speed (rad/s)", ("omega1", "omega2", "omega3", "omega4")))
-GAP_PERIODS = 3.0        # a line breaks where the rows are further apart than this many median periods
 
 
 def streams(table: Table) -> list[tuple[str, float, int, int, float]]:

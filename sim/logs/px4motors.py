@@ -15,7 +15,7 @@ import re
 
 import numpy as np
 
-from flightctl.sim.logs.common import Imported, Stream
+from flightctl.sim.logs.common import Imported, Stream, command_p
 
 MAV_TYPES = {0: "a generic vehicle", 1: "a fixed wing", 3: "a coaxial helicopter", 4: "a helicopter",
              10: "a ground rover", 11: "a boat", 12: "a submarine", 13: "a hexacopter", 14: "an octocopter",
@@ -177,16 +177,13 @@ def motors(u, p: dict, imp: Imported, armed) -> Stream:
             imp.meta["command"] = "P = 255 actuator_motors.control[0..3] (PX4's normalised motor commands, 0-1)"
             return Stream("actuator_motors", am["timestamp"] * 1e-6, np.clip(np.nan_to_num(c) * 255.0, 0.0, 255.0),
                           held=True)
-    P = 255.0 * (raw - lo[:, None]) / (hi - lo)[:, None]
-    clipped = int(((P < 0) | (P > 255)).any(axis=0).sum())
-    if clipped:
-        imp.notes.append(f"{clipped} actuator_outputs samples outside their MIN..MAX (stopped or disarmed: "
-                         "their disarmed value) clipped to 0-255")
+    P = command_p(imp, raw, lo[:, None], hi[:, None], "actuator_outputs samples outside their MIN..MAX (stopped or "
+                  "disarmed: their disarmed value)")
     imp.meta["command_range"] = f"{lo.min():g} {hi.max():g}"
     imp.meta["command"] = f"P = 255 (output - MIN) / (MAX - MIN) of {where}"
     if group == "UAVCAN_EC" or what.startswith("UAVCAN"):
         imp.meta["esc_order"] = " ".join(str(c) for c in channels)
-    return Stream(f"actuator_outputs[{inst}]", t, np.clip(P, 0.0, 255.0), held=True)
+    return Stream(f"actuator_outputs[{inst}]", t, P, held=True)
 
 
 def _range(p: dict, group: str | None, chan: dict[int, int], raw: np.ndarray):

@@ -15,9 +15,8 @@ import math
 import numpy as np
 
 from flightctl.errors import InputError
-from flightctl.sim.logs.common import Imported, Stream, euler_from_frd_ned, rate_notes
+from flightctl.sim.logs.common import FRD, Imported, Stream, euler_from_frd_ned, rate_notes
 
-FRD = np.array([[1.0], [-1.0], [-1.0]])      # FRD (or NED) to ours: y and z change sign
 ARMED = 2                                    # vehicle_status.arming_state ARMED (every PX4 version)
 RANGE_MAX_M = 10.0                           # the contract's rangefinder range
 DOWNWARD = 25                                # distance_sensor.orientation ROTATION_DOWNWARD_FACING

@@ -47,6 +47,7 @@ from flightctl.sim.identify.diagnose.scoring import linear_stats, reparametrized
 H2_LOW = -1000.0   # P units: far below the idle, the curve is nearly linear in P over the flight
 # The timings at which the base model may be identified (`_timing`): the candidates' 0-300 ms. A pure
 # delay aligns the commands with the motion as well as a lag of the same total for this purpose.
+TIMING_DELAYS = np.concatenate([np.arange(0.0, 0.1, 0.005), np.arange(0.1, 0.3001, 0.01)])     # s
 # A base model for causes: each axis' effectiveness at least T_BASE jackknife standard errors above zero
 # (8 blocks: t with 7 degrees of freedom, one-sided 4 %). A log scrambled on purpose gives a negative
 # effectiveness or one within a standard error of zero on the axis it scrambles (t below 1.1 in
@@ -69,7 +70,6 @@ T_FREE = 3.5
 # has g1 / (2 l) = 0.040 (conventions.md). Taken at 0.01 (docs/real-flights.md).
 YAW_RATIO_MIN = 0.01
 YAW_UNKNOWN = "the yaw effectiveness is not identified from this log"
-TIMING_GRID = {"delay": np.concatenate([np.arange(0.0, 0.1, 0.005), np.arange(0.1, 0.3001, 0.01)])}
 NAMES = ("k_p", "k_q", "k_r", "k_z", "gamma")
 UNITS = ("rad/s^2 per P^2 (arm)", "rad/s^2 per P^2 (arm)", "rad/s^2 per P^2", "m/s^2 per P^2", "1/rad")
 WHAT = ("h1 l / Jxx: roll", "h1 l / Jyy: pitch", "h1 g1 / Jzz: yaw", "h1 / M: specific force",
@@ -110,10 +110,10 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     def jackknife_sd(jack):
         return np.sqrt((N_BLOCKS - 1) / N_BLOCKS * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
 
-    timing = _timing(ds, drag) if slow is None else ("delay", 0.0)
-    Ps = timed_commands(ds, *timing)
-    if timing[1] > 0:
-        progress(f"base model: identified at the timing the flight prefers, {timing[0]} {1e3 * timing[1]:.0f} ms")
+    delay = _timing(ds, drag) if slow is None else 0.0
+    Ps = delayed_commands(ds, delay)
+    if delay > 0:
+        progress(f"base model: identified at the timing the flight prefers, delay {1e3 * delay:.0f} ms")
 
     # one curve for the four rotors: h2 by a bounded scalar search (below every command in flight, where
     # the curve is zero), the effectiveness of each channel on it by least squares
@@ -198,7 +198,7 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
                           "what": "the median command in flight (the accelerometer's bias hides the thrust's level)"}
     report["layout"] = {"x": list(layout.x), "y": list(layout.y), "spin": list(layout.spin), "unit": layout.unit,
                         "source": layout.source}
-    report["timing"] = {"kind": timing[0], "value": round(float(timing[1]), 4), "unit": "s",
+    report["timing"] = {"kind": "delay", "value": round(float(delay), 4), "unit": "s",
                         "what": "the commands' timing (a pure delay or a first-order lag) at which the base model "
                                 "was identified: the one the flight prefers on a 0-300 ms grid. The base model "
                                 "itself has none: the timing is judged as a cause"}
@@ -317,27 +317,24 @@ def yaw_identified(vehicle: Vehicle) -> bool:
     return not any(YAW_UNKNOWN in n for n in vehicle.identification.get("notes", ()))
 
 
-def timed_commands(ds: DataSet, kind: str, value: float) -> list[np.ndarray]:
-    """Each file's commands (4, n) through a pure delay or a first-order lag of `value` s (the
-    candidates' own: `actuation_delay.shift`, `motor_lag.lag_held`)."""
+def delayed_commands(ds: DataSet, delay: float) -> list[np.ndarray]:
+    """Each file's commands (4, n) through a pure delay of `delay` s (the candidate's own:
+    `actuation_delay.shift`)."""
     from flightctl.sim.causes.actuation_delay import shift
-    from flightctl.sim.causes.motor_lag import lag_held
-    if value <= 0:
+    if delay <= 0:
         return [f.P for f in ds.files]
-    if kind == "delay":
-        return [shift(f.P, value * ds.fs) for f in ds.files]
-    return [lag_held(f.P, value, ds.fs)[1] for f in ds.files]
+    return [shift(f.P, delay * ds.fs) for f in ds.files]
 
 
-def _timing(ds: DataSet, drag: np.ndarray) -> tuple[str, float]:
-    """("delay" or "lag", s): the timing of the commands at which a free curve per channel (each thrust
-    channel linear in the timed P^2 and P, a trim on each angular channel, the yaw drag) best predicts the flight, over TIMING_GRID
-    (0-300 ms). A vehicle whose motors lag 150 ms shows almost nothing of its effectiveness to a model
+def _timing(ds: DataSet, drag: np.ndarray) -> float:
+    """The delay (s) of the commands at which a free curve per channel (each thrust channel linear in
+    the timed P^2 and P, a trim on each angular channel, the yaw drag) best predicts the flight, over
+    TIMING_DELAYS (0-300 ms). A vehicle whose motors lag 150 ms shows almost nothing of its effectiveness to a model
     without it: identified at zero timing, its gains and signs would be noise."""
     allb = np.ones(N_BLOCKS, bool)
 
-    def objective(kind, value):
-        Ps = timed_commands(ds, kind, value)
+    def objective(delay):
+        Ps = delayed_commands(ds, delay)
         U = ds.flat_filtered([ds.predict_file(i, ds.drive(P * P, P)).unit for i, P in enumerate(Ps)])
         cols = []
         for c in THRUST_CHANNELS:
@@ -347,9 +344,8 @@ def _timing(ds: DataSet, drag: np.ndarray) -> tuple[str, float]:
                 cols.append(x)
         return solve(linear_stats(ds, ds.measured, np.stack(cols + [drag], axis=-1)), allb, ds.block_counts)[0]
 
-    trials = [(objective(kind, v), kind, float(v)) for kind, grid in TIMING_GRID.items() for v in grid]
-    _, kind, value = min(trials)
-    return kind, value
+    _, delay = min((objective(d), float(d)) for d in TIMING_DELAYS)
+    return delay
 
 
 def _rotor_columns(ds: DataSet, Ps, h2: float, drag: np.ndarray) -> np.ndarray:

@@ -169,12 +169,12 @@ TIMING_CHECK = (f"a lag or delay of 0-{1e3 * MAX_TIMING_S:.0f} ms: motor time co
                 "measured 9.4-inch rotor) and ESC delays of a few ms")
 
 
-def timing_not_physical(result: Result) -> str | None:
-    """`physical` of a lag or delay: one at or beyond MAX_TIMING_S (the end of the search)."""
+def timing_not_physical(result: Result, why: str = "no rotor's lag or delay is that long (the commands and the "
+                                                     "motion the log shows do not match in time)") -> str | None:
+    """`physical` of a lag or delay: one at or beyond MAX_TIMING_S (the end of the search), and `why` not."""
     v = next(iter(result.parameters.values()))
     if v >= MAX_TIMING_S * 0.995:
-        return (f"{v * 1e3:.0f} ms is at the end of the 0-{1e3 * MAX_TIMING_S:.0f} ms search: no rotor's lag or "
-                "delay is that long (the commands and the motion the log shows do not match in time)")
+        return f"{v * 1e3:.0f} ms is at the end of the 0-{1e3 * MAX_TIMING_S:.0f} ms search: {why}"
     return None
 
 

@@ -191,7 +191,7 @@ def _write(out_json: Path, report: dict, plots: dict, images: dict) -> None:
 
 def _each(args, params, progress, t0) -> int:
     """A file of many logs: each log that holds a flight diagnosed on its own; the others named."""
-    from flightctl.sim.logs import each_log, skipped
+    from flightctl.sim.logs import each_log, reason, skipped
     path = args.logs[0]
     progress(f"reading {path}: a file of many logs, each diagnosed on its own")
     entries = each_log(path, None, progress)
@@ -203,9 +203,7 @@ def _each(args, params, progress, t0) -> int:
             try:
                 judged.append((e, _judge([e.table], others, params, args.params is not None, progress)))
             except InputError as err:
-                text = str(err)
-                e.reason = text.split(": ", 1)[1] if text.startswith(e.table.path) and ": " in text else text
-                e.table = None
+                e.reason, e.table = reason(str(err), path), None
     if not judged:
         raise InputError(f"{path}: no log could be judged: {skipped(entries)}")
     reports = {e.index: d.report() for e, d in judged}

@@ -121,7 +121,7 @@ def find_logs(folder: Path) -> list[Path]:
 
 def _jobs(folder: Path, files: list[Path]) -> tuple[list[Row], list[Row]]:
     """(rows to diagnose, one per log, and rows already refused: files that cannot be read)."""
-    from flightctl.sim.logs import count_logs
+    from flightctl.sim.logs import count_logs, reason
     todo, refused = [], []
     for p in files:
         rel = p.relative_to(folder).as_posix()
@@ -131,7 +131,7 @@ def _jobs(folder: Path, files: list[Path]) -> tuple[list[Row], list[Row]]:
         try:
             n = count_logs(str(p))
         except InputError as e:
-            refused.append(Row(rel, str(p), None, reason=_reason(str(e), str(p))))
+            refused.append(Row(rel, str(p), None, reason=reason(str(e), str(p))))
             continue
         if n == 0:
             refused.append(Row(rel, str(p), None, reason="no log in this file"))
@@ -140,17 +140,10 @@ def _jobs(folder: Path, files: list[Path]) -> tuple[list[Row], list[Row]]:
     return todo, refused
 
 
-def _reason(error: str, path: str) -> str:
-    """An InputError's line without the file's path (the row names the log), also as `PATH#k: `."""
-    import re
-    for p in (path, Path(path).name):
-        error = re.sub(rf"^{re.escape(p)}(#\d+)?: ", "", error)
-    return error
-
-
 def run_one(row: Row) -> Row:
     """Read and diagnose one log, quietly: the row with its report, or its refusal."""
     from flightctl.params import load
+    from flightctl.sim.logs import reason
     from flightctl.sim.identify.diagnose.cli import read_logs
     from flightctl.sim.identify.diagnose.verdict import diagnose
     quiet = lambda *a: None   # noqa: E731
@@ -161,7 +154,7 @@ def run_one(row: Row) -> Row:
         row.report = d.report()
         row.status = "diagnosed"
     except InputError as e:
-        row.reason = _reason(str(e), row.path)
+        row.reason = reason(str(e), row.path)
     except Exception as e:         # a fault of diagnose's on this log: said, and the other logs go on
         row.status = "failed"
         row.reason = f"diagnose failed on this log ({type(e).__name__}: {e}): a fault to report"

@@ -175,6 +175,11 @@ def _tilt_rotation(acc_mean):
     return np.array([[ct, st * sf, st * cf], [0.0, cf, -sf], [-st, ct * sf, ct * cf]])
 
 
+def all_running(P: np.ndarray) -> np.ndarray:
+    """(n,) bool: the rows of a foreign log's commands P (4, n) where all four motors run (above IDLE_P)."""
+    return (P > IDLE_P).all(axis=0)
+
+
 def stretches(mask):
     """(start, stop) index pairs of the runs of True in a boolean array."""
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
@@ -229,7 +234,7 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, acc_z: np.ndarray, not
     if "rotors" not in meta:
         table.fail("# vehicle: foreign without a '# rotors:' line: the rotor layout is unknown")
     layout = Layout.parse(meta["rotors"], meta.get("rotors_source", "the log's '# rotors:' line"), table.fail)
-    running = (P > IDLE_P).all(axis=0)
+    running = all_running(P)
     if "height" in table and meta.get("height_source", "") in HEIGHT_SOURCES and np.isfinite(table["height"]).any():
         h = table["height"]
         z = h - np.nanpercentile(h, 1)
@@ -310,7 +315,7 @@ def load_file(table: Table, a: Airframe) -> FileData:
                                for k in ("gyro_filter", "acc_filter"))
     if foreign:
         _check_columns(table, P, IDLE_P, "1 % of the command range")
-        on = (P > IDLE_P).all(axis=0)
+        on = all_running(P)
     else:
         _check_columns(table, P, a.h2 + MOTOR_ON_MARGIN, f"its dead zone h2 = {a.h2:g}")
         on = motors_on(P, a)

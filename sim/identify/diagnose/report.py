@@ -16,7 +16,7 @@ XCORR_MAX_S = 0.25    # cross-correlations are searched over lags within +-this
 
 
 def _decimate_step(d: Diagnosis) -> int:
-    return max(1, int(d.ds.fs_flat / (2.0 * d.report()["data"]["lowpass_hz"])))
+    return max(1, int(d.ds.fs_flat / (2.0 * d.lowpass_hz)))
 
 
 def whiteness(x: np.ndarray, step: int) -> tuple[float, float]:
