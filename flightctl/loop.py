@@ -220,8 +220,10 @@ class FlightLoop:
                         last_echo = t
                     if flying:
                         ctl.on_range(echo, t)
+                        if echo == echo and ctl.alt > TOUCHDOWN_ALT:
+                            detector.lifted()          # off the floor: a lost motor is looked for
                 if flying:
-                    lost = 0 if spinning else detector.update(sample, ctl.mixer.f, dt)
+                    lost = 0 if spinning else detector.update(sample, ctl.mixer.f, dt, ctl.alt < TOUCHDOWN_ALT)
                     if lost:
                         giving = 1.0 - detector.missing
                         if spin.why_not or flown_on_four(self.params, lost, giving):
@@ -284,11 +286,12 @@ class FlightLoop:
                         if self._why:
                             res.reason = "landed: " + self._why.rsplit(": ", 1)[0]
                         counts = stop_counts
-                        finished = landing     # the loop's own landing is the plan's end
+                        # the loop's own landing is the plan's end; so is a touchdown confirmed after it
+                        finished = landing or t - t_arm >= plan.duration
                 else:
                     counts = stop_counts
                     ctl.step(sample, dt, 0.0, 0.0, ctl.est.yaw, 0.0)   # keep estimating on the ground
-                if t - t_arm >= plan.duration:
+                if t - t_arm >= plan.duration and not finished:
                     if not flying:
                         break
                     if landing:          # the landing's own end: the touchdown was never detected
@@ -299,8 +302,9 @@ class FlightLoop:
                         motors.stop()
                         self._event(t, f"never left the ground (highest altitude {max_alt:.2f} m): motors stopped")
                         break
-                    landing = self._land(t, ctl.alt, f"plan ended in the air at {ctl.alt:.2f} m: landing")
-                    plan = self.plan
+                    if t_touch is None:        # (else the plan's own touchdown is under way: it ends within TOUCHDOWN_S)
+                        landing = self._land(t, ctl.alt, f"plan ended in the air at {ctl.alt:.2f} m: landing")
+                        plan = self.plan
             if flying:
                 motors.write(counts)
             if log_append is not None and armed:   # the log starts at arming, with the gyro calibrated

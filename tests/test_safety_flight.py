@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter, read_flight_log
-from flightctl.loop import FlightLoop
+from flightctl.loop import TOUCHDOWN_S, FlightLoop
 from flightctl.params import load
 from flightctl.plans.plan import Move, Plan
 from flightctl.safety import CRASH_TILT, CRASH_TOUCHDOWN_SPEED, crash_reason
@@ -55,6 +55,20 @@ def test_a_landing_move_after_duration_is_flown_as_a_controlled_landing(tmp_path
     flight = fly_plan(tmp_path, Plan([Move(0.0, "alt", 1.0, 2.0), Move(6.0, "alt", 0.0, 2.0)], 5.0, "late"))
     soft_landing(flight.touchdowns, flight.log)
     assert any("plan ended in the air" in what for _, what in flight.result.events)
+
+
+def test_a_plan_that_ends_while_its_touchdown_is_being_confirmed_lands_as_with_time_to_spare(tmp_path):
+    """The plan's own touchdown is confirmed TOUCHDOWN_S after the sonar first puts the vehicle on
+    the floor with the setpoint at 0. A plan that ends inside that half second (excite, 0.5 s after
+    its ramp) must not be taken for one that ended in the air: that started the loop's own landing
+    on the floor, on an altitude estimate without an echo, and lifted the vehicle off again."""
+    moves = [Move(0.0, "alt", 0.5, 2.0), Move(5.0, "alt", 0.0, 2.0)]
+    spare = fly_plan(tmp_path, Plan(moves, 30.0, "spare"))
+    t_landed = next(t for t, w in spare.result.events if w == "landed: motors stopped") - spare.t_arm
+    tight = fly_plan(tmp_path, Plan(moves, t_landed - 0.5 * TOUCHDOWN_S, "tight"))
+    assert not [w for _, w in tight.result.events if "ended in the air" in w], tight.result.events
+    assert next(t for t, w in tight.result.events if w == "landed: motors stopped") - tight.t_arm == pytest.approx(t_landed)
+    soft_landing(tight.touchdowns, tight.log)
 
 
 def test_a_full_disk_drops_log_rows_and_lands(tmp_path):

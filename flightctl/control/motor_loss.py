@@ -14,9 +14,12 @@ THRESHOLD for LOOPS loops of calm flight it names motor i at once; above WEAK fo
 for tens of milliseconds, but not in the collective (the two sides of an axis change in opposite
 directions); and the count only starts in calm flight (the body rates, low-passed, below CALM): a
 vehicle already tumbling is not read as a lost rotor. It looks at any height: a vehicle resting on
-the floor has the floor carrying weight, the collective residual the other way; a touchdown's jolt
-(the low-passed collective residual JOLT above the commanded thrusts) holds the count off for JOLT_S
-(a hop, legs settling).
+the floor has the floor carrying weight and torque, and nothing is looked for while the floor may be
+holding it: from arming, and from a touchdown's jolt (the low-passed collective residual JOLT above the
+commanded thrusts), until the sonar sees it above the floor (`lifted`), for at least JOLT_S after the
+jolt (a hop, legs settling); and while the loop's altitude is the floor's (`update`'s `low`). A
+vehicle that limit-cycles down onto the floor in the middle of a plan, its attitude integrals wound up,
+gives the floor a torque and a weight to carry that look like a lost motor.
 """
 from __future__ import annotations
 
@@ -64,7 +67,7 @@ class MotorLossDetector:
     `accept()`: the loop flies on with that motor (a weak one): its missing thrust becomes part of
     the residuals' slow part."""
     __slots__ = ("km", "kf", "kb", "kc", "fl", "sx", "sy", "sz", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
-                 "strong", "missing", "fast", "seen", "damp", "hold", "jolt_loops", "p", "q", "half", "quiet", "ic1", "c1", "w", "Jxx", "Jyy", "Jp", "jx",
+                 "strong", "missing", "fast", "seen", "damp", "hold", "floor", "jolt_loops", "p", "q", "half", "quiet", "ic1", "c1", "w", "Jxx", "Jyy", "Jp", "jx",
                  "jy", "l", "iM", "M", "il")
 
     def __init__(self, params: Params, tau_motor: float | None = None):
@@ -102,9 +105,15 @@ class MotorLossDetector:
         self.rx = self.ry = self.rz = self.bx = self.by = self.bz = self.sx = self.sy = self.sz = 0.0
         self.calm = 0.0
         self.hold = 0
+        self.floor = True        # on the floor at arming, until the sonar sees it leave (`lifted`)
         self.p = self.q = None
 
-    def update(self, s: ImuSample, f: list[float], dt: float) -> int:
+    def lifted(self) -> None:
+        """A valid sonar altitude above the floor's: the floor no longer carries the vehicle."""
+        self.floor = False
+
+    def update(self, s: ImuSample, f: list[float], dt: float, low: bool = False) -> int:
+        """`low`: the loop's altitude is the floor's (flightctl/loop.py TOUCHDOWN_ALT)."""
         # the rotors' speeds now (eq. 27), from the thrusts commanded one loop earlier through the motor
         # time constant (the speed lags, as the plant's motor_dynamics has it), and their thrusts
         w, km, ic1, c1 = self.w, self.km, self.ic1, self.c1
@@ -143,9 +152,10 @@ class MotorLossDetector:
         if rz > JOLT:                              # the floor pushing up: a touchdown (low-passed: not the
             #                                      rotors' vibration on the accelerometer)
             self.hold = self.jolt_loops
+            self.floor = True
         elif self.hold > 0:
             self.hold -= 1
-        if self.hold or fall <= self.quiet:   # on the floor the floor carries weight: no fall
+        if self.hold or self.floor or low or fall <= self.quiet:   # the floor may carry weight and torque
             count[0] = count[1] = count[2] = count[3] = strong[0] = strong[1] = strong[2] = strong[3] = 0
             self.seen = 0.0
         else:

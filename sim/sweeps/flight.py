@@ -506,7 +506,8 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
                             w[W_NEXT + j] = 0.0
                         w[W_REASON], w[W_DONE] = NEVER_LEFT, 1.0
                         break
-                    land(w, e, sp, tp, e[ob.ALT])
+                    if w[W_T_TOUCH] < 0.0:
+                        land(w, e, sp, tp, e[ob.ALT])
             if write and w[W_FLYING] != 0.0:                   # `SimMotors.write`
                 for j in range(4):
                     w[W_NEXT + j] = cnt[j] * (255.0 / 40000.0)
