@@ -137,7 +137,7 @@ class _Vehicles:
         self.e = np.zeros((n, ob.N_E))
         self.e[:, ob.ALT_T] = -1.0
         self.kc = np.zeros((n, ob.N_K))
-        self.regs = np.zeros((n, 128), dtype=np.uint8)
+        self.words = np.zeros((n, 7))             # each chip's burst, as the driver decodes it (`flight.put_word`)
         self.cs, self.cc = np.zeros((n, N_CHIP_STATE)), np.zeros((n, N_CHIP_CONST))
         self.normal = fl.generators([np.random.default_rng(s) for s in seeds])   # each chip's `NoisePool`
         self.rng = []             # each vehicle's `World.rng`, whose `random()`s the loop takes from uni
@@ -228,7 +228,7 @@ def _fly_group_now(job) -> tuple:
     i0 = 0
     while i0 < i_end and not veh.w[:, fl.W_DONE].all():
         n = min(CHUNK, i_end - i0)
-        run(veh.x, veh.w, veh.e, veh.kc, veh.q, veh.codes, veh.ring, veh.nring, veh.frac, veh.regs, veh.cs, veh.cc,
+        run(veh.x, veh.w, veh.e, veh.kc, veh.q, veh.codes, veh.ring, veh.nring, veh.frac, veh.words, veh.cs, veh.cc,
             veh.normal, veh.uni, np.ascontiguousarray(sp[i0 + 1:i0 + 1 + n]), rec, k, template["jump"],
             i0, n, i_arm, rec0)
         veh.refill()

@@ -109,11 +109,18 @@ def compiled_copy(fn, allocates: bool = False, **dependencies):
     if not enabled():
         return None
     import numba
+    copy = rebound(fn, **dependencies)
+    return numba.njit(cache=CACHE, nogil=True, forceinline=True, **({} if allocates else {"_nrt": False}))(copy)
+
+
+def rebound(fn, **dependencies):
+    """A copy of the plain function `fn` whose global names in `dependencies` are bound to other
+    functions (`compiled_copy` compiles such a copy)."""
     g = dict(fn.__globals__)
     g.update(dependencies)
     copy = types.FunctionType(fn.__code__, g, fn.__name__, fn.__defaults__, fn.__closure__)
     copy.__qualname__, copy.__module__, copy.__doc__ = fn.__qualname__, fn.__module__, fn.__doc__
-    return numba.njit(cache=CACHE, nogil=True, forceinline=True, **({} if allocates else {"_nrt": False}))(copy)
+    return copy
 
 
 # The effects the compiled plant carries, by their wrench hooks' codes (`layout`); a model with any other

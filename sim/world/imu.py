@@ -321,13 +321,17 @@ def put16(regs, at: int, v: float) -> None:
 
 
 @functools.cache
-def chip_frame_compiled():
-    """`chip_frame` compiled (sim/world/compiled.py), or None."""
+def chip_frame_compiled(put=None):
+    """`chip_frame` compiled (sim/world/compiled.py), or None. `put`: a plain function in place of
+    `put16` (the batched simulator's `flight.put_word`, into a float array: a signature of its own,
+    so that numba's cache, which keys a function's copies by their argument types, keeps both)."""
     from flightctl.sim.world import compiled
     if not compiled.enabled():
         return None
     c = compiled.compiled_copy
-    frame = c(chip_frame, vibration=c(vibration, remainder=c(remainder)), put16=c(put16, _i16=c(_i16)))
+    frame = c(chip_frame, vibration=c(vibration, remainder=c(remainder)), put16=c(put or put16, _i16=c(_i16)))
+    if put is not None:
+        return frame
     # compiled (or loaded from the cache) now, not at a first read that a simulation paced by the wall
     # clock would see as a stall
     zeros = np.zeros(N_CHIP_CONST)
