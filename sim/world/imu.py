@@ -348,4 +348,5 @@ def _i16(v: float) -> int:
         return -32768
     if v != v:
         raise ValueError("a NaN register value")
-    return int(v + 0.5) if v >= 0.0 else -int(0.5 - v)
+    r = int(abs(v) + 0.5)                 # (|v| + 0.5 is 0.5 - v below zero, to the bit: no branch on the sign's
+    return r if v >= 0.0 else -r          # rounding, which noise around zero would mispredict)
