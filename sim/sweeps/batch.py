@@ -106,10 +106,10 @@ class _Vehicles:
     """The arrays of `flight.fly` for vehicles with their parameters, draws and seeds, at power-on."""
 
     def __init__(self, params: Params, draws: dict, gains, seeds, template: dict, structure: str, uniforms: int):
-        from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params, one_draw
+        from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params
         from flightctl.sim.world import compiled
         from flightctl.sim.world.devices import SensorNoise, vehicle_noise
-        from flightctl.sim.world.imu import N_CHIP_CONST, N_CHIP_STATE, chip_die
+        from flightctl.sim.world.imu import N_CHIP_CONST, N_CHIP_STATE, chip_die, vibration_constants
         from flightctl.sim.world.model import Model
         n = len(seeds)
         self.n = n
@@ -142,16 +142,19 @@ class _Vehicles:
         self.normal = fl.generators([np.random.default_rng(s) for s in seeds])   # each chip's `NoisePool`
         self.rng = []             # each vehicle's `World.rng`, whose `random()`s the loop takes from uni
         self.uni = np.zeros((n, uniforms))
+        # the vehicles' parameters at once, each drawn value an (n,) array (elementwise arithmetic, as a
+        # float's): the controllers' constants and the chips' vibration, a column each
+        p = drawn_params(params, draws, effects=False)
+        if gains is not None:
+            p = dataclasses.replace(p, gains=Gains(**{f.name: np.array([getattr(g, f.name) for g in gains])
+                                                      for f in dataclasses.fields(Gains)}))
+        for j, value in enumerate(ob.constants(p, structure)):
+            self.kc[:, j] = value
         noise = SensorNoise()
         for v, seed in enumerate(seeds):
-            drawn = one_draw(draws, v)
-            p = drawn_params(params, drawn, effects=False) if drawn else params
-            if gains is not None:
-                p = dataclasses.replace(p, gains=gains[v])
-            self.kc[v] = ob.constants(p, structure)
             r = random.Random(seed)                 # `World.rng`: the sonar's tick, the chip's die, the power monitor
             r.randrange(1 << 32)
-            s, c = chip_die(vehicle_noise(noise, p.sensors), p.airframe, r)
+            s, c = chip_die(noise, a, r)            # (its draws take nothing of the vehicle's values)
             self.cs[v], self.cc[v] = s, c
             for _ in range(template["start_draws"]):
                 r.gauss(0.0, 1.0)
@@ -159,6 +162,7 @@ class _Vehicles:
                 self.w[v, fl.W_GAUSS], self.w[v, fl.W_HAS_GAUSS] = r.gauss_next, 1.0
             self.rng.append(r)
             self.uni[v] = [r.random() for _ in range(uniforms)]
+        vibration_constants(self.cc.T, vehicle_noise(noise, p.sensors), p.airframe)
         self.cc[:, template["registered"]] = template["values"]
 
     def refill(self) -> None:

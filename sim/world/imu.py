@@ -215,12 +215,20 @@ def chip_die(noise: SensorNoise, airframe, rng) -> tuple[list, list]:
     c[_C_G0:_C_G0 + 3], c[_C_GC:_C_GC + 3] = gyro_bias, gyro_temp_coeff
     c[_C_ZC:_C_ZC + 4], c[_C_ZS:_C_ZS + 4] = [math.cos(v) for v in z], [math.sin(v) for v in z]
     c[_C_WALK] = n.gyro_bias_walk
+    vibration_constants(c, n, a)
+    return s, c
+
+
+def vibration_constants(c, noise: SensorNoise, airframe) -> None:
+    """The vehicle's vibration and broadband noise per newton of thrust into a chip's constants c
+    (`chip_die`); with the vehicle's values as arrays, into c's rows of arrays (the batched simulator's
+    chips, a column per constant: nothing here is drawn)."""
+    n, a = noise, airframe
     B = a.M * a.g / 4.0                          # hover thrust per rotor
     c[_C_KV] = n.vibration / B                   # m/s^2 per newton of the rotor's thrust
     c[_C_KVG] = n.gyro_vibration / B             # rad/s per newton
     c[_C_H2], c[_C_H3], c[_C_YAW] = n.harmonic2, n.harmonic3, n.yaw_share
     c[_C_BB] = n.gyro_broadband / (4.0 * B)      # rad/s rms per newton of the four rotors' thrust
-    return s, c
 
 
 def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, held, dt, temp, started):
