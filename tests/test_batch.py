@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import random
 import types
 
 import numpy as np
@@ -19,7 +20,7 @@ from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import SCENARIOS
 from flightctl.sim.sweeps import montecarlo
 from flightctl.sim.sweeps import onboard
-from flightctl.sim.sweeps.batch import simulate
+from flightctl.sim.sweeps.batch import simulate, uniforms
 from flightctl.sim.sweeps.montecarlo import draw, drawn_params
 from flightctl.sim.world import compiled
 
@@ -102,6 +103,21 @@ def test_the_batch_controller_gives_the_onboard_counts(structure):
             same += 1
         assert c.landing.integral != 0.0 and c.est.yaw != 0.0     # the landing and the magnetometer did act
     assert same == n * steps
+
+
+def test_the_batchs_uniforms_are_the_mersenne_twisters_random_calls():
+    """`uniforms(r, k)` (the sonar's and power monitor's numbers, drawn at once) is k calls of
+    `r.random()`, number for number, and leaves r where they leave it, from states met mid-stream."""
+    rng = np.random.default_rng(3)
+    for seed in rng.integers(0, 2 ** 40, 20):
+        a, b = random.Random(int(seed)), random.Random(int(seed))
+        for _ in range(int(rng.integers(0, 700))):   # somewhere within the generator's 624-word block
+            a.random()
+            b.random()
+        for k in (1, 2, 311, 624, 1000):
+            expected = [b.random() for _ in range(k)]
+            np.testing.assert_array_equal(uniforms(a, k), expected)
+            assert a.getstate() == b.getstate()
 
 
 @pytest.mark.skipif(not compiled.enabled(), reason="the batch's speed needs numba (the fast extra)")

@@ -74,6 +74,27 @@ def test_the_compiled_step_and_forces_equal_the_plain_ones():
 
 
 @needs_numba
+def test_the_compiled_sines_and_cosines_are_maths():
+    """LLVM turns a sine and a cosine of one angle into libm's `sincos` (`attitude_trig`, the chip's
+    vibration lines): the same bits as `math.sin` and `math.cos`, which the plain plant calls apart,
+    from the attitude's angles through rotor phases to the largest doubles."""
+    import math
+    trig = compiled.functions()["attitude_trig"]
+    rng = np.random.default_rng(5)
+    wk = compiled.work(N_RIGID)
+    x = np.zeros(N_RIGID)
+    angles = np.concatenate([rng.uniform(-1.6, 1.6, 30000), rng.uniform(-7.0, 7.0, 30000),
+                             rng.uniform(-1e4, 1e4, 15000), rng.uniform(-1e9, 1e9, 15000),
+                             np.sign(rng.uniform(-1, 1, 15000)) * 10.0 ** rng.uniform(-300, 308, 15000),
+                             [0.0, -0.0, 5e-324, math.pi, 0.855469, 2.426265, 105414350.0, 1e22, 1.7976931348623157e308]])
+    angles = np.concatenate([angles, np.zeros(-len(angles) % 3)])
+    for phi, theta, psi in angles.reshape(-1, 3).tolist():
+        x[6:9] = phi, theta, psi
+        got = trig(x, 0, wk)
+        assert got == (math.sin(phi), math.cos(phi), math.sin(theta), math.cos(theta), math.sin(psi), math.cos(psi))
+
+
+@needs_numba
 def test_the_compiled_chip_writes_the_plain_ones_registers():
     """`imu.chip_frame` compiled and plain, from the same state, constants and noise: the same
     register bytes and the same state after, over random truths, rotors and read intervals, with a

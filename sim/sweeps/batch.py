@@ -32,6 +32,7 @@ from flightctl.sim.world.board import SIM_CALIBRATE_S
 
 GROUP = 256          # vehicles whose arrays are set up and flown together
 CHUNK = 225          # loop periods flown per call of the compiled loop (the uniforms refilled between)
+SPARE = 8            # chunks' worth of uniforms each vehicle holds (refilled when less than one is left)
 LAND_MARGIN_S = 45.0   # s past the plan's end a loop's own landing may take (its ramp and slack)
 
 
@@ -105,11 +106,11 @@ def _world_constants(params: Params, plan: Plan, template: dict, dt: float) -> n
 class _Vehicles:
     """The arrays of `flight.fly` for vehicles with their parameters, draws and seeds, at power-on."""
 
-    def __init__(self, params: Params, draws: dict, gains, seeds, template: dict, structure: str, uniforms: int):
-        from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params, one_draw
+    def __init__(self, params: Params, draws: dict, gains, seeds, template: dict, structure: str, most: int):
+        from flightctl.sim.sweeps.montecarlo import drawn_airframe, drawn_params
         from flightctl.sim.world import compiled
         from flightctl.sim.world.devices import SensorNoise, vehicle_noise
-        from flightctl.sim.world.imu import N_CHIP_CONST, N_CHIP_STATE, chip_die
+        from flightctl.sim.world.imu import N_CHIP_CONST, N_CHIP_STATE, chip_die, vibration_constants
         from flightctl.sim.world.model import Model
         n = len(seeds)
         self.n = n
@@ -137,41 +138,56 @@ class _Vehicles:
         self.e = np.zeros((n, ob.N_E))
         self.e[:, ob.ALT_T] = -1.0
         self.kc = np.zeros((n, ob.N_K))
-        self.regs = np.zeros((n, 128), dtype=np.uint8)
+        self.words = np.zeros((n, 7))             # each chip's burst, as the driver decodes it (`flight.put_word`)
         self.cs, self.cc = np.zeros((n, N_CHIP_STATE)), np.zeros((n, N_CHIP_CONST))
         self.normal = fl.generators([np.random.default_rng(s) for s in seeds])   # each chip's `NoisePool`
         self.rng = []             # each vehicle's `World.rng`, whose `random()`s the loop takes from uni
-        self.uni = np.zeros((n, uniforms))
+        self.most = most          # the most uniforms a vehicle takes in a chunk
+        self.uni = np.zeros((n, SPARE * most))
+        # the vehicles' parameters at once, each drawn value an (n,) array (elementwise arithmetic, as a
+        # float's): the controllers' constants and the chips' vibration, a column each
+        p = drawn_params(params, draws, effects=False)
+        if gains is not None:
+            p = dataclasses.replace(p, gains=Gains(**{f.name: np.array([getattr(g, f.name) for g in gains])
+                                                      for f in dataclasses.fields(Gains)}))
+        for j, value in enumerate(ob.constants(p, structure)):
+            self.kc[:, j] = value
         noise = SensorNoise()
         for v, seed in enumerate(seeds):
-            drawn = one_draw(draws, v)
-            p = drawn_params(params, drawn, effects=False) if drawn else params
-            if gains is not None:
-                p = dataclasses.replace(p, gains=gains[v])
-            self.kc[v] = ob.constants(p, structure)
             r = random.Random(seed)                 # `World.rng`: the sonar's tick, the chip's die, the power monitor
             r.randrange(1 << 32)
-            s, c = chip_die(vehicle_noise(noise, p.sensors), p.airframe, r)
+            s, c = chip_die(noise, a, r)            # (its draws take nothing of the vehicle's values)
             self.cs[v], self.cc[v] = s, c
             for _ in range(template["start_draws"]):
                 r.gauss(0.0, 1.0)
             if r.gauss_next is not None:            # `random.gauss`'s second number, kept for its next call
                 self.w[v, fl.W_GAUSS], self.w[v, fl.W_HAS_GAUSS] = r.gauss_next, 1.0
             self.rng.append(r)
-            self.uni[v] = [r.random() for _ in range(uniforms)]
+            self.uni[v] = uniforms(r, SPARE * most)
+        vibration_constants(self.cc.T, vehicle_noise(noise, p.sensors), p.airframe)
         self.cc[:, template["registered"]] = template["values"]
 
     def refill(self) -> None:
-        """The uniforms each vehicle used since the last refill, drawn anew behind the ones left."""
+        """For each vehicle with less than a chunk's uniforms left, those it used drawn anew behind the
+        ones left."""
         used = self.w[:, fl.W_U].astype(np.int64)
         m = self.uni.shape[1]
         if used.max() > m:
             raise RuntimeError("a vehicle drew more random numbers than the batch holds for it")
-        for v in np.nonzero(used)[0]:
-            u, r = used[v], self.rng[v]
+        for v in np.nonzero(m - used < self.most)[0]:
+            u = used[v]
             self.uni[v, :m - u] = self.uni[v, u:].copy()
-            self.uni[v, m - u:] = [r.random() for _ in range(u)]
-        self.w[:, fl.W_U] = 0.0
+            self.uni[v, m - u:] = uniforms(self.rng[v], u)
+            self.w[v, fl.W_U] = 0.0
+
+
+def uniforms(r: random.Random, k: int) -> np.ndarray:
+    """The next k numbers of `r.random()`, at once: CPython's `random()` takes two 32-bit outputs a, b
+    of the Mersenne Twister and returns ((a >> 5) 2^26 + (b >> 6)) / 2^53 (each step exact in doubles),
+    and `getrandbits(64 k)` holds the next 2 k outputs in order from its lowest 32 bits up; r's state
+    moves on as k calls of `random()` move it (tests/test_batch.py)."""
+    words = np.frombuffer(r.getrandbits(64 * k).to_bytes(8 * k, "little"), dtype="<u4")
+    return ((words[0::2] >> 5) * 67108864.0 + (words[1::2] >> 6)) * (1.0 / 9007199254740992.0)
 
 
 def _judge(w: np.ndarray, g: float) -> tuple[str, bool, bool]:
@@ -228,7 +244,7 @@ def _fly_group_now(job) -> tuple:
     i0 = 0
     while i0 < i_end and not veh.w[:, fl.W_DONE].all():
         n = min(CHUNK, i_end - i0)
-        run(veh.x, veh.w, veh.e, veh.kc, veh.q, veh.codes, veh.ring, veh.nring, veh.frac, veh.regs, veh.cs, veh.cc,
+        run(veh.x, veh.w, veh.e, veh.kc, veh.q, veh.codes, veh.ring, veh.nring, veh.frac, veh.words, veh.cs, veh.cc,
             veh.normal, veh.uni, np.ascontiguousarray(sp[i0 + 1:i0 + 1 + n]), rec, k, template["jump"],
             i0, n, i_arm, rec0)
         veh.refill()

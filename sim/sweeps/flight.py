@@ -47,7 +47,7 @@ from flightctl.sim.sweeps import onboard as ob
 from flightctl.sim.world.devices import EARTH_FIELD_T, NoisePool, SimGpio
 from flightctl.sim.world.imu import (_BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, _C_PERIOD, AMBIENT_C, SimMpu9250,
                                     _i16, chip_frame)
-from flightctl.sim.world.compiled import attitude_trig, commanded, forces, rk4, work
+from flightctl.sim.world.compiled import attitude_trig, commanded, forces, rebound, rk4, work
 from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VX, VY, VZ, Z, rotation_from_trig
 from flightctl.sim.world.plant import CONTACT_S, time_weighted
 
@@ -235,7 +235,7 @@ def held_command(w):
     return w[c], w[c + 1], w[c + 2], w[c + 3], w[c + 4], w[c + 5], w[c + 6], w[c + 7]
 
 
-def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: float, held: float, temp: float,
+def chip_read(x, w, q, codes, burst, cs, cc, e, ie: int, im: int, jump, k, t: float, held: float, temp: float,
               gains, wk) -> bool:
     """`SimMpu9250._sample` at t (the plant's specific force, rates, rotors) and `Mpu9250.read` of the
     burst, with the chip's nine normals e[ie:ie + 9] and the magnetometer's three e[im:im + 3], `held`
@@ -269,7 +269,7 @@ def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: flo
             cc[_C_KA], cc[_C_KG] = gains[1], gains[2]
         else:
             cc[_C_KA], cc[_C_KG] = 1.0 - exp(-dt / cc[_C_A_DELAY]), 1.0 - exp(-dt / cc[_C_G_DELAY])
-    chip_frame(regs, cs, cc, e, ie, fx, fy, fz, x[P], x[Q], x[R], f[0], f[1], f[2], f[3], rw[0], rw[1], rw[2], rw[3],
+    chip_words(burst, cs, cc, e, ie, fx, fy, fz, x[P], x[Q], x[R], f[0], f[1], f[2], f[3], rw[0], rw[1], rw[2], rw[3],
                held, dt, temp, w[W_READS] > 0.0)
     w[W_READS] += 1.0
     if int(w[W_READS]) % MAG_EVERY == 1 % MAG_EVERY:   # reads 1, 5, 9...: the AK8963's sample
@@ -281,8 +281,7 @@ def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: flo
         w[W_MAG] = i16((by + sm * e[im]) * AK_LSB)
         w[W_MAG + 1] = i16((bx + sm * e[im + 1]) * AK_LSB)
         w[W_MAG + 2] = i16(-(bz + sm * e[im + 2]) * AK_LSB)
-    words = (word(regs, _BURST), word(regs, _BURST + 2), word(regs, _BURST + 4), word(regs, _BURST + 6),
-             word(regs, _BURST + 8), word(regs, _BURST + 10), word(regs, _BURST + 12))
+    words = (burst[0], burst[1], burst[2], burst[3], burst[4], burst[5], burst[6])
     had_prev = w[W_HAS_PREV] != 0.0
     jumps_prev = False
     if had_prev:
@@ -315,10 +314,14 @@ def chip_read(x, w, q, codes, regs, cs, cc, e, ie: int, im: int, jump, k, t: flo
     return True
 
 
-def word(regs, at: int) -> float:
-    """The big-endian int16 at regs[at] (the driver's `>h`)."""
-    v = regs[at] * 256 + regs[at + 1]
-    return float(v - 65536 if v >= 32768 else v)
+def put_word(words, at: int, v: float) -> None:
+    """`imu.put16` of the register pair at `at` as the driver reads it back (the big-endian int16 of
+    its two bytes, `>h`: `_i16(v)`), kept as a float in words[(at - _BURST) // 2], without the bytes."""
+    words[(at - _BURST) >> 1] = _i16(v)
+
+
+# `imu.chip_frame` writing the burst's seven words with `put_word` (its compiled copy in `compiled_fly`)
+chip_words = rebound(chip_frame, put16=put_word)
 
 
 def i16(v: float) -> float:
@@ -367,12 +370,12 @@ def normals(gen, w, e, at: int, count: int) -> None:
     w[W_POOL] = i + count
 
 
-def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, REC, k, jump, i0: int, n: int,
+def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI, SP, REC, k, jump, i0: int, n: int,
         i_arm: int, rec0: int) -> None:
     """Loop periods i0 + 1 .. i0 + n of every vehicle (rows of the arrays): X the plants' states, W the
     world's and loop's (`w`), E and KC the controllers' (sim/sweeps/onboard.py), Q the plants' constants
-    (sim/world/compiled.py `layout_rows`), RING and NRING, FRAC the delayed commands, REGS, CS, CC the
-    chips' registers, state and constants, GEN their numpy generators (`NoisePool`'s), UNI the Mersenne
+    (sim/world/compiled.py `layout_rows`), RING and NRING, FRAC the delayed commands, WORDS, CS, CC the
+    chips' burst words (`put_word`), state and constants, GEN their numpy generators (`NoisePool`'s), UNI the Mersenne
     Twisters' uniforms, SP the plan's setpoints per period from i0 + 1, REC the judged record (rows
     from period rec0 on: true and estimated roll, pitch, yaw), k the shared constants (`N_WORLD`), jump the
     driver's limits per word. The loop arms at period i_arm."""
@@ -394,7 +397,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
         rise = k[WARM_RISE]
         temp[step] = AMBIENT_C if rise == 0.0 else AMBIENT_C + rise * (1.0 - exp((0.0 - t) / k[WARM_TAU]))
     for v in range(X.shape[0]):
-        x, w, e, kc, q, ring, regs, cs, cc = X[v], W[v], E[v], KC[v], Q[v], RING[v], REGS[v], CS[v], CC[v]
+        x, w, e, kc, q, ring, burst, cs, cc = X[v], W[v], E[v], KC[v], Q[v], RING[v], WORDS[v], CS[v], CC[v]
         uni, gen = UNI[v], GEN[v]
         nring, frac = NRING[v], FRAC[v]
         for step in range(n):
@@ -409,7 +412,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, REGS, CS, CC, GEN, UNI, SP, RE
             normals(gen, w, e9, 0, 9)
             if i % MAG_EVERY == 1 % MAG_EVERY:      # read i's magnetometer sample (`chip_read`)
                 normals(gen, w, e9, 9, 3)
-            if chip_read(x, w, q, codes, regs, cs, cc, e9, 0, 9, jump, k, t, held[step], temp[step], gains[step], wk):
+            if chip_read(x, w, q, codes, burst, cs, cc, e9, 0, 9, jump, k, t, held[step], temp[step], gains[step], wk):
                 w[W_BAD] = 0.0
             else:
                 w[W_BAD] += 1.0
@@ -556,7 +559,7 @@ def compiled_fly():
               plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held,
                               time_weighted=cc(time_weighted)),
               sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
-              chip_read=cc(chip_read, forces=at, held_command=held, chip_frame=imu.chip_frame_compiled(), word=cc(word),
+              chip_read=cc(chip_read, forces=at, held_command=held, chip_words=imu.chip_frame_compiled(put_word),
                            rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],
                            i16=cc(i16, _i16=cc(imu._i16))),
               land=cc(land, ob_landing_start=o["landing_start"]), landing_setpoint=cc(landing_setpoint),
@@ -566,11 +569,33 @@ def compiled_fly():
 
 def generators(gens: list) -> list:
     """The vehicles' numpy generators as `fly` takes them: a numba typed List where it is compiled (whose
-    generators are the same objects: their state moves on in numpy's), else the list."""
-    if compiled_fly() is None:
+    generators are the same objects: their state moves on in numpy's), else the list. The list is made
+    and grown by compiled functions (`listed`), from numba's cache: numba.typed.List's own methods
+    compile afresh in every process (a third of a second, more than the appends)."""
+    if not gens or compiled_fly() is None:
         return gens
-    from numba.typed import List
-    typed = List()
-    for g in gens:            # (an append each: half the cost of List(gens))
-        typed.append(g)
+    first, more = listed()
+    typed = first(gens[0])
+    for g in gens[1:]:
+        more(typed, g)
     return typed
+
+
+def list_of(g):
+    """A numba typed list holding g (`listed`: compiled, where `List` is numba.typed.List)."""
+    out = List()
+    out.append(g)
+    return out
+
+
+def append_to(out, g) -> None:
+    """out.append(g), compiled (`listed`)."""
+    out.append(g)
+
+
+@functools.cache
+def listed():
+    """`list_of` and `append_to` compiled (and cached by numba), for `generators`."""
+    from numba.typed import List as typed_list
+    from flightctl.sim.world.compiled import compiled_copy
+    return compiled_copy(list_of, allocates=True, List=typed_list), compiled_copy(append_to, allocates=True)

@@ -215,12 +215,20 @@ def chip_die(noise: SensorNoise, airframe, rng) -> tuple[list, list]:
     c[_C_G0:_C_G0 + 3], c[_C_GC:_C_GC + 3] = gyro_bias, gyro_temp_coeff
     c[_C_ZC:_C_ZC + 4], c[_C_ZS:_C_ZS + 4] = [math.cos(v) for v in z], [math.sin(v) for v in z]
     c[_C_WALK] = n.gyro_bias_walk
+    vibration_constants(c, n, a)
+    return s, c
+
+
+def vibration_constants(c, noise: SensorNoise, airframe) -> None:
+    """The vehicle's vibration and broadband noise per newton of thrust into a chip's constants c
+    (`chip_die`); with the vehicle's values as arrays, into c's rows of arrays (the batched simulator's
+    chips, a column per constant: nothing here is drawn)."""
+    n, a = noise, airframe
     B = a.M * a.g / 4.0                          # hover thrust per rotor
     c[_C_KV] = n.vibration / B                   # m/s^2 per newton of the rotor's thrust
     c[_C_KVG] = n.gyro_vibration / B             # rad/s per newton
     c[_C_H2], c[_C_H3], c[_C_YAW] = n.harmonic2, n.harmonic3, n.yaw_share
     c[_C_BB] = n.gyro_broadband / (4.0 * B)      # rad/s rms per newton of the four rotors' thrust
-    return s, c
 
 
 def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, held, dt, temp, started):
@@ -321,13 +329,17 @@ def put16(regs, at: int, v: float) -> None:
 
 
 @functools.cache
-def chip_frame_compiled():
-    """`chip_frame` compiled (sim/world/compiled.py), or None."""
+def chip_frame_compiled(put=None):
+    """`chip_frame` compiled (sim/world/compiled.py), or None. `put`: a plain function in place of
+    `put16` (the batched simulator's `flight.put_word`, into a float array: a signature of its own,
+    so that numba's cache, which keys a function's copies by their argument types, keeps both)."""
     from flightctl.sim.world import compiled
     if not compiled.enabled():
         return None
     c = compiled.compiled_copy
-    frame = c(chip_frame, vibration=c(vibration, remainder=c(remainder)), put16=c(put16, _i16=c(_i16)))
+    frame = c(chip_frame, vibration=c(vibration, remainder=c(remainder)), put16=c(put or put16, _i16=c(_i16)))
+    if put is not None:
+        return frame
     # compiled (or loaded from the cache) now, not at a first read that a simulation paced by the wall
     # clock would see as a stall
     zeros = np.zeros(N_CHIP_CONST)
@@ -344,4 +356,5 @@ def _i16(v: float) -> int:
         return -32768
     if v != v:
         raise ValueError("a NaN register value")
-    return int(v + 0.5) if v >= 0.0 else -int(0.5 - v)
+    r = int(abs(v) + 0.5)                 # (|v| + 0.5 is 0.5 - v below zero, to the bit: no branch on the sign's
+    return r if v >= 0.0 else -r          # rounding, which noise around zero would mispredict)
