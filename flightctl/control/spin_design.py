@@ -48,6 +48,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from flightctl.drivers import mpu9250_regs as reg
+from flightctl.errors import InputError, write_atomic
 from flightctl.params import Params
 
 GYRO_MAX = math.radians(32767.0 / reg.GYRO_LSB_PER_DPS[3])   # rad/s: the driver's +-2000 deg/s (34.9)
@@ -525,10 +526,8 @@ def load(d: tuple) -> dict:
         if path is not None:
             try:
                 folder.mkdir(parents=True, exist_ok=True)
-                tmp = path.with_suffix(f".{os.getpid()}.tmp")
-                tmp.write_text(json.dumps(s))
-                os.replace(tmp, path)
-            except OSError:
+                write_atomic(path, json.dumps(s))
+            except (OSError, InputError):
                 pass
     _MEMORY[k] = s
     return s

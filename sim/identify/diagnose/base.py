@@ -199,7 +199,7 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     report["layout"] = {"x": list(layout.x), "y": list(layout.y), "spin": list(layout.spin), "unit": layout.unit,
                         "source": layout.source}
     report["timing"] = {"kind": "delay", "value": round(float(delay), 4), "unit": "s",
-                        "what": "the commands' timing (a pure delay or a first-order lag) at which the base model "
+                        "what": "the commands' timing (a pure delay) at which the base model "
                                 "was identified: the one the flight prefers on a 0-300 ms grid. The base model "
                                 "itself has none: the timing is judged as a cause"}
     report["notes"] = more

@@ -146,8 +146,8 @@ def main(argv: list[str]) -> int:
     plots = _plot_paths(args.plot, len(tables))
     d = _judge(tables, others, params, args.params is not None, progress)
     images = _images(d, tables, plots)
-    text = diagnose_report.text(d)
     report = d.report()
+    text = diagnose_report.text(d, report)
     report["runtime_s"] = round(time.perf_counter() - t0, 2)
     _write(out_json, report, plots, images)
     print(text, end="")
@@ -222,7 +222,7 @@ def _each(args, params, progress, t0) -> int:
                            f"the report of log {first.index}, the first judged; every log's report or the reason it "
                            "was skipped is in `logs`")
     report["runtime_s"] = round(time.perf_counter() - t0, 2)
-    texts = [f"== {path} log {e.index} of {len(entries)} ==\n" + diagnose_report.text(d) for e, d in judged]
+    texts = [f"== {path} log {e.index} of {len(entries)} ==\n" + diagnose_report.text(d, reports[e.index]) for e, d in judged]
     _write(Path(args.json), report, plots, images)
     print("".join(texts), end="")
     if any(e.table is None for e in entries):

@@ -63,8 +63,9 @@ def xcorr(res: np.ndarray, x: np.ndarray, max_lag: int, step: int) -> float:
     return float(np.max(np.abs(full[a.size - 1 + lags])) / (na * nb))
 
 
-def text(d: Diagnosis) -> str:
-    rep = d.report()
+def text(d: Diagnosis, rep: dict | None = None) -> str:
+    """The printed report of `d`; `rep`: its `d.report()`, where the caller has it already."""
+    rep = d.report() if rep is None else rep
     ds = d.ds
     L = []
     L.append(f"flightctl diagnose: {', '.join(rep['data']['files'])}")
