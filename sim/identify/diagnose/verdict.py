@@ -30,6 +30,11 @@ from flightctl.sim.identify.diagnose.scoring import (DM_CHANNEL_WINDOW_S, DM_WIN
 # Causes that are one physical effect modelled two ways: once one is in the chain the other is not tried.
 TWINS = {"motor_lag": "motor_dynamics", "motor_dynamics": "motor_lag"}
 TIMING = ("actuation_delay", "motor_lag", "motor_dynamics")     # the causes that time the actuation
+# A lag of the gyro and a lag or a delay of the rotors make the gyro follow the commands late alike; only
+# the rotors' lag the accelerometer's z too. Which one a chain names is settled with its other causes in
+# the model (`_swap`): beside an unmodelled cause that also moves acc_z, that channel can mislead the first
+# round (docs/diagnose.md, "Two lags at once").
+LOOKALIKES = {"gyro_lag": TIMING, **{c: ("gyro_lag",) for c in TIMING}}
 
 METRIC = ("geometric mean over 6 channels of the held-out RMSE of the one-loop-period equation error: "
           "angular acceleration p, q, r (rad/s^2, differenced gyro) and specific force x, y, z (m/s^2, "
@@ -417,6 +422,8 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
         ds = _folded(first, [(r.named.cause, r.named.parameters) for r in rounds])
     final = _backfit(first, [(r.named.cause, r.named.parameters) for r in rounds if r.named is not None],
                      notes, progress, alone={r.cause: r for r in rounds[0].results})
+    if any(c not in {r.named.cause for r in rounds if r.named is not None} for c in final):
+        rounds = _rechain(first, rounds[0], final, static_only, notes, progress)
     return Diagnosis(rounds, first, notes, carried, lowpass, final=final, rotor_speed_check=speeds,
                      rotor_gain_check=gain_check)
 
@@ -494,15 +501,71 @@ def _refit(ds0: DataSet, chain: list[tuple[str, dict]], passes: int) -> tuple[li
     return chain, results
 
 
+def _swap(ds0: DataSet, chain: list[tuple[str, dict]], results: list[Result], tried: set, notes: list[str],
+          progress) -> list[tuple[str, dict]] | None:
+    """The chain with one cause replaced by a look-alike (`LOOKALIKES`) that, refitted jointly with the
+    others, predicts the held-out data better (the metric: the geometric mean over the channels of the
+    held-out RMSE, the cause refitted per fold on top of the others) and is named there (significant,
+    physical); None if no look-alike does. The first round judged each look-alike on the base model
+    alone, where a cause not yet in the model can hide the channel that tells them apart: a rotor lag's
+    `acc_z` beside an unmodelled `rotor_inflow`, whose damping of the climb speed is in antiphase
+    with the lag's in the altitude loop. A chain of causes already tried is not tried again."""
+    causes = {c for c, _ in chain}
+    for i, (cause, _) in enumerate(chain):
+        best, swapped = results[i], None
+        for alt in LOOKALIKES.get(cause, ()):
+            trial = chain[:i] + [(alt, {})] + chain[i + 1:]
+            key = tuple(c for c, _ in trial)
+            if alt in causes or TWINS.get(alt) in causes or key in tried:
+                continue
+            tried.add(key)
+            trial[i] = (alt, _on_top(ds0, trial, i).parameters)
+            trial, rs = _refit(ds0, trial, 2)
+            progress(f"{alt} in place of {cause}, refitted with the other causes: {trial[i][1]}, held-out RMSE "
+                     f"{geomean(rs[i].score.rmse()):.4g} against {geomean(best.score.rmse()):.4g}")
+            if rs[i].note is None and geomean(rs[i].score.rmse()) < geomean(best.score.rmse()):
+                best, swapped = rs[i], trial
+        if swapped is not None:
+            notes.append(f"{cause} was named first, but with the other causes in the model its look-alike "
+                         f"{best.cause} predicts the held-out data better (RMSE {geomean(best.score.rmse()):.4g} "
+                         f"against {geomean(results[i].score.rmse()):.4g}): named instead")
+            progress(f"{best.cause} named in place of {cause}")
+            return swapped
+    return None
+
+
+def _rechain(ds0: DataSet, first: Round, final: dict[str, Result], static_only: str | None, notes: list[str],
+             progress) -> list[Round]:
+    """The forward chain again, of the backfit's causes in their order, after a look-alike was swapped
+    in (`_swap`): each round judges every candidate on top of the causes before it and names the
+    chain's next cause, so that each entry's gain and RMSE are over the model with the ones before it.
+    A cause swapped in that was not significant in its own round is reported with its significance on
+    top of all the others, where it was judged."""
+    rounds, skip, ds, chain = [], set(), ds0, []
+    for k, cause in enumerate(final):
+        rnd = first if k == 0 else _round(ds, skip, static_only, notes, progress, f"[cause {k + 1}] ")[0]
+        rnd.named = next(r for r in rnd.results if r.cause == cause)
+        rnd.significant.setdefault(cause, final[cause].significance.named_by())
+        rounds.append(rnd)
+        skip |= {cause, TWINS.get(cause, cause)}
+        chain.append((cause, rnd.named.parameters))
+        ds = _folded(ds0, chain)
+    last, _ = _round(ds, skip, static_only, notes, progress, f"[cause {len(final) + 1}] ")
+    last.named = None
+    return rounds + [last]
+
+
 def _backfit(ds0: DataSet, chain: list[tuple[str, dict]], notes: list[str], progress,
              alone: dict[str, Result] | None = None) -> dict[str, Result]:
     """The chain refitted jointly (each cause on top of all the others, twice over), then each cause
     tested on top of the others refitted without it: one that is then not significant is dropped (a
     cause named early can take up part of one named later, and a small one can stand in for the
-    bias that leaves). Returns {cause: its Result on top of the others}, in chain order. `alone`: each
+    bias that leaves); then each cause with a look-alike is tried against it, both refitted with the
+    others (`_swap`). Returns {cause: its Result on top of the others}, in chain order. `alone`: each
     cause's Result on the base model alone (the first round), which is a chain of one's, not run again."""
     if not chain:
         return {}
+    tried = {tuple(c for c, _ in chain)}
     while True:
         chain, results = _refit(ds0, chain, 2 if len(chain) > 1 else 0)
         if len(chain) == 1:
@@ -520,7 +583,11 @@ def _backfit(ds0: DataSet, chain: list[tuple[str, dict]], notes: list[str], prog
                 dropped = chain[i][0]
                 break
         if dropped is None:
-            return {cause: r for (cause, _), r in zip(chain, results)}
+            swapped = _swap(ds0, chain, results, tried, notes, progress)
+            if swapped is None:
+                return {cause: r for (cause, _), r in zip(chain, results)}
+            chain = swapped
+            continue
         notes.append(f"{dropped}: named in the chain, but not significant once the other causes are refitted "
                      "without it: dropped")
         progress(f"{dropped}: not significant once the others are refitted without it: dropped from the chain")
