@@ -566,36 +566,3 @@ def compiled_fly():
               ob_step=o["step"], ob_on_range=o["on_range"], tilt_from_accel=o["tilt"], ob_heading=o["heading"],
               ob_set_reference=o["set_reference"], ob_arm=o["arm"])
 
-
-def generators(gens: list) -> list:
-    """The vehicles' numpy generators as `fly` takes them: a numba typed List where it is compiled (whose
-    generators are the same objects: their state moves on in numpy's), else the list. The list is made
-    and grown by compiled functions (`listed`), from numba's cache: numba.typed.List's own methods
-    compile afresh in every process (a third of a second, more than the appends)."""
-    if not gens or compiled_fly() is None:
-        return gens
-    first, more = listed()
-    typed = first(gens[0])
-    for g in gens[1:]:
-        more(typed, g)
-    return typed
-
-
-def list_of(g):
-    """A numba typed list holding g (`listed`: compiled, where `List` is numba.typed.List)."""
-    out = List()
-    out.append(g)
-    return out
-
-
-def append_to(out, g) -> None:
-    """out.append(g), compiled (`listed`)."""
-    out.append(g)
-
-
-@functools.cache
-def listed():
-    """`list_of` and `append_to` compiled (and cached by numba), for `generators`."""
-    from numba.typed import List as typed_list
-    from flightctl.sim.world.compiled import compiled_copy
-    return compiled_copy(list_of, allocates=True, List=typed_list), compiled_copy(append_to, allocates=True)
