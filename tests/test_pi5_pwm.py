@@ -127,7 +127,7 @@ def test_the_channel_files_are_waited_for_until_udev_gives_them_to_group_gpio(fa
     esc.close()
 
 
-@pytest.mark.parametrize("what, message", [("chip", r"motor 1 .* cannot be exported \(Permission denied\)"),
+@pytest.mark.parametrize("what, message", [("chip", r"motor 1 .* cannot be exported: \S*/pwmchip2/export: Permission denied"),
                                            ("channel", r"cannot open .*/pwm0/period \(Permission denied\)")])
 def test_without_the_udev_rule_the_start_says_what_is_missing(fake, what, message):
     if what == "chip":
