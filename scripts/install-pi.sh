@@ -3,7 +3,7 @@
 #
 #   sudo scripts/install-pi.sh [--dry-run] [--board pi|pi5] [--prefix /opt/flightctl] [--source DIR] [--no-enable]
 #
-# The board comes from /proc/device-tree/model (--board overrides it): a Raspberry Pi 5 gets the `pi5`
+# The board comes from the device tree's model (--board overrides it): a Raspberry Pi 5 gets the `pi5`
 # board (the RP1's PWM overlay, the udev rule that gives the PWM files to group gpio, the '.[pi5]'
 # extra), a Pi 3/4 the `pi` board (pigpio and its localhost-only pigpiod drop-in, the '.[pi]' extra).
 # Both: SPI and I2C enabled, the user `flightctl` (groups gpio, spi, i2c), the package in a venv under
@@ -64,7 +64,7 @@ if [ ! -f "$SOURCE/pyproject.toml" ] || [ ! -f "$SOURCE/systemd/flightctl.servic
     exit 1
 fi
 # the board: the RP1 I/O chip (Raspberry Pi 5, 500, Compute Module 5) or not (flightctl/boards/detect.py)
-MODEL=$( { tr -d '\0' </proc/device-tree/model; } 2>/dev/null || true)
+MODEL=$( { tr -d '\0' </sys/firmware/devicetree/base/model || tr -d '\0' </proc/device-tree/model; } 2>/dev/null || true)
 if [ -z "$BOARD" ]; then
     case "$MODEL" in
         "Raspberry Pi 5"*|"Raspberry Pi Compute Module 5"*) BOARD=pi5 ;;    # the 500 too

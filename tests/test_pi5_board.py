@@ -159,11 +159,12 @@ def test_stop_motors_without_the_pwm_chip_fails_loudly(tmp_path, caplog):
     assert "stop-motors: no PWM chips" in caplog.text
 
 
-# --- which board: /proc/device-tree/model --------------------------------------------------------
+# --- which board: the device tree's model (tests/test_pi_sandbox.py: inside the unit's sandbox) -----
 @pytest.fixture
 def model(tmp_path, monkeypatch):
-    path = tmp_path / "model"
-    monkeypatch.setattr(detect, "MODEL_PATH", str(path))
+    path = tmp_path / "sys" / "firmware" / "devicetree" / "base" / "model"
+    path.parent.mkdir(parents=True)
+    monkeypatch.setattr(detect, "MODEL_PATHS", (str(path), str(tmp_path / "proc" / "device-tree" / "model")))
     return path
 
 

@@ -33,7 +33,7 @@ and the RP1's driver drivers/pwm/pwm-rp1.c (raspberrypi/linux):
     duty_cycle <= period; from an invalid state to another invalid one the state is stored, not applied.
 - a store writes the value the kernel would show (`%d\\n`); reads show it. `output(chip, channel)`: the
   RP1's 50 MHz clock rounds period and duty to 20 ns.
-The kernel's own state (what survives an unexport, the pins' polarity) is kept in BASE/kernel/, so that
+The kernel's own state (what survives an unexport, the pins' polarity) is kept in BASE/sys/.fake-kernel/, so that
 another process's `attach` sees the same kernel.
 
 Permissions are those of a process in group gpio: the chip's files writable (udev's rule at boot), a
@@ -89,7 +89,7 @@ class FakePwmSysfs:
     def _setup(self, base, kernel_held) -> None:
         self.base = Path(base)
         self.root = self.base / "sys" / "class" / "pwm"
-        self.kdir = self.base / "kernel"
+        self.kdir = self.base / "sys" / ".fake-kernel"     # not a kernel file: the fake kernel's memory
         self.kernel_held = kernel_held if kernel_held is not None else {(RP1_PWM1, 3): "cooling_fan"}
         self.lock = threading.RLock()
         self._paths: dict[int, Path] = {}     # open fd -> path
