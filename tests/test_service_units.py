@@ -37,7 +37,7 @@ def test_service_unit_has_the_lifecycle_the_design_needs():
     p = unit_entries(UNIT, PIGPIO)
     assert p["Requires"] == ["pigpiod.service"] and p["After"] == ["pigpiod.service"]
     assert "Requires" not in unit_entries(UNIT, PI5)
-    assert u["KillMode"] == ["mixed"]                   # SIGTERM to the controller only; its dead-man after it
+    assert u["KillMode"] == ["process"]                 # signals to the controller only: its dead-man outlives it
     assert int(u["WatchdogSec"][0]) >= 1
     assert u["User"] == ["flightctl"] and u["SupplementaryGroups"] == ["gpio spi i2c"]
     assert u["CPUSchedulingPolicy"] == ["fifo"] and "LimitRTPRIO" in u

@@ -294,6 +294,8 @@ class SysfsPwmEsc:
 
     def _tell(self, what: bytes) -> None:
         if self._beat < 0:
+            if self.armed and self.deadman_ms > 0:
+                raise self._fired()             # it fired before: never a flight duty cycle again
             return
         try:
             os.write(self._beat, what)

@@ -98,6 +98,7 @@ class FakePwmSysfs:
         # boot) unless `chip_writable` is False; a new channel's files become so `udev_delay_s` after
         # the export (udev's "change" event), never if it is None (no udev rule)
         self.chip_writable, self.udev_delay_s = True, 0.0
+        self.clock_off = False                # the RP1's PWM clock not running: every apply is EINVAL
         self._exported_at: dict[Path, float] = {}
         self.chips: dict[int, tuple[str, int]] = {}
         self.dirs: dict[str, Path] = {}
@@ -149,7 +150,7 @@ class FakePwmSysfs:
                polarity: str = "normal") -> None:
         """What the channel's last user left (it is not exported now): a state this kernel could hold."""
         state = {"period": period, "duty_cycle": duty_cycle, "enable": enable, "polarity": polarity}
-        if not valid(state, self.rule):
+        if state != ZERO and not valid(state, self.rule):     # zeros: never used since boot
             raise ValueError(f"kernel {self.rule} never holds {state}")
         with self.lock:
             if self.channel(device, c).exists():
@@ -274,6 +275,8 @@ class FakePwmSysfs:
             state[name] = v
         if not valid(state, self.rule) and (self.rule == "6.6" or valid(old, self.rule)):
             self._fail(errno.EINVAL, p)         # refused: the state stays as it was
+        if self.clock_off and state != old and valid(state, self.rule):
+            self._fail(errno.EINVAL, p)         # rp1_pwm_apply(): "failed to get clock rate"
         self._put(p, str(state[name]))
         if state != old and valid(state, self.rule):      # applied: the pin follows
             _, device, _ = self._chip_of(p)
