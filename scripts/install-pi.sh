@@ -71,14 +71,28 @@ if [ -z "$BOARD" ]; then
         *) BOARD=pi ;;
     esac
 fi
+# spidev has no wheel for the Pi (aarch64, armhf): pip builds it from source, with a C compiler
+# (build-essential) and Python's headers (python3-dev)
 case "$BOARD" in
-    pi) PACKAGES="pigpio python3-venv python3-dev" ;;
-    pi5) PACKAGES="python3-venv python3-dev device-tree-compiler" ;;
+    pi) PACKAGES="pigpio python3-venv python3-dev build-essential" ;;
+    pi5) PACKAGES="python3-venv python3-dev build-essential device-tree-compiler" ;;
     *) echo "install-pi.sh: --board $BOARD: pi (Raspberry Pi 3/4) or pi5" >&2; exit 2 ;;
 esac
 echo "board: $BOARD (${MODEL:-no device tree model})"
+echo "packages: $PACKAGES"
 
-# 1. packages: Python venv support; pigpio (daemon and tools) for the pi board, dtc for the pi5 overlay
+# 1. packages: Python venv support and what spidev builds with; pigpio (daemon and tools, with its
+# pigpiod.service) for the pi board, dtc for the pi5 overlay. pigpio comes from the Raspberry Pi archive,
+# which has it up to Bookworm; Trixie and later have none (github.com/joan2937/pigpio/issues/632), and
+# Debian's python3-pigpio is only the client: without pigpiod the pi board cannot fly.
+if [ "$BOARD" = pi ] && ! dpkg-query -W -f='${Status}' pigpio 2>/dev/null | grep -q "install ok installed" \
+        && ! apt-cache policy pigpio 2>/dev/null | grep -q "Candidate: [0-9]"; then
+    CODENAME=$( (. /etc/os-release && echo "${VERSION_CODENAME:-}") 2>/dev/null || true)
+    echo "install-pi.sh: no pigpio package (pigpiod) for this system (${CODENAME:-unknown release}): the Raspberry Pi archive (archive.raspberrypi.org) has it up to Bookworm, not for Trixie; on a Pi 3/4 use Raspberry Pi OS Bookworm (docs/pi.md, \"Install\")" >&2
+    if [ "$DRY_RUN" = 0 ]; then
+        exit 1
+    fi
+fi
 missing=()
 for pkg in $PACKAGES; do
     if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then

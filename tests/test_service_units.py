@@ -92,6 +92,8 @@ def test_install_script_dry_run_prints_every_step_and_changes_nothing(tmp_path):
                  "systemctl enable flightctl.service", "dry run: nothing was changed"):
         assert step in out, step
     assert "pigpio" in out or "ok: packages" in out
+    # spidev builds from source on the Pi (no aarch64/armhf wheel): a compiler and Python's headers
+    assert {"build-essential", "python3-dev", "pigpio"} <= set(out.split("packages: ", 1)[1].split("\n", 1)[0].split())
     assert "board: pi (" in out and "[pi]" in out and "flightctl.service.d/pigpio.conf" in out
     assert "flightctl-pwm-pi5" not in out and "pi5.conf" not in out
     assert not (tmp_path / "opt").exists()
@@ -108,6 +110,7 @@ def test_install_script_dry_run_on_a_pi5_installs_the_overlay_the_udev_rule_and_
                  "systemctl enable flightctl.service", "dry run: nothing was changed"):
         assert step in out, step
     assert "pigpio" not in out.replace("pigpio.conf", "") and "[pi]" not in out
+    assert {"build-essential", "python3-dev"} <= set(out.split("packages: ", 1)[1].split("\n", 1)[0].split())
     assert not (tmp_path / "opt").exists()
     r = subprocess.run(["bash", str(INSTALL), "--dry-run", "--board", "pi4"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "--board pi4: pi (Raspberry Pi 3/4) or pi5" in r.stderr
