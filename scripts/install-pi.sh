@@ -87,6 +87,7 @@ echo "packages: $PACKAGES"
 # Debian's python3-pigpio is only the client: without pigpiod the pi board cannot fly.
 if [ "$BOARD" = pi ] && ! dpkg-query -W -f='${Status}' pigpio 2>/dev/null | grep -q "install ok installed" \
         && ! apt-cache policy pigpio 2>/dev/null | grep -q "Candidate: [0-9]"; then
+    # shellcheck source=/dev/null
     CODENAME=$( (. /etc/os-release && echo "${VERSION_CODENAME:-}") 2>/dev/null || true)
     echo "install-pi.sh: no pigpio package (pigpiod) for this system (${CODENAME:-unknown release}): the Raspberry Pi archive (archive.raspberrypi.org) has it up to Bookworm, not for Trixie; on a Pi 3/4 use Raspberry Pi OS Bookworm (docs/pi.md, \"Install\")" >&2
     if [ "$DRY_RUN" = 0 ]; then
