@@ -203,3 +203,82 @@ def test_without_gpiod_the_pi5_board_says_which_extra_to_install(tmp_path):
     assert r.returncode == 3
     lines = [line for line in r.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "pip install '.[pi5]'" in lines[0], r.stderr
+
+
+# --- the GPIO chip by its label (the real gpiod's device check; the fake chip where gpiod.Chip opens) ---
+class Chips:
+    """/dev/gpiochipN as a kernel numbers them: each path a FakeGpioDevice of that label, the files made so
+    the lookup's glob finds them; `denied`: how many more opens get EACCES (udev not yet run)."""
+
+    def __init__(self, dev, labels: dict[str, str], denied: int = 0):
+        self.devices = {}
+        for name, label in labels.items():
+            (dev / name).write_text("")
+            self.devices[str(dev / name)] = FakeGpioDevice(name=name, label=label)
+        self.denied, self.opened, self.closed = denied, [], []
+
+    def open(self, path: str):
+        if self.denied:
+            self.denied -= 1
+            raise PermissionError(13, "Permission denied", path)
+        chip = self.devices[path].chip(path)
+        self.opened.append(path)
+        close = chip.close
+        chip.close = lambda: (self.closed.append(path), close())
+        return chip
+
+    def shut(self) -> None:
+        for d in self.devices.values():
+            d.close()
+
+
+EARLY_66 = {"gpiochip0": "gpio-brcmstb@107d508500", "gpiochip1": "gpio-brcmstb@107d508520",
+            "gpiochip2": "gpio-brcmstb@107d517c00", "gpiochip3": "gpio-brcmstb@107d517c20", "gpiochip4": "pinctrl-rp1"}
+LATER = {"gpiochip0": "pinctrl-rp1", "gpiochip10": "gpio-brcmstb@107d508500", "gpiochip11": "gpio-brcmstb@107d508520"}
+
+
+@pytest.mark.parametrize("labels", [EARLY_66, LATER], ids=["6.6 early: gpiochip4", "later: gpiochip0"])
+def test_the_gpio_chip_is_found_by_its_label_whatever_its_number(tmp_path, labels):
+    from flightctl.boards.pi5 import open_gpio_chip
+
+    chips = Chips(tmp_path, labels)
+    try:
+        chip = open_gpio_chip("pinctrl-rp1", pattern=str(tmp_path / "gpiochip*"), open_chip=chips.open, wait_s=0)
+        want = next(n for n, label in labels.items() if label == "pinctrl-rp1")
+        assert chip.path == str(tmp_path / want) and chip.get_info().num_lines == 54
+        assert sorted(chips.closed) == sorted(p for p in chips.opened if p != chip.path)   # the others closed
+        with pytest.raises(BoardUnavailable, match=r"no GPIO chip 'pinctrl-rp2' \(there: .*gpiochip0 \("):
+            open_gpio_chip("pinctrl-rp2", pattern=str(tmp_path / "gpiochip*"), open_chip=chips.open, wait_s=0)
+        by_path = open_gpio_chip(str(tmp_path / "gpiochip0"), open_chip=chips.open, wait_s=0)
+        assert by_path.get_info().label == labels["gpiochip0"]
+    finally:
+        chips.shut()
+
+
+def test_at_boot_the_gpio_chip_is_waited_for_until_udev_gives_it_to_group_gpio(tmp_path):
+    from flightctl.boards.pi5 import GPIO_WAIT_S, open_gpio_chip
+
+    t = [0.0]
+    sleep = lambda s: t.__setitem__(0, t[0] + s)             # noqa: E731
+    chips = Chips(tmp_path, {"gpiochip0": "pinctrl-rp1"}, denied=3)
+    try:
+        chip = open_gpio_chip("pinctrl-rp1", pattern=str(tmp_path / "gpiochip*"), open_chip=chips.open,
+                              clock=lambda: t[0], sleep=sleep)
+        assert chip.get_info().label == "pinctrl-rp1" and 0.25 < t[0] < 0.35
+        chips.denied = 10 ** 6                                 # no udev rule at all
+        with pytest.raises(BoardUnavailable, match=r"gpiochip0 \(permission denied\); is the user in group gpio"):
+            open_gpio_chip("pinctrl-rp1", pattern=str(tmp_path / "gpiochip*"), open_chip=chips.open,
+                           clock=lambda: t[0], sleep=sleep)
+        assert t[0] >= GPIO_WAIT_S
+    finally:
+        chips.shut()
+
+
+def test_files_that_are_not_gpio_devices_are_passed_over_by_gpiod(tmp_path):
+    """The real binding's device check: a regular file and /dev/null named gpiochipN are no chips."""
+    from flightctl.boards.pi5 import open_gpio_chip
+
+    (tmp_path / "gpiochip0").write_text("")
+    (tmp_path / "gpiochip1").symlink_to("/dev/null")
+    with pytest.raises(BoardUnavailable, match=r"^no GPIO chip 'pinctrl-rp1' \(there: none\)$"):
+        open_gpio_chip("pinctrl-rp1", pattern=str(tmp_path / "gpiochip*"), wait_s=0)

@@ -68,7 +68,7 @@ out = {{"proc": [n for n in os.listdir("/proc") if not n.isdigit()],
        "proc_device_tree": os.path.exists("/proc/device-tree"), "model": detect.model(),
        "board": detect.detected()}}
 try:
-    open_gpio_chip("pinctrl-rp1").close()
+    open_gpio_chip("pinctrl-rp1", wait_s=0).close()
     out["gpio"] = "opened"
 except BoardUnavailable as e:
     out["gpio"] = str(e)

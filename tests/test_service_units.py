@@ -193,3 +193,18 @@ def test_systemd_analyze_security_rates_the_unit_3_or_better(tmp_path, board_dro
         pytest.skip("this systemd-analyze cannot rate a unit file offline")
     line = [l for l in r.stdout.splitlines() if "Overall exposure level" in l][0]
     assert float(line.split(":")[1].split()[0]) <= 3.0, line
+
+
+def test_the_start_timeout_covers_the_boot_waits_of_the_pi5_board():
+    """At boot the Pi 5 board waits, bounded, for the PWM chip and udev's permission on its export, for
+    each channel's files, for the dead-man to start and for the GPIO chip; the unit's TimeoutStartSec
+    must leave as much again for the imports and the pre-arm checks. A refusal after those waits is
+    exit 3, which the unit does not restart (no overlay: restarting will not help)."""
+    from flightctl.boards.pi5 import GPIO_WAIT_S
+    from flightctl.drivers.pwm_sysfs import CHIP_WAIT_S, DEADMAN_START_S, EXPORT_WAIT_S
+    from flightctl.service import EXIT_REFUSED
+
+    waits = CHIP_WAIT_S + 4 * EXPORT_WAIT_S + DEADMAN_START_S + GPIO_WAIT_S
+    u = unit_entries(UNIT)
+    assert 2 * waits <= float(u["TimeoutStartSec"][0])
+    assert u["RestartPreventExitStatus"] == [str(EXIT_REFUSED)] and u["Restart"] == ["on-failure"]

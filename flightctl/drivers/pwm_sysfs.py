@@ -132,6 +132,7 @@ class SysfsPwmEsc:
         self._deadman: subprocess.Popen | None = None
         self._beat = -1                          # write end of the dead-man's pipe
         self._last_check = 0.0
+        self._boot_end = 0.0
         self.armed = False
         self.writes = 0                          # duty_cycle writes so far
 
@@ -145,6 +146,7 @@ class SysfsPwmEsc:
         """Export the four channels (refusing any already exported), take each from whatever state its
         last user left to the stop pulse, start the dead-man. Every failure is one `EscError` naming the
         file; what was exported is released again."""
+        self._boot_end = self._clock() + CHIP_WAIT_S      # one bound for the chip and udev's permission
         self.dir = self._wait_for_chip()
         npwm = int(self._setup(_read, os.path.join(self.dir, "npwm")))
         for i, c in enumerate(self.channels):
@@ -174,12 +176,11 @@ class SysfsPwmEsc:
     def _wait_for_chip(self) -> str:
         """The chip's directory, waited for up to CHIP_WAIT_S: at boot the RP1's PWM driver may probe
         after the service started."""
-        end = self._clock() + CHIP_WAIT_S
         while True:
             try:
                 return find_chip(self.root, self.chip)
             except EscError as e:
-                if self._clock() > end:
+                if self._clock() > self._boot_end:
                     raise EscError(f"{e} (waited {CHIP_WAIT_S:g} s)") from None
             self._sleep(POLL_S)
 
@@ -189,7 +190,6 @@ class SysfsPwmEsc:
                            "controller died without its ExecStopPost; `flightctl run --board pi5 "
                            "--stop-motors` releases it)")
         path = os.path.join(self.dir, "export")
-        end = self._clock() + CHIP_WAIT_S
         while True:
             try:
                 _store(self.fs, path, b"%d\n" % c)
@@ -198,7 +198,7 @@ class SysfsPwmEsc:
                 if e.errno == errno.EBUSY:
                     raise EscError(f"{self._name(i)} is held by a kernel driver (EBUSY on export): "
                                    "this channel is not free for the ESCs") from None
-                if e.errno in (errno.EACCES, errno.EPERM) and self._clock() <= end:
+                if e.errno in (errno.EACCES, errno.EPERM) and self._clock() <= self._boot_end:
                     self._sleep(POLL_S)         # at boot udev may not yet have given the chip to group gpio
                     continue
                 raise EscError(f"{self._name(i)} cannot be exported: {path}: {e.strerror}: is the user in group "
