@@ -18,6 +18,57 @@ def step(name: str, measured: str, ok: bool, fix: str) -> None:
     assert ok, f"{name}: {measured}; what to do: {fix}"
 
 
+def imu_at_rest(config) -> None:
+    """Two seconds of frames with the vehicle still: 1 g, and the gyro's offset and noise."""
+    from flightctl.boards.boardfile import open_spi
+    from flightctl.drivers.mpu9250 import Mpu9250
+    from flightctl.hal import ImuSample
+
+    spi = open_spi(config.imu)
+    try:
+        imu = Mpu9250(spi)
+        imu.start()
+        s, rows = ImuSample(), []
+        for _ in range(450 * 2):
+            if imu.read(s):
+                rows.append((s.ax, s.ay, s.az, s.gx, s.gy, s.gz))
+            time.sleep(1 / 450)
+    finally:
+        spi.close()
+    from flightctl.params import load
+
+    if not rows:
+        step("IMU at rest", "no frame in 2 s", False, "check the SPI wiring (CE0, mode 3), dtparam=spi=on, "
+             "and that the chip answers WHO_AM_I 0x71 (MPU-9250)")
+    a = statistics.mean(math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2) for r in rows) / load(None).airframe.g
+    rates = [math.degrees(statistics.mean(r[i] for r in rows)) for i in (3, 4, 5)]
+    noise = [math.degrees(statistics.pstdev(r[i] for r in rows)) for i in (3, 4, 5)]
+    step("IMU at rest", f"{len(rows)} frames in 2 s, |a| {a:.3f} g, gyro mean {rates[0]:+.2f} {rates[1]:+.2f} "
+         f"{rates[2]:+.2f} deg/s, noise {noise[0]:.2f} {noise[1]:.2f} {noise[2]:.2f} deg/s",
+         len(rows) > 800 and 0.95 < a < 1.05 and max(map(abs, rates)) < 5.0,
+         "keep the vehicle still and level; a dead or wrong chip: check the SPI wiring (CE0, mode 3) and "
+         "WHO_AM_I; a gyro offset above 5 deg/s: replace the IMU")
+
+
+def battery(config) -> None:
+    """The INA219: the battery's voltage and current, in range."""
+    import smbus2
+
+    from flightctl.drivers.ina219 import Ina219
+
+    bus = smbus2.SMBus(config.power.i2c_bus)
+    try:
+        ina = Ina219(bus, config.power.address, config.power.shunt_ohm, config.power.max_current_a)
+        ina.start()
+        v, i = ina.read()
+    finally:
+        bus.close()
+    step("battery", f"{v:.2f} V, {i:+.2f} A (board file: {config.checks.min_battery_v:.2f} V to arm)",
+         5.0 < v < 26.0 and abs(i) < config.power.max_current_a and v >= config.checks.min_battery_v,
+         "below the arming threshold: charge the battery; no reading: check the INA219's address "
+         "(i2cdetect -y 1), its shunt in the battery lead and [power] in the board file")
+
+
 def sonar_answers(sonar) -> None:
     """Ten measurements, 50 ms apart: at least one real range among them; prints the echo times."""
     results = []

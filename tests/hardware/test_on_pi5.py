@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from checks import loop_io, sonar_answers, step
+from checks import battery, imu_at_rest, loop_io, sonar_answers, step
 
 from flightctl.boards.detect import MODEL_PATHS, is_pi5, model
 
@@ -132,29 +132,11 @@ def test_the_dead_man_process_stops_the_escs_when_the_loop_stalls(esc):
 
 
 def test_the_imu_reads_one_g_and_small_rates_at_rest(config):
-    from flightctl.boards.boardfile import open_spi
-    from flightctl.drivers.mpu9250 import Mpu9250
-    from flightctl.hal import ImuSample
+    imu_at_rest(config)
 
-    spi = open_spi(config.imu)
-    try:
-        imu = Mpu9250(spi)
-        imu.start()
-        s, rows = ImuSample(), []
-        for _ in range(450 * 2):
-            if imu.read(s):
-                rows.append((s.ax, s.ay, s.az, s.gx, s.gy, s.gz))
-            time.sleep(1 / 450)
-    finally:
-        spi.close()
-    a = statistics.mean((r[0] ** 2 + r[1] ** 2 + r[2] ** 2) ** 0.5 for r in rows) / 9.80665
-    rates = [statistics.mean(r[i] for r in rows) * 57.2958 for i in (3, 4, 5)]
-    noise = [statistics.pstdev(r[i] for r in rows) * 57.2958 for i in (3, 4, 5)]
-    step("IMU at rest", f"{len(rows)} frames in 2 s, |a| {a:.3f} g, gyro mean {rates[0]:+.2f} {rates[1]:+.2f} "
-         f"{rates[2]:+.2f} deg/s, noise {noise[0]:.2f} {noise[1]:.2f} {noise[2]:.2f} deg/s",
-         len(rows) > 800 and 0.95 < a < 1.05 and max(map(abs, rates)) < 5.0,
-         "keep the vehicle still and level; a dead or wrong chip: check the SPI wiring (CE0, mode 3) and "
-         "WHO_AM_I; a gyro offset above 5 deg/s: replace the IMU")
+
+def test_the_power_monitor_reads_the_battery(config):
+    battery(config)
 
 
 def test_the_sonar_answers_through_the_gpio_character_device(config):
