@@ -11,7 +11,7 @@ from the controller) and the read end of a pipe whose write end only the control
     s       disarmed: no countdown (the controller has put the stop pulse itself)
     q       quit without writing (the controller is releasing the channels itself)
     EOF     the controller died (crash, SIGKILL, OOM): the stop pulse at once
-    SIGTERM (systemd stopping the unit's processes): the stop pulse, then exit
+    SIGTERM (`systemctl kill flightctl`, which signals every process of the unit): the stop pulse, then exit
 
 When it has fired it closes its end of the pipe, writes the stop pulse and exits, and stays gone: the
 controller's next heartbeat, which `write()` sends before any duty cycle, finds the pipe broken and stops
