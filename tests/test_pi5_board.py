@@ -139,6 +139,19 @@ def test_a_held_pwm_channel_is_board_unavailable_and_run_exits_3_with_one_line(f
     assert pwm.exported() == [0]                                  # not ours: left alone
 
 
+def test_a_write_the_kernel_refuses_at_start_up_is_exit_3_with_one_line_naming_the_file(fakes, tmp_path, caplog):
+    """Issue 36: a refused write escaped as a traceback (exit 1, restarted three times)."""
+    params, pwm, gpio, devices = fakes
+    pwm.clock_off = True                                          # rp1_pwm_apply(): no clock rate, EINVAL
+    with caplog.at_level(logging.ERROR, logger="flightctl.run"):
+        rc = main(["--board", "pi5", "--plan", "hover", "--log", str(tmp_path)], devices=devices)
+    assert rc == 3
+    errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert len(errors) == 1 and "\n" not in errors[0] and "Traceback" not in caplog.text
+    assert errors[0].startswith(f"not flying: {pwm.root / 'pwmchip2' / 'pwm0' / 'period'}: writing 2227171 failed")
+    assert pwm.exported() == []
+
+
 def test_stop_motors_releases_the_channels_a_dead_controller_left(fakes):
     params, pwm, gpio, devices = fakes
     board = open_board("pi5", params, BoardOptions(devices=devices))

@@ -208,3 +208,24 @@ def test_the_start_timeout_covers_the_boot_waits_of_the_pi5_board():
     u = unit_entries(UNIT)
     assert 2 * waits <= float(u["TimeoutStartSec"][0])
     assert u["RestartPreventExitStatus"] == [str(EXIT_REFUSED)] and u["Restart"] == ["on-failure"]
+
+
+def test_the_pigpio_boards_socket_is_one_the_units_sandbox_lets_through():
+    """The pigpio client connects to the board file's host (socket.create_connection, pigpio.py): every
+    address it resolves to must be of a family RestrictAddressFamilies= allows (an AF_INET6 ::1 would be
+    EAFNOSUPPORT) and inside IPAddressAllow=localhost, on the loopback both units share."""
+    import ipaddress
+    import socket
+
+    from flightctl.boards.pi import load_board
+
+    u, d = unit_entries(UNIT, PIGPIO), unit_entries(DROPIN)
+    families = set(u["RestrictAddressFamilies"][0].split())
+    assert u["IPAddressAllow"] == ["localhost"] and d["IPAddressAllow"] == ["localhost"]
+    pig = load_board().pigpio
+    infos = socket.getaddrinfo(pig.host, pig.port, type=socket.SOCK_STREAM)
+    assert infos
+    for family, *_, address in infos:
+        assert family.name in families, (pig.host, family.name, families)
+        assert ipaddress.ip_address(address[0]).is_loopback, address
+    assert " -l" in d["ExecStart"][1]                    # pigpiod listens on localhost: what the client reaches
