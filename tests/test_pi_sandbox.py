@@ -140,3 +140,28 @@ def test_inside_the_units_sandbox_auto_is_the_pi5_board_and_execstoppost_stops_t
     assert out["stop_motors"].startswith("stop pulse (1000 us), then disabled and unexported: pwm0, pwm1, pwm2, pwm3")
     assert out["after"] == {str(c): None for c in range(4)} and out["exported"] == []
     assert fake.retained(RP1_PWM0, 0)["duty_cycle"] == 1_000_000          # the stop pulse, kept for the next user
+
+
+@pytest.mark.skipif(can_sandbox() is not None, reason=str(can_sandbox()))
+def test_the_units_execstoppost_command_finds_the_pi5_in_the_sandbox_and_stops_what_a_dead_controller_left(tmp_path):
+    """The unit's own ExecStopPost command line, in the sandbox, on the kernel's files (written with the
+    `os` module as on the Pi, so the fake's rules do not apply: it checks the path the command takes, not
+    the kernel's answers). Before issue 36 it picked the pigpio board there and exited 1."""
+    fake = FakePwmSysfs(tmp_path)
+    chip = fake.dirs[RP1_PWM0]
+    for c in range(4):                                   # a dead controller's channels, motors running
+        fake.write(chip / "export", str(c))
+        for what, value in (("period", "2227171"), ("duty_cycle", "1800000"), ("enable", "1")):
+            fake.write(chip / f"pwm{c}" / what, value)
+    model = tmp_path / "sys/firmware/devicetree/base/model"
+    model.parent.mkdir(parents=True)
+    model.write_bytes(PI5)
+    script = ("import sys; from flightctl.cli import main; "
+              "sys.exit(main(['run', '--board', 'auto', '--stop-motors']))")
+    r = sandboxed(tmp_path, script)
+    assert r.returncode == 0, r.stderr
+    assert "stop-motors: stop pulse (1000 us), then disabled and unexported: pwm0, pwm1, pwm2, pwm3 of " \
+           "1f00098000.pwm" in r.stderr
+    for c in range(4):
+        assert (chip / f"pwm{c}" / "duty_cycle").read_text() == "1000000\n"
+        assert (chip / f"pwm{c}" / "enable").read_text() == "0\n"
