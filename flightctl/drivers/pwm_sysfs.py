@@ -9,7 +9,7 @@ pwmchip0 on 6.12), so the chip is found by its device (`1f00098000.pwm`, the `de
 pwmchipN) or named outright (`pwmchip2`); at boot it is waited for (CHIP_WAIT_S), as is udev giving its
 export file to group gpio. The kernel checks every write, and a freshly exported channel is not fresh:
 it keeps whatever its last user left (the RP1's driver has no .get_state), so `start()` reads that state
-and orders its writes so that each is accepted by 6.6's rule and by 6.12's (`_take`). Every OSError of
+and orders its writes so that each is accepted by 6.6's rule and by the later ones (`_take`). Every OSError of
 the set-up is one `EscError` naming the file. The root is a parameter (the tests give a fake tree), and
 so are the system calls that reach it (`fs`: open, pwrite, pread, close; the `os` module on the
 vehicle, the fake kernel's in the tests).
@@ -210,10 +210,17 @@ class SysfsPwmEsc:
         the kernel accepts. pwm-rp1 has no .get_state and unexport does not reset a channel, so it keeps
         its last user's period, duty cycle, enable and polarity (tests/fakes/sysfs_pwm.py, from the
         Raspberry Pi kernel's sysfs.c, core.c and pwm-rp1.c). 6.6 refuses any state with period 0 or
-        duty_cycle > period, enabled or not; 6.12 checks enabled states only. So: disabled first (unless
-        it never had a period: disabling that is EINVAL on 6.6, and it is off); then the period before the
-        duty cycle if the held duty cycle fits our period, else the duty cycle first (the held period is
-        then longer than both); polarity; enabled last."""
+        duty_cycle > period, enabled or not; from 6.11 an invalid state may follow an invalid one, and
+        which states count as invalid was inverted until the fix in 6.16 (and its stable backports): 6.11
+        checks disabled states only, 6.16 enabled ones only. So, with every intermediate state having a
+        period and a duty cycle no longer than it wherever the held state allows:
+        - disabled first (unless it is off already: disabling a channel that never had a period is EINVAL
+          on 6.6); then the period before the duty cycle if the held duty cycle fits our period, else the
+          duty cycle first (the held period is then at least as long, or the state was invalid anyway);
+        - an enabled state without a valid period and duty cycle (only 6.11 leaves one) is mended while
+          enabled, where 6.11 checks nothing (disabling it there would be EINVAL): the stop pulse's duty
+          cycle, then the period;
+        then polarity, and enabled last."""
         held = {}
         for name, fd in fds.items():
             try:
@@ -225,9 +232,16 @@ class SysfsPwmEsc:
             duty, enabled = int(held["duty_cycle"]), held["enable"] == b"1"
         except ValueError:
             raise EscError(f"{self._channel_file(i, 'duty_cycle')}: reads {held['duty_cycle']!r}, not a number") from None
-        steps = [("enable", b"0\n")] if enabled else []
+        try:
+            period = int(held["period"])
+        except ValueError:
+            raise EscError(f"{self._channel_file(i, 'period')}: reads {held['period']!r}, not a number") from None
         order = (("period", self._period_bytes), ("duty_cycle", self._stop_bytes))
-        steps += order if duty <= self.period_ns else order[::-1]
+        if enabled and not 0 < period >= duty:
+            steps = list(order[::-1])
+        else:
+            steps = [("enable", b"0\n")] if enabled else []
+            steps += order if duty <= self.period_ns else order[::-1]
         steps += [("polarity", b"normal\n"), ("enable", b"1\n")]
         for name, value in steps:
             try:

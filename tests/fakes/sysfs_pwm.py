@@ -26,11 +26,18 @@ and the RP1's driver drivers/pwm/pwm-rp1.c (raspberrypi/linux):
 - period, duty_cycle (ns, unsigned), enable (0 or 1), polarity (normal or inversed): each store builds
   the whole new state from the current one and applies it; when the new state equals the current one,
   nothing is applied (core.c). Which states are refused depends on the kernel (`rule`):
-  "6.6": `pwm_apply_state()` refuses (EINVAL, state unchanged) any state with period 0 or duty_cycle >
-    period, enabled or not: a duty cycle before a period is EINVAL, and so is disabling a channel whose
-    period is still 0;
-  "6.12": `pwm_state_valid()`: a disabled state is not checked; an enabled one needs period > 0 and
-    duty_cycle <= period; from an invalid state to another invalid one the state is stored, not applied.
+  "6.6": `__pwm_apply()` (raspberrypi/linux core.c of the 6.6 line) refuses (EINVAL, state unchanged)
+    any state with period 0 or duty_cycle > period, enabled or not: a duty cycle before a period is
+    EINVAL, and so is disabling a channel whose period is still 0;
+  "6.11": `pwm_state_valid()` as 6.11-rc1 brought it, up to 6.12.y before the fix below was backported:
+    it tests `state->enabled` the wrong way round, so an enabled state is never checked and a disabled
+    one needs period > 0 and duty_cycle <= period; a store from an invalid state to another invalid one
+    is stored, not applied (no EINVAL);
+  "6.16": the same after "pwm: Fix invalid state detection" (9ee124caae1b, 6.16-rc6, backported to the
+    stable kernels): a disabled state is not checked, an enabled one needs period > 0 and duty_cycle <=
+    period; invalid to invalid is stored, not applied.
+  The Raspberry Pi 5's 6.12 kernels have the "6.11" rule or the "6.16" one, depending on their stable
+  release; `holdable()` is what a channel can be left in under each.
 - a store writes the value the kernel would show (`%d\\n`); reads show it. `output(chip, channel)`: the
   RP1's 50 MHz clock rounds period and duty to 20 ns.
 The kernel's own state (what survives an unexport, the pins' polarity) is kept in BASE/sys/.fake-kernel/, so that
@@ -60,14 +67,28 @@ PARENT = "sys/devices/platform/axi/1000120000.pcie"
 CLOCK_NS = 20       # the RP1's PWM clock: 50 MHz
 ATTRS = ("period", "duty_cycle", "enable", "polarity")
 ZERO = {"period": 0, "duty_cycle": 0, "enable": 0, "polarity": "normal"}
-RULES = ("6.6", "6.12")
+RULES = ("6.6", "6.11", "6.16")
+
+
+def strict(state: dict) -> bool:
+    return state["period"] > 0 and state["duty_cycle"] <= state["period"]
 
 
 def valid(state: dict, rule: str) -> bool:
     """Whether the kernel applies `state` (the rules above)."""
-    if rule == "6.12" and not state["enable"]:
+    if rule == "6.11" and state["enable"]:
         return True
-    return state["period"] > 0 and state["duty_cycle"] <= state["period"]
+    if rule == "6.16" and not state["enable"]:
+        return True
+    return strict(state)
+
+
+def holdable(state: dict, rule: str) -> bool:
+    """Whether a channel can be left in `state` under `rule`: never used since boot, applied, or (6.11,
+    6.16) reached by stores from one invalid state to another, starting from the zeros."""
+    if state == ZERO or valid(state, rule):
+        return True
+    return rule == "6.11"                 # the zeros are invalid there: every invalid state is reachable
 
 
 class FakePwmSysfs:
@@ -75,7 +96,7 @@ class FakePwmSysfs:
                  kernel_held: dict[tuple[str, int], str] | None = None, rule: str = "6.6"):
         """`chips`: pwmchip number -> (device, npwm); the default is a 6.6 kernel's numbering, the RP1's
         PWM0 at pwmchip2 and PWM1 (the fan's) at pwmchip6. `kernel_held`: (device, channel) -> the kernel
-        consumer holding it. `rule`: the kernel whose validity rule the stores follow ("6.6", "6.12")."""
+        consumer holding it. `rule`: the kernel whose validity rule the stores follow (RULES)."""
         if rule not in RULES:
             raise ValueError(f"rule: one of {RULES}")
         self._setup(base, kernel_held)
@@ -150,7 +171,7 @@ class FakePwmSysfs:
                polarity: str = "normal") -> None:
         """What the channel's last user left (it is not exported now): a state this kernel could hold."""
         state = {"period": period, "duty_cycle": duty_cycle, "enable": enable, "polarity": polarity}
-        if state != ZERO and not valid(state, self.rule):     # zeros: never used since boot
+        if not holdable(state, self.rule):
             raise ValueError(f"kernel {self.rule} never holds {state}")
         with self.lock:
             if self.channel(device, c).exists():
