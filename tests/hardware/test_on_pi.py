@@ -1,8 +1,9 @@
 """The first-flight checklist on the quadcopter's Raspberry Pi 3/4 (docs/pi.md, "First flight checklist"):
 `python -m pytest -m hardware tests/hardware/test_on_pi.py -v -s` on the Pi, pigpiod running, the flightctl
-service stopped, PROPELLERS OFF. Every step prints what it measured and, when it fails, what to do. Deselected by default (pyproject: -m 'not hardware'); skips itself without
-/dev/spidev0.0 or a reachable pigpiod. Set FLIGHTCTL_BOARD_FILE to use another wiring than the
-shipped flightctl/boards/pi.toml.
+service stopped, PROPELLERS OFF. Every step prints what it measured and, when it fails, what to do.
+Deselected by default (pyproject: -m 'not hardware'); skips itself without /dev/spidev0.0 or a reachable
+pigpiod. Set FLIGHTCTL_BOARD_FILE to use another wiring than the shipped flightctl/boards/pi.toml, and
+FLIGHTCTL_LOOP_S for a shorter loop check than a minute.
 
 No test here spins a motor: the ESC outputs carry the stop pulse or pulses below eq. 26's dead zone
 (h2 = 120, 1048 us). What they check is what the fakes cannot: the real 449 Hz on the pins, pigpiod

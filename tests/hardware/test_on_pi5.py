@@ -1,8 +1,9 @@
 """The first-flight checklist on the quadcopter's Raspberry Pi 5 (docs/pi.md, "First flight checklist"):
 `python -m pytest -m hardware tests/hardware/test_on_pi5.py -v -s` on the Pi, the flightctl service stopped,
-PROPELLERS OFF. Every step prints what it measured and, when it fails, what to do. Deselected by default (pyproject: -m 'not hardware'); skips
-itself off a Pi 5 or without /dev/spidev0.0. Set FLIGHTCTL_BOARD_FILE for another wiring than the shipped
-flightctl/boards/pi5.toml, and FLIGHTCTL_LOOPBACK_PIN=N with a jumper from motor 1's pin (GPIO 12, header
+PROPELLERS OFF. Every step prints what it measured and, when it fails, what to do. Deselected by default
+(pyproject: -m 'not hardware'); skips itself off a Pi 5 or without /dev/spidev0.0. Set FLIGHTCTL_BOARD_FILE
+for another wiring than the shipped flightctl/boards/pi5.toml, FLIGHTCTL_LOOP_S for a shorter loop check
+than a minute, and FLIGHTCTL_LOOPBACK_PIN=N with a jumper from motor 1's pin (GPIO 12, header
 pin 32) to GPIO N to have the real output measured (kernel edge timestamps on GPIO N).
 
 No test here spins a motor: the ESC outputs carry the stop pulse or 1030 us, below eq. 26's dead zone
@@ -65,7 +66,8 @@ def test_the_esc_channels_take_the_period_and_the_stop_pulse(esc):
         back[c] = {k: (d / k).read_text().strip() for k in ("period", "duty_cycle", "enable", "polarity")}
     shown = "; ".join(f"channel {c}: period {v['period']} ns, pulse {int(v['duty_cycle']) / 1000:g} us, "
                       f"enable {v['enable']}, {v['polarity']}" for c, v in back.items())
-    step("ESC pulses read back", shown, esc.output_problems() == [] and esc.check_frequency() == pytest.approx(449.0, abs=0.01),
+    ok = esc.output_problems() == [] and esc.check_frequency() == pytest.approx(449.0, abs=0.01)
+    step("ESC pulses read back", shown, ok,
          "another process drives a channel (ls /sys/class/pwm/*/pwm*; flightctl run --board pi5 --stop-motors "
          "releases what a dead controller left), or the board file's chip and channels are wrong")
 
