@@ -3,7 +3,7 @@
 #
 #   sudo scripts/install-pi.sh [--dry-run] [--board pi|pi5] [--prefix /opt/flightctl] [--source DIR] [--no-enable]
 #
-# The board comes from /proc/device-tree/model (--board overrides it): a Raspberry Pi 5 gets the `pi5`
+# The board comes from the device tree's model (--board overrides it): a Raspberry Pi 5 gets the `pi5`
 # board (the RP1's PWM overlay, the udev rule that gives the PWM files to group gpio, the '.[pi5]'
 # extra), a Pi 3/4 the `pi` board (pigpio and its localhost-only pigpiod drop-in, the '.[pi]' extra).
 # Both: SPI and I2C enabled, the user `flightctl` (groups gpio, spi, i2c), the package in a venv under
@@ -64,21 +64,36 @@ if [ ! -f "$SOURCE/pyproject.toml" ] || [ ! -f "$SOURCE/systemd/flightctl.servic
     exit 1
 fi
 # the board: the RP1 I/O chip (Raspberry Pi 5, 500, Compute Module 5) or not (flightctl/boards/detect.py)
-MODEL=$( { tr -d '\0' </proc/device-tree/model; } 2>/dev/null || true)
+MODEL=$( { tr -d '\0' </sys/firmware/devicetree/base/model || tr -d '\0' </proc/device-tree/model; } 2>/dev/null || true)
 if [ -z "$BOARD" ]; then
     case "$MODEL" in
         "Raspberry Pi 5"*|"Raspberry Pi Compute Module 5"*) BOARD=pi5 ;;    # the 500 too
         *) BOARD=pi ;;
     esac
 fi
+# spidev has no wheel for the Pi (aarch64, armhf): pip builds it from source, with a C compiler
+# (build-essential) and Python's headers (python3-dev)
 case "$BOARD" in
-    pi) PACKAGES="pigpio python3-venv python3-dev" ;;
-    pi5) PACKAGES="python3-venv python3-dev device-tree-compiler" ;;
+    pi) PACKAGES="pigpio python3-venv python3-dev build-essential" ;;
+    pi5) PACKAGES="python3-venv python3-dev build-essential device-tree-compiler" ;;
     *) echo "install-pi.sh: --board $BOARD: pi (Raspberry Pi 3/4) or pi5" >&2; exit 2 ;;
 esac
 echo "board: $BOARD (${MODEL:-no device tree model})"
+echo "packages: $PACKAGES"
 
-# 1. packages: Python venv support; pigpio (daemon and tools) for the pi board, dtc for the pi5 overlay
+# 1. packages: Python venv support and what spidev builds with; pigpio (daemon and tools, with its
+# pigpiod.service) for the pi board, dtc for the pi5 overlay. pigpio comes from the Raspberry Pi archive,
+# which has it up to Bookworm; Trixie and later have none (github.com/joan2937/pigpio/issues/632), and
+# Debian's python3-pigpio is only the client: without pigpiod the pi board cannot fly.
+if [ "$BOARD" = pi ] && ! dpkg-query -W -f='${Status}' pigpio 2>/dev/null | grep -q "install ok installed" \
+        && ! apt-cache policy pigpio 2>/dev/null | grep -q "Candidate: [0-9]"; then
+    # shellcheck source=/dev/null
+    CODENAME=$( (. /etc/os-release && echo "${VERSION_CODENAME:-}") 2>/dev/null || true)
+    echo "install-pi.sh: no pigpio package (pigpiod) for this system (${CODENAME:-unknown release}): the Raspberry Pi archive (archive.raspberrypi.org) has it up to Bookworm, not for Trixie; on a Pi 3/4 use Raspberry Pi OS Bookworm (docs/pi.md, \"Install\")" >&2
+    if [ "$DRY_RUN" = 0 ]; then
+        exit 1
+    fi
+fi
 missing=()
 for pkg in $PACKAGES; do
     if ! dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed"; then

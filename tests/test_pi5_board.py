@@ -139,6 +139,19 @@ def test_a_held_pwm_channel_is_board_unavailable_and_run_exits_3_with_one_line(f
     assert pwm.exported() == [0]                                  # not ours: left alone
 
 
+def test_a_write_the_kernel_refuses_at_start_up_is_exit_3_with_one_line_naming_the_file(fakes, tmp_path, caplog):
+    """Issue 36: a refused write escaped as a traceback (exit 1, restarted three times)."""
+    params, pwm, gpio, devices = fakes
+    pwm.clock_off = True                                          # rp1_pwm_apply(): no clock rate, EINVAL
+    with caplog.at_level(logging.ERROR, logger="flightctl.run"):
+        rc = main(["--board", "pi5", "--plan", "hover", "--log", str(tmp_path)], devices=devices)
+    assert rc == 3
+    errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert len(errors) == 1 and "\n" not in errors[0] and "Traceback" not in caplog.text
+    assert errors[0].startswith(f"not flying: {pwm.root / 'pwmchip2' / 'pwm0' / 'period'}: writing 2227171 failed")
+    assert pwm.exported() == []
+
+
 def test_stop_motors_releases_the_channels_a_dead_controller_left(fakes):
     params, pwm, gpio, devices = fakes
     board = open_board("pi5", params, BoardOptions(devices=devices))
@@ -159,11 +172,12 @@ def test_stop_motors_without_the_pwm_chip_fails_loudly(tmp_path, caplog):
     assert "stop-motors: no PWM chips" in caplog.text
 
 
-# --- which board: /proc/device-tree/model --------------------------------------------------------
+# --- which board: the device tree's model (tests/test_pi_sandbox.py: inside the unit's sandbox) -----
 @pytest.fixture
 def model(tmp_path, monkeypatch):
-    path = tmp_path / "model"
-    monkeypatch.setattr(detect, "MODEL_PATH", str(path))
+    path = tmp_path / "sys" / "firmware" / "devicetree" / "base" / "model"
+    path.parent.mkdir(parents=True)
+    monkeypatch.setattr(detect, "MODEL_PATHS", (str(path), str(tmp_path / "proc" / "device-tree" / "model")))
     return path
 
 
@@ -202,3 +216,82 @@ def test_without_gpiod_the_pi5_board_says_which_extra_to_install(tmp_path):
     assert r.returncode == 3
     lines = [line for line in r.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "pip install '.[pi5]'" in lines[0], r.stderr
+
+
+# --- the GPIO chip by its label (the real gpiod's device check; the fake chip where gpiod.Chip opens) ---
+class Chips:
+    """/dev/gpiochipN as a kernel numbers them: each path a FakeGpioDevice of that label, the files made so
+    the lookup's glob finds them; `denied`: how many more opens get EACCES (udev not yet run)."""
+
+    def __init__(self, dev, labels: dict[str, str], denied: int = 0):
+        self.devices = {}
+        for name, label in labels.items():
+            (dev / name).write_text("")
+            self.devices[str(dev / name)] = FakeGpioDevice(name=name, label=label)
+        self.denied, self.opened, self.closed = denied, [], []
+
+    def open(self, path: str):
+        if self.denied:
+            self.denied -= 1
+            raise PermissionError(13, "Permission denied", path)
+        chip = self.devices[path].chip(path)
+        self.opened.append(path)
+        close = chip.close
+        chip.close = lambda: (self.closed.append(path), close())
+        return chip
+
+    def shut(self) -> None:
+        for d in self.devices.values():
+            d.close()
+
+
+EARLY_66 = {"gpiochip0": "gpio-brcmstb@107d508500", "gpiochip1": "gpio-brcmstb@107d508520",
+            "gpiochip2": "gpio-brcmstb@107d517c00", "gpiochip3": "gpio-brcmstb@107d517c20", "gpiochip4": "pinctrl-rp1"}
+LATER = {"gpiochip0": "pinctrl-rp1", "gpiochip10": "gpio-brcmstb@107d508500", "gpiochip11": "gpio-brcmstb@107d508520"}
+
+
+@pytest.mark.parametrize("labels", [EARLY_66, LATER], ids=["6.6 early: gpiochip4", "later: gpiochip0"])
+def test_the_gpio_chip_is_found_by_its_label_whatever_its_number(tmp_path, labels):
+    from flightctl.boards.pi5 import open_gpio_chip
+
+    chips = Chips(tmp_path, labels)
+    try:
+        chip = open_gpio_chip("pinctrl-rp1", pattern=str(tmp_path / "gpiochip*"), open_chip=chips.open, wait_s=0)
+        want = next(n for n, label in labels.items() if label == "pinctrl-rp1")
+        assert chip.path == str(tmp_path / want) and chip.get_info().num_lines == 54
+        assert sorted(chips.closed) == sorted(p for p in chips.opened if p != chip.path)   # the others closed
+        with pytest.raises(BoardUnavailable, match=r"no GPIO chip 'pinctrl-rp2' \(there: .*gpiochip0 \("):
+            open_gpio_chip("pinctrl-rp2", pattern=str(tmp_path / "gpiochip*"), open_chip=chips.open, wait_s=0)
+        by_path = open_gpio_chip(str(tmp_path / "gpiochip0"), open_chip=chips.open, wait_s=0)
+        assert by_path.get_info().label == labels["gpiochip0"]
+    finally:
+        chips.shut()
+
+
+def test_at_boot_the_gpio_chip_is_waited_for_until_udev_gives_it_to_group_gpio(tmp_path):
+    from flightctl.boards.pi5 import GPIO_WAIT_S, open_gpio_chip
+
+    t = [0.0]
+    sleep = lambda s: t.__setitem__(0, t[0] + s)             # noqa: E731
+    chips = Chips(tmp_path, {"gpiochip0": "pinctrl-rp1"}, denied=3)
+    try:
+        chip = open_gpio_chip("pinctrl-rp1", pattern=str(tmp_path / "gpiochip*"), open_chip=chips.open,
+                              clock=lambda: t[0], sleep=sleep)
+        assert chip.get_info().label == "pinctrl-rp1" and 0.25 < t[0] < 0.35
+        chips.denied = 10 ** 6                                 # no udev rule at all
+        with pytest.raises(BoardUnavailable, match=r"gpiochip0 \(permission denied\); is the user in group gpio"):
+            open_gpio_chip("pinctrl-rp1", pattern=str(tmp_path / "gpiochip*"), open_chip=chips.open,
+                           clock=lambda: t[0], sleep=sleep)
+        assert t[0] >= GPIO_WAIT_S
+    finally:
+        chips.shut()
+
+
+def test_files_that_are_not_gpio_devices_are_passed_over_by_gpiod(tmp_path):
+    """The real binding's device check: a regular file and /dev/null named gpiochipN are no chips."""
+    from flightctl.boards.pi5 import open_gpio_chip
+
+    (tmp_path / "gpiochip0").write_text("")
+    (tmp_path / "gpiochip1").symlink_to("/dev/null")
+    with pytest.raises(BoardUnavailable, match=r"^no GPIO chip 'pinctrl-rp1' \(there: none\)$"):
+        open_gpio_chip("pinctrl-rp1", pattern=str(tmp_path / "gpiochip*"), wait_s=0)

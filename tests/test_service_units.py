@@ -37,7 +37,7 @@ def test_service_unit_has_the_lifecycle_the_design_needs():
     p = unit_entries(UNIT, PIGPIO)
     assert p["Requires"] == ["pigpiod.service"] and p["After"] == ["pigpiod.service"]
     assert "Requires" not in unit_entries(UNIT, PI5)
-    assert u["KillMode"] == ["mixed"]                   # SIGTERM to the controller only; its dead-man after it
+    assert u["KillMode"] == ["process"]                 # signals to the controller only: its dead-man outlives it
     assert int(u["WatchdogSec"][0]) >= 1
     assert u["User"] == ["flightctl"] and u["SupplementaryGroups"] == ["gpio spi i2c"]
     assert u["CPUSchedulingPolicy"] == ["fifo"] and "LimitRTPRIO" in u
@@ -92,6 +92,8 @@ def test_install_script_dry_run_prints_every_step_and_changes_nothing(tmp_path):
                  "systemctl enable flightctl.service", "dry run: nothing was changed"):
         assert step in out, step
     assert "pigpio" in out or "ok: packages" in out
+    # spidev builds from source on the Pi (no aarch64/armhf wheel): a compiler and Python's headers
+    assert {"build-essential", "python3-dev", "pigpio"} <= set(out.split("packages: ", 1)[1].split("\n", 1)[0].split())
     assert "board: pi (" in out and "[pi]" in out and "flightctl.service.d/pigpio.conf" in out
     assert "flightctl-pwm-pi5" not in out and "pi5.conf" not in out
     assert not (tmp_path / "opt").exists()
@@ -108,6 +110,7 @@ def test_install_script_dry_run_on_a_pi5_installs_the_overlay_the_udev_rule_and_
                  "systemctl enable flightctl.service", "dry run: nothing was changed"):
         assert step in out, step
     assert "pigpio" not in out.replace("pigpio.conf", "") and "[pi]" not in out
+    assert {"build-essential", "python3-dev"} <= set(out.split("packages: ", 1)[1].split("\n", 1)[0].split())
     assert not (tmp_path / "opt").exists()
     r = subprocess.run(["bash", str(INSTALL), "--dry-run", "--board", "pi4"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "--board pi4: pi (Raspberry Pi 3/4) or pi5" in r.stderr
@@ -190,3 +193,39 @@ def test_systemd_analyze_security_rates_the_unit_3_or_better(tmp_path, board_dro
         pytest.skip("this systemd-analyze cannot rate a unit file offline")
     line = [l for l in r.stdout.splitlines() if "Overall exposure level" in l][0]
     assert float(line.split(":")[1].split()[0]) <= 3.0, line
+
+
+def test_the_start_timeout_covers_the_boot_waits_of_the_pi5_board():
+    """At boot the Pi 5 board waits, bounded, for the PWM chip and udev's permission on its export, for
+    each channel's files, for the dead-man to start and for the GPIO chip; the unit's TimeoutStartSec
+    must leave as much again for the imports and the pre-arm checks. A refusal after those waits is
+    exit 3, which the unit does not restart (no overlay: restarting will not help)."""
+    from flightctl.boards.pi5 import GPIO_WAIT_S
+    from flightctl.drivers.pwm_sysfs import CHIP_WAIT_S, DEADMAN_START_S, EXPORT_WAIT_S
+    from flightctl.service import EXIT_REFUSED
+
+    waits = CHIP_WAIT_S + 4 * EXPORT_WAIT_S + DEADMAN_START_S + GPIO_WAIT_S
+    u = unit_entries(UNIT)
+    assert 2 * waits <= float(u["TimeoutStartSec"][0])
+    assert u["RestartPreventExitStatus"] == [str(EXIT_REFUSED)] and u["Restart"] == ["on-failure"]
+
+
+def test_the_pigpio_boards_socket_is_one_the_units_sandbox_lets_through():
+    """The pigpio client connects to the board file's host (socket.create_connection, pigpio.py): every
+    address it resolves to must be of a family RestrictAddressFamilies= allows (an AF_INET6 ::1 would be
+    EAFNOSUPPORT) and inside IPAddressAllow=localhost, on the loopback both units share."""
+    import ipaddress
+    import socket
+
+    from flightctl.boards.pi import load_board
+
+    u, d = unit_entries(UNIT, PIGPIO), unit_entries(DROPIN)
+    families = set(u["RestrictAddressFamilies"][0].split())
+    assert u["IPAddressAllow"] == ["localhost"] and d["IPAddressAllow"] == ["localhost"]
+    pig = load_board().pigpio
+    infos = socket.getaddrinfo(pig.host, pig.port, type=socket.SOCK_STREAM)
+    assert infos
+    for family, *_, address in infos:
+        assert family.name in families, (pig.host, family.name, families)
+        assert ipaddress.ip_address(address[0]).is_loopback, address
+    assert " -l" in d["ExecStart"][1]                    # pigpiod listens on localhost: what the client reaches

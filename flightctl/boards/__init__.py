@@ -38,7 +38,7 @@ BOARDS = {
                 "flightctl.boards.detect:stop_pi", "install the Pi libraries with pip install '.[pi]' in the flightctl checkout"),
     "pi5": Entry("flightctl.boards.pi5:open_board", "the quadcopter on a Raspberry Pi 5 (the kernel's PWM and GPIO)",
                  "flightctl.boards.pi5:stop_motors", "install the Pi 5 libraries with pip install '.[pi5]' in the flightctl checkout"),
-    "auto": Entry("flightctl.boards.detect:open_auto", "pi5 on a Raspberry Pi 5, pi on any other (/proc/device-tree/model)",
+    "auto": Entry("flightctl.boards.detect:open_auto", "pi5 on a Raspberry Pi 5, pi on any other (the device tree's model)",
                   "flightctl.boards.detect:stop_auto"),
     "sim": Entry("flightctl.sim.world.board:open_board",
                  "the simulated quadcopter behind the real IMU and sonar drivers"),

@@ -3,7 +3,12 @@ depend on it: `--board pi` refuses on a Raspberry Pi 5 (pigpiod does not run the
 (the default of `flightctl run`, and the systemd unit's) opens `pi5` on a Raspberry Pi 5 and `pi`
 anywhere else.
 
-    /proc/device-tree/model:  "Raspberry Pi 5 Model B Rev 1.0\\0", "Raspberry Pi 4 Model B Rev 1.4\\0", ...
+    /sys/firmware/devicetree/base/model:  "Raspberry Pi 5 Model B Rev 1.0\\0", "Raspberry Pi 4 Model B Rev 1.4\\0", ...
+
+The model is read from sysfs first: /proc/device-tree is only a symlink into it, and the service's
+sandbox (ProcSubset=pid in systemd/flightctl.service) mounts a procfs that has nothing but the process
+directories, so /proc/device-tree does not exist there (tests/test_pi_sandbox.py). /proc/device-tree is
+the fallback for a system whose sysfs is not mounted where it is expected.
 
 The RP1 I/O chip (its PWM, its GPIO) is on the Raspberry Pi 5, the Pi 500 and the Compute Module 5;
 their model strings start "Raspberry Pi 5", "Raspberry Pi 500" and "Raspberry Pi Compute Module 5".
@@ -13,17 +18,20 @@ from __future__ import annotations
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, missing_module, open_board, stop_motors
 from flightctl.params import Params
 
-MODEL_PATH = "/proc/device-tree/model"
+MODEL_PATHS = ("/sys/firmware/devicetree/base/model", "/proc/device-tree/model")
 RP1_MODELS = ("Raspberry Pi 5", "Raspberry Pi Compute Module 5")     # "Raspberry Pi 5" covers the 500
 
 
-def model(path: str | None = None) -> str:
-    """The board's model string; "" where there is no device tree (a PC)."""
-    try:
-        with open(path or MODEL_PATH, "rb") as f:
-            return f.read().rstrip(b"\0\n").decode(errors="replace")
-    except OSError:
-        return ""
+def model(paths: tuple[str, ...] | None = None) -> str:
+    """The board's model string, from the first of `paths` (MODEL_PATHS) that can be read; "" where
+    there is no device tree (a PC)."""
+    for path in MODEL_PATHS if paths is None else paths:
+        try:
+            with open(path, "rb") as f:
+                return f.read().rstrip(b"\0\n").decode(errors="replace")
+        except OSError:
+            continue
+    return ""
 
 
 def is_pi5(name: str | None = None) -> bool:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import glob
 import importlib
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,6 +46,7 @@ RP1_PWM0 = "1f00098000.pwm"             # the RP1's PWM0 (rp1.dtsi: pwm@98000)
 # the header GPIOs of the RP1's PWM0 channels (RP1 peripherals datasheet; pinctrl-rp1: GPIO 12, 13 at
 # function a0, 14, 15 at a0, 18, 19 at a3)
 RP1_PWM0_CHANNEL = {12: 0, 13: 1, 14: 2, 15: 3, 18: 2, 19: 3}
+GPIO_WAIT_S = 5.0                       # at boot: the GPIO chip, and udev giving it to group gpio
 
 
 @dataclass(frozen=True)
@@ -102,21 +104,40 @@ def load_board(path: str | Path | None = None) -> Pi5Config:
     return c
 
 
-def open_gpio_chip(name: str):
-    """The `gpiod.Chip` labelled `name` (or at the path `name`)."""
+def _gpiod_chip(path: str):
+    """`gpiod.Chip(path)`, or None if `path` is not a GPIO character device."""
     import gpiod
 
-    paths = [name] if name.startswith("/") else sorted(glob.glob("/dev/gpiochip*"))
+    return gpiod.Chip(path) if gpiod.is_gpiochip_device(path) else None
+
+
+def open_gpio_chip(name: str, *, pattern: str = "/dev/gpiochip*", open_chip=_gpiod_chip, wait_s: float = GPIO_WAIT_S,
+                   clock=time.monotonic, sleep=time.sleep):
+    """The `gpiod.Chip` labelled `name` (or at the path `name`), among the devices `pattern` matches (the
+    RP1's "pinctrl-rp1" is gpiochip4 on early 6.6 kernels and gpiochip0 later). At boot the chip may not
+    be there yet, or not yet group gpio's (udev): looked for again until `wait_s` has passed."""
+    end = clock() + wait_s
+    while True:
+        try:
+            return _find_gpio_chip(name, pattern, open_chip)
+        except BoardUnavailable:
+            if clock() > end:
+                raise
+        sleep(0.1)
+
+
+def _find_gpio_chip(name: str, pattern: str, open_chip):
+    paths = [name] if name.startswith("/") else sorted(glob.glob(pattern))
     seen = []
     for path in paths:
         try:
-            if not gpiod.is_gpiochip_device(path):
-                continue
-            chip = gpiod.Chip(path)
+            chip = open_chip(path)
         except PermissionError:
             raise BoardUnavailable(f"cannot open {path} (permission denied); is the user in group gpio?") from None
         except OSError as e:
             raise BoardUnavailable(f"cannot open {path} ({e.strerror})") from None
+        if chip is None:
+            continue
         label = chip.get_info().label
         if name == path or label == name:
             return chip

@@ -7,14 +7,18 @@ kernel has nothing like it, so this process is. It holds open the four `duty_cyc
 from the controller) and the read end of a pipe whose write end only the controller holds:
 
     a       armed: from now on, no message for TIMEOUT_MS puts the stop pulse on the ESCs
-    h       heartbeat (the controller's write(), at most every REFRESH_S)
+    h       heartbeat (the controller's write(), at every call while armed, before its duty writes)
     s       disarmed: no countdown (the controller has put the stop pulse itself)
     q       quit without writing (the controller is releasing the channels itself)
     EOF     the controller died (crash, SIGKILL, OOM): the stop pulse at once
-    SIGTERM (systemd stopping the unit's processes): the stop pulse, then exit
+    SIGTERM (`systemctl kill flightctl`, which signals every process of the unit): the stop pulse, then exit
 
-When it has fired it writes the stop pulse and exits, and stays gone: the controller's next heartbeat
-finds the pipe broken and stops its loop (EscError), as the pigpio driver does when its dead-man fired.
+When it has fired it closes its end of the pipe, writes the stop pulse and exits, and stays gone: the
+controller's next heartbeat, which `write()` sends before any duty cycle, finds the pipe broken and stops
+its loop (EscError) without putting a flight duty cycle back, as the pigpio driver does when its dead-man
+fired. It must outlive the controller to fire on its death: the unit's KillMode=process leaves it alone
+when the controller dies (systemd/flightctl.service; with KillMode=mixed systemd SIGKILLs it together with
+a dead main process, a race with this stop pulse).
 Only the standard library, and nothing but `os.pwrite` of one fixed, valid value once it has fired.
 
     python -m flightctl.drivers.pwm_deadman PIPE_FD READY_FD TIMEOUT_MS STOP_DUTY_NS FD [FD ...]
@@ -49,6 +53,7 @@ def run(pipe: int, ready: int, timeout_ms: int, stop: bytes, fds: list[int]) -> 
     poll.register(pipe, select.POLLIN)
     while True:
         if not poll.poll(timeout_ms if armed else None):
+            os.close(pipe)      # first: the controller's next heartbeat fails (EPIPE) before its duty writes
             fire()
             return "fired: no command"
         data = os.read(pipe, 256)

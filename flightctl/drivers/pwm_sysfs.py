@@ -6,10 +6,13 @@ RP1 PWM0: four channels, 50 MHz, docs/pi.md), behind the `Motors` protocol.
 
 The kernel numbers its PWM chips as they probe (the RP1's PWM0 was pwmchip2 on 6.6 kernels and is
 pwmchip0 on 6.12), so the chip is found by its device (`1f00098000.pwm`, the `device` link of each
-pwmchipN) or named outright (`pwmchip2`). The kernel checks every write: a duty cycle with no period
-yet or longer than the period is EINVAL, so the period is written first. The root is a parameter (the
-tests give a fake tree), and so are the system calls that reach it (`fs`: open, pwrite, pread, close;
-the `os` module on the vehicle, the fake kernel's in the tests).
+pwmchipN) or named outright (`pwmchip2`); at boot it is waited for (CHIP_WAIT_S), as is udev giving its
+export file to group gpio. The kernel checks every write, and a freshly exported channel is not fresh:
+it keeps whatever its last user left (the RP1's driver has no .get_state), so `start()` reads that state
+and orders its writes so that each is accepted by 6.6's rule and by the later ones (`_take`). Every OSError of
+the set-up is one `EscError` naming the file. The root is a parameter (the tests give a fake tree), and
+so are the system calls that reach it (`fs`: open, pwrite, pread, close; the `os` module on the
+vehicle, the fake kernel's in the tests).
 
 The period is round(1e9 / 449) = 2227171 ns; the RP1 counts it in 20 ns ticks (111359 ticks, 449.000 Hz).
 Each loop `write(counts)` writes the on-time (rounded to 1 us, drivers/pulses.py) of each motor whose
@@ -29,6 +32,7 @@ The dead-man (drivers/pwm_deadman.py, a process of its own): the kernel keeps a 
 cycle when the controller dies, as pigpiod keeps a dead client's wave. While armed, no command for
 `deadman_ms` (a stalled loop), or the controller's death (SIGKILL included: the pipe closes), puts the
 stop pulse on the ESCs; systemd's watchdog and the unit's ExecStopPost (`--stop-motors`, below) follow.
+`write()` sends its heartbeat before its duty writes: after the dead-man fired, no flight duty comes back.
 `close()` puts the stop pulse, disables and unexports the channels: the lines go low, which the ESCs
 take as no signal (zero thrust); the next start finds them free.
 """
@@ -42,12 +46,14 @@ import sys
 import time
 from typing import Callable, Sequence
 
-from flightctl.drivers.pulses import (DEADMAN_MS, FREQUENCY_HZ, MAX_US, OUTPUT_CHECK_S, REFRESH_S, STOP_US,
+from flightctl.drivers.pulses import (DEADMAN_MS, FREQUENCY_HZ, MAX_US, OUTPUT_CHECK_S, STOP_US,
                                       EscError, on_time_us)
 from flightctl.hal import PWM_RANGE, ArmingRefused
 
 SYSFS_PWM = "/sys/class/pwm"
 EXPORT_WAIT_S = 2.0         # udev gives the new pwmC/ files to group gpio a few ms after the export
+CHIP_WAIT_S = 10.0          # at boot: the PWM chip's driver probing, udev giving its export file to group gpio
+POLL_S = 0.1
 DEADMAN_START_S = 5.0       # the dead-man process says it is ready within this
 
 
@@ -125,8 +131,8 @@ class SysfsPwmEsc:
         self._exported: list[int] = []           # channels this driver exported (unexported at close)
         self._deadman: subprocess.Popen | None = None
         self._beat = -1                          # write end of the dead-man's pipe
-        self._last_beat = 0.0
         self._last_check = 0.0
+        self._boot_end = 0.0
         self.armed = False
         self.writes = 0                          # duty_cycle writes so far
 
@@ -137,57 +143,134 @@ class SysfsPwmEsc:
 
     # --- lifecycle ---------------------------------------------------------------------------
     def start(self) -> None:
-        """Export the four channels (refusing any already exported), put the stop pulse on them, start
-        the dead-man. On any failure what was exported is released again."""
-        self.dir = find_chip(self.root, self.chip)
-        npwm = int(_read(self.fs, os.path.join(self.dir, "npwm")))
+        """Export the four channels (refusing any already exported), take each from whatever state its
+        last user left to the stop pulse, start the dead-man. Every failure is one `EscError` naming the
+        file; what was exported is released again."""
+        self._boot_end = self._clock() + CHIP_WAIT_S      # one bound for the chip and udev's permission
+        self.dir = self._wait_for_chip()
+        npwm = int(self._setup(_read, os.path.join(self.dir, "npwm")))
         for i, c in enumerate(self.channels):
             if c >= npwm:
                 raise EscError(f"{self._name(i)}: {os.path.basename(self.dir)} has {npwm} channels (0..{npwm - 1})")
         try:
             for i, c in enumerate(self.channels):
-                if os.path.isdir(os.path.join(self.dir, f"pwm{c}")):
-                    raise EscError(f"{self._name(i)} is already exported: another process drives it (or a "
-                                   "controller died without its ExecStopPost; `flightctl run --board pi5 "
-                                   "--stop-motors` releases it)")
-                try:
-                    _store(self.fs, os.path.join(self.dir, "export"), b"%d\n" % c)
-                except OSError as e:
-                    if e.errno == errno.EBUSY:
-                        raise EscError(f"{self._name(i)} is held by a kernel driver (EBUSY on export): "
-                                       "this channel is not free for the ESCs") from None
-                    raise EscError(f"{self._name(i)} cannot be exported ({e.strerror}): is the user in group "
-                                   "gpio and the udev rule installed (docs/pi.md)?") from None
-                self._exported.append(c)
+                self._export(i, c)
             for i, c in enumerate(self.channels):
                 fds = self._open_channel(c)
                 self._fds.append(fds)
                 self._duty_fd[i] = fds["duty_cycle"]
-                fs = self.fs
-                fs.pwrite(fds["period"], self._period_bytes, 0)      # before the duty cycle: EINVAL otherwise
-                fs.pwrite(fds["duty_cycle"], self._stop_bytes, 0)
-                fs.pwrite(fds["polarity"], b"normal\n", 0)
-                fs.pwrite(fds["enable"], b"1\n", 0)
-                self._on[i] = self.stop_us
+                self._take(i, fds)
             if self.deadman_ms > 0:
                 self._start_deadman()
         except BaseException:
             self.close()
             raise
 
+    def _setup(self, call, path: str, *args):
+        """A system call of the set-up; its OSError as one `EscError` naming the file."""
+        try:
+            return call(self.fs, path, *args)
+        except OSError as e:
+            raise EscError(f"{path}: {e.strerror or e} (errno {e.errno}) while setting up the ESC output") from None
+
+    def _wait_for_chip(self) -> str:
+        """The chip's directory, waited for up to CHIP_WAIT_S: at boot the RP1's PWM driver may probe
+        after the service started."""
+        while True:
+            try:
+                return find_chip(self.root, self.chip)
+            except EscError as e:
+                if self._clock() > self._boot_end:
+                    raise EscError(f"{e} (waited {CHIP_WAIT_S:g} s)") from None
+            self._sleep(POLL_S)
+
+    def _export(self, i: int, c: int) -> None:
+        if os.path.isdir(os.path.join(self.dir, f"pwm{c}")):
+            raise EscError(f"{self._name(i)} is already exported: another process drives it (or a "
+                           "controller died without its ExecStopPost; `flightctl run --board pi5 "
+                           "--stop-motors` releases it)")
+        path = os.path.join(self.dir, "export")
+        while True:
+            try:
+                _store(self.fs, path, b"%d\n" % c)
+                break
+            except OSError as e:
+                if e.errno == errno.EBUSY:
+                    raise EscError(f"{self._name(i)} is held by a kernel driver (EBUSY on export): "
+                                   "this channel is not free for the ESCs") from None
+                if e.errno in (errno.EACCES, errno.EPERM) and self._clock() <= self._boot_end:
+                    self._sleep(POLL_S)         # at boot udev may not yet have given the chip to group gpio
+                    continue
+                raise EscError(f"{self._name(i)} cannot be exported: {path}: {e.strerror}: is the user in group "
+                               "gpio and the udev rule installed (docs/pi.md)?") from None
+        self._exported.append(c)
+
+    def _take(self, i: int, fds: dict[str, int]) -> None:
+        """From the state the channel's last user left to the stop pulse at our period, each write a state
+        the kernel accepts. pwm-rp1 has no .get_state and unexport does not reset a channel, so it keeps
+        its last user's period, duty cycle, enable and polarity (tests/fakes/sysfs_pwm.py, from the
+        Raspberry Pi kernel's sysfs.c, core.c and pwm-rp1.c). 6.6 refuses any state with period 0 or
+        duty_cycle > period, enabled or not; from 6.11 an invalid state may follow an invalid one, and
+        which states count as invalid was inverted until the fix in 6.16 (and its stable backports): 6.11
+        checks disabled states only, 6.16 enabled ones only. So, with every intermediate state having a
+        period and a duty cycle no longer than it wherever the held state allows:
+        - disabled first (unless it is off already: disabling a channel that never had a period is EINVAL
+          on 6.6); then the period before the duty cycle if the held duty cycle fits our period, else the
+          duty cycle first (the held period is then at least as long, or the state was invalid anyway);
+        - an enabled state without a valid period and duty cycle (only 6.11 leaves one) is mended while
+          enabled, where 6.11 checks nothing (disabling it there would be EINVAL): the stop pulse's duty
+          cycle, then the period;
+        then polarity, and enabled last."""
+        held = {}
+        for name, fd in fds.items():
+            try:
+                held[name] = self.fs.pread(fd, 64, 0).strip()
+            except OSError as e:
+                raise EscError(f"{self._channel_file(i, name)}: cannot be read ({e.strerror}) while setting up "
+                               "the ESC output") from None
+        try:
+            duty, enabled = int(held["duty_cycle"]), held["enable"] == b"1"
+        except ValueError:
+            raise EscError(f"{self._channel_file(i, 'duty_cycle')}: reads {held['duty_cycle']!r}, not a number") from None
+        try:
+            period = int(held["period"])
+        except ValueError:
+            raise EscError(f"{self._channel_file(i, 'period')}: reads {held['period']!r}, not a number") from None
+        order = (("period", self._period_bytes), ("duty_cycle", self._stop_bytes))
+        if enabled and not 0 < period >= duty:
+            steps = list(order[::-1])
+        else:
+            steps = [("enable", b"0\n")] if enabled else []
+            steps += order if duty <= self.period_ns else order[::-1]
+        steps += [("polarity", b"normal\n"), ("enable", b"1\n")]
+        for name, value in steps:
+            try:
+                self.fs.pwrite(fds[name], value, 0)
+            except OSError as e:
+                raise EscError(f"{self._channel_file(i, name)}: writing {value.decode().strip()} failed "
+                               f"({e.strerror}); the channel held period {held['period'].decode()}, duty_cycle "
+                               f"{held['duty_cycle'].decode()}, enable {held['enable'].decode()}, polarity "
+                               f"{held['polarity'].decode()}") from None
+        self._on[i] = self.stop_us
+
+    def _channel_file(self, i: int, name: str) -> str:
+        return os.path.join(self.dir, f"pwm{self.channels[i]}", name)
+
     def _open_channel(self, c: int) -> dict[str, int]:
         """Open the channel's files; udev makes them writable for group gpio shortly after the export."""
         d = os.path.join(self.dir, f"pwm{c}")
         end = self._clock() + EXPORT_WAIT_S
         while True:
+            out = {}
             try:
-                out = {}
                 for name in ("period", "duty_cycle", "enable", "polarity"):
                     out[name] = self.fs.open(os.path.join(d, name), os.O_RDWR | os.O_CLOEXEC)
                 return out
-            except (PermissionError, FileNotFoundError) as e:
+            except OSError as e:
                 for fd in out.values():
                     self.fs.close(fd)
+                if not isinstance(e, (PermissionError, FileNotFoundError)):
+                    raise EscError(f"cannot open {e.filename or d} ({e.strerror}) while setting up the ESC output") from None
                 if self._clock() > end:
                     raise EscError(f"cannot open {d}/{e.filename and os.path.basename(e.filename)} ({e.strerror}): "
                                    "is the user in group gpio and the udev rule installed (docs/pi.md)?") from None
@@ -202,6 +285,10 @@ class SysfsPwmEsc:
                 [sys.executable, "-m", "flightctl.drivers.pwm_deadman", str(r), str(ready_w), str(self.deadman_ms),
                  str(self.stop_us * 1000)] + [str(fd) for fd in fds],
                 pass_fds=[r, ready_w] + fds, stdin=subprocess.DEVNULL, start_new_session=False)
+        except OSError as e:
+            for fd in (w, ready_r):
+                os.close(fd)
+            raise EscError(f"{sys.executable}: the ESC dead-man process cannot be started ({e.strerror})") from None
         finally:
             os.close(r)
             os.close(ready_w)
@@ -221,6 +308,8 @@ class SysfsPwmEsc:
 
     def _tell(self, what: bytes) -> None:
         if self._beat < 0:
+            if self.armed and self.deadman_ms > 0:
+                raise self._fired()             # it fired before: never a flight duty cycle again
             return
         try:
             os.write(self._beat, what)
@@ -257,10 +346,14 @@ class SysfsPwmEsc:
             raise ArmingRefused("ESC output: " + "; ".join(problems))
         self.stop()
         self._tell(b"a")
-        self._last_beat = self._clock()
         self.armed = True
 
     def write(self, counts: list[int]) -> None:
+        """The on-times of the commands whose value changed. While armed the heartbeat comes first, at
+        every call: once the dead-man has fired (and closed its end of the pipe) the write fails with
+        EPIPE and this raises before any flight duty cycle could replace its stop pulse."""
+        if self.armed:
+            self._tell(b"h")
         k, lo, hi, on, fds, pwrite, duty = self._us_per_count, self.stop_us, self.max_us, self._on, \
             self._duty_fd, self.fs.pwrite, self._duty
         for i in (0, 1, 2, 3):
@@ -270,9 +363,6 @@ class SysfsPwmEsc:
                 on[i] = us
                 self.writes += 1
         now = self._clock()
-        if self.armed and now - self._last_beat >= REFRESH_S:
-            self._tell(b"h")
-            self._last_beat = now
         if now - self._last_check >= OUTPUT_CHECK_S:
             self._last_check = now
             problems = self.output_problems()
