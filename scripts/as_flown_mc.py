@@ -66,11 +66,11 @@ def over_bound(result: dict) -> list[tuple[float, int, int, int, int]]:
 
 def plot_bound(result: dict, path: Path = BOUND_PNG) -> None:
     """The shares against the bound on the ringing: the curve the README's facts are one point of."""
-    from flightctl.sim.plots import figure, legend, save
+    from flightctl.sim.plots import figure, save
     n, bank = result["n"], judge.RING_BOUND_DEG["roll"]
     curve = over_bound(result)
     x = [bank * k for k, *_ in curve]
-    fig, ax = figure(1, 1, size=(9.0, 4.8))
+    fig, ax = figure(1, 1, size=(9.0, 5.4))
     a = ax[0, 0]
     a.plot(x, [100 * c[1] / n for c in curve], color="tab:blue", label="Table 4 holds within the bound")
     a.plot(x, [100 * c[2] / n for c in curve], color="tab:orange", label="Table 6 holds within the bound")
@@ -81,12 +81,12 @@ def plot_bound(result: dict, path: Path = BOUND_PNG) -> None:
               label="the paper's account, landing only (no bound)")
     a.axvline(bank, color="tab:red", lw=0.8, label=f"the bound: sec. 3.3's tuning steps ({bank:g} and "
               f"{judge.RING_BOUND_DEG['yaw']:g} deg)")
-    a.set_xlabel(f"bound on a bank's ringing, peak-to-peak from {judge.RING_AFTER_S:g} s after its step (deg; "
-                 f"a turn's: {judge.RING_BOUND_DEG['yaw'] / bank:g} x)")
+    a.set_xlabel(f"bound on a bank's ringing (deg peak-to-peak from {judge.RING_AFTER_S:g} s after its step; "
+                 f"a turn's {judge.RING_BOUND_DEG['yaw'] / bank:g} x)")
     a.set_ylabel(f"share of the {n} draws (%)")
     a.set_ylim(0, 100)
     a.grid(alpha=0.3)
-    legend(a)
+    a.legend(loc="upper right", fontsize="small")
     fig.suptitle(f"The shares against the bound on the ringing ({n} draws of {result['params']}, seed "
                  f"{result['seed']})")
     save(fig, path)
