@@ -90,6 +90,8 @@ BLOCKS = (
           SCRIPT + ("scripts/as_flown_mc.py", "--from", "docs/as-flown-mc.json", "--doc", "{doc}")),
     Block("as-flown-gains", "docs/as-flown.md", *marked("as-flown gains"),
           SCRIPT + ("scripts/as_flown_gains.py", "--doc", "{doc}"), minutes=0.5),
+    Block("estimator-bias", "docs/as-flown.md", *marked("estimator bias"),
+          SCRIPT + ("scripts/estimator_bias.py", "--seeds", "4", "--doc", "{doc}"), minutes=3),
     Block("paper-facts", "README.md", "<!-- paper facts begin -->", "<!-- paper facts end -->",
           SCRIPT + ("scripts/as_flown_mc.py", "--from", "docs/as-flown-mc.json", "--readme", "{doc}")),
     Block("real-data", "docs/identification.md", "<!-- real-data:begin -->", "<!-- real-data:end -->",

@@ -6,8 +6,11 @@ chain, at the file's nominal values and at the fast end of the motor time consta
 
 Tolerances, and why:
 - the paper's account, judged as the paper judged it (sim/sweeps/judge.py): Table 4 (tuned in
-  simulation) flies and lands, Table 6 (retuned on the vehicle) flies, lands and rings less; not a
-  band on the true error, which both tables share with the estimator's bias.
+  simulation) flies and lands, Table 6 (retuned on the vehicle) flies, lands, holds every bank and
+  turn within the pilot's bound (the size of sec. 3.3's tuning steps) and rings less; not a band on
+  the true error, which both tables share with the estimator's bias. Table 4 itself does not hold
+  within the bound at these two points (its banks limit-cycle, docs/as-flown.md): the whole account,
+  both within the bound, holds in a minority of the Monte Carlo's draws, which the README counts.
 - touchdown below 1 m/s: a fall from the 1.5 m hover lands at 5.4 m/s.
 - the 5-minute hover: 2 deg of true tilt is about 0.34 m/s^2 of unintended horizontal acceleration, what a
   pilot notices as a drift; 10 cm of altitude is 2.5 % of the HC-SR04's range and many times its
@@ -46,8 +49,8 @@ def settled_errors(flight) -> list[tuple[str, float]]:
 
 
 @pytest.mark.parametrize("tau", TAUS)
-def test_on_the_as_flown_model_both_tables_fly_and_table6_rings_less(tmp_path, tau):
-    """Sec. 4.4.5: the simulation's gains worked on the vehicle, the retuned ones improved it."""
+def test_on_the_as_flown_model_both_tables_land_and_table6_holds_and_rings_less(tmp_path, tau):
+    """Sec. 4.4.5: the simulation's gains flew the vehicle, the retuned ones improved it."""
     sc = SCENARIOS["paper"]()
     judged = {}
     for gains in ("table4", "table6"):
@@ -58,7 +61,9 @@ def test_on_the_as_flown_model_both_tables_fly_and_table6_rings_less(tmp_path, t
         figures = judge.step_figures(flight.log, sc.steps, flight.t_arm)
         assert len(figures) == 12
         judged[gains] = {"flies": flight.outcome == "landed upright", **judge.summary(figures)}
-    assert judge.verdict(judged["table4"], judged["table6"])["paper's account"], judged
+    verdict = judge.verdict(judged["table4"], judged["table6"])
+    assert judge.bounded(judged["table6"]), judged["table6"]
+    assert verdict["table6 beats table4"] and verdict["paper's account, landing only"], judged
 
 
 def test_the_as_flown_model_damps_what_the_base_model_lets_ring(tmp_path):
