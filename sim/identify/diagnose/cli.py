@@ -31,6 +31,7 @@ from flightctl.logfile import read_flight_log
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
 from flightctl.sim.identify.diagnose import report as diagnose_report
 from flightctl.sim.identify.diagnose.verdict import diagnose, say, validate
+from flightctl.sim.identify.static import STATIC_COLUMNS, StaticOnly
 
 MIN_LOG_S = 2.0   # a log shorter than this cannot hold a take-off and a flight: too short to judge
 
@@ -85,7 +86,7 @@ def read_logs(paths: list[str], index: int | None, progress) -> list:
         if kind(log) is not None:
             tables += read_foreign(log, index, progress)
         else:
-            tables.append(read_flight_log(log, min_seconds=MIN_LOG_S, min_rows=10, extra=FOREIGN_COLUMNS))
+            tables.append(read_flight_log(log, min_seconds=MIN_LOG_S, min_rows=10, extra=FOREIGN_COLUMNS + STATIC_COLUMNS))
     return tables
 
 
@@ -168,6 +169,8 @@ def _plot_paths(prefix: str | None, n_tables: int, tag: str = "") -> dict[str, P
 
 def _judge(tables, others, params, given: bool, progress):
     d = diagnose(tables, params.airframe, progress, params.effects, params_given=given, accepted=progress.release)
+    if others and isinstance(d, StaticOnly):
+        raise InputError(f"--validate predicts with the dynamic tier's model, which these logs did not reach: {d.why}")
     if others:
         d.validation = validate(d, others, params.airframe, progress)
     return d
@@ -178,6 +181,10 @@ def _images(d, tables, plots) -> dict[str, bytes]:
         return {}
     from flightctl.sim.logs import read_figure
     from flightctl.sim.plots import png
+    if isinstance(d, StaticOnly):      # no residuals without the dynamic tier: what was read only
+        for k in ("residuals", "explained"):
+            plots.pop(k, None)
+        return {f"read-{k}": png(read_figure(t)) for k, t in enumerate(tables, 1)}
     images = diagnose_report.figures(d)
     images.update({f"read-{k}": png(read_figure(t)) for k, t in enumerate(tables, 1)})
     return images
