@@ -69,7 +69,7 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
                  f"motor shares {out['motors']['share']}, pattern: {out['pattern']['verdict']}")
     else:
         why = (f"{hv.seconds:.1f} s of hover (airborne, all motors running below full command, body rates under "
-               f"0.5 rad/s, specific force within 25 % of g): at least {MIN_HOVER_S:g} s in {5} blocks of 2 s needed")
+               f"0.5 rad/s, specific force within 25 % of g): at least {MIN_HOVER_S:g} s needed")
         for k in ("hover", "motors", "pattern"):
             out["not_judged"][k] = why
     bat = battery(files, [t["current"] if "current" in t else None for t in tabs])

@@ -16,15 +16,24 @@ G = 9.80665
 HOVER_RATE = 0.5        # rad/s: body rates below this (a quadrotor holding its attitude)
 HOVER_ACC = 0.25        # the specific force within this share of g (not climbing hard, not falling)
 FULL_P = 250.0          # a motor at or above this command is saturated: the torques are not balanced there
-MIN_HOVER_S = 3.0       # s of hover needed for the hover findings
-BLOCK_S = 2.0           # s: blocks at least this long ...
+SMOOTH_S = 0.2          # s: the rates and the specific force averaged over this for the hover test
+MIN_HOVER_S = 2.5       # s of hover needed for the hover findings
+BLOCK_S = 0.5           # s: blocks at least this long ...
 MAX_BLOCKS, MIN_BLOCKS = 20, 5   # ... and this many of them
 
 
+def moving_mean(t: np.ndarray, x: np.ndarray, seconds: float) -> np.ndarray:
+    """Each row of x (k, n) averaged over `seconds` centred on it (at least 3 rows)."""
+    width = max(3, int(round(seconds / float(np.median(np.diff(t))))))
+    k = np.ones(width) / width
+    return np.vstack([np.convolve(np.nan_to_num(v), k, mode="same") for v in np.atleast_2d(x)])
+
+
 def hover_mask(f: FileData) -> np.ndarray:
-    """(n,) bool: the rows of `f` in hover (the module's docstring)."""
-    rate = np.linalg.norm(np.nan_to_num(f.gyro), axis=0)
-    acc = np.linalg.norm(np.nan_to_num(f.acc), axis=0)
+    """(n,) bool: the rows of `f` in hover (the module's docstring), on the body rates and the specific
+    force averaged over SMOOTH_S (a small vehicle's accelerometer shakes by g with its motors)."""
+    rate = np.linalg.norm(moving_mean(f.t, f.gyro, SMOOTH_S), axis=0)
+    acc = np.linalg.norm(moving_mean(f.t, f.acc, SMOOTH_S), axis=0)
     return (f.airborne & all_running(f.P) & (f.P < FULL_P).all(axis=0) & (rate < HOVER_RATE)
             & (np.abs(acc / G - 1.0) < HOVER_ACC))
 

@@ -35,7 +35,12 @@ from flightctl.sim.identify.static.curve import P_FULL, Curve
 P_FIT = 0.01            # a hypothesis fits when its chi-square's upper tail is at least this
 DRIFT_TOL = 0.02        # a share's change over the flight worth naming (and 3 standard errors)
 DRIFT_T = 3.0
+MIN_DRIFT_SPAN_S = 30.0   # s between the first and last hover block: shorter, a trend is the flight's manoeuvres
 MAX_COM = 0.5           # arm lengths: a centre of mass further off leaves too little roll/pitch authority
+# A yaw trim is a small thrust difference between the pairs (a rotor's reaction torque is a few % of its
+# thrust times the arm): one pair at more than this share above the other is a declared motor order or
+# spin that is not the vehicle's, not a trim.
+MAX_YAW_SPLIT = 0.3
 MIN_WEAK = 0.5          # a motor giving less than half the thrust for its command would not hover
 
 
@@ -77,13 +82,15 @@ def shares(bl: Blocks, c: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
     t = bl.times()
     slope, se = drift(t, per_block)
     span = float(t[-1] - t[0])
-    named = [i for i in range(4) if abs(slope[i] * span) >= DRIFT_TOL and abs(slope[i]) >= DRIFT_T * se[i]]
+    named = [i for i in range(4) if abs(slope[i] * span) >= DRIFT_TOL and abs(slope[i]) >= DRIFT_T * se[i]
+             and span >= MIN_DRIFT_SPAN_S]
     out = {"share": [_num(v) for v in share], "stderr": [float(f"{e:.2g}") for e in sd],
            "drift_per_min": [_num(60 * v, 5) for v in slope], "drift_stderr_per_min": [float(f"{60 * e:.2g}") for e in se],
            "span_s": round(span, 1), "blocks": bl.n_blocks,
            "drifting": [i + 1 for i in named],
            "check": (f"a share drifts when its change over the {span:.0f} s between the first and last block is at least "
-                     f"{100 * DRIFT_TOL:g} % and {DRIFT_T:g} standard errors (regression over the {bl.n_blocks} blocks)"),
+                     f"{100 * DRIFT_TOL:g} % and {DRIFT_T:g} standard errors (regression over the {bl.n_blocks} blocks), over "
+                     f"at least {MIN_DRIFT_SPAN_S:g} s"),
            "what": "each motor's share of the hover thrust through the curve (the mean of the four is 1), block "
                    "jackknife standard error; drift: the blocks' shares regressed on time"}
     return out, m, per_block
@@ -120,11 +127,11 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
     v = g - 1.0
     dof_all = int(np.linalg.matrix_rank(cov, tol=1e-12 * max(np.trace(cov), 1e-300)))
     com = lambda x: np.array(com_of_gains(stat(x), layout)[:2])
-    yaw = lambda x: np.array(yaw_trim_of_gains(stat(x), layout)[:1])
+    yaw = lambda x: np.array(yaw_trim_of_gains(x / x.mean(), layout)[:1])    # of the thrust shares
     (dx, dy), com_sd, _ = bl.jackknife(m, com)
     (split,), (split_sd,), _ = bl.jackknife(m, yaw)
     _, _, com_share = com_of_gains(g, layout)
-    _, yaw_share = yaw_trim_of_gains(g, layout)
+    _, yaw_share = yaw_trim_of_gains(m.mean(axis=0) / m.mean(), layout)
     fits = []
     for name, A in _hypotheses(layout).items():
         beta, chi2 = _gls(v, W, A)
@@ -172,6 +179,11 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
                               f"{best['dof']} dof)")
                 if not size_ok:
                     out["verdict"], out["why"] = "none", out["why"] + f": further than {MAX_COM} arm lengths, not physical"
+            elif best["hypothesis"] == "yaw trim" and abs(split) > MAX_YAW_SPLIT:
+                out["verdict"] = "none"
+                out["why"] = (f"a pattern of the spins alone, but the pairs differ by {100 * abs(split):.0f} % of thrust, "
+                              f"more than a trim's {100 * MAX_YAW_SPLIT:g} %: not physical (a motor order or spin the log "
+                              "declares that is not the vehicle's?)")
             elif best["hypothesis"] == "yaw trim":
                 out["why"] = (f"a pattern of the spins alone: the counter-clockwise pair gives {100 * abs(split):.1f} +- "
                               f"{100 * split_sd:.2g} % {'more' if split > 0 else 'less'} thrust than the clockwise one "

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flightctl.sim.identify.static.blocks import Blocks
+from flightctl.sim.identify.static.blocks import Blocks, moving_mean
 
 VIBE_COLUMNS = ("vibe_x", "vibe_y", "vibe_z", "clip")
 ACCEPTABLE, PROBLEM = 30.0, 60.0     # m/s^2: ArduPilot's guidance (the module's docstring)
@@ -57,11 +57,8 @@ def vibration(tables, files, airborne: Blocks | None, hover: Blocks | None) -> d
     if hover is None or not hover.enough:
         return None
     spread = []
-    for f, m in zip(hover.files, hover.masks):
-        width = max(3, int(round(MOVING_S / float(np.median(np.diff(f.t))))))
-        k = np.ones(width) / width
-        slow = np.vstack([np.convolve(np.nan_to_num(a), k, mode="same") for a in f.acc])
-        spread.append((f.acc - slow) ** 2)
+    for f in hover.files:
+        spread.append((f.acc - moving_mean(f.t, f.acc, MOVING_S)) ** 2)
     m = hover.means(hover.rows(spread))
     rms, sd, _ = hover.jackknife(m, np.sqrt)
     fs = 1.0 / hover.dt
