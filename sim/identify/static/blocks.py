@@ -23,10 +23,17 @@ MAX_BLOCKS, MIN_BLOCKS = 20, 5   # ... and this many of them
 
 
 def moving_mean(t: np.ndarray, x: np.ndarray, seconds: float) -> np.ndarray:
-    """Each row of x (k, n) averaged over `seconds` centred on it (at least 3 rows)."""
+    """Each row of x (k, n) averaged over `seconds` centred on it (at least 3 rows; over the finite
+    values in the window, fewer at the ends)."""
     width = max(3, int(round(seconds / float(np.median(np.diff(t))))))
-    k = np.ones(width) / width
-    return np.vstack([np.convolve(np.nan_to_num(v), k, mode="same") for v in np.atleast_2d(x)])
+    k = np.ones(width)
+    out = []
+    for v in np.atleast_2d(x):
+        ok = np.isfinite(v)
+        n = np.convolve(ok.astype(float), k, mode="same")
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out.append(np.convolve(np.where(ok, v, 0.0), k, mode="same") / n)
+    return np.vstack(out)
 
 
 def hover_mask(f: FileData) -> np.ndarray:

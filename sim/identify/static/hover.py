@@ -13,9 +13,8 @@ the hover rows (`blocks`), each with its block-jackknife standard error:
   loop holds (a motor mounted tilted, a propeller of another drag) asks one spin direction's pair for
   more (`yaw_trim_of_gains`); a weak motor (less thrust for its command) gets a higher command for the
   same thrust, alone, which is a part of each pattern in a fixed ratio (its position and its spin).
-  The shares are read as the gains a model with equal rotors would call each rotor (the mean share
-  over the rotor's), and each hypothesis is fitted to them by generalised least squares with the
-  jackknife covariance; the one with the fewest parameters that fits (chi-square, P_FIT) is named. A
+  Each hypothesis's pattern of the shares (`_hypotheses`) is fitted to them by generalised least squares
+  with their jackknife covariance; the one with the fewest parameters that fits (chi-square, P_FIT) is named. A
   quadrotor's four shares have three free numbers, which a centre of mass and a yaw trim together
   always fit: a weak motor is also such a mix, told apart only by its fixed ratio, or by the rotor
   speeds where the log has them (`rotorspeed.rotor_gain_check`: the speed each rotor turns at for its
@@ -27,7 +26,7 @@ import numpy as np
 from scipy import stats
 
 from flightctl.sim.identify.diagnose.data import FileData, Layout
-from flightctl.sim.identify.diagnose.rotorspeed import (GAIN_TOL, _speed_gains, com_of_gains, rotor_gain_check,
+from flightctl.sim.identify.diagnose.rotorspeed import (GAIN_TOL, _speed_gains, rotor_gain_check,
                                                         trim_pattern, yaw_trim_of_gains)
 from flightctl.sim.identify.static.blocks import G, Blocks, drift
 from flightctl.sim.identify.static.curve import P_FULL, Curve
@@ -97,15 +96,19 @@ def shares(bl: Blocks, c: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
 
 
 def _hypotheses(layout: Layout) -> dict[str, np.ndarray]:
-    """name -> (4, k) columns of the gains' pattern g - 1 each hypothesis makes (k parameters)."""
+    """name -> (4, k) columns of the pattern of the thrust shares, s - 1, each hypothesis makes (k
+    parameters). Exact in the shares: a centre of mass at d asks for sum_i s_i r_i = N d (the torque
+    balance about it, eq. 25's roll and pitch rows), the opposite of `trim_pattern`'s gains; a yaw
+    trim for a difference of the spins' pairs (eq. 25's yaw row); a weak motor for its own command's
+    thrust alone raised (the direction exact, its size a scale)."""
     s = np.asarray(layout.spin, float)[:, None]
     out = {"yaw trim": s}
     for j in range(4):
         e = -np.full((4, 1), 0.25)
         e[j] += 1.0
         out[f"weak motor {j + 1}"] = e
-    out["centre of mass"] = trim_pattern(layout)
-    out["centre of mass and yaw trim"] = np.hstack([trim_pattern(layout), s])
+    out["centre of mass"] = -trim_pattern(layout)
+    out["centre of mass and yaw trim"] = np.hstack([-trim_pattern(layout), s])
     return out
 
 
@@ -119,41 +122,42 @@ def _gls(v: np.ndarray, W: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, float
 def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
     """What the pattern of the shares in hover is (the module's docstring)."""
     unit = "m" if layout.unit == "m" else "arm lengths"
-    stat = lambda v: _gains(v / v.mean())
-    g, g_sd, jack = bl.jackknife(m, stat)
+    stat = lambda v: v / v.mean()
+    share, share_sd, jack = bl.jackknife(m, stat)
+    g, g_sd, _ = bl.jackknife(m, lambda v: _gains(v / v.mean()))
     B = bl.n_blocks
     cov = (B - 1) / B * (jack - jack.mean(axis=0)).T @ (jack - jack.mean(axis=0))
     W = np.linalg.pinv(cov, rcond=1e-10)
-    v = g - 1.0
+    v = share - 1.0
     dof_all = int(np.linalg.matrix_rank(cov, tol=1e-12 * max(np.trace(cov), 1e-300)))
-    com = lambda x: np.array(com_of_gains(stat(x), layout)[:2])
-    yaw = lambda x: np.array(yaw_trim_of_gains(x / x.mean(), layout)[:1])    # of the thrust shares
+    hyp = _hypotheses(layout)
+    com = lambda x: np.linalg.lstsq(hyp["centre of mass"], stat(x) - 1.0, rcond=None)[0]
+    yaw = lambda x: np.array(yaw_trim_of_gains(stat(x), layout)[:1])    # of the thrust shares: a pattern of the spins
     (dx, dy), com_sd, _ = bl.jackknife(m, com)
     (split,), (split_sd,), _ = bl.jackknife(m, yaw)
-    _, _, com_share = com_of_gains(g, layout)
-    _, yaw_share = yaw_trim_of_gains(m.mean(axis=0) / m.mean(), layout)
+    total = float(v @ v)
+    com_share = 1.0 - float(np.sum((v - hyp["centre of mass"] @ np.array([dx, dy])) ** 2)) / total if total > 0 else 1.0
+    _, yaw_share = yaw_trim_of_gains(share, layout)
     fits = []
-    for name, A in _hypotheses(layout).items():
+    for name, A in hyp.items():
         beta, chi2 = _gls(v, W, A)
         dof = max(dof_all - A.shape[1], 0)
         p = float(stats.chi2.sf(chi2, dof)) if dof > 0 else 1.0
         size = None
         if name.startswith("weak motor"):
-            j = int(name.split()[-1]) - 1
-            gj = 1.0 + 0.75 * beta[0]
-            rest = 1.0 - 0.25 * beta[0]
-            size = gj / rest            # its thrust for its command against the others'
+            size = (1.0 - 0.25 * beta[0]) / (1.0 + 0.75 * beta[0])   # its thrust for its command against the others'
             if not (MIN_WEAK <= size < 1.0):
                 p = 0.0                 # a stronger motor, or one too weak to hover: not physical
         fits.append({"hypothesis": name, "parameters": A.shape[1], "chi2": round(chi2, 2), "dof": dof,
                      "p": float(f"{p:.3g}"), **({"thrust_scale": _num(size)} if size is not None else {})})
     none_chi2 = float(v @ W @ v)
-    worth = bool(np.any((np.abs(v) > GAIN_TOL) & (np.abs(v) > 2.0 * g_sd)))
+    worth = bool(np.any((np.abs(v) > GAIN_TOL) & (np.abs(v) > 2.0 * share_sd)))
     out = {"gains": [_num(x) for x in g], "gains_stderr": [float(f"{e:.2g}") for e in g_sd],
            "com": {"dx": _num(dx), "dy": _num(dy), "stderr": [float(f"{e:.2g}") for e in com_sd], "unit": unit,
                    "share": _num(com_share, 3),
-                   "what": "the centre of mass off the thrust centre (x forward, y left) whose hover trim the "
-                           "pattern's front/rear and left/right parts stand for (least squares)"},
+                   "what": "the centre of mass off the thrust centre (x forward, y left) that the shares' front/rear "
+                           "and left/right parts balance (sum_i s_i r_i = N d, least squares); share: the part of "
+                           "the pattern it explains"},
            "yaw_trim": {"ccw_minus_cw": _num(split), "stderr": float(f"{split_sd:.2g}"), "share": _num(yaw_share, 3),
                         "what": "how much more thrust the counter-clockwise pair gives than the clockwise one in hover"},
            "hypotheses": fits, "chi2_none": round(none_chi2, 2), "dof": dof_all}
