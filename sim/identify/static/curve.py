@@ -60,7 +60,7 @@ def parse(text: str, source: str, fail) -> Curve:
 def of_log(table, a, foreign: bool) -> Curve:
     """The curve a log declares, else eq. 26 (this project's airframe's h2, or h2 = 0 assumed)."""
     if table.meta.get("thrust_curve"):
-        return parse(table.meta["thrust_curve"], table.meta.get("thrust_curve_source", "the log's '# thrust_curve:'"),
+        return parse(table.meta["thrust_curve"], table.meta.get("thrust_curve_source", f"the log's '# thrust_curve: {table.meta['thrust_curve']}'"),
                      table.fail)
     if not foreign:
         return Curve(1.0, a.h2 / P_FULL, 1.0, f"eq. 26 with the airframe's h2 = {a.h2:g}", True)
