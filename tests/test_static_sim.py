@@ -47,9 +47,21 @@ def current(log) -> np.ndarray:
     return power / log["battery_v"]
 
 
-def arducopter(log, path, r_hidden: float = 0.0):
+def vibe(log) -> np.ndarray:
+    """(3, n) ArduPilot's VIBE of the logged accelerometer (AP_InertialSensor::calc_vibration_and_clipping:
+    the square root of the low-passed (2 Hz) square of the accelerometer less its 5 Hz low-pass; here
+    moving means of 0.2 s and 0.5 s stand for the two low-passes), m/s^2."""
+    def mean(x, seconds):
+        k = np.ones(int(round(seconds * 450))) / int(round(seconds * 450))
+        return np.vstack([np.convolve(v, k, mode="same") for v in x])
+    acc = np.vstack([log[c] for c in ("acc_x", "acc_y", "acc_z")])
+    return np.sqrt(mean((acc - mean(acc, 0.2)) ** 2, 0.5))
+
+
+def arducopter(log, path, r_hidden: float = 0.0, clips=None):
     """The flight as an ArduCopter 4.x log at the default rates, the thrust curve declared as eq. 26
-    (MOT_THST_EXPO 1 above MOT_SPIN_MIN = h2 / 255), the pack's voltage lowered by r_hidden I."""
+    (MOT_THST_EXPO 1 above MOT_SPIN_MIN = h2 / 255), the pack's voltage lowered by r_hidden I; with
+    `clips` ((3, n) cumulative counts per IMU), VIBE at 10 Hz."""
     f = DataFlash()
     f.add("MSG", 1000, "ArduCopter V4.5.7 (1a2b3c4d)")
     params = {"FRAME_CLASS": 1, "FRAME_TYPE": 0, "MOT_PWM_MIN": PWM[0], "MOT_PWM_MAX": PWM[1], "MOT_BAT_VOLT_MAX": 16.8,
@@ -59,6 +71,7 @@ def arducopter(log, path, r_hidden: float = 0.0):
         f.add("PARM", 1000, k, float(v))
     f.add("ARM", 2000, 1)
     cur = current(log)
+    levels = vibe(log) if clips is not None else None
     for k in range(len(log)):
         if k % IMU_EVERY and k % SLOW_EVERY:
             continue
@@ -72,6 +85,8 @@ def arducopter(log, path, r_hidden: float = 0.0):
             f.add("BAT", us, 0, float(log["battery_v"][k] - r_hidden * cur[k]), float(cur[k]))
             f.add("ATT", us, 0.0, math.degrees(log["roll"][k]), 0.0, -math.degrees(log["pitch"][k]), 0.0,
                   -math.degrees(log["yaw"][k]) % 360.0)
+            if clips is not None:
+                f.add("VIBE", us, *(float(v) for v in levels[:, k]), *(int(c) for c in clips[:, k]))
     path.write_bytes(f.bytes())
     return path
 
@@ -157,3 +172,24 @@ def test_an_internal_resistance_hidden_in_the_voltage_is_found_on_top_of_the_pac
     before, after = rep["static"]["battery"]["resistance"], st["battery"]["resistance"]
     assert after["passed"], after["check"]
     assert after["ohm"] - before["ohm"] == pytest.approx(R, abs=0.002), (R, before, after)
+
+
+def test_vibe_and_its_clip_counts_are_reported_against_ardupilots_guidance(tmp, untouched):
+    log, _ = untouched
+    rng = np.random.default_rng(3800)
+    n = len(log)
+    clips = np.zeros((3, n), int)
+    for i in range(3):                          # clip events at random rows of each IMU, drawn
+        events = rng.integers(0, n, int(rng.integers(0, 150)))
+        clips[i] = np.cumsum(np.bincount(events, minlength=n))
+    st = diagnose(arducopter(log, tmp / "vibe.bin", clips=clips), tmp)["static"]
+    v = st["vibration"]
+    assert v["source"].startswith("VIBE") and v["physical"].endswith("passed")
+    total = int(clips[:, -1].sum() - clips[:, 0].sum())
+    assert v["clips"] == total
+    levels = vibe(log)
+    t = log["t"]
+    flying = (t > 5.0) & (t < 75.0)             # well inside the airborne part of the paper's flight
+    for j, a in enumerate("xyz"):
+        assert v["mean"][a] == pytest.approx(float(levels[j, flying].mean()), rel=0.15), (a, v)
+    assert v["acceptable"] == (max(v["p95"].values()) < 60.0 and total < 100)
