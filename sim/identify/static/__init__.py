@@ -37,13 +37,18 @@ def _rate(table, key: str, t: np.ndarray) -> float:
 
 def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
     """The static findings of the airborne logs `files` (diagnose's `_files`, read from `tables`), or
-    None when they answer none of them (too slow, no hover, no battery, no vibration logged)."""
+    None when they answer none of them (too slow, maybe never a flight by the barometer, no hover, no
+    battery, no vibration logged)."""
     by_path = {t.path: t for t in tables}
     tabs = [by_path[f.path] for f in files]
     rates = {"sensors_hz": round(min(_rate(t, "rate_hz", f.t) for t, f in zip(tabs, files)), 1),
              "motors_hz": round(min(_rate(t, "motor_rate_hz", f.t) for t, f in zip(tabs, files)), 1)}
     if min(rates.values()) < STATIC_MIN_HZ:
         progress(f"static tier: not reached (rates {rates}: {STATIC_MIN_HZ:g} Hz or more needed)")
+        return None
+    if all(f.baro_climb is not None and f.baro_climb < BARO_CLIMB_M for f in files):
+        progress(f"static tier: not reached (the barometer rose less than {BARO_CLIMB_M:g} m while the motors ran: "
+                 "maybe never a flight)")
         return None
     layout = files[0].layout
     curve = of_log(tabs[0], a, files[0].foreign)
@@ -54,13 +59,7 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
            "thrust_curve": curve.source, "layout": {"x": list(layout.x), "y": list(layout.y), "spin": list(layout.spin),
                                                     "unit": layout.unit, "source": layout.source},
            "not_judged": {}}
-    ground = [f.path for f in files if f.baro_climb is not None and f.baro_climb < BARO_CLIMB_M]
-    if ground:
-        why = (f"the barometer rose less than {BARO_CLIMB_M:g} m while the motors ran ({', '.join(ground)}): the vehicle "
-               "may never have left the ground, where the motors' shares hold no weight")
-        for k in ("hover", "motors", "pattern"):
-            out["not_judged"][k] = why
-    elif hv.enough and hv.seconds >= MIN_HOVER_S:
+    if hv.enough and hv.seconds >= MIN_HOVER_S:
         c = hv.rows([curve.thrust(f.P) for f in files])
         out["hover"] = throttle(hv, c, hv.rows([f.P for f in files]), hv.rows([f.acc[2] for f in files])[0], curve)
         out["motors"], m, _ = shares(hv, c)
