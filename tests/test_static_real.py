@@ -158,6 +158,14 @@ def case(name, rate, seed, slow=False):
     return pytest.param(name, rate, seed, marks=pytest.mark.slow) if slow else (name, rate, seed)
 
 
+def hidden(tmp, name: str, rate: str, rng, hide, tag: str) -> tuple[dict, dict]:
+    """(the untouched log's findings, the findings with `hide(meta, names, rows)` applied), at `rate`."""
+    meta, names, rows = imported(name, tmp, rng)
+    before = RATES[rate](meta, names, [list(r) for r in rows], tmp / f"{name}-{rate}-{tag}-plain.csv")
+    hide(meta, names, rows)
+    return before, RATES[rate](meta, names, rows, tmp / f"{name}-{rate}-{tag}.csv")
+
+
 def scale_of(st0: dict, st: dict, motor: int) -> float:
     """The hidden motor's thrust for its command against the others', from the change of its share."""
     def own(st):
@@ -170,11 +178,8 @@ def scale_of(st0: dict, st: dict, motor: int) -> float:
                                               case("LOG00230", "full", 3), case("btfl_002", "default", 4)])
 def test_a_weak_motor_hidden_in_a_real_log_is_found_with_its_size(tmp, name, rate, seed):
     rng = np.random.default_rng(4100 + seed)
-    meta, names, rows = imported(name, tmp, rng)
-    before = RATES[rate](meta, names, [list(r) for r in rows], tmp / f"{name}-{rate}-plain.csv")
     motor, scale = int(rng.integers(1, 5)), float(rng.uniform(0.75, 0.92))
-    weaken(meta, names, rows, motor, scale)
-    after = RATES[rate](meta, names, rows, tmp / f"{name}-{rate}-weak.csv")
+    before, after = hidden(tmp, name, rate, rng, lambda m, n, r: weaken(m, n, r, motor, scale), "weak")
     tol = 0.02 if rate == "full" else 0.03
     assert scale_of(before, after, motor) == pytest.approx(scale, abs=tol), (motor, scale, before["motors"], after["motors"])
     change = np.array(after["motors"]["share"]) - np.array(before["motors"]["share"])
@@ -188,12 +193,9 @@ def test_a_weak_motor_hidden_in_a_real_log_is_found_with_its_size(tmp, name, rat
                                               case("LOG00230", "default", 3), case("btfl_002", "default", 4)])
 def test_a_centre_of_mass_moved_in_a_real_log_is_found_on_top_of_its_own(tmp, name, rate, seed):
     rng = np.random.default_rng(4200 + seed)
-    meta, names, rows = imported(name, tmp, rng)
-    before = RATES[rate](meta, names, [list(r) for r in rows], tmp / f"{name}-{rate}-plain.csv")
     r, a = float(rng.uniform(0.04, 0.10)), float(rng.uniform(0.0, 2.0 * np.pi))
     dx, dy = r * np.cos(a), r * np.sin(a)
-    move_com(meta, names, rows, dx, dy)
-    after = RATES[rate](meta, names, rows, tmp / f"{name}-{rate}-com.csv")
+    before, after = hidden(tmp, name, rate, rng, lambda m, n, rows: move_com(m, n, rows, dx, dy), "com")
     got = np.array([after["pattern"]["com"]["dx"] - before["pattern"]["com"]["dx"],
                     after["pattern"]["com"]["dy"] - before["pattern"]["com"]["dy"]])
     assert np.allclose(got, [dx, dy], atol=0.01), ((dx, dy), got)
@@ -205,11 +207,8 @@ def test_a_centre_of_mass_moved_in_a_real_log_is_found_on_top_of_its_own(tmp, na
 @pytest.mark.parametrize("rate, seed", [("full", 1), ("default", 2)])
 def test_an_internal_resistance_hidden_in_a_real_log_is_found_on_top_of_the_packs(tmp, rate, seed):
     rng = np.random.default_rng(4300 + seed)
-    meta, names, rows = imported("LOG00037", tmp, rng)
-    before = RATES[rate](meta, names, [list(r) for r in rows], tmp / f"R-{rate}-plain.csv")
     R = float(rng.uniform(0.01, 0.05))
-    resist(names, rows, R)
-    after = RATES[rate](meta, names, rows, tmp / f"R-{rate}-hidden.csv")
+    before, after = hidden(tmp, "LOG00037", rate, rng, lambda m, n, rows: resist(n, rows, R), "R")
     r0, r1 = before["battery"]["resistance"], after["battery"]["resistance"]
     assert r0["passed"] and r1["passed"], (r0["check"], r1["check"])
     assert r1["ohm"] - r0["ohm"] == pytest.approx(R, abs=0.002), (R, r0, r1)

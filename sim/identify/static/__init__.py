@@ -86,7 +86,18 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
         out["vibration"] = vib
     if not any(k in out for k in ("hover", "battery", "vibration")):
         return None
-    return out
+    return _finite(out)
+
+
+def _finite(x):
+    """The findings with every non-finite number as None (the report is strict JSON)."""
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        return float(x) if np.isfinite(x) else None
+    return x
 
 
 def tier_why(static: dict | None) -> str:
