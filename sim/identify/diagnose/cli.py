@@ -8,6 +8,11 @@ Logs of other autopilots (PX4's ULog, ArduPilot's DataFlash, the blackbox of Bet
 read by `flightctl.sim.logs` into the same table as `flightctl log import` writes; their vehicle's
 base model is identified from the flight (docs/real-flights.md).
 
+Two tiers (docs/diagnose.md, "Static tier"): a log fast enough for the dynamic tier (the causes chain)
+gets it and the static tier's findings beside it; a log the dynamic tier refuses gets the static tier
+alone (hover, motor shares, centre of mass against weak motor against yaw trim, battery, vibration),
+exit status 0, with the refusal as `tier_why`. REPORT.json's `tier` says which.
+
 Several files are one vehicle, diagnosed jointly. One file of many logs (a blackbox file holds one
 per arming) is diagnosed log by log: each log that can be judged gets its own report, the others are
 named with the reason they were skipped (REPORT.json's `logs` list); the exit status is 0 when at
