@@ -193,3 +193,15 @@ def test_vibe_and_its_clip_counts_are_reported_against_ardupilots_guidance(tmp, 
     for j, a in enumerate("xyz"):
         assert v["mean"][a] == pytest.approx(float(levels[j, flying].mean()), rel=0.15), (a, v)
     assert v["acceptable"] == (max(v["p95"].values()) < 60.0 and total < 100)
+
+
+def test_a_static_only_log_plots_what_was_read_and_no_residuals(tmp, untouched):
+    log, _ = untouched
+    path = arducopter(log, tmp / "plot.bin")
+    prefix = tmp / "p"
+    assert main(["diagnose", str(path), "--json", str(tmp / "plot.json"), "--plot", str(prefix), "--quiet"]) == 0
+    assert (tmp / "p-read-1.png").read_bytes().startswith(b"\x89PNG")
+    assert not (tmp / "p-residuals.png").exists() and not (tmp / "p-explained.png").exists()
+    # --validate predicts with the dynamic tier's model, which a static-only log has not: refused, nothing written
+    assert main(["diagnose", str(path), "--json", str(tmp / "v.json"), "--validate", str(path), "--quiet"]) == 2
+    assert not (tmp / "v.json").exists()
