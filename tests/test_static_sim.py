@@ -205,3 +205,16 @@ def test_a_static_only_log_plots_what_was_read_and_no_residuals(tmp, untouched):
     # --validate predicts with the dynamic tier's model, which a static-only log has not: refused, nothing written
     assert main(["diagnose", str(path), "--json", str(tmp / "v.json"), "--validate", str(path), "--quiet"]) == 2
     assert not (tmp / "v.json").exists()
+
+
+@pytest.mark.parametrize("line", ["expo 2 spin 0 1", "expo 0.5 spin 0.4 0.2", "curve 1 2 3"])
+def test_a_thrust_curve_that_is_not_one_is_refused_in_one_line_before_any_work(tmp, untouched, capsys, line):
+    log, _ = untouched
+    text = (tmp / "plain.csv").read_text()
+    bad = tmp / "badcurve.csv"
+    bad.write_text(f"# thrust_curve: {line}\n" + text)
+    capsys.readouterr()
+    assert main(["diagnose", str(bad), "--json", str(tmp / "bad.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "thrust_curve" in err and "badcurve.csv" in err, err
+    assert not (tmp / "bad.json").exists()

@@ -37,6 +37,7 @@ from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
 from flightctl.sim.identify.diagnose import report as diagnose_report
 from flightctl.sim.identify.diagnose.verdict import diagnose, say, validate
 from flightctl.sim.identify.static import STATIC_COLUMNS, StaticOnly
+from flightctl.sim.identify.static.curve import declared as declared_curve
 
 MIN_LOG_S = 2.0   # a log shorter than this cannot hold a take-off and a flight: too short to judge
 
@@ -92,6 +93,8 @@ def read_logs(paths: list[str], index: int | None, progress) -> list:
             tables += read_foreign(log, index, progress)
         else:
             tables.append(read_flight_log(log, min_seconds=MIN_LOG_S, min_rows=10, extra=FOREIGN_COLUMNS + STATIC_COLUMNS))
+    for t in tables:          # a malformed `# thrust_curve:` is bad input, refused before any work
+        declared_curve(t)
     return tables
 
 

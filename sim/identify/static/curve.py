@@ -57,11 +57,19 @@ def parse(text: str, source: str, fail) -> Curve:
     return Curve(e, a, b, source, True)
 
 
+def declared(table) -> Curve | None:
+    """The curve the log's `# thrust_curve:` line declares, None without one; InputError naming the
+    file when the line is not a curve."""
+    text = table.meta.get("thrust_curve", "").strip()
+    if not text:
+        return None
+    return parse(text, table.meta.get("thrust_curve_source", f"the log's '# thrust_curve: {text}'"), table.fail)
+
+
 def of_log(table, a, foreign: bool) -> Curve:
     """The curve a log declares, else eq. 26 (this project's airframe's h2, or h2 = 0 assumed)."""
-    if table.meta.get("thrust_curve"):
-        return parse(table.meta["thrust_curve"], table.meta.get("thrust_curve_source", f"the log's '# thrust_curve: {table.meta['thrust_curve']}'"),
-                     table.fail)
+    if (curve := declared(table)) is not None:
+        return curve
     if not foreign:
         return Curve(1.0, a.h2 / P_FULL, 1.0, f"eq. 26 with the airframe's h2 = {a.h2:g}", True)
     return Curve(1.0, 0.0, 1.0, "assumed: eq. 26's shape with h2 = 0 (thrust as the square of the command above "
