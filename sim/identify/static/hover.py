@@ -112,11 +112,12 @@ def _hypotheses(layout: Layout) -> dict[str, np.ndarray]:
     return out
 
 
-def _gls(v: np.ndarray, W: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, float]:
-    """(beta, chi-square) of v ~ A beta weighted by W (the covariance's pseudo-inverse)."""
-    beta = np.linalg.lstsq(A.T @ W @ A, A.T @ W @ v, rcond=None)[0]
+def _gls(v: np.ndarray, W: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(beta, its standard errors, chi-square) of v ~ A beta weighted by W (the covariance's pseudo-inverse)."""
+    F = A.T @ W @ A
+    beta = np.linalg.lstsq(F, A.T @ W @ v, rcond=None)[0]
     r = v - A @ beta
-    return beta, float(r @ W @ r)
+    return beta, np.sqrt(np.abs(np.diag(np.linalg.pinv(F)))), float(r @ W @ r)
 
 
 def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
@@ -140,16 +141,19 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
     _, yaw_share = yaw_trim_of_gains(share, layout)
     fits = []
     for name, A in hyp.items():
-        beta, chi2 = _gls(v, W, A)
+        beta, beta_sd, chi2 = _gls(v, W, A)
         dof = max(dof_all - A.shape[1], 0)
         p = float(stats.chi2.sf(chi2, dof)) if dof > 0 else 1.0
         size = None
         if name.startswith("weak motor"):
             size = (1.0 - 0.25 * beta[0]) / (1.0 + 0.75 * beta[0])   # its thrust for its command against the others'
+            size_sd = beta_sd[0] / (1.0 + 0.75 * beta[0]) ** 2          # d size / d beta = -1 / (1 + 3 beta / 4)^2
             if not (MIN_WEAK <= size < 1.0):
                 p = 0.0                 # a stronger motor, or one too weak to hover: not physical
         fits.append({"hypothesis": name, "parameters": A.shape[1], "chi2": round(chi2, 2), "dof": dof,
-                     "p": float(f"{p:.3g}"), **({"thrust_scale": _num(size)} if size is not None else {})})
+                     "p": float(f"{p:.3g}"),
+                     **({"thrust_scale": _num(size), "thrust_scale_stderr": float(f"{size_sd:.2g}")} if size is not None
+                        else {})})
     none_chi2 = float(v @ W @ v)
     worth = bool(np.any((np.abs(v) > GAIN_TOL) & (np.abs(v) > 2.0 * share_sd)))
     out = {"gains": [_num(x) for x in g], "gains_stderr": [float(f"{e:.2g}") for e in g_sd],
@@ -196,8 +200,9 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
                               f"{best['dof']} dof)")
             else:
                 out["why"] = (f"one motor's command raised alone (its roll, pitch and yaw parts in its position's and "
-                              f"spin's ratio): {best['hypothesis']} gives {100 * best['thrust_scale']:.0f} % of the "
-                              f"others' thrust for its command (chi-square {best['chi2']} on {best['dof']} dof)")
+                              f"spin's ratio): {best['hypothesis']} gives {100 * best['thrust_scale']:.1f} +- "
+                              f"{100 * best['thrust_scale_stderr']:.2g} % of the others' thrust for its command "
+                              f"(chi-square {best['chi2']} on {best['dof']} dof)")
             alike = [f["hypothesis"] for f in ok if f["parameters"] == best["parameters"] and f is not best]
             if alike:
                 out["why"] += "; " + ", ".join(alike) + " fit" + ("s" if len(alike) == 1 else "") + " as well"
