@@ -218,3 +218,15 @@ def test_a_thrust_curve_that_is_not_one_is_refused_in_one_line_before_any_work(t
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "thrust_curve" in err and "badcurve.csv" in err, err
     assert not (tmp / "bad.json").exists()
+
+
+def test_the_projects_own_log_reads_the_same_hover_through_eq_26(tmp, untouched):
+    """The simulator's own CSV (this project's vehicle: eq. 26 with the airframe's h2, the paper's + layout)
+    at its 450 Hz gives the hover and shares the default-rate ArduCopter log of the same flight gives."""
+    from flightctl.sim.identify.diagnose.data import load_file
+    from flightctl.sim.identify.static import static_tier
+    log, rep = untouched
+    st = static_tier([log], [load_file(log, A)], A)
+    assert st["thrust_curve"].startswith("eq. 26 with the airframe's h2")
+    assert st["hover"]["thrust_share"] == pytest.approx(rep["static"]["hover"]["thrust_share"], rel=0.02)
+    assert st["pattern"]["verdict"] == "none" and st["pattern"]["com"]["unit"] == "m"
