@@ -100,6 +100,8 @@ BLOCKS = (
           SCRIPT + ("scripts/diagnose_pairs.py", "--pairs", "30", "--doc", "{doc}"), minutes=40),
     Block("diagnose-sweep", "docs/diagnose.md", *marked("diagnose_sweep"),
           SCRIPT + ("scripts/diagnose_sweep.py", "--doc", "{doc}"), minutes=6),
+    Block("static-tier", "docs/diagnose.md", *marked("static tier"), SCRIPT + ("scripts/static_tier.py", "--doc", "{doc}"),
+          minutes=1.5),
     Block("tune-table", "docs/tune.md", *marked("tune procedure"), FLIGHTCTL + ("tune", "--out", "{tmp}/t.toml", "--doc", "{doc}"),
           minutes=0.5),
     Block("tune-strict", "docs/tune.md", *marked("tune strict"),

@@ -6,7 +6,7 @@ from __future__ import annotations
 import struct
 
 HEAD = b"\xa3\x95"
-CODES = {"B": "B", "H": "H", "f": "f", "Q": "Q", "n": "4s", "N": "16s", "Z": "64s"}
+CODES = {"B": "B", "H": "H", "I": "I", "f": "f", "Q": "Q", "n": "4s", "N": "16s", "Z": "64s"}
 FORMATS = {  # name: (type id, format, columns)
     "PARM": (129, "QNf", "TimeUS,Name,Value"),
     "MSG": (130, "QZ", "TimeUS,Message"),
@@ -18,6 +18,7 @@ FORMATS = {  # name: (type id, format, columns)
     "ESC": (136, "QBf", "TimeUS,Instance,RPM"),
     "ARM": (137, "QB", "TimeUS,ArmState"),
     "BARO": (138, "QBf", "TimeUS,I,Alt"),
+    "VIBE": (139, "QfffIII", "TimeUS,VibeX,VibeY,VibeZ,Clip0,Clip1,Clip2"),   # ArduCopter 3.3-4.0's
 }
 
 

@@ -235,8 +235,9 @@ def test_the_corpus_of_ardupilot_logs_gives_one_row_per_log(tmp_path):
         assert all(w in rows[name] for w in words), rows[name]
     assert "10.0 Hz" in rows["nan.log"] and "too short to judge" in rows["backend_log_80k.bin"]
     judged = rows["log171.bin"].split("|")
-    assert judged[5].strip() == "none" and judged[8].strip() == "" and "APM:Copter V3.3-dev" in judged[2]
-    assert judged[7].strip().startswith("t: roll 5, pitch 6, yaw 7, thrust 8")   # docs/log-import.md
+    assert judged[7].strip() == "none" and judged[10].strip() == "" and "APM:Copter V3.3-dev" in judged[2]
+    assert judged[9].strip().startswith("t: roll 5, pitch 6, yaw 7, thrust 8")   # docs/log-import.md
+    assert judged[5].strip() == "dynamic (static too)" and "pattern: yaw trim" in judged[6]
 
 
 # log171.bin (README.md): ArduCopter 3.3-dev, QUAD/X, IMU and RCOU at 50 Hz, 2.5 min in the air; then a
@@ -303,12 +304,14 @@ def test_an_arducopter_3_log_whose_rcou_names_no_pulses_is_refused_by_name(tmp_p
 
 def test_taken_as_flight_the_crash_hides_the_vehicle_from_diagnose(tmp_path, capsys, monkeypatch):
     """Without the specific-force test (data.CONTACT_ACC_Z at minus infinity) the 14 s on its back are
-    airborne, and the base model's roll and pitch effectiveness are no longer told from zero."""
+    airborne, and the base model's roll and pitch effectiveness are no longer told from zero: the
+    dynamic tier refuses, and the report is the static tier's, which says why."""
     from flightctl.sim.identify.diagnose import data
     monkeypatch.setattr(data, "CONTACT_ACC_Z", -np.inf)
-    assert main(["diagnose", str(CRASH), "--json", str(tmp_path / "r.json"), "--quiet"]) == 2
-    err = capsys.readouterr().err
-    assert "does not identify the vehicle's roll and pitch effectiveness" in err, err
+    assert main(["diagnose", str(CRASH), "--json", str(tmp_path / "r.json"), "--quiet"]) == 0
+    rep = json.loads((tmp_path / "r.json").read_text())     # the dynamic tier refused; the static tier answers
+    assert rep["tier"] == "static" and rep["cause"] == "none"
+    assert "does not identify the vehicle's roll and pitch effectiveness" in rep["tier_why"], rep["tier_why"]
 
 
 @pytest.fixture(scope="module")

@@ -64,7 +64,7 @@ def test_fitted_on_one_flight_it_predicts_another_better_than_the_base_model(fli
 def test_the_imported_csv_gives_the_same_diagnosis_as_the_foreign_log(flight):
     csv, report, tmp = flight
     again = run([csv], tmp / "csv.json")
-    for key in ("cause", "parameters", "rmse_base", "gain", "causes", "base_model"):
+    for key in ("cause", "parameters", "rmse_base", "gain", "causes", "base_model", "tier", "static"):
         assert again[key] == report[key], key
 
 
@@ -127,17 +127,26 @@ def test_a_px4_hover_with_motors_logged_at_10_hz_is_judged_for_static_effects(tm
     assert report["data"]["airborne_s"] < 80          # the ramp on the ground and the touchdown left out
 
 
-def test_px4_sensors_logged_at_9_hz_are_refused_for_that(tmp_path, capsys):
-    err = _refusal(capsys, need(FLIGHTS / "px4" / "esc_status_log.ulg"), tmp_path)
-    assert "gyro and accelerometer were logged at 9.6 Hz" in err and "SDLOG_PROFILE" in err, err
-    assert "contradict" not in err
+def _static_only(log, tmp_path, *index) -> str:
+    """The report of a log the dynamic tier refuses and the static tier answers: its `tier_why`."""
+    out = tmp_path / "r.json"
+    assert main(["diagnose", str(log), *index, "--json", str(out), "--quiet"]) == 0
+    report = json.loads(out.read_text())
+    assert report["tier"] == "static" and report["cause"] == "none" and report["static"], report["tier_why"]
+    return report["tier_why"]
 
 
-def test_a_log_that_hardly_moves_an_axis_is_refused_as_not_showing_it(tmp_path, capsys):
+def test_px4_sensors_logged_at_9_hz_get_the_static_tier_and_are_told_why_not_the_dynamic(tmp_path):
+    why = _static_only(need(FLIGHTS / "px4" / "esc_status_log.ulg"), tmp_path)
+    assert "gyro and accelerometer were logged at 9.6 Hz" in why and "SDLOG_PROFILE" in why, why
+    assert "contradict" not in why
+
+
+def test_a_log_that_hardly_moves_an_axis_gets_the_static_tier_and_is_told_it_does_not_show_it(tmp_path):
     """btfl_all.bbl #12: the Gecko of btfl_002 (which is judged), 3.7 s in the air, hardly a pitch."""
-    err = _refusal(capsys, need(FLIGHTS / "betaflight" / "btfl_all.bbl"), tmp_path, "--index", "12")
-    assert "does not identify the vehicle's pitch effectiveness" in err and "s in the air" in err, err
-    assert "contradict" not in err
+    why = _static_only(need(FLIGHTS / "betaflight" / "btfl_all.bbl"), tmp_path, "--index", "12")
+    assert "does not identify the vehicle's pitch effectiveness" in why and "s in the air" in why, why
+    assert "contradict" not in why
 
 
 def test_a_take_off_that_never_left_the_ground_is_not_called_an_unlogged_motor(tmp_path, capsys):

@@ -26,12 +26,12 @@ AXES = ("x", "y", "z")
 # reads, then what draws rate tracking (the rate setpoint, the sticks, the PID terms).
 EXTRA = (("current", "height", "omega1", "omega2", "omega3", "omega4", "gyro_f_x", "gyro_f_y", "gyro_f_z")
          + tuple(f"setpoint_{a}" for a in AXES) + ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle")
-         + tuple(f"pid_{term}_{a}" for term in "pidf" for a in AXES))
+         + tuple(f"pid_{term}_{a}" for term in "pidf" for a in AXES) + ("vibe_x", "vibe_y", "vibe_z", "clip"))
 # stream name -> its columns (streams of one value write the stream's name)
 GROUPS = {"acc": tuple(f"acc_{a}" for a in AXES), "gyro_f": tuple(f"gyro_f_{a}" for a in AXES),
           "omega": tuple(f"omega{i}" for i in range(1, 5)), "attitude": ("roll", "pitch", "yaw"),
           "setpoint": tuple(f"setpoint_{a}" for a in AXES), "rc": ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle"),
-          "pid": tuple(c for c in EXTRA if c.startswith("pid_"))}
+          "pid": tuple(c for c in EXTRA if c.startswith("pid_")), "vibe": ("vibe_x", "vibe_y", "vibe_z")}
 GAP_PERIODS = 3.0        # a measured stream is empty across gaps longer than this many of its own periods
 MIN_ROWS = 10
 ISLAND_GAP_S = 1.0       # a few rows cut off from the log by a gap this long at its start or end are not data

@@ -45,7 +45,7 @@ RATE_NOTE = ("set LOG_BITMASK's IMU_FAST (and RCOUT) bits, or INS_RAW_LOG_OPT fo
 OLD_RATE_NOTE = ("ArduCopter before 3.3 logs IMU in its 50 Hz loop and the motor outputs in its 10 Hz loop, "
                  "whatever LOG_BITMASK says: with a newer firmware, ")
 WANTED = ["PARM", "MSG", "VER", "IMU", "GYR", "ACC", "RCOU", "RCO2", "RCO3", "BAT", "BARO", "RFND", "ATT", "RATE",
-          "ESC", "ARM", "EV", "MOT", "CURR", "CTUN"]
+          "ESC", "ARM", "EV", "MOT", "CURR", "CTUN", "VIBE"]
 ARMED_EVENTS = (10, 11)               # EV's ARMED and DISARMED (ArduCopter's LogEvent, the same since 3.0)
 PREAMBLE_LINES = 8                    # a text dump opens with a few lines (log number, firmware, board) before FMT
 
@@ -366,6 +366,8 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
     if rate:
         sp = np.vstack([_col(rate, k) for k in ("RDes", "PDes", "YDes")]) * DEG
         imp.streams["setpoint"] = Stream("RATE RDes/PDes/YDes", _t(rate), sp * FRD)
+    _vibe(msgs, imp)
+    _thrust_curve(p, imp)
     order = [int(k) for k in imp.meta.pop("esc_order").split()]
     esc = msgs["ESC"]
     if esc and hasattr(esc[0], "RPM"):
@@ -377,3 +379,31 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
                 imp.streams["omega"] = Stream("ESC RPM", t, np.abs(w) * 2.0 * math.pi / 60.0)
                 imp.meta["omega_source"] = (f"ESC telemetry RPM of instances {', '.join(map(str, order))} (the motors' "
                                             "output channels) for motors 1-4")
+
+
+def _vibe(msgs, imp: Imported) -> None:
+    """VIBE's VibeX/Y/Z (m/s^2, the accelerometer's standard deviation; of the first IMU where 4.x logs one
+    per IMU) and its clip count (Clip0 + Clip1 + Clip2 before 4.x, Clip after), cumulative."""
+    vibe = _pick(msgs["VIBE"], "IMU")
+    if not vibe:
+        return
+    t = _t(vibe)
+    imp.streams["vibe"] = Stream("VIBE", t, np.vstack([_col(vibe, f"Vibe{a}") for a in "XYZ"]))
+    names = [c for c in ("Clip", "Clip0", "Clip1", "Clip2") if hasattr(vibe[0], c)]
+    if names:
+        imp.streams["clip"] = Stream("VIBE " + "+".join(names), t, sum(_col(vibe, c) for c in names)[None], held=True)
+
+
+def _thrust_curve(p: dict, imp: Imported) -> None:
+    """`thrust_curve` from MOT_THST_EXPO and the spin range (MOT_SPIN_MIN/MAX; MOT_THST_MAX before 3.5,
+    which had no MOT_SPIN_MIN: 0 there), AP_MotorsMulticopter's thrust linearisation."""
+    if "MOT_THST_EXPO" not in p:
+        return
+    e = float(p["MOT_THST_EXPO"])
+    lo = float(p.get("MOT_SPIN_MIN", 0.0))
+    hi = float(p.get("MOT_SPIN_MAX", p.get("MOT_THST_MAX", 0.95)))
+    if 0.0 <= e <= 1.0 and 0.0 <= lo < hi <= 1.0:
+        imp.meta["thrust_curve"] = f"expo {e:.4g} spin {lo:.4g} {hi:.4g}"
+        imp.meta["thrust_curve_source"] = ("ArduPilot's MOT_THST_EXPO " + f"{e:.4g}, spin range {lo:.4g}-{hi:.4g} of "
+                                           "the output (MOT_SPIN_MIN/MAX" + ("" if "MOT_SPIN_MIN" in p else
+                                                                           "; MOT_THST_MAX, no MOT_SPIN_MIN: 0") + ")")

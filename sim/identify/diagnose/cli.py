@@ -8,6 +8,11 @@ Logs of other autopilots (PX4's ULog, ArduPilot's DataFlash, the blackbox of Bet
 read by `flightctl.sim.logs` into the same table as `flightctl log import` writes; their vehicle's
 base model is identified from the flight (docs/real-flights.md).
 
+Two tiers (docs/diagnose.md, "Static tier"): a log fast enough for the dynamic tier (the causes chain)
+gets it and the static tier's findings beside it; a log the dynamic tier refuses gets the static tier
+alone (hover, motor shares, centre of mass against weak motor against yaw trim, battery, vibration),
+exit status 0, with the refusal as `tier_why`. REPORT.json's `tier` says which.
+
 Several files are one vehicle, diagnosed jointly. One file of many logs (a blackbox file holds one
 per arming) is diagnosed log by log: each log that can be judged gets its own report, the others are
 named with the reason they were skipped (REPORT.json's `logs` list); the exit status is 0 when at
@@ -31,6 +36,8 @@ from flightctl.logfile import read_flight_log
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
 from flightctl.sim.identify.diagnose import report as diagnose_report
 from flightctl.sim.identify.diagnose.verdict import diagnose, say, validate
+from flightctl.sim.identify.static import STATIC_COLUMNS, StaticOnly
+from flightctl.sim.identify.static.curve import declared as declared_curve
 
 MIN_LOG_S = 2.0   # a log shorter than this cannot hold a take-off and a flight: too short to judge
 
@@ -85,7 +92,9 @@ def read_logs(paths: list[str], index: int | None, progress) -> list:
         if kind(log) is not None:
             tables += read_foreign(log, index, progress)
         else:
-            tables.append(read_flight_log(log, min_seconds=MIN_LOG_S, min_rows=10, extra=FOREIGN_COLUMNS))
+            tables.append(read_flight_log(log, min_seconds=MIN_LOG_S, min_rows=10, extra=FOREIGN_COLUMNS + STATIC_COLUMNS))
+    for t in tables:          # a malformed `# thrust_curve:` is bad input, refused before any work
+        declared_curve(t)
     return tables
 
 
@@ -168,6 +177,8 @@ def _plot_paths(prefix: str | None, n_tables: int, tag: str = "") -> dict[str, P
 
 def _judge(tables, others, params, given: bool, progress):
     d = diagnose(tables, params.airframe, progress, params.effects, params_given=given, accepted=progress.release)
+    if others and isinstance(d, StaticOnly):
+        raise InputError(f"--validate predicts with the dynamic tier's model, which these logs did not reach: {d.why}")
     if others:
         d.validation = validate(d, others, params.airframe, progress)
     return d
@@ -178,6 +189,10 @@ def _images(d, tables, plots) -> dict[str, bytes]:
         return {}
     from flightctl.sim.logs import read_figure
     from flightctl.sim.plots import png
+    if isinstance(d, StaticOnly):      # no residuals without the dynamic tier: what was read only
+        for k in ("residuals", "explained"):
+            plots.pop(k, None)
+        return {f"read-{k}": png(read_figure(t)) for k, t in enumerate(tables, 1)}
     images = diagnose_report.figures(d)
     images.update({f"read-{k}": png(read_figure(t)) for k, t in enumerate(tables, 1)})
     return images

@@ -22,11 +22,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from flightctl.errors import InputError, output_file, write_atomic
+from flightctl.sim.identify.static import summary
 
 TABLE_BEGIN = "<!-- diagnose --corpus table: begin -->"
 TABLE_END = "<!-- diagnose --corpus table: end -->"
 CSV_SUFFIXES = (".csv",)
-COLUMNS = ("log", "vehicle", "what was read", "airborne", "causes (each on top of the ones before)",
+COLUMNS = ("log", "vehicle", "what was read", "airborne", "tier", "static tier", "causes (each on top of the ones before)",
            "fits, but not physical", "base model: effectiveness (t = value / its jackknife error)", "refused")
 
 
@@ -44,12 +45,16 @@ class Row:
         read = _read(self.meta, self.report) if self.meta else ""
         vehicle = _vehicle(self.meta) if self.meta else ""
         if self.status != "diagnosed":
-            return [self.log, vehicle, read, "", "", "", "", _clean(self.reason)]
+            return [self.log, vehicle, read, "", "refused", "", "", "", "", _clean(self.reason)]
         r = self.report
         causes = "; ".join(f"{c['cause']} {_params(c['parameters'])} (gain {c['gain']:.3f})" for c in r["causes"]) or "none"
         unphysical = "; ".join(f"{c['cause']} {_params(c['parameters'])}: {c['why']}" for c in r["not_physical"])
-        return [self.log, vehicle, read, f"{r['data']['airborne_s']:.1f} s", _clean(causes), _clean(unphysical),
-                _base(r), ""]
+        tier = r.get("tier", "dynamic") + (" (static too)" if r.get("tier") == "dynamic" and r.get("static") else "")
+        static = _clean(summary(r["static"])) if r.get("static") else ""
+        if r.get("tier") == "static":
+            causes = f"not judged: {r['tier_why']}"
+        return [self.log, vehicle, read, f"{r['data']['airborne_s']:.1f} s", tier, static, _clean(causes),
+                _clean(unphysical), _base(r), ""]
 
 
 def _clean(text: str) -> str:
@@ -83,6 +88,8 @@ def _read(meta: dict, report: dict | None) -> str:
 
 def _base(r: dict) -> str:
     b = r["base_model"]
+    if r.get("tier") == "static":
+        return ""
     if not b.get("identified"):
         return "this project's airframe"
     axes = []

@@ -10,6 +10,7 @@ import numpy as np
 from flightctl.sim.identify.diagnose.candidate import Result
 from flightctl.sim.identify.diagnose.dataset import CHANNELS, UNITS, C
 from flightctl.sim.identify.diagnose.verdict import Diagnosis
+from flightctl.sim.identify.static import static_text, text as static_section
 
 LB_LAGS = 10          # Ljung-Box lags, on the residual decimated to the low-pass bandwidth
 XCORR_MAX_S = 0.25    # cross-correlations are searched over lags within +-this
@@ -66,6 +67,8 @@ def xcorr(res: np.ndarray, x: np.ndarray, max_lag: int, step: int) -> float:
 def text(d: Diagnosis, rep: dict | None = None) -> str:
     """The printed report of `d`; `rep`: its `d.report()`, where the caller has it already."""
     rep = d.report() if rep is None else rep
+    if rep.get("tier") == "static":
+        return static_text(rep)
     ds = d.ds
     L = []
     L.append(f"flightctl diagnose: {', '.join(rep['data']['files'])}")
@@ -139,6 +142,8 @@ def text(d: Diagnosis, rep: dict | None = None) -> str:
     if val:
         L.append(f"  validation on {', '.join(val['files'])} ({val['airborne_s']} s airborne), the model as fitted here: "
                  f"RMSE {val['rmse_base']:.4g} (base) -> {val['rmse_extended']:.4g} (with the causes), gain {val['gain']:+.3f}")
+    if rep.get("static"):
+        L.append(static_section(rep["static"]))
     L.append("")
     L.append(_residual_table(d, best))
     if d.notes:

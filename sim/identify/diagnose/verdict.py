@@ -26,6 +26,7 @@ from flightctl.sim.identify.diagnose.dataset import (CHANNELS, DYNAMIC_MIN_HZ, L
 from flightctl.sim.identify.diagnose.rotorspeed import rotor_gain_check, rotor_speed_lag, timing_agreement
 from flightctl.sim.identify.diagnose.scoring import (DM_CHANNEL_WINDOW_S, DM_WINDOW_S, MIN_CHANNEL_GAIN, MIN_GAIN,
                                                      T_CHANNEL, T_CRIT, geomean, heldout_linear, significance)
+from flightctl.sim.identify.static import StaticOnly, static_tier, tier_why
 
 # Causes that are one physical effect modelled two ways: once one is in the chain the other is not tried.
 TWINS = {"motor_lag": "motor_dynamics", "motor_dynamics": "motor_lag"}
@@ -92,6 +93,7 @@ class Diagnosis:
     rotor_speed_check: dict | None = None
     rotor_gain_check: dict | None = None
     validation: dict | None = field(default=None)
+    static: dict | None = None       # the static tier's findings (flightctl.sim.identify.static), None if not reached
 
     # the first round is the contract's top level: the strongest cause and every candidate
     @property
@@ -196,6 +198,7 @@ class Diagnosis:
                      "battery_v": (None if (v := pack_range(self.ds.files)) is None else [round(x, 2) for x in v]),
                      "gyro_noise": gyro_noise(self.ds.files)},
             "notes": list(dict.fromkeys(self.notes)),   # a note said twice (two passes) once
+            "tier": "dynamic", "tier_why": tier_why(self.static), "static": self.static,
         }
         seen = set()
         out["not_physical"] = []
@@ -385,18 +388,21 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
         make(e.cause, **dict(e.parameters))     # the registry's checks (known cause, names, ranges) first
     notes: list[str] = []
     files = _files(tables, a, notes, progress)
-    _sensor_rate(tables, files)
-    lowpass, static_only, slow = LOWPASS_HZ, None, None
-    rate = _motor_rate(tables)
-    if rate is not None and rate < DYNAMIC_MIN_HZ:
-        lowpass = rate / 4.0
-        static_only = (f"the motor outputs were logged at {rate:.1f} Hz: a lag or a delay of tens of ms needs "
-                       f"them at {DYNAMIC_MIN_HZ:g} Hz or more")
-        notes.append(f"{static_only}; only static effects are judged, on data low-passed at {lowpass:.2g} Hz")
-        slow = (f"its motor commands were logged at {rate:.1f} Hz, held between samples that miss what the motors "
-                f"did in between" + _faster(tables))
-    speeds = rotor_speed_lag(files)
-    vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, speeds, notes, progress, slow)
+    try:
+        _sensor_rate(tables, files)
+        lowpass, static_only, slow = LOWPASS_HZ, None, None
+        rate = _motor_rate(tables)
+        if rate is not None and rate < DYNAMIC_MIN_HZ:
+            lowpass = rate / 4.0
+            static_only = (f"the motor outputs were logged at {rate:.1f} Hz: a lag or a delay of tens of ms needs "
+                           f"them at {DYNAMIC_MIN_HZ:g} Hz or more")
+            notes.append(f"{static_only}; only static effects are judged, on data low-passed at {lowpass:.2g} Hz")
+            slow = (f"its motor commands were logged at {rate:.1f} Hz, held between samples that miss what the motors "
+                    f"did in between" + _faster(tables))
+        speeds = rotor_speed_lag(files)
+        vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, speeds, notes, progress, slow)
+    except InputError as e:     # the dynamic tier refused: the static tier's report, if it answers anything
+        return StaticOnly.instead_of(e, tables, files, a, notes, progress, accepted)
     ds = DataSet(files, vehicle, lowpass)
     ds.rotor_speeds = speeds
     gain_check = None
@@ -425,7 +431,7 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
     if any(c not in {r.named.cause for r in rounds if r.named is not None} for c in final):
         rounds = _rechain(first, rounds[0], final, static_only, notes, progress)
     return Diagnosis(rounds, first, notes, carried, lowpass, final=final, rotor_speed_check=speeds,
-                     rotor_gain_check=gain_check)
+                     rotor_gain_check=gain_check, static=static_tier(tables, files, a, progress))
 
 
 def validate(d: Diagnosis, tables: list[Table], a: Airframe, progress=say) -> dict:

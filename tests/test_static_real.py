@@ -1,0 +1,230 @@
+"""The static tier (docs/diagnose.md, "Static tier") on real flight logs of other vehicles
+(../shared/data/real/flights, tests/real.py), with effects hidden in them, drawn from seeded generators and
+not told to the diagnosis, at the log's full rate (the static tier's own function on the imported table)
+and decimated to ArduPilot's default rates (gyro and accelerometer 25 Hz, motors and battery 10 Hz, held:
+`flightctl diagnose`, which reaches the static tier only). A real vehicle carries its own imbalance, so
+each finding is judged against the untouched log's own finding plus what was hidden:
+
+- a motor made weaker (scale 0.75-0.92): its command raised so that its thrust, through the thrust curve
+  the log declares (drawn at random too: ArduPilot's MOT_THST_EXPO form), is unchanged; its thrust for its
+  command against the others' comes out at the drawn scale within 0.02 (0.03 decimated);
+- a centre of mass moved (0.04-0.10 arm lengths, any direction): the thrusts redistributed so that the
+  torques about the new centre are the logged ones (the roll and pitch rows of eq. 25, yaw and total kept);
+  the centre of mass moves by the drawn offset within 0.01 arm lengths;
+- an internal resistance (10-50 mOhm): the voltage lowered by R I; found on top of the pack's own
+  within 2 mOhm;
+- the same rewriting with nothing hidden changes nothing (the null test);
+- where the log has rotor speeds (INDIflight's ESC telemetry) a hidden weak motor is called a weak motor
+  by them (it turns slower for its command than the others).
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from flightctl.cli import main
+from flightctl.logfile import read_flight_log
+from flightctl.params import Airframe
+from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS, load_file
+from flightctl.sim.identify.static import STATIC_COLUMNS, static_tier
+from flightctl.sim.identify.static.curve import parse
+from real import FLIGHTS, need, rows_and_header, write
+
+LOGS = {"LOG00037": "betaflight/LOG00037.BFL", "LOG00230": "indiflight/LOG00230.BFL",
+        "btfl_002": "betaflight/btfl_002.bbl"}
+WITH_CURRENT = {"LOG00037"}
+_cache: dict = {}
+
+
+@pytest.fixture(scope="module")
+def tmp(tmp_path_factory):
+    return tmp_path_factory.mktemp("static_real")
+
+
+def imported(name: str, tmp, rng) -> tuple:
+    """(metadata with a thrust curve drawn from `rng` declared, header, rows) of the log imported as CSV."""
+    if name not in _cache:
+        csv = tmp / f"{name}.csv"
+        assert main(["log", "import", str(need(FLIGHTS / LOGS[name])), str(csv), "--quiet"]) == 0
+        _cache[name] = csv.read_text()
+    meta, names, rows = rows_and_header(_cache[name])
+    curve = f"expo {rng.uniform(0.5, 1.0):.3f} spin {rng.uniform(0.0, 0.1):.3f} 1"
+    return meta + [f"# thrust_curve: {curve}"], names, rows
+
+
+def columns(names, rows, cols) -> np.ndarray:
+    j = [names.index(c) for c in cols]
+    return np.array([[float(r[k]) if r[k] not in ("", "nan") else np.nan for k in j] for r in rows]).T
+
+
+def put(names, rows, cols, values) -> None:
+    for c, v in zip(cols, values):
+        k = names.index(c)
+        for r, x in zip(rows, v):
+            if np.isfinite(x):
+                r[k] = f"{x:.7g}"
+
+
+MOTORS = ("P1", "P2", "P3", "P4")
+
+
+def curve_of(meta):
+    return parse(next(m for m in meta if m.startswith("# thrust_curve:")).split(":", 1)[1].strip(), "test", None)
+
+
+def weaken(meta, names, rows, motor: int, scale: float) -> None:
+    """Motor `motor` gives `scale` of the thrust its command asks for: its command asks for 1/scale of it."""
+    c = curve_of(meta)
+    P = columns(names, rows, [f"P{motor}"])[0]
+    on = P > 0
+    P[on] = np.minimum(255.0, c.command(c.thrust(P[on]) / scale))
+    put(names, rows, [f"P{motor}"], [np.where(on, P, np.nan)])
+
+
+def move_com(meta, names, rows, dx: float, dy: float) -> None:
+    """The centre of mass at (dx, dy) arm lengths: sum_i (y_i - dy) f'_i = sum_i y_i f_i and the same in x,
+    the yaw torque and the total thrust kept; the rotors' speeds follow their thrusts (eq. 27)."""
+    c = curve_of(meta)
+    rotors = next(m for m in meta if m.startswith("# rotors:")).split(":", 1)[1]
+    x, y, s = (np.array(v, float) for v in zip(*[r.split() for r in rotors.split(";")]))
+    B_inv = np.linalg.inv(np.vstack([y, x, s, np.ones(4)]))
+    P = columns(names, rows, MOTORS)
+    on = (P > 2.55).all(axis=0)
+    f = c.thrust(P[:, on])
+    W = f.sum(axis=0)
+    f2 = np.maximum(f + B_inv @ np.vstack([dy * W, dx * W, 0 * W, 0 * W]), 0.0)
+    P2 = np.full(P.shape, np.nan)
+    P2[:, on] = np.minimum(255.0, c.command(f2))
+    put(names, rows, MOTORS, P2)
+    if "omega1" in names:
+        w = columns(names, rows, ("omega1", "omega2", "omega3", "omega4"))
+        ratio = np.full(P.shape, np.nan)
+        ratio[:, on] = np.sqrt(c.thrust(P2[:, on]) / np.maximum(f, 1e-12))
+        put(names, rows, ("omega1", "omega2", "omega3", "omega4"), w * ratio)
+
+
+def resist(names, rows, R: float) -> None:
+    V, I = columns(names, rows, ("battery_v", "current"))
+    put(names, rows, ["battery_v"], [V - R * I])
+
+
+def decimated(meta, names, rows, path):
+    """The log as ArduPilot's default logging gives it: rows at 25 Hz; the motors, voltage and current
+    sampled at 10 Hz and held."""
+    t = columns(names, rows, ["t"])[0]
+    fs = 1.0 / float(np.median(np.diff(t)))
+    keep = np.arange(0, len(rows), max(1, int(round(fs / 25.0))))
+    slow = np.floor(t / 0.1)
+    first = np.concatenate([[True], slow[1:] != slow[:-1]])
+    held = np.maximum.accumulate(np.where(first, np.arange(t.size), 0))
+    cols = [c for c in MOTORS + ("battery_v", "current") if c in names]
+    j = [names.index(c) for c in cols]
+    out = []
+    for k in keep:
+        r = list(rows[k])
+        for c in j:
+            r[c] = rows[held[k]][c]
+        out.append(r)
+    m = [x for x in meta if not x.startswith(("# rate_hz:", "# motor_rate_hz:"))]
+    m += [f"# rate_hz: {fs / max(1, int(round(fs / 25.0))):.1f}", "# motor_rate_hz: 10.0"]
+    return write(m, names, out, path)
+
+
+def static_full(meta, names, rows, path) -> dict:
+    """The static tier's findings on the log at its full rate (its own function on the table)."""
+    write(meta, names, rows, path)
+    table = read_flight_log(path, extra=FOREIGN_COLUMNS + STATIC_COLUMNS)
+    st = static_tier([table], [load_file(table, Airframe())], Airframe())
+    assert st is not None
+    return st
+
+
+def static_default(meta, names, rows, path) -> dict:
+    """`flightctl diagnose` on the log decimated to ArduPilot's default rates: the static tier's report."""
+    decimated(meta, names, rows, path)
+    out = path.with_suffix(".json")
+    assert main(["diagnose", str(path), "--json", str(out), "--quiet"]) == 0
+    rep = json.loads(out.read_text())
+    assert rep["tier"] == "static" and rep["cause"] == "none", rep["tier_why"]
+    return rep["static"]
+
+
+RATES = {"full": static_full, "default": static_default}
+
+
+def case(name, rate, seed, slow=False):
+    return pytest.param(name, rate, seed, marks=pytest.mark.slow) if slow else (name, rate, seed)
+
+
+def hidden(tmp, name: str, rate: str, rng, hide, tag: str) -> tuple[dict, dict]:
+    """(the untouched log's findings, the findings with `hide(meta, names, rows)` applied), at `rate`."""
+    meta, names, rows = imported(name, tmp, rng)
+    before = RATES[rate](meta, names, [list(r) for r in rows], tmp / f"{name}-{rate}-{tag}-plain.csv")
+    hide(meta, names, rows)
+    return before, RATES[rate](meta, names, rows, tmp / f"{name}-{rate}-{tag}.csv")
+
+
+def scale_of(st0: dict, st: dict, motor: int) -> float:
+    """The hidden motor's thrust for its command against the others', from the change of its share."""
+    def own(st):
+        s = np.array(st["motors"]["share"])
+        return s[motor - 1] / np.mean(np.delete(s, motor - 1))
+    return own(st0) / own(st)
+
+
+@pytest.mark.parametrize("name, rate, seed", [case("LOG00037", "full", 1), case("LOG00037", "default", 2),
+                                              case("LOG00230", "full", 3), case("btfl_002", "default", 4)])
+def test_a_weak_motor_hidden_in_a_real_log_is_found_with_its_size(tmp, name, rate, seed):
+    rng = np.random.default_rng(4100 + seed)
+    motor, scale = int(rng.integers(1, 5)), float(rng.uniform(0.75, 0.92))
+    before, after = hidden(tmp, name, rate, rng, lambda m, n, r: weaken(m, n, r, motor, scale), "weak")
+    tol = 0.02 if rate == "full" else 0.03
+    assert scale_of(before, after, motor) == pytest.approx(scale, abs=tol), (motor, scale, before["motors"], after["motors"])
+    change = np.array(after["motors"]["share"]) - np.array(before["motors"]["share"])
+    assert int(np.argmax(change)) == motor - 1, (motor, change)
+    speeds = after["pattern"]["rotor_speeds"]
+    if speeds is not None:             # a weak motor turns slower for its command: the speeds name it
+        assert "weak motor" in speeds["verdict"] and f"motor {motor} " in speeds["why"], (motor, speeds)
+
+
+@pytest.mark.parametrize("name, rate, seed", [case("LOG00037", "full", 1), case("LOG00037", "default", 2),
+                                              case("LOG00230", "default", 3), case("btfl_002", "default", 4)])
+def test_a_centre_of_mass_moved_in_a_real_log_is_found_on_top_of_its_own(tmp, name, rate, seed):
+    rng = np.random.default_rng(4200 + seed)
+    r, a = float(rng.uniform(0.04, 0.10)), float(rng.uniform(0.0, 2.0 * np.pi))
+    dx, dy = r * np.cos(a), r * np.sin(a)
+    before, after = hidden(tmp, name, rate, rng, lambda m, n, rows: move_com(m, n, rows, dx, dy), "com")
+    got = np.array([after["pattern"]["com"]["dx"] - before["pattern"]["com"]["dx"],
+                    after["pattern"]["com"]["dy"] - before["pattern"]["com"]["dy"]])
+    assert np.allclose(got, [dx, dy], atol=0.01), ((dx, dy), got)
+    speeds = after["pattern"]["rotor_speeds"]
+    if speeds is not None:
+        assert "weak motor" not in speeds["verdict"], speeds
+
+
+@pytest.mark.parametrize("rate, seed", [("full", 1), ("default", 2)])
+def test_an_internal_resistance_hidden_in_a_real_log_is_found_on_top_of_the_packs(tmp, rate, seed):
+    rng = np.random.default_rng(4300 + seed)
+    R = float(rng.uniform(0.01, 0.05))
+    before, after = hidden(tmp, "LOG00037", rate, rng, lambda m, n, rows: resist(n, rows, R), "R")
+    r0, r1 = before["battery"]["resistance"], after["battery"]["resistance"]
+    assert r0["passed"] and r1["passed"], (r0["check"], r1["check"])
+    assert r1["ohm"] - r0["ohm"] == pytest.approx(R, abs=0.002), (R, r0, r1)
+
+
+@pytest.mark.parametrize("name", ["LOG00037", "LOG00230"])
+def test_the_same_rewriting_with_nothing_hidden_changes_nothing(tmp, name):
+    rng = np.random.default_rng(4400)
+    meta, names, rows = imported(name, tmp, rng)
+    before = static_full(meta, names, [list(r) for r in rows], tmp / f"{name}-same0.csv")
+    weaken(meta, names, rows, 1, 1.0)
+    move_com(meta, names, rows, 0.0, 0.0)
+    if name in WITH_CURRENT:
+        resist(names, rows, 0.0)
+    after = static_full(meta, names, rows, tmp / f"{name}-same1.csv")
+    assert np.allclose(after["motors"]["share"], before["motors"]["share"], atol=1e-4)
+    assert after["pattern"]["verdict"] == before["pattern"]["verdict"]
+    if name in WITH_CURRENT:
+        assert after["battery"]["resistance"]["ohm"] == pytest.approx(before["battery"]["resistance"]["ohm"], abs=1e-5)
