@@ -297,10 +297,10 @@ def read(path: str, text: bool = False) -> Imported:
     imp = Imported(path, {}, {}, [])
     if "_damage" in msgs:
         imp.notes.append(f"damaged: read up to {msgs['_damage'][0]}")
+    if _armed(msgs) is False:          # before the vehicle: what a bench log's frame says does not matter
+        imp.fail("never armed: the motors did not run in this log (" + ("ARM" if msgs["ARM"] else "EV") + " messages)")
     firmware = _firmware(msgs, texts)
     _vehicle(p, firmware, formats, texts, imp)
-    if _armed(msgs) is False:
-        imp.fail("never armed: the motors did not run in this log (" + ("ARM" if msgs["ARM"] else "EV") + " messages)")
     filtered, gsource, asource = _gyro(p, msgs, imp)
     rotors, source = _rotors(p, imp)
     imp.streams["motors"] = _motors(p, msgs, imp)
