@@ -215,10 +215,10 @@ def _check_columns(table: Table, P: np.ndarray, low: float, what: str) -> None:
     span = float(t[-1] - t[0])
     if ran == 0.0:
         table.fail(f"too short to judge: idle, no motor ran in its {span:.2g} s (every command at most {P.max():g}, "
-                   f"{what}): no flight in it")
+                   f"{what}): no airborne data")
     if ran < MIN_AIRBORNE_S:
         table.fail(f"too short to judge: an idle snippet, its motors ran for {ran:.2g} s ({what}); at least "
-                   f"{MIN_AIRBORNE_S:g} s of flight is needed")
+                   f"{MIN_AIRBORNE_S:g} s of airborne data is needed")
     for name in IMU_COLUMNS:
         x = table[name]
         if np.ptp(x) == 0:
