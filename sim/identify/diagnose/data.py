@@ -217,8 +217,8 @@ def _check_columns(table: Table, P: np.ndarray, low: float, what: str) -> None:
         table.fail(f"too short to judge: idle, no motor ran in its {span:.2g} s (every command at most {P.max():g}, "
                    f"{what}): no airborne data")
     if ran < MIN_AIRBORNE_S:
-        table.fail(f"too short to judge: an idle snippet, its motors ran for {ran:.2g} s ({what}); at least "
-                   f"{MIN_AIRBORNE_S:g} s of airborne data is needed")
+        table.fail(f"too short to judge: its motors ran for {ran:.2g} s ({what}), idle for the rest of its {span:.2g} s; "
+                   f"at least {MIN_AIRBORNE_S:g} s of airborne data is needed")
     for name in IMU_COLUMNS:
         x = table[name]
         if np.ptp(x) == 0:
