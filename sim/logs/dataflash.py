@@ -111,7 +111,7 @@ def _binary(path: str):
     with _quiet():
         r = DFReader.DFReader_binary(path, zero_time_base=False)
     skipped, places, end = _indexed(r)
-    data, resumed, tmp = None, 0, None
+    data, resumed, tmp, unknown = None, 0, None, False
     try:
         while r.data_len - end >= TAIL_BYTES and resumed < MAX_RESUMES:
             if data is None:
@@ -119,7 +119,8 @@ def _binary(path: str):
             k = data.find(HEADER, end)
             while k >= 0 and k + 2 < len(data) and data[k + 2] in r.formats:
                 k = data.find(HEADER, k + 1)
-            if k < 0 or k + 2 >= len(data):
+            unknown = 0 <= k < len(data) - 2
+            if not unknown:
                 break
             data[k:k + 3] = b"\0\0\0"
             resumed += 1
@@ -134,14 +135,14 @@ def _binary(path: str):
     finally:
         if tmp is not None:
             os.unlink(tmp)
-    note = None
+    parts = []
     if places:
-        note = (f"damaged: {skipped} bytes in {places} places skipped (each place a message or more lost: pymavlink "
-                "reads on from the next message header)")
+        parts.append(f"damaged: {skipped} bytes in {places} places skipped (each place a message or more lost: "
+                     "pymavlink reads on from the next message header)")
     if r.data_len - end >= TAIL_BYTES:
-        note = (note + "; " if note else "damaged: ") + (f"read up to byte {end} of {r.data_len} (a message header "
-                                                         "of an unknown type there)")
-    return r, note
+        parts.append(f"read up to byte {end} of {r.data_len}: " + (f"a message header of an unknown type there after "
+                     f"{MAX_RESUMES} read past" if unknown else "no message header after it"))
+    return r, "; ".join(parts) or None
 
 
 @contextlib.contextmanager

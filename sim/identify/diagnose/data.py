@@ -264,8 +264,8 @@ def at_rest(t: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> np.ndarray:
     still = np.ones(t.size, bool)
     for k in range(3):
         still &= moved(gyro[k]) < REST_RATE
-    f = _smoothed(t, np.sqrt((acc * acc).sum(axis=0)))
-    return still & (moved(np.sqrt((acc * acc).sum(axis=0))) < REST_ACC) & (np.abs(f - G) < REST_G * G)
+    force = np.sqrt((acc * acc).sum(axis=0))
+    return still & (moved(force) < REST_ACC) & (np.abs(_smoothed(t, force) - G) < REST_G * G)
 
 
 def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc: np.ndarray, notes: list[str]):
