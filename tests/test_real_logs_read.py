@@ -97,12 +97,21 @@ def _never_armed(u):
             d.data["arming_state"][:] = 1
 
 
+def _never_armed_on_the_bench(u):
+    """Never armed, and its layout not set up (a board on the bench): CA_ROTOR1_PX/PY gone. The never-armed
+    check comes first: the layout of a vehicle that never flew is no reason to give."""
+    _never_armed(u)
+    for k in ("CA_ROTOR1_PX", "CA_ROTOR1_PY"):
+        u.initial_parameters.pop(k)
+
+
 @pytest.mark.parametrize("name, change, words", [
     ("vtol.ulg", lambda u: u.initial_parameters.update(MAV_TYPE=22), "MAV_TYPE = 22: a VTOL"),
     ("octo.ulg", lambda u: u.initial_parameters.update(CA_ROTOR_COUNT=8), "CA_ROTOR_COUNT = 8: an octocopter"),
     ("plane.ulg", lambda u: u.initial_parameters.update(CA_AIRFRAME=1), "CA_AIRFRAME = 1: a fixed wing"),
     ("hexa_x.ulg", lambda u: u.initial_parameters.update(PWM_MAIN_FUNC5=105, PWM_MAIN_FUNC6=106), "more than four motors"),
-    ("unarmed.ulg", _never_armed, "never armed")])
+    ("unarmed.ulg", _never_armed, "never armed"),
+    ("unarmed_no_layout.ulg", _never_armed_on_the_bench, "never armed")])
 def test_a_real_px4_log_edited_into_another_vehicle_is_refused_by_name(tmp_path, capsys, name, change, words):
     path = _edited(tmp_path, name, change)
     out = tmp_path / "out.csv"

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import re
+import struct
 
 import numpy as np
 
@@ -81,6 +82,37 @@ def filters(h: dict) -> tuple[str, str, str]:
     return "; ".join(chain) or "none", "; ".join(notes), "; ".join(notches) or "none"
 
 
+# The header's scales, as Betaflight's Blackbox Explorer applies them (betaflight/blackbox-log-viewer:
+# src/flightlog_parser.js reads `gyro.scale`/`gyro_scale` as a hex float, deg/s per count for Cleanflight,
+# Betaflight and INAV and rad/us per count for Baseflight; src/flightlog.js converts ADC counts,
+# vbatADCToMillivolts = counts x 33 x 10 x vbatscale / 4095 and amperageADCToMillivolts = (counts x 33 x
+# 100 / 4095 - currentMeter offset) x 10000 / currentMeter scale, in mA; src/flightlog_fields_presenter.js
+# says which firmware logs volts and amps instead, `battery_scale` and `current_scale` below).
+ADC_FULL = 4095.0                  # a 12-bit ADC
+ADC_VREF_V = 3.3
+
+
+def gyro_scale(h: dict) -> tuple[float, str]:
+    """(deg/s per count of the gyro fields, its source): the header's `gyro_scale` (`gyro.scale` in
+    Cleanflight and Betaflight before 3.1), a float written as its bits in hex: 1.0 when the gyro is
+    logged in deg/s (Betaflight 3.1+), 1 / 16.4 for an MPU-6050's raw counts at 2000 deg/s in a 2016
+    Cleanflight log. Baseflight's is in rad/us per count."""
+    text = h.get("gyro_scale", h.get("gyro.scale"))
+    if text is None:
+        return 1.0, "no gyro_scale in the header: deg/s taken"
+    try:       # (orangebox gives the header's 0x... as its int; a text header as written)
+        bits = text if isinstance(text, int) else int(str(text), 16)
+        raw = struct.unpack("<f", struct.pack("<I", bits))[0]
+        text = f"0x{bits:08x}"
+    except (ValueError, struct.error):
+        return 1.0, f"gyro_scale {text!r} is not a hex float: deg/s taken"
+    if not (math.isfinite(raw) and raw > 0):
+        return 1.0, f"gyro_scale {text} is not a positive scale: deg/s taken"
+    if str(h.get("Firmware type", "")).lower() == "baseflight":
+        return raw * 1e6 / DEG, f"gyro_scale {text} ({raw:.4g} rad/us per count, Baseflight)"
+    return raw, f"gyro_scale {text} ({raw:.6g} deg/s per count)"
+
+
 def battery_scale(kind: str, ver: tuple[int, ...]) -> tuple[float | None, str]:
     """Volts per count of `vbatLatest` (Blackbox Explorer's reading by firmware): Betaflight 4.0+,
     INDIflight and INAV 0.01 V; Betaflight 3.1-3.5 and Cleanflight 2 0.1 V; older logs ADC counts (None)."""
@@ -88,17 +120,44 @@ def battery_scale(kind: str, ver: tuple[int, ...]) -> tuple[float | None, str]:
         return 0.01, "0.01 V"
     if (kind == "betaflight" and ver >= (3, 1, 0)) or (kind == "cleanflight" and ver >= (2, 0, 0)):
         return 0.1, "0.1 V (before Betaflight 4.0)"
-    return None, "ADC counts (vbat_scale)"
+    return None, "ADC counts"
+
+
+def vbat_volts(raw, h: dict, scale: float | None):
+    """`vbatLatest` (or `vbatref`) in volts: counts x scale, or ADC counts through the divider the header's
+    `vbatscale` (`vbat_scale`; 110 by default: 11.0 to 1) declares."""
+    if scale is not None:
+        return raw * scale
+    div = float(h.get("vbat_scale", h.get("vbatscale", 110)) or 110)
+    return raw * ADC_VREF_V * div / 10.0 / ADC_FULL
+
+
+def current_scale(kind: str, ver: tuple[int, ...]) -> float | None:
+    """Amps per count of `amperageLatest`: 0.01 A from Betaflight 3.1 and Cleanflight 2 (and INAV,
+    INDIflight), before them ADC counts (None: `amps`)."""
+    if kind in ("inav", "indiflight", "emuflight") or (kind == "betaflight" and ver >= (3, 1, 0)) \
+            or (kind == "cleanflight" and ver >= (2, 0, 0)):
+        return 0.01
+    return None
+
+
+def amps(raw, h: dict):
+    """ADC counts of the current sensor in amps: its millivolts less the header's `currentMeter` offset
+    (mV), over its scale (mV per 10 A)."""
+    meter = h.get("currentMeter", h.get("currentSensor", [0, 400]))
+    offset, scale = (float(v) for v in (meter if isinstance(meter, list) and len(meter) >= 2 else [0, 400])[:2])
+    mv = raw * ADC_VREF_V * 1000.0 / ADC_FULL
+    return (mv - offset) * 10.0 / (scale or 400.0)
 
 
 def cells(h: dict, scale: float | None) -> tuple[str, str] | None:
     """(cell count, its source) from the header, as Blackbox Explorer estimates it: the voltage at
     power-on `vbatref` over the cell's full voltage `vbatcellvoltage` [min, warning, max]."""
     ref, cell = h.get("vbatref"), h.get("vbatcellvoltage")
-    if not ref or scale is None or not isinstance(cell, list) or len(cell) < 3 or not cell[2]:
+    if not ref or not isinstance(cell, list) or len(cell) < 3 or not cell[2]:
         return None
     full = cell[2] / (100.0 if cell[2] > 100 else 10.0)           # 0.01 V (Betaflight 4) or 0.1 V
-    v = ref * scale
+    v = float(vbat_volts(ref, h, scale))
     n = max(1, math.ceil(v / full - 1e-9))
     return str(n), f"header: vbatref {v:.2f} V at power-on over vbatcellvoltage's full cell {full:.2f} V"
 
@@ -120,25 +179,29 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
             imp.fail(f"no {need.split('[')[0]} field: {'the time' if need == 'time' else 'that sensor'} was not logged")
     t = a[:, col["time"]] * 1e-6
     hires = 10.0 if int(h.get("blackbox_high_resolution", 0) or 0) else 1.0   # gyro logged in 0.1 deg/s
+    per_count, scale_source = gyro_scale(h)
+    counts = hires / per_count                                             # the gyro fields' counts per deg/s
 
     def field(prefix, k, cols=None):
         return np.vstack([a[:, col[f"{prefix}[{i}]"]] if f"{prefix}[{i}]" in col else np.full(len(t), np.nan)
                           for i in (cols or range(k))])
 
     # the gyro before its filters where the log has it; else gyroADC with its low-pass declared
-    filtered = field("gyroADC", 3) / hires * DEG
+    filtered = field("gyroADC", 3) / counts * DEG
     chain, note, notches = filters(h)
     debug = int(h.get("debug_mode", 0) or 0)
     if kind == "indiflight" and "gyroADCafterRpm[0]" in col:
-        gyro, source = field("gyroADCafterRpm", 3) / hires * DEG, "gyroADCafterRpm (after the rpm notches, before the low-pass)"
+        gyro, source = field("gyroADCafterRpm", 3) / counts * DEG, "gyroADCafterRpm (after the rpm notches, before the low-pass)"
     elif "gyroUnfilt[0]" in col:
-        gyro, source = field("gyroUnfilt", 3) / hires * DEG, "gyroUnfilt (before the filters)"
+        gyro, source = field("gyroUnfilt", 3) / counts * DEG, "gyroUnfilt (before the filters)"
     elif kind == "inav" and "gyroRaw[0]" in col:
         gyro, source = field("gyroRaw", 3) * DEG, "gyroRaw (INAV's gyro before its filters)"
     elif debug == GYRO_SCALED and "debug[0]" in col and kind == "betaflight" and ver < (4, 3, 0):
-        gyro, source = field("debug", 3) * DEG, "debug[0..2] (debug_mode GYRO_SCALED: before the filters)"
+        gyro, source = field("debug", 3) * per_count * DEG, "debug[0..2] (debug_mode GYRO_SCALED: before the filters)"
     else:
         gyro, source = filtered, "gyroADC (filtered)"
+    if per_count != 1.0:
+        source += f"; {scale_source}"
     gyro_filter = chain if gyro is filtered else "none"
     if gyro is not filtered:
         imp.streams["gyro_f"] = Stream("gyroADC", t, filtered)
@@ -193,20 +256,24 @@ def _battery(imp, h, a, col, t, kind, ver):
     name = "vbat" if kind == "inav" and "vbat" in col else "vbatLatest"
     if name in col:
         scale, unit = battery_scale(kind, ver)
-        raw = a[:, col[name]]
-        if scale is None:        # ADC counts: Blackbox Explorer's vbatADCToMillivolts
-            v = raw * 3.3 * 10.0 * float(h.get("vbat_scale", 110) or 110) / 4095.0 / 1000.0
-        else:
-            v = raw * scale
+        v = vbat_volts(a[:, col[name]], h, scale)
+        if scale is None:
+            unit += f" through vbatscale {float(h.get('vbat_scale', h.get('vbatscale', 110)) or 110):g}"
         ok = v > 0.5                    # 0 (or a few counts) until the first reading after power-on
         if ok.any():
             imp.streams["battery_v"] = Stream(f"{name} ({unit})", t[ok], v[None, ok])
         found = cells(h, scale)
         if found:
             imp.meta["battery_cells"], imp.meta["battery_cells_source"] = found
-    amps = "amperage" if kind == "inav" and "amperage" in col else "amperageLatest"
-    if amps in col and np.any(a[:, col[amps]] != 0):
-        imp.streams["current"] = Stream(f"{amps} (0.01 A)", t, a[None, :, col[amps]] * 0.01)
+    name_a = "amperage" if kind == "inav" and "amperage" in col else "amperageLatest"
+    if name_a in col and np.any(a[:, col[name_a]] != 0):
+        per = current_scale(kind, ver)
+        raw = a[None, :, col[name_a]]
+        if per is not None:
+            imp.streams["current"] = Stream(f"{name_a} (0.01 A)", t, raw * per)
+        else:
+            imp.streams["current"] = Stream(f"{name_a} (ADC counts through currentMeter "
+                                            f"{h.get('currentMeter', h.get('currentSensor', '0,400'))})", t, amps(raw, h))
 
 
 def _rotor_speeds(imp, h, a, col, t, field, debug, kind):

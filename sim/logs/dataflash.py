@@ -13,12 +13,17 @@ ArduCopter before FRAME_CLASS (3.0-3.4: FRAME, MOT, CURR, TimeMS) is read as `ar
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import math
+import os
 import re
+import sys
+import tempfile
 
 import numpy as np
 
-from flightctl.errors import InputError
+from flightctl.errors import InputError, read_bytes
 from flightctl.sim.logs import arducopter3
 from flightctl.sim.logs.common import CELL_FULL_V, DEG, FRD, Imported, Stream, command_p, rate_notes
 
@@ -47,6 +52,9 @@ OLD_RATE_NOTE = ("ArduCopter before 3.3 logs IMU in its 50 Hz loop and the motor
 WANTED = ["PARM", "MSG", "VER", "IMU", "GYR", "ACC", "RCOU", "RCO2", "RCO3", "BAT", "BARO", "RFND", "ATT", "RATE",
           "ESC", "ARM", "EV", "MOT", "CURR", "CTUN", "VIBE"]
 ARMED_EVENTS = (10, 11)               # EV's ARMED and DISARMED (ArduCopter's LogEvent, the same since 3.0)
+HEADER = b"\xa3\x95"                   # every binary message starts so (then its type byte)
+TAIL_BYTES = 528                      # pymavlink's allowance for garbage at a log's end (a flash page and more)
+MAX_RESUMES = 100                     # readings past an unknown message type (each one a pass over the file)
 PREAMBLE_LINES = 8                    # a text dump opens with a few lines (log number, firmware, board) before FMT
 
 
@@ -75,6 +83,85 @@ def _text_reader():
     return Text
 
 
+def _indexed(r) -> tuple[int, int, int]:
+    """(bytes between the messages pymavlink's index found, the places they are in, the end of the last
+    message found) of a binary reader `r`: its index (`offsets` per message type, each type's `len`)
+    skips what does not start with a message header of a known type, byte by byte, to the next one."""
+    starts, lengths = [], []
+    for mtype, offsets in enumerate(r.offsets):
+        if offsets and mtype in r.formats:
+            starts.append(np.asarray(offsets, dtype=np.int64))
+            lengths.append(np.full(len(offsets), r.formats[mtype].len, dtype=np.int64))
+    if not starts:
+        return 0, 0, 0
+    o = np.concatenate(starts)
+    order = np.argsort(o, kind="stable")
+    o = o[order]
+    end = np.maximum.accumulate(o + np.concatenate(lengths)[order])
+    gaps = np.concatenate([[o[0]], o[1:] - end[:-1]])
+    return int(gaps[gaps > 0].sum()), int((gaps > 0).sum()), int(end[-1])
+
+
+def _binary(path: str):
+    """pymavlink's binary reader of `path`, and a note of the damage it skipped, or None. Its index stops
+    at a message header of an unknown type (a damaged type byte; TAIL_BYTES from the end it is the
+    log's usual garbage): such a header is zeroed in a copy and the copy read again, so that the index
+    skips it as the damaged bytes it is and reads on (at most MAX_RESUMES times; then read up to there)."""
+    from pymavlink import DFReader
+    with _quiet():
+        r = DFReader.DFReader_binary(path, zero_time_base=False)
+    skipped, places, end = _indexed(r)
+    data, resumed, tmp, unknown = None, 0, None, False
+    try:
+        while r.data_len - end >= TAIL_BYTES and resumed < MAX_RESUMES:
+            if data is None:
+                data = bytearray(read_bytes(path))
+            k = data.find(HEADER, end)
+            while k >= 0 and k + 2 < len(data) and data[k + 2] in r.formats:
+                k = data.find(HEADER, k + 1)
+            unknown = 0 <= k < len(data) - 2
+            if not unknown:
+                break
+            data[k:k + 3] = b"\0\0\0"
+            resumed += 1
+            if tmp is None:
+                fd, tmp = tempfile.mkstemp(suffix=".bin")
+                os.close(fd)
+            with open(tmp, "wb") as f:
+                f.write(data)
+            with _quiet():
+                r = DFReader.DFReader_binary(tmp, zero_time_base=False)      # (its map stays open once unlinked)
+            skipped, places, end = _indexed(r)
+    finally:
+        if tmp is not None:
+            os.unlink(tmp)
+    parts = []
+    if places:
+        parts.append(f"damaged: {skipped} bytes in {places} places skipped (each place a message or more lost: "
+                     "pymavlink reads on from the next message header)")
+    if r.data_len - end >= TAIL_BYTES:
+        parts.append(f"read up to byte {end} of {r.data_len}: " + (f"a message header of an unknown type there after "
+                     f"{MAX_RESUMES} read past" if unknown else "no message header after it"))
+    return r, "; ".join(parts) or None
+
+
+@contextlib.contextmanager
+def _quiet():
+    """pymavlink prints a line to stderr for each damaged byte it skips (its compiled index to the process's
+    own descriptor 2): the note says it once. Both are sent to /dev/null meanwhile."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 2)
+        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+
+
 def _read(path: str, text: bool):
     """(parameters, messages by type, formats by name, texts: the preamble and MSG lines). Each message
     gets `boot_s`: its TimeUS or TimeMS in s, else (ArduCopter 3.0-3.1 write MOT, ATT, CTUN without one)
@@ -84,24 +171,31 @@ def _read(path: str, text: bool):
     except ImportError:
         raise InputError(f"{path}: reading an ArduPilot log needs the logs extra: pip install '.[logs]' "
                          "(from the checkout)") from None
+    damage = None
     try:
-        r = (_text_reader() if text else DFReader.DFReader_binary)(path, zero_time_base=False)
+        if text:
+            r = _text_reader()(path, zero_time_base=False)
+        else:
+            r, damage = _binary(path)
     except Exception as e:
         raise InputError(f"{path}: not a readable DataFlash log ({type(e).__name__}: {e})") from None
     msgs: dict[str, list] = {k: [] for k in WANTED}
+    if damage:
+        msgs["_skipped"] = [damage]
     boot = None
-    while True:
-        try:
-            m = r.recv_match(type=WANTED)
-        except Exception as e:          # DFReader raises what the bytes give it: read up to there
-            msgs.setdefault("_damage", []).append(f"{type(e).__name__}: {e}")
-            break
-        if m is None:
-            break
-        us, ms = getattr(m, "TimeUS", None), getattr(m, "TimeMS", None)     # (GPS, whose TimeMS is its week's, is not read)
-        boot = us * 1e-6 if us is not None else ms * 1e-3 if ms is not None else boot
-        m.boot_s = boot
-        msgs[m.get_type()].append(m)
+    with _quiet():
+        while True:
+            try:
+                m = r.recv_match(type=WANTED)
+            except Exception as e:          # DFReader raises what the bytes give it: read up to there
+                msgs.setdefault("_damage", []).append(f"{type(e).__name__}: {e}")
+                break
+            if m is None:
+                break
+            us, ms = getattr(m, "TimeUS", None), getattr(m, "TimeMS", None)     # (GPS, whose TimeMS is its week's, is not read)
+            boot = us * 1e-6 if us is not None else ms * 1e-3 if ms is not None else boot
+            m.boot_s = boot
+            msgs[m.get_type()].append(m)
     texts = [str(getattr(m, "Message", "")) for m in msgs["MSG"]]
     if text:
         with open(path, "rb") as f:
@@ -295,12 +389,13 @@ def _filters(p: dict, firmware: str, texts: list[str], filtered: bool, imp: Impo
 def read(path: str, text: bool = False) -> Imported:
     p, msgs, formats, texts = _read(path, text)
     imp = Imported(path, {}, {}, [])
+    imp.notes += msgs.get("_skipped", [])
     if "_damage" in msgs:
         imp.notes.append(f"damaged: read up to {msgs['_damage'][0]}")
+    if _armed(msgs) is False:          # before the vehicle: what a bench log's frame says does not matter
+        imp.fail("never armed: the motors did not run in this log (" + ("ARM" if msgs["ARM"] else "EV") + " messages)")
     firmware = _firmware(msgs, texts)
     _vehicle(p, firmware, formats, texts, imp)
-    if _armed(msgs) is False:
-        imp.fail("never armed: the motors did not run in this log (" + ("ARM" if msgs["ARM"] else "EV") + " messages)")
     filtered, gsource, asource = _gyro(p, msgs, imp)
     rotors, source = _rotors(p, imp)
     imp.streams["motors"] = _motors(p, msgs, imp)

@@ -57,10 +57,12 @@ def read(path: str) -> Imported:
     u = _ulog(path)
     imp = Imported(path, {}, {}, [])
     p = u.initial_parameters
-    rotors, source = px4motors.vehicle(u, p, imp)        # refuses what is not a quadrotor, names why
+    # never armed is said first: a log of a board on the bench says nothing of its vehicle's flight, and
+    # its layout is often not set up yet (CA_ROTOR* missing would be refused as an unknown layout)
     armed = armed_times(u)
     if armed is not None and not armed[1].any():
         imp.fail("never armed: the motors did not run in this log (actuator_armed / vehicle_status.arming_state)")
+    rotors, source = px4motors.vehicle(u, p, imp)        # refuses what is not a quadrotor, names why
     sc = topic(u, "sensor_combined")
     if sc is None or "gyro_rad[0]" not in sc:
         imp.fail("no sensor_combined topic: the gyro was not logged")

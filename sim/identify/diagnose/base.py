@@ -170,6 +170,13 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     progress(f"base model identified from the flight: h2 = {h2:.1f}, "
              + ", ".join(f"{n} = {v:.4g} +- {e:.2g}" for n, v, e in zip(NAMES, theta, sd[1:])))
     free_t = {c: _free_t(st, c, ds.block_counts, jackknife_sd) for c in (0, 1, 5)}
+    thrust_source = "the motor commands, f = h1 (P - h2)^2 (eq. 26)"
+    measured = thrust_from_speeds(ds, speeds, jackknife_sd)
+    if measured is not None:
+        theta[3], sd[4] = measured
+        thrust_source = (f"the log's rotor speeds, f = c1 Omega^2 (eq. 27): acc_z on the sum of the squared speeds, "
+                         f"times the speed-per-command slope squared ({speeds['slope']:.4g} rad/s per P unit)")
+        progress(f"base model: the thrust effectiveness from the rotor speeds, k_z = {theta[3]:.4g} +- {sd[4]:.2g}")
     layout, more = _refuse(files, layout, theta, sd[1:], free_t, _shown(ds, slow))
     notes += more
     hover = hover_gains(gains, com, layout)
@@ -186,6 +193,7 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
                      "what": f"eq. 26: the thrust is zero at P = h2 (from {h2_source})"}}
     report.update({name: {"value": float(f"{v:.5g}"), "stderr": float(f"{e:.2g}"), "unit": u, "what": w}
                    for name, v, e, u, w in zip(NAMES, theta, sd[1:], UNITS, WHAT)})
+    report["k_z"]["source"] = thrust_source
     report["rotor_gain"] = {"value": [round(float(g), 4) for g in gains],
                             "stderr": [float(f"{e:.2g}") for e in gains_sd], "unit": "-",
                             "what": "each rotor's thrust and torque against the mean of the four (eq. 7's "
@@ -207,6 +215,30 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     report["coupling"] = {"value": list(coupling), "what": "eq. 7's a_p, a_q, a_r of a flat vehicle, Jzz = Jxx + Jyy"}
     return Vehicle(equivalent(h2, theta), layout, coupling, identified=True, identification=report,
                    gains=tuple(float(g) for g in gains)), notes
+
+
+def thrust_from_speeds(ds: DataSet, speeds: dict | None, jackknife_sd) -> tuple[float, float] | None:
+    """(k_z, its jackknife standard error) from the log's own rotor speeds, or None when a log has none on
+    its airborne rows. Each rotor's thrust is c1 Omega^2 (eq. 27): acc_z = (c1 / M) sum_i Omega_i^2 and an
+    offset, the sum low-passed and sensed as the data are (row k: the speeds with the accelerometer's
+    sample k + 1), fitted by the same weighted least squares on the blocks; with Omega = a (P - h2)
+    (`rotorspeed.rotor_speed_lag`'s common slope a) it is k_z = (c1 / M) a^2 per P^2. The speeds measure
+    the thrust where the commands only ask for it: a small quad's punch-outs shake the commands' fit
+    (its rotor lags, its ESC's curve) but not this one."""
+    if speeds is None or not speeds.get("slope", 0) > 0:
+        return None
+    per_file = []
+    for f in ds.files:
+        if f.omega is None or not np.isfinite(f.omega[:, f.airborne]).all():
+            return None
+        x = np.zeros((C, f.t.size))
+        x[5, :-1] = (np.nan_to_num(f.omega[:, 1:]) ** 2).sum(axis=0)
+        per_file.append(x)
+    st = linear_stats(ds, ds.measured, ds.flat_filtered(per_file)[..., None])
+    fit = lambda keep: float(solve(st, keep, ds.block_counts)[1][0])
+    a2 = float(speeds["slope"]) ** 2
+    jack = np.array([fit(np.arange(N_BLOCKS) != b) for b in range(N_BLOCKS)])
+    return fit(np.ones(N_BLOCKS, bool)) * a2, float(jackknife_sd(jack)) * a2
 
 
 AXES = (("roll", 0, 0), ("pitch", 1, 1), ("thrust", 3, 5))      # (axis, its index in NAMES, its channel)

@@ -11,7 +11,7 @@ import numpy as np
 
 from flightctl.logfile import Table
 from flightctl.params import Airframe
-from flightctl.physics import thrust_from_command
+from flightctl.physics import G, thrust_from_command
 
 MIN_AIRBORNE_S = 1.0     # s of airborne data needed in total to judge anything
 Z_AIRBORNE = 0.10        # m: below this the legs may touch and the range is near its 2 cm limit
@@ -41,6 +41,17 @@ SMOOTH_S = 0.5
 # zero is a contact force: the vehicle on its side (0) or its back (-g) with its motors running, as
 # after a crash (tests/data/ardupilot/log171.bin: 14 s on its back at full command), not flight.
 CONTACT_ACC_Z = 0.0
+# On the ground the vehicle is held still whatever its motors do (a slow take-off's ramp, a vehicle
+# stuck or tied down, one on its legs at full command): its gyro, averaged over SMOOTH_S, does not move
+# by REST_RATE in REST_S and its specific force, so averaged, stays at g (within REST_G of it) and does
+# not move by REST_ACC. Measured (docs/real-flights.md): px4/quadrotor_local.ulg on its legs while its
+# motors ramp to 0.9 of the hover's command for 5 s moves 0.0012 rad/s and 0.022 m/s^2 at most; in the air
+# no row of the shared logs or tests/data/ardupilot/log171.bin stays within both for REST_S (the steadiest
+# hover's 5th percentile: 0.043 rad/s, 0.068 m/s^2).
+REST_S = 1.0
+REST_RATE = 0.01         # rad/s
+REST_ACC = 0.05          # m/s^2
+REST_G = 0.1             # share of g
 # A barometer is too coarse to time a take-off (its noise and the rotors' wash move it by a few tenths
 # of a metre), but one that never rose this far above its level at rest while the motors ran says that
 # the vehicle may never have left the ground: said beside a refusal (base._shown), never a verdict.
@@ -192,15 +203,27 @@ def motors_on(P: np.ndarray, a: Airframe) -> np.ndarray:
 
 
 def _check_columns(table: Table, P: np.ndarray, low: float, what: str) -> None:
-    """Refuse what would give a confident verdict from no measurement: a sensor column that never
-    changes (a dead or unlogged sensor; a real IMU always reads noise), and a motor whose command
-    never leaves its lowest range while the others fly (the quadcopter cannot fly so: not logged)."""
+    """Refuse what would give a confident verdict from no measurement: a log too short or idle to hold
+    a flight (its motors ran for less than MIN_AIRBORNE_S: said first, since a sensor at rest can read
+    one quantum on every row of a short snippet - Betaflight's gyro in whole deg/s - which is no dead
+    sensor), a sensor column that never changes (a dead or unlogged sensor; a real IMU in flight always
+    reads noise), and a motor whose command never leaves its lowest range while the others fly (the
+    quadcopter cannot fly so: not logged)."""
+    t = table["t"]
+    dt = np.diff(t, append=t[-1])
+    ran = float(dt[(P > low).any(axis=0)].sum())
+    span = float(t[-1] - t[0])
+    if ran == 0.0:
+        table.fail(f"too short to judge: idle, no motor ran in its {span:.2g} s (every command at most {P.max():g}, "
+                   f"{what}): no airborne data")
+    if ran < MIN_AIRBORNE_S:
+        table.fail(f"too short to judge: its motors ran for {ran:.2g} s ({what}), idle for the rest of its {span:.2g} s; "
+                   f"at least {MIN_AIRBORNE_S:g} s of airborne data is needed")
     for name in IMU_COLUMNS:
         x = table[name]
         if np.ptp(x) == 0:
             table.fail(f"{x[0]:g} on every row: a dead or unlogged sensor cannot be judged", column=name)
     running = P > low
-    dt = np.diff(table["t"], append=table["t"][-1])
     for i in np.flatnonzero(~running.any(axis=1)):
         others = float(dt[np.delete(running, i, axis=0).all(axis=0)].sum())
         if others >= MIN_AIRBORNE_S:       # less is no flight: too short to judge, whatever the motor
@@ -224,12 +247,35 @@ def _levelled_range(t, rng, Rm):
     return z
 
 
-def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, acc_z: np.ndarray, notes: list[str]):
+def at_rest(t: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> np.ndarray:
+    """(n,) bool: the rows where the IMU says the vehicle is held still (on the ground, REST_S): the gyro
+    (3, n) averaged over SMOOTH_S moves by less than REST_RATE on every axis within REST_S around the
+    row, and the specific force's magnitude (acc, 3, n) so averaged stays within REST_G g of g and moves
+    by less than REST_ACC. A vehicle in the air is never so still: the loop moves it all the time."""
+    from scipy.ndimage import maximum_filter1d, minimum_filter1d
+    if t.size < 2:
+        return np.zeros(t.size, bool)
+    width = max(1, int(round(REST_S / float(np.median(np.diff(t))))))
+
+    def moved(x):
+        m = _smoothed(t, x)
+        return maximum_filter1d(m, width, mode="nearest") - minimum_filter1d(m, width, mode="nearest")
+
+    still = np.ones(t.size, bool)
+    for k in range(3):
+        still &= moved(gyro[k]) < REST_RATE
+    force = np.sqrt((acc * acc).sum(axis=0))
+    return still & (moved(force) < REST_ACC) & (np.abs(_smoothed(t, force) - G) < REST_G * G)
+
+
+def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc: np.ndarray, notes: list[str]):
     """A log of another vehicle (docs/real-flights.md): its rotor layout from the metadata, its height
     above the ground (a precise logged height, else a downward range levelled), and its airborne rows:
     all four motors running, the mean command at least THROTTLE_SHARE of its median while they run,
-    above Z_AIRBORNE when the height is known, and not on its side or back (`acc_z`, the body-z
-    specific force, averaged over SMOOTH_S at least CONTACT_ACC_Z)."""
+    above Z_AIRBORNE when the height is known, not on its side or back (`acc_z`, the body-z specific
+    force, averaged over SMOOTH_S at least CONTACT_ACC_Z), and not held still (`at_rest`: on the ground
+    whatever the motors do)."""
+    acc_z = acc[2]
     meta = table.meta
     if "rotors" not in meta:
         table.fail("# vehicle: foreign without a '# rotors:' line: the rotor layout is unknown")
@@ -241,11 +287,17 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, acc_z: np.ndarray, not
     else:
         z = _levelled_range(table["t"], table["range"], Rm)
     mean_p = P.mean(axis=0)
-    hover = float(np.median(mean_p[running])) if running.any() else 0.0
-    up = running & (mean_p >= THROTTLE_SHARE * hover)
+    rest = at_rest(table["t"], gyro, acc)
+    dt = float(np.median(np.diff(table["t"])))
+    if (running & rest).any():
+        notes.append(f"{(running & rest).sum() * dt:.1f} s with the motors running and the IMU held still (the gyro, "
+                     f"averaged over {SMOOTH_S:g} s, moving less than {REST_RATE:g} rad/s in {REST_S:g} s and the specific "
+                     f"force at g within {REST_ACC:g} m/s^2): on the ground, not airborne")
+    flown = running & ~rest
+    hover = float(np.median(mean_p[flown])) if flown.any() else 0.0
+    up = flown & (mean_p >= THROTTLE_SHARE * hover)
     contact = _smoothed(table["t"], acc_z) < CONTACT_ACC_Z
     if (up & contact).any():
-        dt = float(np.median(np.diff(table["t"])))
         notes.append(f"{(up & contact).sum() * dt:.1f} s with the motors running and the body-z specific force "
                      f"(acc_z, averaged over {SMOOTH_S:g} s) below {CONTACT_ACC_Z:g} m/s^2, which the rotors cannot "
                      f"give: on its side or its back (a contact force), not airborne")
@@ -253,7 +305,7 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, acc_z: np.ndarray, not
     if np.isfinite(z).any():
         up &= np.nan_to_num(z, nan=-1.0) > Z_AIRBORNE
     elif up.any():
-        up &= _between_take_off_and_landing(table["t"], np.where(contact, 0.0, mean_p), HOVER_SHARE * hover)
+        up &= _between_take_off_and_landing(table["t"], np.where(contact | rest, 0.0, mean_p), HOVER_SHARE * hover)
         notes.append(f"no precise height: airborne taken as all motors running with the mean command at least "
                      f"{THROTTLE_SHARE:g} of its median, from the first time it reaches {HOVER_SHARE:g} of it "
                      f"(averaged over {SMOOTH_S:g} s: the take-off) to the last (the landing)")
@@ -338,7 +390,7 @@ def load_file(table: Table, a: Airframe) -> FileData:
         ok = np.isfinite(bv)
         bv = np.interp(t, t[ok], bv[ok])
     if foreign:
-        layout, up, z, omega, baro = _foreign(table, P, Rm, acc[2], notes)
+        layout, up, z, omega, baro = _foreign(table, P, Rm, gyro, acc, notes)
     else:
         layout, omega, baro = Layout.plus(a.l), None, None
         z = _levelled_range(t, table["range"], Rm)

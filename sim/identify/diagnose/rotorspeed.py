@@ -94,13 +94,15 @@ def rotor_speed_lag(files: list[FileData]) -> dict | None:
     for m in range(4):    # each rotor's own lag at the common delay
         errs = [fit(lagged(t), delay)[0][m] for t in taus]
         per_motor.append(float(taus[int(np.argmin(errs))]))
+    gains, slope = _speed_gains(have, U, delay, fs)
     return {"tau": round(tau, 4), "delay": round(delay, 4), "rmse": round(rmse, 2),
             "per_motor_tau": [round(t, 4) for t in per_motor], "h2": round(float(np.median(h2)), 1),
             "h2_spread": round(float(np.std(h2)), 1), "samples": total,
-            "speed_gain": [round(float(g), 4) for g in _speed_gains(have, U, delay, fs)],
+            "speed_gain": [round(float(g), 4) for g in gains], "slope": float(f"{slope:.6g}"),
             "what": "first-order lag and pure delay from the command to the measured rotor speed, "
                     "Omega = a (P - h2) per rotor (eq. 26, 27), fitted on the airborne rows over 0-300 ms "
-                    "of each; speed_gain: each rotor's speed against the four's common speed-per-command curve"}
+                    "of each; speed_gain: each rotor's speed against the four's common speed-per-command curve; "
+                    "slope: that curve's a (rad/s per P unit)"}
 
 
 def _delayed_at(u: np.ndarray, samples: float, rows: np.ndarray) -> np.ndarray:
@@ -111,9 +113,9 @@ def _delayed_at(u: np.ndarray, samples: float, rows: np.ndarray) -> np.ndarray:
     return x if frac == 0.0 else (1.0 - frac) * x + frac * u[:, np.maximum(rows - m - 1, 0)]
 
 
-def _speed_gains(have, U, delay: float, fs: float) -> np.ndarray:
-    """(4,): each rotor's measured speed against one speed-per-command curve for the four, Omega =
-    a (x - h2) with x the timed command (least squares through the common curve, airborne rows)."""
+def _speed_gains(have, U, delay: float, fs: float) -> tuple[np.ndarray, float]:
+    """((4,): each rotor's measured speed against one speed-per-command curve for the four, Omega =
+    a (x - h2) with x the timed command (least squares through the common curve, airborne rows); a)."""
     xs, ys = [], []
     for f, u in zip(have, U):
         xs.append(shift(u, delay * fs)[:, f.airborne])
@@ -122,7 +124,7 @@ def _speed_gains(have, U, delay: float, fs: float) -> np.ndarray:
     A = np.stack([x.ravel(), np.ones(x.size)], axis=1)
     a, b = np.linalg.lstsq(A, y.ravel(), rcond=None)[0]
     common = a * x + b
-    return np.einsum("mn,mn->m", y, common) / np.einsum("mn,mn->m", common, common)
+    return np.einsum("mn,mn->m", y, common) / np.einsum("mn,mn->m", common, common), float(a)
 
 
 def timing_agreement(check: dict, gyro: tuple[str, float] | None) -> dict:
