@@ -44,6 +44,7 @@ from flightctl.service import prearm
 from flightctl.hil.serve import Cut, HilPlant, serve
 
 MODES = ("lockstep", "free")
+READY = "hil serve: ready"              # on stdout once the PC side answers (tcp: "listening on port N")
 LAND_S = 4.0            # the demo's descent ramp
 
 
@@ -112,6 +113,8 @@ def serve_main(args) -> int:
             port = lk.SerialPort(where, n)
         except lk.LinkError as e:
             raise InputError(str(e)) from None
+    if kind != "tcp":   # imported, plant built (compiled), port open: what `hil demo` waits for before its first contact
+        print(READY, flush=True)
     cut = Cut(*args.cut) if args.cut else None
     try:
         res = serve(port, plant, args.mode, args.seconds, cut)
@@ -136,7 +139,10 @@ def demo_plan(seconds: float) -> Plan:
 
 
 def _spawn_serve(args, tmp: Path):
-    """The PC side in a child process; returns (process, the flight side's --link, fds to close).
+    """The PC side in a child process; returns (process, the flight side's --link, fds to close), once
+    the child says it is ready (imported, its plant built, its end of the link open): however long that
+    takes on a busy machine, the flight side's first contact (flightctl/boards/hil.py, FIRST_CONTACT_S)
+    starts only then. A child that ends before it is ready is a BoardUnavailable naming its exit code.
     `-P`: the child imports the installed flightctl, never a source tree in the current directory."""
     cmd = [sys.executable, "-P", "-m", "flightctl.cli", "hil", "serve", "--mode", args.mode, "--seed", str(args.seed),
            "--json", str(tmp / "serve.json")]
@@ -145,19 +151,30 @@ def _spawn_serve(args, tmp: Path):
     if args.cut:
         cmd += ["--cut", *map(str, args.cut)]
     # its own session: Ctrl-C reaches the flight side alone, which stops and says goodbye over the link
+    popen = dict(stdout=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, start_new_session=True)
     if args.link == "pty":
         master, slave = os.openpty()
-        proc = subprocess.Popen(cmd + ["--link", f"fd:{master}"], pass_fds=(master,), stdin=subprocess.DEVNULL,
-                                start_new_session=True)
+        proc = subprocess.Popen(cmd + ["--link", f"fd:{master}"], pass_fds=(master,), **popen)
         os.close(master)
+        _await(proc, READY, [slave])
         return proc, f"serial:{os.ttyname(slave)},{lk.DEFAULT_BAUD}", [slave]
-    proc = subprocess.Popen(cmd + ["--link", "tcp:127.0.0.1:0"], stdout=subprocess.PIPE, stdin=subprocess.DEVNULL,
-                            text=True, start_new_session=True)
-    line = proc.stdout.readline()
-    if not line.startswith("hil serve: listening on port "):
-        proc.kill()
-        raise InputError(f"hil demo: the PC side did not start ({line.strip() or 'no output'})")
+    proc = subprocess.Popen(cmd + ["--link", "tcp:127.0.0.1:0"], **popen)
+    line = _await(proc, "hil serve: listening on port ", [])
     return proc, f"tcp:127.0.0.1:{int(line.rsplit(' ', 1)[1])}", []
+
+
+def _await(proc: subprocess.Popen, prefix: str, fds: list[int]) -> str:
+    """The child's first line of output, which starts with `prefix`: read until it comes or the child's
+    output ends (the child died), never against a clock."""
+    line = proc.stdout.readline()
+    if line.startswith(prefix):
+        return line.strip()
+    proc.kill()
+    rc = proc.wait()
+    for fd in fds:
+        os.close(fd)
+    raise BoardUnavailable(f"the PC side (flightctl hil serve) ended before it was ready (exit {rc}"
+                           + (f"; it said: {line.strip()}" if line.strip() else "") + ")")
 
 
 def _machine() -> tuple:
@@ -199,7 +216,11 @@ def demo_main(args) -> int:
     with tempfile.TemporaryDirectory(prefix="flightctl-hil-") as tmpdir:
         tmp = Path(tmpdir)
         before = _machine()
-        proc, spec, fds = _spawn_serve(args, tmp)
+        try:
+            proc, spec, fds = _spawn_serve(args, tmp)
+        except BoardUnavailable as e:
+            print(f"flightctl hil demo: cannot open the hil board: {e}", file=sys.stderr)
+            return 3
         try:
             try:
                 board = open_board("hil", params, BoardOptions(link=spec))
@@ -231,7 +252,12 @@ def demo_main(args) -> int:
                         outcome = f"not armed: {e}"
             finally:
                 board.close()
-            proc.wait(timeout=10)
+            # The PC side ends on its own, however slowly: at the flight side's BYE, or when its end of the
+            # link reads the end of file once every flight-side end is closed (hil/serve.py).
+            for fd in fds:
+                os.close(fd)
+            fds = []
+            proc.wait()
             after = _machine()
         finally:
             if proc.poll() is None:
