@@ -74,6 +74,9 @@ def _check_params_update(path: str, values: dict[str, float]) -> None:
 
 def identify(args) -> Identified:
     _doc, columns, text, fit = KINDS[args.kind]
+    for flag, path in (("--json", args.json), ("--write-params", args.write_params), ("--plot", args.plot)):
+        if path:
+            output_file(path, flag)
     airframe = paramfile.load(args.params).airframe
     table = read_table(args.file, columns, text_columns=text)
     try:
@@ -82,9 +85,6 @@ def identify(args) -> Identified:
         check_result(result)
     except FitError as e:
         table.fail(str(e))
-    for flag, path in (("--json", args.json), ("--write-params", args.write_params), ("--plot", args.plot)):
-        if path:
-            output_file(path, flag)
     if args.write_params:
         _check_params_update(args.write_params, result.values)
     image = None
@@ -106,11 +106,13 @@ def identify(args) -> Identified:
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
     if args.kind == "rcbenchmark":
+        output_file(args.out, "--out")
         from flightctl.sim.identify import realdata
         lines = realdata.convert(args.runs, args.out)
     elif args.kind == "real-data":
-        from flightctl.sim.identify import realdata, realplots
+        from flightctl.sim.identify import realdata
         data_dir, out_dir = realdata.report_dirs(args.data, args.out)
+        from flightctl.sim.identify import realplots
         res = realdata.analyse(data_dir)
         lines = realdata.write_report(res, realplots.images(res), args.data, out_dir)
     else:
