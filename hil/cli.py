@@ -44,6 +44,7 @@ from flightctl.service import prearm
 from flightctl.hil.serve import Cut, HilPlant, serve
 
 MODES = ("lockstep", "free")
+SUBCOMMANDS = ("serve", "demo")         # an error names `flightctl hil demo` (flightctl/cli.py)
 READY = "hil serve: ready"              # on stdout once the PC side answers (tcp: "listening on port N")
 LAND_S = 4.0            # the demo's descent ramp
 
@@ -55,7 +56,7 @@ class _Parser(argparse.ArgumentParser):
 
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="flightctl hil", description=__doc__.split("\n\n")[0])
-    sub = p.add_subparsers(dest="what", required=True, metavar="serve|demo")
+    sub = p.add_subparsers(dest="what", required=True, metavar="|".join(SUBCOMMANDS))
     s = sub.add_parser("serve", help="the PC side: the simulated plant answering the flight side")
     s.add_argument("--link", required=True, help="serial:/dev/ttyUSB0,921600 or tcp:PORT (tcp:0: any free port)")
     s.add_argument("--mode", choices=MODES, default="lockstep",

@@ -77,6 +77,11 @@ def parser() -> argparse.ArgumentParser:
 MAX_SUBSTEPS = 100
 
 
+def speed(ratio: float) -> str:
+    """Simulated time over wall time, to two significant figures below 10 (0.55x, 8.3x), whole above (71x)."""
+    return f"{ratio:.2f}x" if ratio < 1 else f"{ratio:.1f}x" if ratio < 10 else f"{ratio:.0f}x"
+
+
 def _finite(v: float) -> float | None:
     """JSON has no infinity or NaN: a step never settled, or a value not measured, is null."""
     return v if math.isfinite(v) else None
@@ -153,6 +158,10 @@ def main(argv: list[str]) -> int:
         output_file(args.json, "--json")
     if not args.no_plot:
         output_file(args.plot or log_path.with_suffix(".png"), "--plot", ".png")
+    link = None
+    if args.mavlink:      # a URL it cannot open is one line before anything flies
+        from flightctl.comms.mavlink import open_link
+        link = open_link(args.mavlink, params)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     path = "perfect state feedback" if args.truth else f"full onboard path, {args.estimator} estimator"
     say(f"flying {flown.name} ({flown.doc}); {gains_label(args, params)}, {path}"
@@ -162,10 +171,6 @@ def main(argv: list[str]) -> int:
             say(f"  --effect {e.cause} replaces the one the parameter file carries "
                 f"({', '.join(f'{k}={v:g}' for k, v in e.parameters)})")
     start = time.perf_counter()
-    link = None
-    if args.mavlink:
-        from flightctl.comms.mavlink import open_link
-        link = open_link(args.mavlink, params)
     if link is not None:
         link.ready(flown.name)
     interrupt = threading.Event()
@@ -187,7 +192,7 @@ def main(argv: list[str]) -> int:
         return EXIT_INTERRUPTED
     loop_reason = "" if flight.result.reason == "plan complete" else f" ({flight.result.reason})"
     print(f"{flown.name}: {flight.outcome}{loop_reason}; {duration:.1f} s flown in {wall:.1f} s "
-          f"({duration / wall:.0f}x real time), {len(log)} rows -> {log_path}")
+          f"({speed(duration / wall)} real time), {len(log)} rows -> {log_path}")
     for t, what in flight.result.events:
         print(f"  t = {t:6.2f} s  {what}")
     for t, vz in flight.touchdowns:

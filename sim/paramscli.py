@@ -80,6 +80,9 @@ def diff(a: str, b: str, gains: str | None = None) -> list[str]:
     return [f"--- {oa}", f"+++ {ob}"] + lines if lines else []
 
 
+SUBCOMMANDS = ("show", "diff")          # an error names `flightctl params show` (flightctl/cli.py)
+
+
 def main(argv: list[str]) -> int:
     p = _Parser(prog="flightctl params", description=__doc__.split("\n\n")[0],
                 epilog=__doc__.split("\n\n", 2)[2], formatter_class=argparse.RawDescriptionHelpFormatter)

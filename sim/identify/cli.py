@@ -32,6 +32,8 @@ KINDS = {  # kind: (help, columns, text columns, identify)
               inertia.identify_rotor),
 }
 
+SUBCOMMANDS = (*KINDS, "rcbenchmark", "real-data")    # an error names `flightctl identify bench` (flightctl/cli.py)
+
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):
