@@ -33,7 +33,7 @@ from flightctl.cli import EXIT_INTERRUPTED, ctrl_c_sets
 from flightctl.comms import link as lk
 from flightctl.boards import BoardOptions, BoardUnavailable, open_board
 from flightctl.control.spin import SpinController
-from flightctl.errors import InputError, output_file, seed, write_atomic
+from flightctl.errors import InputError, Parser, output_file, seed, write_atomic
 from flightctl.hal import ArmingRefused
 from flightctl.loop import FlightLoop
 from flightctl.params import load
@@ -49,13 +49,8 @@ READY = "hil serve: ready"              # on stdout once the PC side answers (tc
 LAND_S = 4.0            # the demo's descent ramp
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise InputError(message)
-
-
 def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="flightctl hil", description=__doc__.split("\n\n")[0])
+    p = Parser(prog="flightctl hil", description=__doc__.split("\n\n")[0])
     sub = p.add_subparsers(dest="what", required=True, metavar="|".join(SUBCOMMANDS))
     s = sub.add_parser("serve", help="the PC side: the simulated plant answering the flight side")
     s.add_argument("--link", required=True, help="serial:/dev/ttyUSB0,921600 or tcp:PORT (tcp:0: any free port)")
@@ -100,13 +95,9 @@ def serve_main(args) -> int:
     if args.json:
         output_file(args.json, "--json")
     params = load(args.params)
-    plant = HilPlant(params, args.seed)
+    # the link's end first (a port in use, a missing device: one line before the plant is built and compiled)
     if kind == "tcp":
         srv = _listen(where if args.link.count(":") == 2 else "0.0.0.0", n)   # tcp:PORT: every interface
-        print(f"hil serve: listening on port {srv.getsockname()[1]}", flush=True)
-        conn, peer = srv.accept()
-        srv.close()
-        port = lk.SocketPort(conn)
     elif kind == "fd":
         port = lk.FdPort(n)
     else:
@@ -114,6 +105,12 @@ def serve_main(args) -> int:
             port = lk.SerialPort(where, n)
         except lk.LinkError as e:
             raise InputError(str(e)) from None
+    plant = HilPlant(params, args.seed)
+    if kind == "tcp":       # a flight side that connects before this line waits in the listen queue
+        print(f"hil serve: listening on port {srv.getsockname()[1]}", flush=True)
+        conn, peer = srv.accept()
+        srv.close()
+        port = lk.SocketPort(conn)
     if kind != "tcp":   # imported, plant built (compiled), port open: what `hil demo` waits for before its first contact
         print(READY, flush=True)
     cut = Cut(*args.cut) if args.cut else None

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from flightctl.cli import EXIT_INTERRUPTED, ctrl_c_sets
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError, output_dir, output_file, seed, write_atomic
+from flightctl.errors import InputError, Parser, output_dir, output_file, seed, write_atomic
 from flightctl.params import GAIN_SETS, shipped
 from flightctl.sim import causes
 from flightctl.sim.world import faults
@@ -32,7 +32,7 @@ from flightctl.sim.flights.scenarios import SCENARIOS, scenario
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="flightctl sim", description=__doc__,
+    p = Parser(prog="flightctl sim", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", choices=sorted(SCENARIOS), help="the named plan to fly")
     p.add_argument("--plan", metavar="PLAN.toml", help="fly this plan file instead (as `flightctl run --plan`)")
@@ -257,7 +257,7 @@ def faults_main(argv: list[str]) -> int:
     """`flightctl sim faults --json M.json [--doc docs/safety.md]`: the fault-injection matrix."""
     from flightctl.sim.flights import faultmatrix
 
-    p = argparse.ArgumentParser(prog="flightctl sim faults", description=faultmatrix.__doc__)
+    p = Parser(prog="flightctl sim faults", description=faultmatrix.__doc__)
     p.add_argument("--json", required=True, metavar="M.json", help="the matrix, one object per fault")
     p.add_argument("--logs", metavar="DIR", help="where the flights' logs go (default: beside --json)")
     p.add_argument("--doc", metavar="safety.md", help="also write the table into this Markdown file, "

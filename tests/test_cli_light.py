@@ -34,6 +34,8 @@ BAD = [
     ["tune", "--out", "nodir/g.toml"],
     ["hil", "demo", "--json", "nodir/d.json"],
     ["hil", "serve", "--link", "tcp:0", "--json", "nodir/s.json"],
+    ["hil", "serve", "--link", "serial:/dev/no-such-port,921600"],
+    ["sim", "paper", "--monte-carlo", "abc"],
     ["params", "show", "no-such-vehicle"],
     ["log", "export", "flight.csv", "nodir/f.ulg"],
 ]

@@ -54,3 +54,14 @@ def test_a_bad_mavlink_url_is_one_line_before_anything_flies(tmp_path, capsys):
                                           (70.8, "71x")])
 def test_the_real_time_factor_keeps_two_figures_below_ten(ratio, shown):
     assert speed(ratio) == shown
+
+
+@pytest.mark.parametrize("argv", [["sim", "paper", "--monte-carlo", "abc"], ["sim", "faults", "--frob"],
+                                  ["analyze", "--alt", "abc"], ["tune", "--robust", "abc", "--out", "g.toml"],
+                                  ["bench", "--frob"], ["identify", "bench"], ["params", "frob"],
+                                  ["hil", "demo", "--seconds", "abc"]])
+def test_argparse_errors_are_one_line_not_a_usage_block(tmp_path, monkeypatch, capsys, argv):
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"flightctl {argv[0]}"), err

@@ -22,7 +22,7 @@ import numpy as np
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError, output_file, write_atomic
+from flightctl.errors import InputError, Parser, output_file, write_atomic
 from flightctl.sim.cli import gains_label
 from flightctl.params import GAIN_SETS, Params
 from flightctl.plans import HOVER_ALT
@@ -168,7 +168,7 @@ def plot(an: Analysis, prefix: str, title: str) -> list[Path]:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="flightctl analyze", description=__doc__,
+    p = Parser(prog="flightctl analyze", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
     p.add_argument("--gains", choices=sorted(GAIN_SETS),

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from flightctl import params as paramfile
-from flightctl.errors import InputError, output_file, read_toml, write_atomic
+from flightctl.errors import InputError, Parser, output_file, read_toml, write_atomic
 from flightctl.logfile import BENCH_COLUMNS, PENDULUM_COLUMNS, YAW_DRAG_COLUMNS, read_table
 from flightctl.sim.identify import inertia, propeller, yaw_drag
 from flightctl.sim.identify.fits import FitError, Identified, check_result
@@ -35,13 +35,8 @@ KINDS = {  # kind: (help, columns, text columns, identify)
 SUBCOMMANDS = (*KINDS, "rcbenchmark", "real-data")    # an error names `flightctl identify bench` (flightctl/cli.py)
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise InputError(message)
-
-
 def _parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="flightctl identify", description="Fit the paper's models to measured data "
+    parser = Parser(prog="flightctl identify", description="Fit the paper's models to measured data "
                      "(the files' columns and units: docs/identification.md in the flightctl checkout).")
     sub = parser.add_subparsers(dest="kind", required=True, metavar="KIND")
     for kind, (doc, *_rest) in KINDS.items():
