@@ -1,6 +1,7 @@
-"""The compiled plant (sim/world/compiled.py, numba, the `fast` extra) integrates what the plain one does:
-the same RK4 step and forces on random states and inputs for the base model and every ordered
-choice of the effects it carries, and the same flight; a model with another effect stays plain."""
+"""The compiled plant (sim/world/compiled.py; numba, in the default install where it has wheels)
+integrates what the plain one does: the same RK4 step and forces on random states and inputs for the
+base model and every ordered choice of the effects it carries, and the same flight; a model with
+another effect stays plain."""
 import itertools
 import os
 
@@ -19,7 +20,7 @@ from flightctl.sim.world.plant import Plant
 from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import SCENARIOS
 
-needs_numba = pytest.mark.skipif(not compiled.enabled(), reason="numba is not installed (the `fast` extra)")
+needs_numba = pytest.mark.skipif(not compiled.enabled(), reason="numba is not installed (a platform without its wheels)")
 
 EFFECTS = {"rotor_inflow": {"k": 0.32, "hub": 0.02}, "motor_dynamics": {"tau": 0.05, "tau_down": 0.09},
            "rotor_drag": {"k": 1.1, "yaw": 0.05}}
