@@ -156,13 +156,13 @@ def batch_rate(n: int = 10000, seconds: float = 1.0, workers: int = 1) -> tuple[
     return flight.vehicle_steps / wall, flight.vehicle_steps / cpu
 
 
-def _child_s(code: str, env: dict[str, str] | None = None) -> float:
-    """The last line a child process prints (a float): a figure measured in a fresh interpreter."""
+def _child_s(code: str, env: dict[str, str] | None = None) -> tuple[float, ...]:
+    """The numbers of the last line a child process prints: figures measured in a fresh interpreter."""
     import subprocess
     import sys
     r = subprocess.run([sys.executable, "-c", code], env={**os.environ, **(env or {})}, check=True,
                        stdout=subprocess.PIPE, text=True)
-    return float(r.stdout.strip().splitlines()[-1])
+    return tuple(float(x) for x in r.stdout.strip().splitlines()[-1].split())
 
 
 PAPER_RATIO = """
@@ -180,7 +180,7 @@ print(flight.log["t"][-1] / (time.perf_counter() - start))
 def plain_ratio() -> float:
     """Times faster than real time of `flightctl sim paper` (full onboard path, base model) with the
     world in plain Python (FLIGHTCTL_JIT=0), in a child process: one run."""
-    return _child_s(PAPER_RATIO, {"FLIGHTCTL_JIT": "0"})
+    return _child_s(PAPER_RATIO, {"FLIGHTCTL_JIT": "0"})[0]
 
 
 FIRST_CALL = {   # what: (set-up, not timed; the timed first call)
@@ -193,12 +193,14 @@ FIRST_CALL = {   # what: (set-up, not timed; the timed first call)
 }
 
 
-def first_call_s(what: str, fresh: bool) -> float:
-    """Wall seconds a fresh process spends making `what` ready (plant: the world's functions and the
+def first_call_s(what: str, fresh: bool) -> tuple[float, float]:
+    """(wall s, CPU s) a fresh process spends making `what` ready (plant: the world's functions and the
     chip's registers; batch: the batch's loop, the plant already made) from numba's cache, or compiled
-    into an empty cache folder (`fresh`). The imports are not counted."""
+    into an empty cache folder (`fresh`). The imports are not counted; the CPU time is the one a busy
+    machine does not inflate."""
     setup, timed = FIRST_CALL[what]
-    code = f"{setup}\nimport time\nstart = time.perf_counter()\n{timed}\nprint(time.perf_counter() - start)\n"
+    code = (f"{setup}\nimport time\nstart, cpu = time.perf_counter(), time.process_time()\n{timed}\n"
+            "print(time.perf_counter() - start, time.process_time() - cpu)\n")
     if not fresh:
         return _child_s(code)
     with tempfile.TemporaryDirectory(prefix="flightctl-numba-") as cache:
@@ -306,8 +308,9 @@ def figures(repeat: int) -> list[tuple[str, str, str]]:
                      "no numba)", f"{plain_ratio():.1f}x real time (one run)", ">= 30x"))
         for what, label in (("plant", "the simulated world (a flight's first call)"),
                             ("batch", "the batched simulator's loop (a batch's first call)")):
-            rows.append((f"first call: {label}", f"{first_call_s(what, False):.1f} s loading numba's cache, "
-                         f"{first_call_s(what, True):.0f} s compiling afresh (an empty cache)", "-"))
+            (load, load_cpu), (fresh, fresh_cpu) = first_call_s(what, False), first_call_s(what, True)
+            rows.append((f"first call: {label}", f"{load:.1f} s loading numba's cache ({load_cpu:.1f} s of CPU), "
+                         f"{fresh:.0f} s compiling afresh into an empty cache ({fresh_cpu:.0f} s of CPU)", "-"))
     period_us = 1e6 * params.airframe.dt
     for label, name in (("base model", None), ("paper-as-flown", "paper-as-flown")):
         world, onboard = min((split_us(name) for _ in range(repeat)), key=sum)
