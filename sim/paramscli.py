@@ -14,9 +14,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-from pathlib import Path
 
-from flightctl.errors import InputError, Parser
+from flightctl.errors import Parser
 from flightctl.params import GAIN_SETS, Params, dumps, load, resolve, shipped
 from flightctl.sim.causes import load_vehicle
 

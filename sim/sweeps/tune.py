@@ -36,7 +36,6 @@ same draws beside them.
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import math
