@@ -27,15 +27,48 @@ COMMANDS = {
     "analyze": ("flightctl.sim.analysis.cli", "linear analysis of each loop about hover: margins, damping, steps"),
     "tune": ("flightctl.sim.sweeps.tune", "the paper's PID tuning procedure (sec. 3.3), automated on the model"),
     "params": ("flightctl.sim.paramscli", "parameter files: params show [NAME|FILE], params diff A B"),
-    "log": ("flightctl.sim.logs.export", "flight logs: log export F.csv F.ulg (PX4's ULog), "
-                                         "log import FOREIGN_LOG OUT.csv (a PX4 or Betaflight log)"),
+    "log": ("flightctl.sim.logs.export", "flight logs: log export F.csv F.ulg (PX4's ULog), log import "
+                                         "FOREIGN_LOG OUT.csv (a PX4, ArduPilot, Betaflight or INAV log)"),
 }
+
+EXIT_CODES = (  # what every command's exit status means (a command's --help says which it uses)
+    (0, "done (the vehicle flew and landed, the fit or the report was written)"),
+    (1, "done, and the answer is no: a crash, a vehicle that did not fly, a bench run whose thrust fell, "
+        "two parameter files that differ"),
+    (2, "bad input: one line on stderr naming the file, row or flag; nothing written"),
+    (3, "cannot fly here: the board or its devices could not be opened (a named reason)"),
+    (EXIT_INTERRUPTED, "interrupted (Ctrl-C): the motors stopped, workers ended, a flight log kept as partial"),
+)
 
 
 def usage() -> str:
     lines = ["usage: flightctl COMMAND [ARGS]  (flightctl COMMAND --help for more)", "", "commands:"]
     lines += [f"  {name:<9} {doc}" for name, (_, doc) in COMMANDS.items()]
+    lines += ["", "exit codes:"] + [f"  {code:<9} {doc}" for code, doc in EXIT_CODES]
     return "\n".join(lines)
+
+
+def version() -> str:
+    """`flightctl --version`: this package's version, Python's, and which simulator `flightctl sim` flies
+    (compiled by numba, or plain Python), read from the installed packages' metadata without importing them."""
+    from importlib import metadata
+
+    from flightctl import __version__
+    try:
+        world = f"the compiled simulator (numba {metadata.version('numba')})"
+        if os.environ.get("FLIGHTCTL_JIT", "1") == "0":
+            world = "the plain-Python simulator (FLIGHTCTL_JIT=0; numba installed)"
+    except metadata.PackageNotFoundError:
+        world = "the plain-Python simulator (numba is not installed)"
+    return (f"flightctl {__version__} (Python {sys.version.split()[0]}, numpy {metadata.version('numpy')}; "
+            f"{world}) from {os.path.dirname(os.path.abspath(__file__))}")
+
+
+def command_name(argv: list[str], module=None) -> str:
+    """`flightctl COMMAND`, or `flightctl COMMAND SUB` for a command whose module lists its SUBCOMMANDS."""
+    if module is not None and len(argv) > 1 and argv[1] in getattr(module, "SUBCOMMANDS", ()):
+        return f"flightctl {argv[0]} {argv[1]}"
+    return f"flightctl {argv[0]}"
 
 
 def interrupted(e: BaseException) -> bool:
@@ -111,24 +144,24 @@ def main(argv: list[str] | None = None) -> int:
         print(usage())
         return 0
     if argv[0] in ("-V", "--version"):
-        from flightctl import __version__
-        print(__version__)
+        print(version())
         return 0
     if argv[0] not in COMMANDS:
         print(f"flightctl: unknown command {argv[0]!r}\n{usage()}", file=sys.stderr)
         return 2
     saved = sys.stdout, sys.stderr
     sys.stdout, sys.stderr = PipeSafe(sys.stdout), PipeSafe(sys.stderr)
+    module = None
     try:
         module = importlib.import_module(COMMANDS[argv[0]][0])
         return int(module.main(argv[1:]) or 0)
     except InputError as e:
-        print(f"flightctl {argv[0]}: error: {e}", file=sys.stderr)
+        print(f"{command_name(argv, module)}: error: {e}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, SystemError) as e:
         if not interrupted(e):
             raise
-        print(f"flightctl {argv[0]}: interrupted", file=sys.stderr)
+        print(f"{command_name(argv, module)}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     finally:
         for stream in (sys.stdout, sys.stderr):

@@ -3,6 +3,7 @@ readers every input file goes through: regular files only (a FIFO is never opene
 text (a byte-order mark is dropped, UTF-16 and binary are refused), bounded line length, TOML, and
 numbers written as numbers (`parse_number`). The outputs: checked before any work (`output_file`),
 written whole or not at all (`write_atomic`: a temporary name in the same folder, then a rename)."""
+import argparse
 import math
 import os
 import re
@@ -16,6 +17,14 @@ MAX_LINE = 65536          # characters: a measured-data row is a few hundred; cs
 
 class InputError(Exception):
     """Bad input (file, parameter, flag): the message names the file, row or column and what is wrong."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser whose errors (an unknown flag, a value that is not a number) are an InputError:
+    one line naming the command (flightctl/cli.py) and exit 2, not argparse's usage block."""
+
+    def error(self, message):
+        raise InputError(message)
 
 
 def output_file(path, what: str = "", suffix: str | None = None) -> Path:

@@ -12,6 +12,7 @@ import multiprocessing
 import os
 import queue
 import signal
+import sys
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +42,7 @@ class Table:
     columns: dict[str, np.ndarray]
     meta: dict[str, str] = field(default_factory=dict)
     lines: np.ndarray | None = None  # file line number of each row, for error messages
+    cut_short: str | None = None     # how the file was cut short (read_table's whole_lines), or None
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.columns[name]
@@ -65,20 +67,27 @@ class Table:
 
 def read_table(path: str | Path, required: tuple[str, ...], text_columns: tuple[str, ...] = (),
                optional: tuple[str, ...] = (), min_rows: int = 1,
-               allow_missing: tuple[str, ...] = (), text: str | None = None) -> Table:
+               allow_missing: tuple[str, ...] = (), text: str | None = None, whole_lines: bool = False) -> Table:
     """Read a CSV with a header row. `required` columns must be present; cells in them must be
     numbers (or, in `allow_missing`, empty/nan). `text_columns` are kept as strings. `text`: the
-    file's content already in hand (a log imported in memory), named `path` in messages."""
+    file's content already in hand (a log imported in memory), named `path` in messages.
+
+    `whole_lines`: every row of the file ends with a newline (FlightLogWriter's flight logs), so that a
+    last line without one is a row cut short (a full card, a copy stopped half-way): it is left out and
+    named in `Table.cut_short` (read_flight_log says it)."""
     path = str(path)
-    f = io.StringIO(read_text(path) if text is None else text, newline="")   # regular file, UTF-8, bounded lines
+    content = read_text(path) if text is None else text
+    f = io.StringIO(content, newline="")   # regular file, UTF-8, bounded lines
     meta: dict[str, str] = {}
     with f:
         header, header_line = None, 0
         rows, lines = [], []
+        last_is_row = False
         for lineno, raw in enumerate(f, start=1):
             s = raw.strip()
             if not s:
                 continue
+            last_is_row = False
             if s.startswith("#"):
                 key, sep, value = s[1:].partition(":")
                 if sep:
@@ -94,8 +103,14 @@ def read_table(path: str | Path, required: tuple[str, ...], text_columns: tuple[
                 continue
             rows.append(cells)
             lines.append(lineno)
+            last_is_row = raw == raw.rstrip("\r\n")         # the file's last line, without its newline
     if header is None:
         raise InputError(f"{path}: no header row (the file is empty)")
+    cut = None
+    if last_is_row and whole_lines:
+        cut = f"its last line ({lines[-1]}) ends mid-row, without a newline; read without it"
+        rows.pop()
+        lines.pop()
     index = {name: i for i, name in enumerate(header)}
     if len(index) < len(header):
         twice = next(name for name in header if header.count(name) > 1)
@@ -109,7 +124,7 @@ def read_table(path: str | Path, required: tuple[str, ...], text_columns: tuple[
     columns = {} if text_columns else _fast_columns(rows, index, wanted, allow_missing)
     if columns is None or text_columns:
         columns = _checked_columns(path, rows, lines, index, wanted, text_columns, allow_missing)
-    return Table(path, columns, meta, np.array(lines))
+    return Table(path, columns, meta, np.array(lines), cut)
 
 
 def _fast_columns(rows, index, wanted, allow_missing):
@@ -170,7 +185,8 @@ def read_flight_log(path: str | Path, min_seconds: float = 0.0, min_rows: int = 
     """A flight log as the contract defines it; time must be strictly increasing. `extra` names
     further columns to keep when present (they may be empty). `text`: as for `read_table`."""
     table = read_table(path, FLIGHT_COLUMNS, optional=MAG_COLUMNS + tuple(extra), min_rows=min_rows,
-                       allow_missing=SPARSE_COLUMNS + ESTIMATE_COLUMNS + ("battery_v",) + tuple(extra), text=text)
+                       allow_missing=SPARSE_COLUMNS + ESTIMATE_COLUMNS + ("battery_v",) + tuple(extra), text=text,
+                       whole_lines=text is None)
     t = table["t"]
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
@@ -184,6 +200,10 @@ def read_flight_log(path: str | Path, min_seconds: float = 0.0, min_rows: int = 
         if bad.size:
             k = int(bad[0])
             table.fail(f"{x[k]:g} is outside {what}", row=k, column=name)
+    # read: the one word that it is not the whole flight (a `# partial:` line is FlightLogWriter's own)
+    for what in filter(None, (table.cut_short, table.meta.get("partial") and
+                              f"the log says `# partial: {table.meta['partial']}`; read as far as it goes")):
+        print(f"{table.path}: cut short: {what}", file=sys.stderr)
     return table
 
 

@@ -45,7 +45,7 @@ from pathlib import Path
 from flightctl import __version__
 from flightctl.cli import interrupted
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, open_board
-from flightctl.errors import InputError, output_file, seed
+from flightctl.errors import InputError, Parser, output_file, seed
 from flightctl.hal import PWM_RANGE
 from flightctl.hil import instruments as ins
 from flightctl.logfile import BENCH_COLUMNS
@@ -342,7 +342,7 @@ def confirm_clamped(args, board: Board, read=input) -> None:
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="flightctl bench", description=__doc__.split("\n\n")[0])
+    p = Parser(prog="flightctl bench", description=__doc__.split("\n\n")[0])
     p.add_argument("--board", default="auto", help=f"the board (default auto: pi5 on a Raspberry Pi 5, else pi): {described('hil')}")
     p.add_argument("--instruments", help="pty (simulated; the default on --board sim), serial:PATH[,BAUD] "
                    "(the line protocol; the default on hardware: serial:/dev/ttyACM0,115200), rcbenchmark:PATH[,BAUD]")

@@ -33,7 +33,7 @@ from flightctl.cli import EXIT_INTERRUPTED, ctrl_c_sets
 from flightctl.comms import link as lk
 from flightctl.boards import BoardOptions, BoardUnavailable, open_board
 from flightctl.control.spin import SpinController
-from flightctl.errors import InputError, output_file, seed, write_atomic
+from flightctl.errors import InputError, Parser, output_file, seed, write_atomic
 from flightctl.hal import ArmingRefused
 from flightctl.loop import FlightLoop
 from flightctl.params import load
@@ -44,17 +44,14 @@ from flightctl.service import prearm
 from flightctl.hil.serve import Cut, HilPlant, serve
 
 MODES = ("lockstep", "free")
+SUBCOMMANDS = ("serve", "demo")         # an error names `flightctl hil demo` (flightctl/cli.py)
+READY = "hil serve: ready"              # on stdout once the PC side answers (tcp: "listening on port N")
 LAND_S = 4.0            # the demo's descent ramp
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise InputError(message)
-
-
 def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="flightctl hil", description=__doc__.split("\n\n")[0])
-    sub = p.add_subparsers(dest="what", required=True, metavar="serve|demo")
+    p = Parser(prog="flightctl hil", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="what", required=True, metavar="|".join(SUBCOMMANDS))
     s = sub.add_parser("serve", help="the PC side: the simulated plant answering the flight side")
     s.add_argument("--link", required=True, help="serial:/dev/ttyUSB0,921600 or tcp:PORT (tcp:0: any free port)")
     s.add_argument("--mode", choices=MODES, default="lockstep",
@@ -98,13 +95,9 @@ def serve_main(args) -> int:
     if args.json:
         output_file(args.json, "--json")
     params = load(args.params)
-    plant = HilPlant(params, args.seed)
+    # the link's end first (a port in use, a missing device: one line before the plant is built and compiled)
     if kind == "tcp":
         srv = _listen(where if args.link.count(":") == 2 else "0.0.0.0", n)   # tcp:PORT: every interface
-        print(f"hil serve: listening on port {srv.getsockname()[1]}", flush=True)
-        conn, peer = srv.accept()
-        srv.close()
-        port = lk.SocketPort(conn)
     elif kind == "fd":
         port = lk.FdPort(n)
     else:
@@ -112,6 +105,14 @@ def serve_main(args) -> int:
             port = lk.SerialPort(where, n)
         except lk.LinkError as e:
             raise InputError(str(e)) from None
+    plant = HilPlant(params, args.seed)
+    if kind == "tcp":       # a flight side that connects before this line waits in the listen queue
+        print(f"hil serve: listening on port {srv.getsockname()[1]}", flush=True)
+        conn, peer = srv.accept()
+        srv.close()
+        port = lk.SocketPort(conn)
+    if kind != "tcp":   # imported, plant built (compiled), port open: what `hil demo` waits for before its first contact
+        print(READY, flush=True)
     cut = Cut(*args.cut) if args.cut else None
     try:
         res = serve(port, plant, args.mode, args.seconds, cut)
@@ -136,7 +137,10 @@ def demo_plan(seconds: float) -> Plan:
 
 
 def _spawn_serve(args, tmp: Path):
-    """The PC side in a child process; returns (process, the flight side's --link, fds to close).
+    """The PC side in a child process; returns (process, the flight side's --link, fds to close), once
+    the child says it is ready (imported, its plant built, its end of the link open): however long that
+    takes on a busy machine, the flight side's first contact (flightctl/boards/hil.py, FIRST_CONTACT_S)
+    starts only then. A child that ends before it is ready is a BoardUnavailable naming its exit code.
     `-P`: the child imports the installed flightctl, never a source tree in the current directory."""
     cmd = [sys.executable, "-P", "-m", "flightctl.cli", "hil", "serve", "--mode", args.mode, "--seed", str(args.seed),
            "--json", str(tmp / "serve.json")]
@@ -145,19 +149,30 @@ def _spawn_serve(args, tmp: Path):
     if args.cut:
         cmd += ["--cut", *map(str, args.cut)]
     # its own session: Ctrl-C reaches the flight side alone, which stops and says goodbye over the link
+    popen = dict(stdout=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, start_new_session=True)
     if args.link == "pty":
         master, slave = os.openpty()
-        proc = subprocess.Popen(cmd + ["--link", f"fd:{master}"], pass_fds=(master,), stdin=subprocess.DEVNULL,
-                                start_new_session=True)
+        proc = subprocess.Popen(cmd + ["--link", f"fd:{master}"], pass_fds=(master,), **popen)
         os.close(master)
+        _await(proc, READY, [slave])
         return proc, f"serial:{os.ttyname(slave)},{lk.DEFAULT_BAUD}", [slave]
-    proc = subprocess.Popen(cmd + ["--link", "tcp:127.0.0.1:0"], stdout=subprocess.PIPE, stdin=subprocess.DEVNULL,
-                            text=True, start_new_session=True)
-    line = proc.stdout.readline()
-    if not line.startswith("hil serve: listening on port "):
-        proc.kill()
-        raise InputError(f"hil demo: the PC side did not start ({line.strip() or 'no output'})")
+    proc = subprocess.Popen(cmd + ["--link", "tcp:127.0.0.1:0"], **popen)
+    line = _await(proc, "hil serve: listening on port ", [])
     return proc, f"tcp:127.0.0.1:{int(line.rsplit(' ', 1)[1])}", []
+
+
+def _await(proc: subprocess.Popen, prefix: str, fds: list[int]) -> str:
+    """The child's first line of output, which starts with `prefix`: read until it comes or the child's
+    output ends (the child died), never against a clock."""
+    line = proc.stdout.readline()
+    if line.startswith(prefix):
+        return line.strip()
+    proc.kill()
+    rc = proc.wait()
+    for fd in fds:
+        os.close(fd)
+    raise BoardUnavailable(f"the PC side (flightctl hil serve) ended before it was ready (exit {rc}"
+                           + (f"; it said: {line.strip()}" if line.strip() else "") + ")")
 
 
 def _machine() -> tuple:
@@ -199,7 +214,11 @@ def demo_main(args) -> int:
     with tempfile.TemporaryDirectory(prefix="flightctl-hil-") as tmpdir:
         tmp = Path(tmpdir)
         before = _machine()
-        proc, spec, fds = _spawn_serve(args, tmp)
+        try:
+            proc, spec, fds = _spawn_serve(args, tmp)
+        except BoardUnavailable as e:
+            print(f"flightctl hil demo: cannot open the hil board: {e}", file=sys.stderr)
+            return 3
         try:
             try:
                 board = open_board("hil", params, BoardOptions(link=spec))
@@ -231,7 +250,12 @@ def demo_main(args) -> int:
                         outcome = f"not armed: {e}"
             finally:
                 board.close()
-            proc.wait(timeout=10)
+            # The PC side ends on its own, however slowly: at the flight side's BYE, or when its end of the
+            # link reads the end of file once every flight-side end is closed (hil/serve.py).
+            for fd in fds:
+                os.close(fd)
+            fds = []
+            proc.wait()
             after = _machine()
         finally:
             if proc.poll() is None:

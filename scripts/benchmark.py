@@ -13,11 +13,21 @@ The iteration is timed on the onboard code only (the fastest of many short runs)
 fixed frame, so the simulated chip's cost is not counted), the calibration, the motor-loss check, the
 estimator, the four PIDs, the mixer and eq. 26 inverted to counts. Targets: >= 30x real time, < 3 % of the period.
 
+The paper flight is measured with the simulated world compiled by numba (the default install) and,
+in a child process with FLIGHTCTL_JIT=0, as plain Python (a platform without numba's wheels: one run).
+
 The batched simulator (sim/sweeps/batch.py): vehicle-steps per second (one loop period of one vehicle,
 flown as the full path flies it: the plant, its chip and sonar, the onboard loop and the controller's
 compiled copy) for N = 10,000 vehicles of the as-flown model, each with its own draw of the file's
-ranges, from power-on through the calibration on the floor and the take-off's first second, on one
-core and on every core. Target: 2,000,000 per core at N = 10,000.
+ranges, from power-on through the calibration on the floor and the take-off's first second (3 s, two
+thirds of it on the floor, where a step costs about a quarter of an airborne one), on one core and on
+every core. Target: 2,000,000 per core at N = 10,000. Beside it, the rate of what a Monte Carlo flies:
+N = 2,000 vehicles for 12 s (10 s after arming, mostly in the air), on one core.
+
+The first call: what a fresh process pays before its first flight, beside the warm figures above: numba
+loading the compiled world from its cache (every later process), and compiling it afresh (the first
+run after installing or changing the plant's code: an empty cache folder), for the plant (one flight)
+and for the batch's loop, each in a child process (its wall time).
 
 And how long `flightctl diagnose` takes on real flight logs (../shared/data/real/flights, the `logs`
 extra): INDIflight's LOG00230 (26 s at 500 Hz, rotor speeds), btfl_002 (151 s at 500 Hz) and LOG00037
@@ -146,6 +156,57 @@ def batch_rate(n: int = 10000, seconds: float = 1.0, workers: int = 1) -> tuple[
     return flight.vehicle_steps / wall, flight.vehicle_steps / cpu
 
 
+def _child_s(code: str, env: dict[str, str] | None = None) -> tuple[float, ...]:
+    """The numbers of the last line a child process prints: figures measured in a fresh interpreter."""
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-c", code], env={**os.environ, **(env or {})}, check=True,
+                       stdout=subprocess.PIPE, text=True)
+    return tuple(float(x) for x in r.stdout.strip().splitlines()[-1].split())
+
+
+PAPER_RATIO = """
+import tempfile, time
+from pathlib import Path
+from flightctl.params import load
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import SCENARIOS
+start = time.perf_counter()
+flight = fly(SCENARIOS["paper"](), load(None), Path(tempfile.mkdtemp()) / "paper.csv")
+print(flight.log["t"][-1] / (time.perf_counter() - start))
+"""
+
+
+def plain_ratio() -> float:
+    """Times faster than real time of `flightctl sim paper` (full onboard path, base model) with the
+    world in plain Python (FLIGHTCTL_JIT=0), in a child process: one run."""
+    return _child_s(PAPER_RATIO, {"FLIGHTCTL_JIT": "0"})[0]
+
+
+FIRST_CALL = {   # what: (set-up, not timed; the timed first call)
+    "plant": ("from flightctl.sim.world import compiled, imu", "compiled.functions()\nimu.chip_frame_compiled()"),
+    "batch": ("from flightctl.params import load\nfrom flightctl.sim.flights.scenarios import SCENARIOS\n"
+              "from flightctl.sim.sweeps.batch import simulate\nfrom flightctl.sim.sweeps.montecarlo import draw\n"
+              "from flightctl.sim.world import compiled, imu\ncompiled.functions()\nimu.chip_frame_compiled()\n"
+              "p = load('paper-as-flown')",
+              "simulate(p, SCENARIOS['paper']().plan, 1, draw(p, 1, 0), until=0.01)"),
+}
+
+
+def first_call_s(what: str, fresh: bool) -> tuple[float, float]:
+    """(wall s, CPU s) a fresh process spends making `what` ready (plant: the world's functions and the
+    chip's registers; batch: the batch's loop, the plant already made) from numba's cache, or compiled
+    into an empty cache folder (`fresh`). The imports are not counted; the CPU time is the one a busy
+    machine does not inflate."""
+    setup, timed = FIRST_CALL[what]
+    code = (f"{setup}\nimport time\nstart, cpu = time.perf_counter(), time.process_time()\n{timed}\n"
+            "print(time.perf_counter() - start, time.process_time() - cpu)\n")
+    if not fresh:
+        return _child_s(code)
+    with tempfile.TemporaryDirectory(prefix="flightctl-numba-") as cache:
+        return _child_s(code, {"NUMBA_CACHE_DIR": cache})
+
+
 def split_us(name: str | None) -> tuple[float, float]:
     """Per loop period of `sim paper` (full onboard path): (us in the simulated world: the plant, the
     chip's SPI answers, the sonar's edges, the battery; us in the onboard loop and the log). The second
@@ -241,6 +302,15 @@ def figures(repeat: int) -> list[tuple[str, str, str]]:
             ratios.append(flight.log["t"][-1] / wall)
         rows.append((f"`flightctl sim paper`, {label}", f"{statistics.median(ratios):.1f}x real time (median of "
                      f"{repeat}; {min(ratios):.1f}x to {max(ratios):.1f}x)", target))
+    from flightctl.sim.world import compiled
+    if compiled.enabled():
+        rows.append(("`flightctl sim paper`, full onboard path, the world in plain Python (FLIGHTCTL_JIT=0: "
+                     "no numba)", f"{plain_ratio():.1f}x real time (one run)", ">= 30x"))
+        for what, label in (("plant", "the simulated world (a flight's first call)"),
+                            ("batch", "the batched simulator's loop (a batch's first call)")):
+            (load, load_cpu), (fresh, fresh_cpu) = first_call_s(what, False), first_call_s(what, True)
+            rows.append((f"first call: {label}", f"{load:.1f} s loading numba's cache ({load_cpu:.1f} s of CPU), "
+                         f"{fresh:.0f} s compiling afresh into an empty cache ({fresh_cpu:.0f} s of CPU)", "-"))
     period_us = 1e6 * params.airframe.dt
     for label, name in (("base model", None), ("paper-as-flown", "paper-as-flown")):
         world, onboard = min((split_us(name) for _ in range(repeat)), key=sum)
@@ -263,6 +333,9 @@ def figures(repeat: int) -> list[tuple[str, str, str]]:
                      f"{rate / 1e6:.2f} M vehicle-steps/s (best of {repeat}; {rate / workers / 1e6:.2f} M per core"
                      + (f", {cpu / 1e6:.2f} M per s of this process's CPU)" if workers == 1 else ")"),
                      ">= 2.0 M per core"))
+    airborne = max(batch_rate(n=2000, seconds=10.0)[0] for _ in range(repeat))
+    rows.append(("batched simulator, 2,000 as-flown vehicles for 12 s on 1 core (10 s after arming: mostly in the "
+                 "air, as a Monte Carlo flies)", f"{airborne / 1e6:.2f} M vehicle-steps/s (best of {repeat})", "-"))
     for name, rate in DIAGNOSED:
         cost = diagnose_cost(name)
         if cost is None:

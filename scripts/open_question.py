@@ -9,8 +9,8 @@ noise seeds (60 degrees = crash). Writes the figure and the numbers beside it (.
 
     python scripts/open_question.py [--out docs/open-question.png] [--quick]
     python scripts/open_question.py --params paper-as-flown --out docs/open-question-as-flown.png --seeds 1
-    python scripts/open_question.py [--out ...] --table     the numbers of the .json beside the figure, as
-                                                            Markdown tables (docs/diagnose.md's blocks)
+    python scripts/open_question.py --from NUMBERS.json --table     the numbers of a run (the .json beside
+                                                            its figure) as Markdown tables (docs/diagnose.md's blocks)
 
 On a model that already carries `motor_dynamics` (the as-flown file), the motor-lag sweep replaces its
 time constant instead of adding a second lag.
@@ -68,12 +68,15 @@ def main(argv=None) -> int:
     ap.add_argument("--table", action="store_true", help="print the .json beside the figure as Markdown tables")
     ap.add_argument("--params", help="parameter file or shipped name (default: the paper's base model)")
     ap.add_argument("--seeds", type=int, default=len(SEEDS), help="noise seeds per case (default 3)")
+    ap.add_argument("--from", dest="source", metavar="NUMBERS.json",
+                    help="the numbers --table prints and --replot draws (default: the .json beside --out)")
     args = ap.parse_args(argv)
+    source = Path(args.source) if args.source else Path(args.out).with_suffix(".json")
     if args.table:
-        print(table(json.loads(Path(args.out).with_suffix(".json").read_text())))
+        print(table(json.loads(source.read_text())))
         return 0
     if args.replot:
-        plot(json.loads(Path(args.out).with_suffix(".json").read_text()), args.out)
+        plot(json.loads(source.read_text()), args.out)
         return 0
     log = Path(args.out).with_suffix(".tmp.csv")
     results = {}

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from flightctl.cli import EXIT_INTERRUPTED, ctrl_c_sets
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError, output_dir, output_file, seed, write_atomic
+from flightctl.errors import InputError, Parser, output_dir, output_file, seed, write_atomic
 from flightctl.params import GAIN_SETS, shipped
 from flightctl.sim import causes
 from flightctl.sim.world import faults
@@ -32,7 +32,7 @@ from flightctl.sim.flights.scenarios import SCENARIOS, scenario
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="flightctl sim", description=__doc__,
+    p = Parser(prog="flightctl sim", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", choices=sorted(SCENARIOS), help="the named plan to fly")
     p.add_argument("--plan", metavar="PLAN.toml", help="fly this plan file instead (as `flightctl run --plan`)")
@@ -75,6 +75,11 @@ def parser() -> argparse.ArgumentParser:
 # One RK4 step a loop period (2.2 ms) already resolves the fastest term of the model (the motors' 20-40 ms);
 # 100 steps of 22 us are far below every time constant, and the flight then runs slower than real time.
 MAX_SUBSTEPS = 100
+
+
+def speed(ratio: float) -> str:
+    """Simulated time over wall time, to two significant figures below 10 (0.55x, 8.3x), whole above (71x)."""
+    return f"{ratio:.2f}x" if ratio < 1 else f"{ratio:.1f}x" if ratio < 10 else f"{ratio:.0f}x"
 
 
 def _finite(v: float) -> float | None:
@@ -153,6 +158,10 @@ def main(argv: list[str]) -> int:
         output_file(args.json, "--json")
     if not args.no_plot:
         output_file(args.plot or log_path.with_suffix(".png"), "--plot", ".png")
+    link = None
+    if args.mavlink:      # a URL it cannot open is one line before anything flies
+        from flightctl.comms.mavlink import open_link
+        link = open_link(args.mavlink, params)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     path = "perfect state feedback" if args.truth else f"full onboard path, {args.estimator} estimator"
     say(f"flying {flown.name} ({flown.doc}); {gains_label(args, params)}, {path}"
@@ -162,10 +171,6 @@ def main(argv: list[str]) -> int:
             say(f"  --effect {e.cause} replaces the one the parameter file carries "
                 f"({', '.join(f'{k}={v:g}' for k, v in e.parameters)})")
     start = time.perf_counter()
-    link = None
-    if args.mavlink:
-        from flightctl.comms.mavlink import open_link
-        link = open_link(args.mavlink, params)
     if link is not None:
         link.ready(flown.name)
     interrupt = threading.Event()
@@ -187,7 +192,7 @@ def main(argv: list[str]) -> int:
         return EXIT_INTERRUPTED
     loop_reason = "" if flight.result.reason == "plan complete" else f" ({flight.result.reason})"
     print(f"{flown.name}: {flight.outcome}{loop_reason}; {duration:.1f} s flown in {wall:.1f} s "
-          f"({duration / wall:.0f}x real time), {len(log)} rows -> {log_path}")
+          f"({speed(duration / wall)} real time), {len(log)} rows -> {log_path}")
     for t, what in flight.result.events:
         print(f"  t = {t:6.2f} s  {what}")
     for t, vz in flight.touchdowns:
@@ -252,7 +257,7 @@ def faults_main(argv: list[str]) -> int:
     """`flightctl sim faults --json M.json [--doc docs/safety.md]`: the fault-injection matrix."""
     from flightctl.sim.flights import faultmatrix
 
-    p = argparse.ArgumentParser(prog="flightctl sim faults", description=faultmatrix.__doc__)
+    p = Parser(prog="flightctl sim faults", description=faultmatrix.__doc__)
     p.add_argument("--json", required=True, metavar="M.json", help="the matrix, one object per fault")
     p.add_argument("--logs", metavar="DIR", help="where the flights' logs go (default: beside --json)")
     p.add_argument("--doc", metavar="safety.md", help="also write the table into this Markdown file, "

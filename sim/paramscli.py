@@ -14,19 +14,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-from pathlib import Path
 
-from flightctl.errors import InputError
+from flightctl.errors import Parser
 from flightctl.params import GAIN_SETS, Params, dumps, load, resolve, shipped
 from flightctl.sim.causes import load_vehicle
 
 DEFAULTS = "defaults"
 TABLES = ("airframe", "gains", "filters", "sensors")
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise InputError(message)
 
 
 def _read(spec: str | None, gains: str | None) -> Params:
@@ -80,8 +74,11 @@ def diff(a: str, b: str, gains: str | None = None) -> list[str]:
     return [f"--- {oa}", f"+++ {ob}"] + lines if lines else []
 
 
+SUBCOMMANDS = ("show", "diff")          # an error names `flightctl params show` (flightctl/cli.py)
+
+
 def main(argv: list[str]) -> int:
-    p = _Parser(prog="flightctl params", description=__doc__.split("\n\n")[0],
+    p = Parser(prog="flightctl params", description=__doc__.split("\n\n")[0],
                 epilog=__doc__.split("\n\n", 2)[2], formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="action", required=True)
     s = sub.add_parser("show", help="print a full parameter file with units and sources")

@@ -120,7 +120,7 @@ def test_the_batchs_uniforms_are_the_mersenne_twisters_random_calls():
             assert a.getstate() == b.getstate()
 
 
-@pytest.mark.skipif(not compiled.enabled(), reason="the batch's speed needs numba (the fast extra)")
+@pytest.mark.skipif(not compiled.enabled(), reason="the batch's speed needs numba (the default install)")
 def test_a_batch_vehicle_flies_the_full_paths_flight():
     """Two draws of paper-as-flown's ranges, each with its seed: the batch's record of the true and
     estimated attitude is the full onboard path's log, to the bit, and its outcome is the same."""
@@ -141,7 +141,7 @@ def test_a_batch_vehicle_flies_the_full_paths_flight():
         assert rows > 4000                                # it flew past the step (at 10 s)
 
 
-@pytest.mark.skipif(not compiled.enabled(), reason="the batch's speed needs numba (the fast extra)")
+@pytest.mark.skipif(not compiled.enabled(), reason="the batch's speed needs numba (the default install)")
 def test_the_batched_monte_carlo_judges_each_draw_as_the_full_path():
     """`--batch` against the full path on the same three draws of step_roll: per draw and gain set, the
     same outcome, the same settle verdict and the same score (the paper's figures)."""

@@ -83,3 +83,40 @@ def test_a_picture_that_differs_is_told_from_one_that_does_not(tmp_path):
         Image.fromarray(image).save(tmp_path / name)
     assert DOCS.same_picture(tmp_path / "a.png", tmp_path / "b.png")
     assert not DOCS.same_picture(tmp_path / "a.png", tmp_path / "c.png")
+
+
+def _reads(command: tuple[str, ...]) -> list[str]:
+    """The arguments of a command that name a file of the checkout; each must be read, not written."""
+    return [a for a in command[1:] if "{" not in a and (ROOT / a).is_file()]
+
+
+@pytest.mark.parametrize("x", DOCS.BLOCKS + DOCS.FIGURES, ids=[x.id for x in DOCS.BLOCKS + DOCS.FIGURES])
+def test_no_command_names_a_tracked_file_but_as_its_input(x):
+    """A command writes into {tmp}, {doc} or {dir} (a copy when checking), never into the checkout:
+    `--check open-question-as-flown-table` once named docs/open-question-as-flown.png as its --out.
+    A file of the checkout is the script itself or follows --from."""
+    args = list(x.command)
+    for a in _reads(x.command):
+        i = args.index(a)
+        assert i == 1 and a.startswith("scripts/") or args[i - 1] == "--from", f"{x.id}: {args[i - 1]} {a}"
+
+
+def test_checking_a_block_leaves_the_checkout_as_it_was():
+    docs = sorted((ROOT / "docs").iterdir())
+    before = {p: p.read_bytes() for p in docs if p.is_file()}
+    assert DOCS.main(["--check", "open-question-as-flown-table", "open-question-table"]) == 0
+    assert sorted((ROOT / "docs").iterdir()) == docs
+    assert all(p.read_bytes() == data for p, data in before.items())
+
+
+def test_quick_leaves_out_every_paper_flight():
+    """A paper flight is 86 s flown: over a minute with numba compiling afresh or without numba on a busy
+    machine, so --list does not call it 0.1 min and --quick leaves it out."""
+    flying = [x for x in DOCS.BLOCKS + DOCS.FIGURES if "sim" in x.command and "paper" in x.command]
+    assert len(flying) >= 2
+    assert all(x.minutes > 1 for x in flying), [(x.id, x.minutes) for x in flying]
+    assert not set(DOCS.pick([], quick=True)) & set(flying)
+    same_script = {x.command[1]: x.minutes for x in DOCS.BLOCKS if x.command[1].startswith("scripts/")}
+    for f in DOCS.FIGURES:                      # a figure drawn by a block's script costs what the block costs
+        if f.command[1] in same_script:
+            assert f.minutes >= same_script[f.command[1]], f.id

@@ -116,3 +116,31 @@ def test_the_service_solves_the_schedule_before_it_opens_the_board(tmp_path, mon
     monkeypatch.setattr(service, "opener", opener)
     assert cli(["run", "--board", "hil", "--link", "tcp:127.0.0.1:9", "--plan", "hover", "--log", str(tmp_path)]) == 3
     assert calls == ["schedule", "board"]
+
+
+def _slow_child(tmp_path, monkeypatch, body: str) -> None:
+    """The PC side's Python runs `body` before anything else (a sitecustomize on its PYTHONPATH): a
+    child as slow to start as on a busy machine, or one that dies at start."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text(body)
+    monkeypatch.setenv("PYTHONPATH", str(site))
+
+
+@pytest.mark.parametrize("link", ["pty", "tcp"])
+def test_first_contact_waits_for_a_slow_pc_side(tmp_path, monkeypatch, link):
+    """The PC side takes 3 s to start, three times the first-contact window this test allows (made short
+    here: on a busy machine the imports alone outlast the real 15 s): the demo waits for the process."""
+    from flightctl.boards.hil import HilLink
+    monkeypatch.setattr(HilLink.contact, "__defaults__", (1.0,))
+    _slow_child(tmp_path, monkeypatch, "import time\ntime.sleep(3.0)\n")
+    d = demo(tmp_path, "--seconds", "1.5", "--link", link)
+    assert d["outcome"].startswith("landed") and d["max_alt_m"] > 0.2
+
+
+def test_a_pc_side_that_dies_at_start_is_one_line_and_exit_3(tmp_path, monkeypatch, capsys):
+    _slow_child(tmp_path, monkeypatch, "import os\nos._exit(7)\n")
+    assert cli(["hil", "demo", "--seconds", "1.5"]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["flightctl hil demo: cannot open the hil board: the PC side (flightctl hil serve) ended before "
+                   "it was ready (exit 7)"]

@@ -272,3 +272,34 @@ def test_a_killed_child_process_writer_is_a_failed_log_not_a_hang(tmp_path):
     w.close()
     assert w.failed and "process" in w.error
     assert w.count + w.dropped == 180 and w.dropped >= 90
+
+
+def _written_log(tmp_path, n=40, partial=None):
+    p = tmp_path / "log.csv"
+    with FlightLogWriter(p, {"board": "sim"}, chunk=7) as w:
+        for k in range(n):
+            w.append(flight_row(k / 450, 172.0 + k / 7, ""))
+        w.partial = partial
+    return p
+
+
+def test_a_log_cut_mid_row_is_read_without_that_row_and_says_so(tmp_path, capsys):
+    """The card filled, or a copy stopped half-way: the file ends inside a row, at a byte drawn at
+    random (seeded) within it. The rows before it are read; the cut one is left out, with one word."""
+    p = _written_log(tmp_path)
+    data = p.read_bytes()
+    last = data.rstrip(b"\n").rfind(b"\n") + 1                    # the last row's first byte
+    at = int(np.random.default_rng(39).integers(last + 1, len(data) - 1))
+    p.write_bytes(data[:at])
+    t = read_flight_log(p)
+    assert len(t) == 39 and t["t"][-1] == pytest.approx(38 / 450, abs=5e-7)
+    assert capsys.readouterr().err == f"{p}: cut short: its last line (42) ends mid-row, without a newline; read without it\n"
+    p.write_bytes(data)                                           # whole: not a word
+    assert len(read_flight_log(p)) == 40 and capsys.readouterr().err == ""
+
+
+def test_a_partial_log_is_read_with_its_reason(tmp_path, capsys):
+    p = _written_log(tmp_path, partial="interrupted (Ctrl-C) at t = 0.087 s")
+    assert len(read_flight_log(p)) == 40
+    err = capsys.readouterr().err
+    assert err.startswith(f"{p}: cut short: the log says `# partial: interrupted (Ctrl-C) at t = 0.087 s, after 40 rows`")

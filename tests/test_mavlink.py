@@ -45,6 +45,7 @@ class Gcs:
         self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}", dialect="common",
                                                source_system=255, source_component=190)
         self.msgs: list = []
+        self.proc: subprocess.Popen | None = None    # the service sending to it, when in a process of its own
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -69,12 +70,17 @@ class Gcs:
         return [m.text for m in self.of("STATUSTEXT")]
 
     def wait(self, cond, timeout: float = 20.0):
+        """The first message that meets `cond`. From a service in its own process (`self.proc`) it is
+        waited for as long as that process lives, however busy the machine; else for `timeout` s."""
         end = time.monotonic() + timeout
-        while time.monotonic() < end:
+        while self.proc is not None or time.monotonic() < end:
+            ended = self.proc is not None and self.proc.poll() is not None
             with self._lock:
                 hit = next((m for m in self.msgs if cond(m)), None)
             if hit is not None:
                 return hit
+            if ended:
+                raise AssertionError(f"the service ended (exit {self.proc.returncode}); texts: {self.texts()}")
             time.sleep(0.01)
         raise AssertionError(f"timed out; texts: {self.texts()}")
 
@@ -230,9 +236,10 @@ def test_losing_the_link_does_not_stop_the_plan(tmp_path, capsys):
 def run_service(tmp_path, gcs, *extra):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     env.pop("NOTIFY_SOCKET", None)
-    return subprocess.Popen([sys.executable, "-P", "-m", "flightctl.cli", "run", "--board", "sim", "--log",
-                             str(tmp_path), "--calibrate", "0.5", "--mavlink", gcs.url, *extra],
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    gcs.proc = subprocess.Popen([sys.executable, "-P", "-m", "flightctl.cli", "run", "--board", "sim", "--log",
+                                 str(tmp_path), "--calibrate", "0.5", "--mavlink", gcs.url, *extra],
+                                env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    return gcs.proc
 
 
 def test_run_arms_only_with_a_plan_loaded(tmp_path, gcs):
@@ -245,7 +252,7 @@ def test_run_arms_only_with_a_plan_loaded(tmp_path, gcs):
         assert not any(b.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED for b in gcs.of("HEARTBEAT"))
     finally:
         proc.send_signal(signal.SIGTERM)
-        proc.communicate(timeout=30)
+        proc.communicate()
     assert proc.returncode == 0
 
 
@@ -261,7 +268,7 @@ def test_run_waits_for_the_pilot_to_arm(tmp_path, gcs):
         gcs.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
         assert gcs.ack(mav.MAV_CMD_COMPONENT_ARM_DISARM, ()).result == mav.MAV_RESULT_ACCEPTED
         gcs.wait(lambda m: m.get_type() == "HEARTBEAT" and m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
-        output, _ = proc.communicate(timeout=40)
+        output, _ = proc.communicate()
     finally:
         if proc.poll() is None:
             proc.kill()

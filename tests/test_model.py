@@ -552,7 +552,9 @@ def test_parse_effect():
     ("motor_lag:tau=-1", ["out of range"]),
     ("motor_lag:tau=nan", ["out of range"]),
     ("motor_lag:tau", ["bad item", "'tau'"]),
-    ("motor_lag:tau=fast", ["bad item", "'tau=fast'"]),
+    ("motor_lag:tau=fast", ["tau = 'fast' is not a number"]),
+    ("tau=abc", ["tau = 'abc' is not a number"]),
+    ("tau=0.05", ["no cause before the values", "motor_lag"]),
     ("motor_weak:motor=2.5,scale=0.5", ["motor must be"]),
     ("motor_weak:motor=5,scale=0.5", ["motor=5", "out of range"]),
 ])

@@ -299,4 +299,5 @@ def open_link(url: str, params: Params, arm_required: bool = False) -> MavlinkLi
         raise InputError(f"--mavlink needs the Python module {e.name!r}: "
                          "pip install '.[mavlink]' in the flightctl checkout") from None
     except (OSError, ValueError) as e:
-        raise InputError(f"--mavlink {url}: cannot open ({e})") from None
+        raise InputError(f"--mavlink {url}: cannot open ({e}); pymavlink's forms: udpout:HOST:PORT, "
+                         "udpin:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT or a serial device DEV[,BAUD]") from None

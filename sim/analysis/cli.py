@@ -16,19 +16,22 @@ import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError, output_file, write_atomic
+from flightctl.errors import InputError, Parser, output_file, write_atomic
 from flightctl.sim.cli import gains_label
 from flightctl.params import GAIN_SETS, Params
 from flightctl.plans import HOVER_ALT
 from flightctl.sim import causes
-from flightctl.sim.analysis.linear import LinearPlant, linearise
-from flightctl.sim.analysis.loops import CHANNELS, Loop, build, hover_responses
 from flightctl.sim.world.model import Model
+
+if TYPE_CHECKING:
+    from flightctl.sim.analysis.linear import LinearPlant
+    from flightctl.sim.analysis.loops import Loop
 
 DEFAULT_ESTIMATOR = inspect.signature(FlightController).parameters["structure"].default   # what flies
 TRUTH = "truth"
@@ -43,11 +46,15 @@ class Analysis:
 
 
 def analyse(params: Params, effects=(), estimators=(TRUTH, DEFAULT_ESTIMATOR), alt: float = HOVER_ALT,
-            horizon: float | None = None, channels=CHANNELS) -> Analysis:
+            horizon: float | None = None, channels=None) -> Analysis:
     """Every loop for each estimator: 'truth' (perfect state feedback), a name of ESTIMATORS, or a
     function making an estimator from the parameters. The model carries the parameter file's
     effects and then `effects`, as the simulated board builds it (`flightctl.sim.world.board`), so that
     their terms and states are in the linearisation."""
+    # here, not at the top: `flightctl analyze` checks its arguments before scipy and python-control load
+    from flightctl.sim.analysis.linear import linearise
+    from flightctl.sim.analysis.loops import CHANNELS, build, hover_responses
+    channels = CHANNELS if channels is None else channels
     a = params.airframe
     effects = causes.combined(params, effects)
     plant = linearise(Model(a, effects), alt, a.battery_nominal_v)
@@ -105,6 +112,7 @@ def plot(an: Analysis, prefix: str, title: str) -> list[Path]:
     """PREFIX-bode.png (|L| and its phase per loop, each estimator a line) and PREFIX-step.png."""
     import control
 
+    from flightctl.sim.analysis.loops import CHANNELS
     from flightctl.sim.plots import figure, figure_legend, save
 
     fig, axes = figure(2, len(CHANNELS), size=(14, 6.5), sharex="col")
@@ -160,7 +168,7 @@ def plot(an: Analysis, prefix: str, title: str) -> list[Path]:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="flightctl analyze", description=__doc__,
+    p = Parser(prog="flightctl analyze", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
     p.add_argument("--gains", choices=sorted(GAIN_SETS),

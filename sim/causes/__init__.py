@@ -101,14 +101,19 @@ def load_vehicle(spec, gains=None):
 
 def parse(text: str) -> Effect:
     """`CAUSE:name=value,name=value`, as `flightctl sim --effect` takes it."""
-    cause, _, args = text.partition(":")
+    cause, colon, args = text.partition(":")
+    if not colon and "=" in cause:          # `--effect tau=0.05`: the values without their cause
+        cause, args = "", cause
     parameters = {}
     for item in filter(None, args.split(",")):
         name, sep, value = item.partition("=")
+        if not sep:
+            raise InputError(f"--effect {text!r}: expected CAUSE:name=value,... (bad item {item!r})")
         try:
             parameters[name.strip()] = float(value)
         except ValueError:
-            sep = ""
-        if not sep:
-            raise InputError(f"--effect {text!r}: expected CAUSE:name=value,... (bad item {item!r})")
+            raise InputError(f"--effect {text!r}: {name.strip()} = {value.strip()!r} is not a number") from None
+    if not cause.strip():
+        raise InputError(f"--effect {text!r}: no cause before the values: expected CAUSE:name=value,... "
+                         f"(causes: {', '.join(CAUSES)})")
     return make(cause.strip(), **parameters)

@@ -15,7 +15,7 @@ kg/m^3 give v_h = 4.75 m/s; Omega = sqrt(B / c1) = 524 rad/s (5000 RPM) gives la
 lift slope a of about 5.7 per rad, so x = 0.60 and dT/dV = -0.32 N s/m per rotor; sigma from 0.08 to
 0.14 gives -0.28 to -0.39 (checked against a numerical solution of the same equations). Ideal
 momentum theory at constant power instead of constant speed gives -T / (3 v_h) = -0.28, and
--T / (2 v_h) = -0.42 is the value at x = 1: the outside check's -0.26 to -0.43 spans these. So
+-T / (2 v_h) = -0.42 is the value at x = 1: these two bound the blade-element values above. So
 theory gives **k = 0.32 N s/m** (0.28 to 0.42); `k` is `-dT/dV` at hover.
 
 At a fixed pitch the thrust goes as Omega^2, v_h as Omega and lambda_h stays the same, so dT/dV

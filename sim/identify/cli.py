@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from flightctl import params as paramfile
-from flightctl.errors import InputError, output_file, read_toml, write_atomic
+from flightctl.errors import InputError, Parser, output_file, read_toml, write_atomic
 from flightctl.logfile import BENCH_COLUMNS, PENDULUM_COLUMNS, YAW_DRAG_COLUMNS, read_table
 from flightctl.sim.identify import inertia, propeller, yaw_drag
 from flightctl.sim.identify.fits import FitError, Identified, check_result
@@ -32,14 +32,11 @@ KINDS = {  # kind: (help, columns, text columns, identify)
               inertia.identify_rotor),
 }
 
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise InputError(message)
+SUBCOMMANDS = (*KINDS, "rcbenchmark", "real-data")    # an error names `flightctl identify bench` (flightctl/cli.py)
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="flightctl identify", description="Fit the paper's models to measured data "
+    parser = Parser(prog="flightctl identify", description="Fit the paper's models to measured data "
                      "(the files' columns and units: docs/identification.md in the flightctl checkout).")
     sub = parser.add_subparsers(dest="kind", required=True, metavar="KIND")
     for kind, (doc, *_rest) in KINDS.items():
@@ -74,6 +71,9 @@ def _check_params_update(path: str, values: dict[str, float]) -> None:
 
 def identify(args) -> Identified:
     _doc, columns, text, fit = KINDS[args.kind]
+    for flag, path in (("--json", args.json), ("--write-params", args.write_params), ("--plot", args.plot)):
+        if path:
+            output_file(path, flag)
     airframe = paramfile.load(args.params).airframe
     table = read_table(args.file, columns, text_columns=text)
     try:
@@ -82,9 +82,6 @@ def identify(args) -> Identified:
         check_result(result)
     except FitError as e:
         table.fail(str(e))
-    for flag, path in (("--json", args.json), ("--write-params", args.write_params), ("--plot", args.plot)):
-        if path:
-            output_file(path, flag)
     if args.write_params:
         _check_params_update(args.write_params, result.values)
     image = None
@@ -106,11 +103,13 @@ def identify(args) -> Identified:
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
     if args.kind == "rcbenchmark":
+        output_file(args.out, "--out")
         from flightctl.sim.identify import realdata
         lines = realdata.convert(args.runs, args.out)
     elif args.kind == "real-data":
-        from flightctl.sim.identify import realdata, realplots
+        from flightctl.sim.identify import realdata
         data_dir, out_dir = realdata.report_dirs(args.data, args.out)
+        from flightctl.sim.identify import realplots
         res = realdata.analyse(data_dir)
         lines = realdata.write_report(res, realplots.images(res), args.data, out_dir)
     else:

@@ -12,7 +12,6 @@ import dataclasses
 import math
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from flightctl.params import Airframe
 
@@ -96,6 +95,7 @@ def linear_fit(A: np.ndarray, y: np.ndarray, names: tuple[str, ...]) -> Fit:
 
 def nonlinear_fit(model, x0: np.ndarray, y: np.ndarray, names: tuple[str, ...]) -> Fit:
     """Nonlinear least squares of y = model(theta), started at x0 (scipy `least_squares`)."""
+    from scipy.optimize import least_squares   # here: a command's arguments are checked before this import
     check_count(len(y), names)
     result = least_squares(lambda theta: model(theta) - y, x0, x_scale="jac", max_nfev=2000)
     if not result.success or not np.all(np.isfinite(result.x)):

@@ -36,7 +36,6 @@ same draws beside them.
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import math
@@ -45,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flightctl.errors import InputError, output_file, seed, write_atomic
+from flightctl.errors import InputError, Parser, output_file, seed, write_atomic
 from flightctl.params import TABLE4, TABLE6, Gains, dumps
 
 SETTLE_S = 3.0
@@ -329,7 +328,7 @@ def doc_block(found: dict, strict: bool, command: str) -> tuple[str, str]:
 def main(argv: list[str] | None = None) -> int:
     from flightctl.sim import causes
     from flightctl.sim.sweeps.montecarlo import ranged
-    p = argparse.ArgumentParser(prog="flightctl tune", description=__doc__.split("\n\n")[0].replace("\n", " "))
+    p = Parser(prog="flightctl tune", description=__doc__.split("\n\n")[0].replace("\n", " "))
     p.add_argument("--params", help="parameter file or shipped vehicle (default: the reference airframe)")
     p.add_argument("--out", required=True, metavar="GAINS.toml", help="the parameter file to write, with the tuned [gains]")
     p.add_argument("--json", metavar="T.json", help="what was found per channel, with Table 4 beside it")

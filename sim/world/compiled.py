@@ -6,7 +6,8 @@ to their compiled copies, so that the plain function stays plain (arrays in the 
 and everywhere without numba). Nothing on the vehicle imports this: the onboard code is plain Python.
 
 `FLIGHTCTL_JIT=0` in the environment turns compilation off (a comparison, or a machine where numba
-misbehaves); `enabled()` says whether it is on. Compiled code is cached (numba's `cache=True`): the
+misbehaves); `enabled()` says whether it is on. numba is in the default install where it has wheels
+(pyproject.toml); where it is missing, the plain path is said once on stderr. Compiled code is cached (numba's `cache=True`): the
 first flight of a fresh install compiles for a few seconds, later ones load it. numba's cache checks
 only each function's own file, not the files of the functions it calls or of the constants it reads:
 the cache's folder (sim/__pycache__/numba-<hash>, unless NUMBA_CACHE_DIR is set) is named by a hash
@@ -72,8 +73,15 @@ def enabled() -> bool:
     try:
         import numba  # noqa: F401
     except ImportError:
+        if not os.environ.get(PLAIN_SAID):     # once: a pool's workers inherit the variable
+            os.environ[PLAIN_SAID] = "1"
+            print("flightctl: numba is not installed here: the simulated world runs as plain Python, several "
+                  "times slower (python3 -m pip install numba, where it has wheels, compiles it)", file=sys.stderr)
         return False
     return True
+
+
+PLAIN_SAID = "FLIGHTCTL_PLAIN_SAID"   # set once the plain-Python fallback has been said, for child processes
 
 
 CACHE = True        # numba's cache=True, unless no folder for it can be written
