@@ -34,7 +34,6 @@ first 12 characters and a 3-character hash), and the `flightctl_params` informat
 """
 from __future__ import annotations
 
-import argparse
 import hashlib
 import struct
 import sys
@@ -44,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from flightctl import __version__
-from flightctl.errors import InputError, output_file
+from flightctl.errors import InputError, Parser, output_file
 from flightctl.comms.frames import euler_ned, pulse_us, quaternion, vector_ned
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe, Gains, from_dict
@@ -312,21 +311,16 @@ def _rates_setpoint(log, params: dict[str, float], P: np.ndarray) -> dict:
     return dict(roll=roll, pitch=pitch, yaw=yaw, thrust_body=thrust)
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise InputError(message)
-
-
 def _import(args) -> int:
     """`flightctl log import FOREIGN OUT.csv`: another autopilot's log as this project's flight log."""
-    from flightctl.sim.logs import import_text, read_figure
-    from flightctl.sim.logs.common import to_table
-    from flightctl.sim.plots import png
     out = output_file(args.out, suffix=".csv")
     if args.plot:
         output_file(args.plot, "--plot", ".png")
     if args.index is not None and args.index < 1:
         raise InputError(f"--index {args.index}: logs are counted from 1")
+    from flightctl.sim.logs import import_text, read_figure      # after the checks: the readers and matplotlib
+    from flightctl.sim.logs.common import to_table
+    from flightctl.sim.plots import png
     say = (lambda *a: None) if args.quiet else (lambda m: print(f"log import: {m}", file=sys.stderr, flush=True))
     text = import_text(args.foreign, args.index, say)
     image = png(read_figure(to_table(text, str(out)))) if args.plot else None     # everything before writing
@@ -339,7 +333,7 @@ def _import(args) -> int:
 
 
 def main(argv: list[str]) -> int:
-    p = _Parser(prog="flightctl log", description="Flight log tools.")
+    p = Parser(prog="flightctl log", description="Flight log tools.")
     sub = p.add_subparsers(dest="action", required=True)
     e = sub.add_parser("export", help="write a flight log (CSV, docs/formats.md) as PX4's ULog",
                        description=__doc__.split("\n\n")[0])

@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 from flightctl import params as paramfile
-from flightctl.errors import InputError, output_file, write_atomic
+from flightctl.errors import InputError, Parser, output_file, write_atomic
 from flightctl.logfile import read_flight_log
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
 from flightctl.sim.identify.diagnose import report as diagnose_report
@@ -42,13 +42,8 @@ from flightctl.sim.identify.static.curve import declared as declared_curve
 MIN_LOG_S = 2.0   # a log shorter than this cannot hold a take-off and a flight: too short to judge
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise InputError(message)
-
-
 def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="flightctl diagnose",
+    p = Parser(prog="flightctl diagnose",
                 description="Fit every candidate extension of the model to part of the flight logs, score "
                             "it on the rest, and name the one that explains the discrepancy, or none "
                             "(the method: docs/diagnose.md in the flightctl checkout).")

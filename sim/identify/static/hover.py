@@ -232,4 +232,5 @@ def speed_gains(files: list[FileData], masks: list[np.ndarray]) -> list[float] |
         h.airborne = m
         hov.append(h)
     fs = 1.0 / float(np.median(np.diff(hov[0].t)))
-    return [float(v) for v in _speed_gains(hov, [h.P for h in hov], 0.0, fs)]
+    gains, _ = _speed_gains(hov, [h.P for h in hov], 0.0, fs)
+    return [float(v) for v in gains]
