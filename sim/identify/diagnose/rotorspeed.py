@@ -94,7 +94,7 @@ def rotor_speed_lag(files: list[FileData]) -> dict | None:
     for m in range(4):    # each rotor's own lag at the common delay
         errs = [fit(lagged(t), delay)[0][m] for t in taus]
         per_motor.append(float(taus[int(np.argmin(errs))]))
-    gains, slope = _speed_gains(have, U, delay, fs)
+    gains, slope = common_speed_gains(have, U, delay, fs)
     return {"tau": round(tau, 4), "delay": round(delay, 4), "rmse": round(rmse, 2),
             "per_motor_tau": [round(t, 4) for t in per_motor], "h2": round(float(np.median(h2)), 1),
             "h2_spread": round(float(np.std(h2)), 1), "samples": total,
@@ -113,7 +113,7 @@ def _delayed_at(u: np.ndarray, samples: float, rows: np.ndarray) -> np.ndarray:
     return x if frac == 0.0 else (1.0 - frac) * x + frac * u[:, np.maximum(rows - m - 1, 0)]
 
 
-def _speed_gains(have, U, delay: float, fs: float) -> tuple[np.ndarray, float]:
+def common_speed_gains(have, U, delay: float, fs: float) -> tuple[np.ndarray, float]:
     """((4,): each rotor's measured speed against one speed-per-command curve for the four, Omega =
     a (x - h2) with x the timed command (least squares through the common curve, airborne rows); a)."""
     xs, ys = [], []

@@ -26,7 +26,7 @@ import numpy as np
 from scipy import stats
 
 from flightctl.sim.identify.diagnose.data import FileData, Layout
-from flightctl.sim.identify.diagnose.rotorspeed import (GAIN_TOL, _speed_gains, rotor_gain_check,
+from flightctl.sim.identify.diagnose.rotorspeed import (GAIN_TOL, common_speed_gains, rotor_gain_check,
                                                         trim_pattern, yaw_trim_of_gains)
 from flightctl.sim.identify.static.blocks import G, Blocks, drift
 from flightctl.sim.identify.static.curve import P_FULL, Curve
@@ -232,5 +232,5 @@ def speed_gains(files: list[FileData], masks: list[np.ndarray]) -> list[float] |
         h.airborne = m
         hov.append(h)
     fs = 1.0 / float(np.median(np.diff(hov[0].t)))
-    gains, _ = _speed_gains(hov, [h.P for h in hov], 0.0, fs)
+    gains, _ = common_speed_gains(hov, [h.P for h in hov], 0.0, fs)
     return [float(v) for v in gains]
