@@ -193,6 +193,7 @@ class GridCandidate(Candidate):
     filtered (C, n) change of the prediction at parameter theta."""
     grid: np.ndarray = np.array([])
     round_to = 4
+    cached = False    # its change of the prediction depends on the base model alone, not on the carried terms
 
     @property
     def name(self) -> str:
@@ -203,9 +204,27 @@ class GridCandidate(Candidate):
         d = self.delta(theta)
         return d if isinstance(d, Change) else Change(d, self.ds.base_free)
 
-    def design(self, theta):
-        """(e, A): the residual before the free columns, and the free columns, at theta."""
+    def _kept_change(self, theta, keep: bool) -> Change:
+        """`change(theta)` from the data set's store of its model (`DataSet.changes`), or computed,
+        and stored when `keep` (the grid's points): a candidate whose change depends on the base
+        model alone (`cached`) finds it there in every later round whose model only carries more
+        terms, and in the backfit's fits on top of carried causes (docs/diagnose.md, "Speed")."""
+        key = (self.cause, float(theta))
+        kept = self.ds.changes.get(key)
+        if kept is not None:
+            delta, live, rows = kept
+            free = np.zeros(live.shape + delta.shape[-1:])
+            free[live] = rows
+            return Change(delta, free)
         ch = self.change(theta)
+        if keep:
+            live = np.any(ch.free != 0.0, axis=-1)       # most free columns act in one channel or two
+            self.ds.changes[key] = (ch.delta, live, ch.free[live])
+        return ch
+
+    def design(self, theta, keep: bool = False):
+        """(e, A): the residual before the free columns, and the free columns, at theta."""
+        ch = self._kept_change(theta, keep) if self.cached else self.change(theta)
         return self.r_base - ch.delta, columns_of(ch)
 
     def objective(self, theta, keep=None) -> float:
@@ -248,7 +267,7 @@ class GridCandidate(Candidate):
 
         def fit(m, j):
             if j not in stats:
-                stats[j] = linear_stats(ds, *self.design(self.grid[j]))
+                stats[j] = linear_stats(ds, *self.design(self.grid[j], keep=True))
             if (m, j) not in fits:
                 fits[m, j] = solve(stats[j], masks[m], ds.block_counts)
             return fits[m, j]

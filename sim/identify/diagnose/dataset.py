@@ -199,6 +199,10 @@ class DataSet:
             self.D = D
         if S is not None:
             self.S = S
+        # the grid candidates' changes of the prediction under this model (`GridCandidate.cached`): a
+        # carried term changes none of them, so a copy that only carries more shares the store; a new
+        # model (this method) gets a store of its own, the old one left to the copies that still have it
+        self.changes: dict = {}
         self.thrust = self.flat([F * s for F, s in zip(self.F, self.S)])
         preds = [self.predict_file(i, self.D[i]) for i in range(len(self.files))]
         self.base_pred = [p.value for p in preds]
