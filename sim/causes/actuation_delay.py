@@ -50,6 +50,7 @@ class ActuationDelayFit(GridCandidate):
     grid = np.concatenate([np.arange(0.0, 0.05, 0.0025), np.arange(0.05, 0.1, 0.005),
                            np.arange(0.1, MAX_TIMING_S + 1e-9, 0.01)])
     physical_check = TIMING_CHECK
+    cached = True     # its change is the base model's thrusts changed: no carried term enters it
 
     def thrusts(self, parameters):
         ds, d = self.ds, parameters["delay"]

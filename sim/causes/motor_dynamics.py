@@ -99,6 +99,7 @@ class MotorDynamicsFit(GridCandidate):
     explains = "rotor spin-up sum s_i dOmega_i/dt (rad/s^2)"
     grid = MotorLagFit.grid
     physical_check = TIMING_CHECK
+    cached = True     # its change is the base model's thrusts changed: no carried term enters it
 
     def _speeds(self, i, tau):
         """(the drive (K, 4, n) of the lagged speeds, sum s_i dOmega_i/dt (n,)) of file i."""

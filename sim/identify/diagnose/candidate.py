@@ -16,6 +16,7 @@ from flightctl.sim.world.model import Effect
 
 MIN_TIMING_PERIODS = 1.5  # lag or delay shorter than this many loop periods is not named
 REFINE_XATOL = 3e-3       # a grid fit's refinement stops within this share of the neighbours' interval
+COARSE_STRIDE = 4         # a grid fit computes every 4th point first, then walks to the best (GridCandidate.run)
 # The physical range of a rotor's timing (lag or delay): docs/as-flown.md's motor time constants run from
 # 20 ms (INDIflight's 3-inch rotors, bench) to 192 ms (the open-loop estimate with Table 2's rotor inertia;
 # 170 ms measured for a 920 KV motor with a 9.4-inch propeller on an open-loop ESC); ESC and loop delays
@@ -192,6 +193,7 @@ class GridCandidate(Candidate):
     filtered (C, n) change of the prediction at parameter theta."""
     grid: np.ndarray = np.array([])
     round_to = 4
+    cached = False    # its change of the prediction depends on the base model alone, not on the carried terms
 
     @property
     def name(self) -> str:
@@ -202,9 +204,27 @@ class GridCandidate(Candidate):
         d = self.delta(theta)
         return d if isinstance(d, Change) else Change(d, self.ds.base_free)
 
-    def design(self, theta):
-        """(e, A): the residual before the free columns, and the free columns, at theta."""
+    def _kept_change(self, theta, keep: bool) -> Change:
+        """`change(theta)` from the data set's store of its model (`DataSet.changes`), or computed,
+        and stored when `keep` (the grid's points): a candidate whose change depends on the base
+        model alone (`cached`) finds it there in every later round whose model only carries more
+        terms, and in the backfit's fits on top of carried causes (docs/diagnose.md, "Speed")."""
+        key = (self.cause, float(theta))
+        kept = self.ds.changes.get(key)
+        if kept is not None:
+            delta, live, rows = kept
+            free = np.zeros(live.shape + delta.shape[-1:])
+            free[live] = rows
+            return Change(delta, free)
         ch = self.change(theta)
+        if keep:
+            live = np.any(ch.free != 0.0, axis=-1)       # most free columns act in one channel or two
+            self.ds.changes[key] = (ch.delta, live, ch.free[live])
+        return ch
+
+    def design(self, theta, keep: bool = False):
+        """(e, A): the residual before the free columns, and the free columns, at theta."""
+        ch = self._kept_change(theta, keep) if self.cached else self.change(theta)
         return self.r_base - ch.delta, columns_of(ch)
 
     def objective(self, theta, keep=None) -> float:
@@ -218,9 +238,9 @@ class GridCandidate(Candidate):
     def delta(self, theta):
         raise NotImplementedError
 
-    def _best(self, objs):
+    def _best(self, j: int) -> float:
+        """The full-data fit refined between grid point j (its best) and its neighbours."""
         from scipy import optimize   # here, not at the top: `flightctl sim` imports the causes for their effects
-        j = int(np.argmin(objs))
         g = self.grid
         if 0 < j < len(g) - 1:
             lo, hi = g[j - 1], g[j + 1]
@@ -233,28 +253,50 @@ class GridCandidate(Candidate):
         return float(g[j])
 
     def run(self) -> Result:
+        """Each fold's grid point (the best on its training blocks) and the full data's, found coarse
+        to fine: every COARSE_STRIDE-th point first, then from the best of those a walk to the nearest
+        grid point that neither neighbour beats (docs/diagnose.md, "Speed"). Over an objective with
+        one minimum along the grid that is the grid's best point, found with a third to a half of
+        the designs (each a pass over the log at its full rate); the grid's other points are not
+        computed."""
         ds = self.ds
-        stats = []
-        for th in self.grid:
-            e, A = self.design(th)
-            stats.append(linear_stats(ds, e, A))
+        stats: dict[int, object] = {}     # grid index -> the block sums of its design
         blocks = np.arange(N_BLOCKS)
-        chosen = []                       # each fold's grid point and fit on its training blocks
-        for b in blocks:
-            fits = [solve(st, blocks != b, ds.block_counts) for st in stats]
-            j = int(np.argmin([f[0] for f in fits]))
-            chosen.append((j, fits[j]))
+        masks = [blocks != b for b in blocks] + [np.ones(N_BLOCKS, bool)]     # the folds, then all data
+        fits: dict[tuple[int, int], tuple] = {}
+
+        def fit(m, j):
+            if j not in stats:
+                stats[j] = linear_stats(ds, *self.design(self.grid[j], keep=True))
+            if (m, j) not in fits:
+                fits[m, j] = solve(stats[j], masks[m], ds.block_counts)
+            return fits[m, j]
+
+        last = len(self.grid) - 1
+        for j in sorted(set(range(0, last + 1, COARSE_STRIDE)) | {last}):
+            fit(len(masks) - 1, j)
+        best = []
+        for m in range(len(masks)):
+            key = lambda j: (fit(m, j)[0], j)      # ties: the lower point, as np.argmin
+            j = min(list(stats), key=key)
+            while True:
+                k = min([i for i in (j - 1, j, j + 1) if 0 <= i <= last], key=key)
+                if k == j:
+                    break
+                j = k
+            best.append(j)
+        chosen = [(best[b], fits[b, best[b]]) for b in blocks]     # each fold's grid point and fit
         folds = [float(self.grid[j]) for j, _ in chosen]
         pieces = {}                       # each grid point's design computed once, for every fold that chose it
         for j in sorted({j for j, _ in chosen}):
             e, A = self.design(self.grid[j])
-            for b, (jb, fit) in enumerate(chosen):
+            for b, (jb, fit_b) in enumerate(chosen):
                 if jb == j:
                     i0, i1 = ds.block_edges[b]
-                    pieces[b] = fitted(e[:, i0:i1], None if A is None else A[:, i0:i1], fit[1]), fit[2]
+                    pieces[b] = fitted(e[:, i0:i1], None if A is None else A[:, i0:i1], fit_b[1]), fit_b[2]
         score = heldout(ds, pieces.__getitem__)
         allb = np.ones(N_BLOCKS, bool)
-        theta = self._best([solve(st, allb, ds.block_counts)[0] for st in stats])
+        theta = self._best(best[-1])
         e, A = self.design(theta)
         coef = solve(linear_stats(ds, e, A), allb, ds.block_counts)[1]
         return Result(self.cause, {self.name: round(theta, self.round_to)}, score, fitted(e, A, coef),

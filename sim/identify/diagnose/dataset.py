@@ -199,6 +199,10 @@ class DataSet:
             self.D = D
         if S is not None:
             self.S = S
+        # the grid candidates' changes of the prediction under this model (`GridCandidate.cached`): a
+        # carried term changes none of them, so a copy that only carries more shares the store; a new
+        # model (this method) gets a store of its own, the old one left to the copies that still have it
+        self.changes: dict = {}
         self.thrust = self.flat([F * s for F, s in zip(self.F, self.S)])
         preds = [self.predict_file(i, self.D[i]) for i in range(len(self.files))]
         self.base_pred = [p.value for p in preds]
@@ -279,7 +283,7 @@ class DataSet:
         (`_padded`): the filter's start-up transient falls there, not on the data. `sensor`: the arrays
         are the model's channels (..., C, n), so they first go through the log's sensor filters (the
         measurements went through them on the vehicle)."""
-        parts = []
+        parts, jobs = [], []
         sensed = {}        # the sensor filters run once over each file, not once per stretch
         for (i, s0, s1), (p0, p1) in zip(self.stretches, self._padded):
             x = per_file[i]
@@ -288,31 +292,59 @@ class DataSet:
                     sensed[i] = self._sense(i, x[..., :self._last_row[i]])
                 x = sensed[i]
             x = x[..., p0:p1]
-            inner = slice(s0 - p0, s1 - p0, self.step)
-            m = len(range(s0, s1, self.step))
-            if x.ndim >= 2:      # rows that are zero stay zero: filter only the others (speed)
-                flat = x.reshape(-1, x.shape[-1])
-                y = np.zeros((flat.shape[0], m))
-                rows = np.flatnonzero(np.any(flat != 0.0, axis=1))
-                if rows.size:
-                    y[rows] = self._filtfilt(flat[rows])[:, inner]
-                parts.append(y.reshape(x.shape[:-1] + (m,)))
-            else:
-                parts.append(self._filtfilt(x[None])[0, inner])
+            flat = x.reshape(-1, x.shape[-1])
+            y = np.zeros((flat.shape[0], len(range(s0, s1, self.step))))
+            # rows that are zero stay zero: filter only the others (speed)
+            rows = np.flatnonzero(np.any(flat != 0.0, axis=1)) if x.ndim >= 2 else np.arange(1)
+            if rows.size:
+                jobs.append((flat[rows], y, rows, slice(s0 - p0, s1 - p0, self.step)))
+            parts.append(y.reshape(x.shape[:-1] + y.shape[-1:]))
+        for (_, y, rows, inner), out in zip(jobs, self._filtfilt_many([j[0] for j in jobs])):
+            y[rows] = out[:, inner]
         return np.concatenate(parts, axis=-1)
 
-    def _filtfilt(self, x: np.ndarray) -> np.ndarray:
-        """scipy.signal.sosfiltfilt(self.sos, x, axis=-1) of rows x (m, L), its odd extension and
-        start-up states, with the states' shape computed once for the data set."""
+    def _filtfilt_many(self, blocks: list[np.ndarray]) -> list[np.ndarray]:
+        """`scipy.signal.sosfiltfilt(self.sos, x, axis=-1)` of each block x (rows, L) of rows (each
+        stretch's), its odd extension and start-up states, as the function does them: the blocks of
+        like length filtered together, each row's extension left-aligned in one array and its reverse
+        gathered left-aligned for the backward pass (a causal filter's output at a sample does not
+        depend on the samples after it, so the padding behind a shorter row changes none of its
+        values). Row for row the same arithmetic as one call per block, in a few calls: a long log
+        has dozens of stretches, and each call's overhead outweighed its work (docs/diagnose.md,
+        "Speed")."""
         from scipy import signal
         pad = 3 * (2 * len(self.sos) + 1 - min((self.sos[:, 2] == 0).sum(), (self.sos[:, 5] == 0).sum()))
-        if x.shape[-1] <= pad:
-            return signal.sosfiltfilt(self.sos, x, axis=-1)
-        ext = np.concatenate([2.0 * x[:, :1] - x[:, pad:0:-1], x, 2.0 * x[:, -1:] - x[:, -2:-pad - 2:-1]], axis=1)
+        out: list[np.ndarray | None] = [None] * len(blocks)
+        todo = []
+        for k, x in enumerate(blocks):
+            if x.shape[-1] <= pad:
+                out[k] = signal.sosfiltfilt(self.sos, x, axis=-1)
+            else:
+                todo.append(k)
+        todo.sort(key=lambda k: -blocks[k].shape[-1])
         zi = self._zi[:, None, :]
-        y, _ = signal.sosfilt(self.sos, ext, axis=-1, zi=zi * ext[None, :, :1])
-        y, _ = signal.sosfilt(self.sos, y[:, ::-1], axis=-1, zi=zi * y[None, :, -1:])
-        return y[:, ::-1][:, pad:-pad]
+        while todo:
+            longest = blocks[todo[0]].shape[-1]
+            group = [k for k in todo if 5 * blocks[k].shape[-1] >= 4 * longest]   # at most a quarter padded
+            todo = todo[len(group):]
+            lengths = np.concatenate([np.full(blocks[k].shape[0], blocks[k].shape[-1] + 2 * pad) for k in group])
+            ext = np.zeros((lengths.size, longest + 2 * pad))
+            r = 0
+            for k in group:
+                x = blocks[k]
+                ext[r:r + x.shape[0], :x.shape[-1] + 2 * pad] = np.concatenate(
+                    [2.0 * x[:, :1] - x[:, pad:0:-1], x, 2.0 * x[:, -1:] - x[:, -2:-pad - 2:-1]], axis=1)
+                r += x.shape[0]
+            y, _ = signal.sosfilt(self.sos, ext, axis=-1, zi=zi * ext[None, :, :1])
+            back = np.maximum(lengths[:, None] - 1 - np.arange(ext.shape[-1])[None, :], 0)
+            y = np.take_along_axis(y, back, axis=1)         # each row reversed, left-aligned
+            y, _ = signal.sosfilt(self.sos, y, axis=-1, zi=zi * y[None, :, :1])
+            r = 0
+            for k in group:
+                n, L = blocks[k].shape
+                out[k] = y[r:r + n, :L + 2 * pad][:, ::-1][:, pad:-pad]
+                r += n
+        return out
 
     def predict_file(self, i, D, scale=None, torque_extra=None, force_extra=None, rates=None) -> Pred:
         """The model's channels for file i from the rotors' drive D (K, 4, n) (`drive`): eq. 7 with the
