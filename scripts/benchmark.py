@@ -207,6 +207,37 @@ def diagnose_cost(name: str) -> tuple[float, float, float] | None:
     return float(table["t"][-1] - table["t"][0]), read, total
 
 
+def fleet_rate(workers: int, logs: int = 6) -> float:
+    """Logs per hour of `flightctl diagnose --corpus` on `workers` of the engine's local workers
+    (sim/engine.py, Dask; in this process without it): `logs` simulated 21 s flights (the tests' quick
+    plan, tests/test_diagnose_cases.py, each its own seed), diagnosed end to end, the engine's start
+    and each worker's imports included (docs/fleet.md)."""
+    import contextlib
+    import io
+    import sys
+    from flightctl.cli import main as cli
+    from flightctl.sim import engine
+    from flightctl.sim.identify.diagnose.corpus import corpus
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from test_diagnose_cases import quick_plan
+    tmp = Path(tempfile.mkdtemp())
+    folder = tmp / "logs"
+    folder.mkdir()
+    plan = quick_plan(tmp)
+    with contextlib.redirect_stdout(io.StringIO()):
+        for k in range(logs):
+            cli(["sim", "--plan", str(plan), "--log", str(folder / f"flight{k:02d}.csv"), "--seed", str(k),
+                 "--no-plot", "--quiet"])
+    engine.use(None, quiet=True)
+    engine.close()
+    start = time.perf_counter()
+    rows = corpus(folder, workers, results=tmp / f"r{workers}.jsonl")
+    wall = time.perf_counter() - start
+    engine.close()
+    assert len(rows) == logs
+    return logs / wall * 3600.0
+
+
 HEADER = ("| what | figure | target |", "|---|---|---|")
 STAMP = "Measured by `python scripts/benchmark.py --markdown` on {date}: {machine}."
 
@@ -263,6 +294,10 @@ def figures(repeat: int) -> list[tuple[str, str, str]]:
                      f"{rate / 1e6:.2f} M vehicle-steps/s (best of {repeat}; {rate / workers / 1e6:.2f} M per core"
                      + (f", {cpu / 1e6:.2f} M per s of this process's CPU)" if workers == 1 else ")"),
                      ">= 2.0 M per core"))
+    rates = {w: fleet_rate(w) for w in (1, 2)}
+    rows.append(("`flightctl diagnose --corpus` of 6 simulated 21 s flights (sim/engine.py: Dask's local "
+                 "workers, start-up included)", f"{rates[1]:.0f} logs/h on 1 worker, {rates[2]:.0f} on 2 "
+                 f"({rates[2] / rates[1]:.2f}x)", "-"))
     for name, rate in DIAGNOSED:
         cost = diagnose_cost(name)
         if cost is None:

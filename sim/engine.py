@@ -28,7 +28,8 @@ import os
 import sys
 from typing import Callable, Iterable
 
-HINT = "one item at a time in this process; for the parallel engine: pip install 'flightctl[fleet]' (Dask)"
+HINT = ("one item at a time in this process; for the parallel engine (Dask): pip install '.[fleet]' in the "
+        "flightctl checkout")
 
 _address: str | None = None         # `use(address)`: an existing cluster's scheduler
 _engine: dict = {}                  # the client (and local cluster) kept for the command's life
@@ -55,7 +56,7 @@ def use(address: str | None, quiet: bool = False) -> None:
     _said["quiet"] = quiet
     if address and not available():
         from flightctl.errors import InputError
-        raise InputError(f"--scheduler {address}: Dask is not installed (pip install 'flightctl[fleet]')")
+        raise InputError(f"--scheduler {address}: Dask is not installed (pip install '.[fleet]' in the flightctl checkout)")
     if address != _address:
         close()
     _address = address

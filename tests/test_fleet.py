@@ -152,4 +152,4 @@ def test_without_dask_the_work_runs_here_and_says_how_to_get_the_engine(monkeypa
     assert engine.run(str.lower, ["D"], 2) == ["d"]
     assert seen == [(0, "A"), (1, "B"), (2, "C")]
     err = capsys.readouterr().err
-    assert err.count("pip install 'flightctl[fleet]'") == 1, err
+    assert err.count("pip install '.[fleet]'") == 1, err
