@@ -153,3 +153,42 @@ def test_without_dask_the_work_runs_here_and_says_how_to_get_the_engine(monkeypa
     assert seen == [(0, "A"), (1, "B"), (2, "C")]
     err = capsys.readouterr().err
     assert err.count("pip install '.[fleet]'") == 1, err
+
+
+def free_port() -> int:
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_cluster_started_apart_is_used_by_its_address(corpus, tmp_path):
+    """A scheduler and a worker started as a cluster's would be (Dask's own `dask scheduler` and
+    `dask worker`), the command pointed at it by DASK_SCHEDULER_ADDRESS: the scheduler ran the logs,
+    and the rows are the local cluster's."""
+    address = f"tcp://127.0.0.1:{free_port()}"
+    dask = Path(sys.executable).parent / "dask"
+    worker_log = tmp_path / "worker.log"
+    procs = [subprocess.Popen([str(dask), "scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":", 1)[1],
+                               "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        procs.append(subprocess.Popen([str(dask), "worker", address, "--nthreads", "1", "--nworkers", "1",
+                                       "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=open(worker_log, "w")))
+        p = command(corpus, tmp_path / "remote.json", "--quiet", env={"DASK_SCHEDULER_ADDRESS": address})
+        _, err = p.communicate(timeout=WAIT_S)
+        assert p.returncode == 0, err
+        from distributed import Client
+        with Client(address, timeout=60) as client:     # what the scheduler ran: the corpus's logs
+            ran = client.run_on_scheduler(lambda dask_scheduler: {
+                prefix: dict(tp.all_durations) for prefix, tp in dask_scheduler.task_prefixes.items()})
+        assert ran.get("run_one", {}).get("compute", 0.0) > 0.0, ran     # computed there
+        local = command(corpus, tmp_path / "local.json", "--jobs", "2", "--quiet")
+        assert local.communicate(timeout=WAIT_S) and local.returncode == 0
+    finally:
+        for q in reversed(procs):
+            q.terminate()
+            q.wait(timeout=WAIT_S)
+    remote = json.loads((tmp_path / "remote.json").read_text())["logs"]
+    assert remote == json.loads((tmp_path / "local.json").read_text())["logs"]
+    assert [entry["log"] for entry in remote] == sorted(LOGS)
+    assert "Registered to" in worker_log.read_text() and address in worker_log.read_text()
