@@ -9,11 +9,12 @@ command's life so that each worker compiles the plant once; or an existing clust
 `scheduler-address`: https://docs.dask.org/en/stable/configuration.html). Its dashboard's address is
 printed when there is one.
 
-Ctrl-C: the command's one line and exit 130 (flightctl/cli.py). The local workers are ended at once
-(their processes killed, not waited for); a remote cluster's tasks are cancelled. A killed command
-leaves no workers either: Dask's worker process exits as soon as its parent's pipe closes
-(distributed/process.py, `AsyncProcess._immediate_exit_when_closed`; tests/test_engine.py kills a
-command with SIGKILL and checks).
+Ctrl-C: the command's one line and exit 130 (flightctl/cli.py), whenever it comes. The local workers
+ignore it (`_workers_deaf_to_ctrl_c`) and are ended at once by this process (killed, not waited
+for); a Ctrl-C while they start is raised once they are up; a remote cluster's tasks are cancelled.
+A killed command leaves no workers either: Dask's worker process exits as soon as its nanny's pipe
+closes (distributed/process.py, `AsyncProcess._immediate_exit_when_closed`), and the fork server
+when this process's does (tests/test_fleet.py kills a command with SIGKILL and checks).
 
 A worker that dies (a log that crashes it) fails its item with `WorkerDied`, not the run's other
 items: `run(..., died=...)` records it; without `died` it is raised. The local cluster marks an
@@ -25,12 +26,16 @@ from __future__ import annotations
 import atexit
 import logging
 import os
+import signal
 import sys
+import threading
+from contextlib import contextmanager
 from typing import Callable, Iterable
 
 HINT = ("one item at a time in this process; for the parallel engine (Dask): pip install '.[fleet]' in the "
         "flightctl checkout")
 
+ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}   # BLAS, per worker
 _address: str | None = None         # `use(address)`: an existing cluster's scheduler
 _engine: dict = {}                  # the client (and local cluster) kept for the command's life
 _hinted = [False]
@@ -79,29 +84,72 @@ def _client(workers: int):
     if _engine.get("key") == key:
         return _engine["client"]
     close()
+    quiet = logging.CRITICAL            # the worker deaths and shut-down chatter are ours to say
     import dask
     from distributed import Client, LocalCluster
-    quiet = logging.CRITICAL            # the worker deaths and shut-down chatter are ours to say
     if address:
         client = Client(address, set_as_default=False)
         cluster = None
     else:
-        with dask.config.set({"distributed.scheduler.allowed-failures": 0,
+        _workers_deaf_to_ctrl_c()
+        with _ctrl_c_deferred(), dask.config.set({"distributed.worker.multiprocessing-method": "forkserver",
+                              "distributed.scheduler.allowed-failures": 0,
                               "distributed.scheduler.worker-saturation": 1.0,
-                              "distributed.nanny.pre-spawn-environ.OPENBLAS_NUM_THREADS": 1,
-                              "distributed.nanny.pre-spawn-environ.OMP_NUM_THREADS": 1,
-                              "distributed.nanny.pre-spawn-environ.MKL_NUM_THREADS": 1}):
+                              **{f"distributed.nanny.pre-spawn-environ.{k}": 1 for k in ONE_THREAD}}):
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    dashboard_address=":0", silence_logs=quiet)
-        client = Client(cluster, set_as_default=False)
+            client = Client(cluster, set_as_default=False)
+            _engine.update(key=key, client=client, cluster=cluster)
+    _engine.update(key=key, client=client, cluster=cluster)
     for name in ("distributed", "distributed.nanny", "distributed.scheduler", "distributed.worker"):
         logging.getLogger(name).setLevel(quiet)
-    _engine.update(key=key, client=client, cluster=cluster)
     link = _dashboard(client, cluster)
     where = address or f"a local cluster of {workers} worker{'s' * (workers != 1)}"
     if not _said["quiet"]:
         print(f"engine: Dask, {where}" + (f"; dashboard {link}" if link else ""), file=sys.stderr, flush=True)
     return client
+
+
+def _workers_deaf_to_ctrl_c() -> None:
+    """Ctrl-C reaches the terminal's whole process group; the workers leave it to this process, which
+    ends them (`close(now=True)`), as the pool before them did. The local workers are forked from
+    multiprocessing's fork server (Dask's `multiprocessing-method` forkserver), started here with SIGINT
+    ignored: an ignored signal stays ignored across fork and exec, Python then installs no handler of
+    its own, and the server hands its children the handlers it started with (signal(7); CPython's
+    multiprocessing/forkserver.py). This process ignores Ctrl-C only while the server starts. The
+    server ends when this process does (its pipe from here closes)."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    from multiprocessing import forkserver
+    saved = {k: os.environ.get(k) for k in ONE_THREAD}
+    os.environ.update(ONE_THREAD)             # the server's environment is its children's
+    handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, handler)
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+@contextmanager
+def _ctrl_c_deferred():
+    """A Ctrl-C while the local cluster starts is raised once it is up (and then ended at once by
+    `run`), not inside Dask's start-up, whose half-made workers would each say so with a traceback."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pressed = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: pressed.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if pressed:
+        raise KeyboardInterrupt
 
 
 def _dashboard(client, cluster) -> str | None:
@@ -159,8 +207,8 @@ def run(fn: Callable, jobs: Iterable, workers: int | None = None, done: Callable
         return _serial(fn, jobs, done)
     from distributed import as_completed
     from distributed.scheduler import KilledWorker
-    client = _client(n)
     try:
+        client = _client(n)
         futures = client.map(fn, jobs, pure=False)
         index = {f.key: k for k, f in enumerate(futures)}
         results: list = [None] * len(jobs)

@@ -53,17 +53,19 @@ def wait_for_rows(p: subprocess.Popen, results: Path, n: int) -> None:
         time.sleep(0.05)
 
 
-def children(pid: int) -> list[int]:
-    """The processes whose parent is `pid` (from /proc)."""
-    out = []
+def descendants(pid: int) -> list[int]:
+    """The processes under `pid`: its children, theirs, ... (from /proc)."""
+    parent = {}
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit():
             try:
-                stat = (entry / "stat").read_text()
+                parent[int(entry.name)] = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
             except OSError:
                 continue
-            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-                out.append(int(entry.name))
+    out, frontier = [], [pid]
+    while frontier:
+        frontier = [p for p, pp in parent.items() if pp in frontier]
+        out += frontier
     return out
 
 
@@ -133,8 +135,8 @@ def test_a_killed_command_leaves_no_workers(corpus, tmp_path):
     the command, nothing of it left running."""
     p = command(corpus, tmp_path / "rows.json", "--jobs", "2", "--quiet")
     wait_for_rows(p, tmp_path / "rows.results.jsonl", 1)
-    workers = children(p.pid)
-    assert len(workers) >= 2, workers
+    workers = descendants(p.pid)            # the fork server, its two workers, the resource tracker
+    assert len(workers) >= 3, workers
     p.kill()
     p.wait()
     start = time.monotonic()
@@ -192,3 +194,22 @@ def test_a_cluster_started_apart_is_used_by_its_address(corpus, tmp_path):
     assert remote == json.loads((tmp_path / "local.json").read_text())["logs"]
     assert [entry["log"] for entry in remote] == sorted(LOGS)
     assert "Registered to" in worker_log.read_text() and address in worker_log.read_text()
+
+
+def test_ctrl_c_while_the_local_cluster_starts_is_one_line_and_ends_everything(corpus, tmp_path):
+    """Ctrl-C as soon as the engine has begun to start its workers (its fork server is there): the
+    command's one line, exit 130, none of the half-started workers' tracebacks, nothing left running."""
+    p = command(corpus, tmp_path / "rows.json", "--jobs", "2", "--quiet")
+    start = time.monotonic()
+    while not descendants(p.pid):
+        assert p.poll() is None and time.monotonic() - start < WAIT_S
+        time.sleep(0.01)
+    group = descendants(p.pid)
+    os.killpg(p.pid, signal.SIGINT)
+    _, err = p.communicate(timeout=WAIT_S)
+    assert p.returncode == 130 and err.strip() == "flightctl diagnose: interrupted", err
+    start = time.monotonic()
+    while any(alive(w) for w in group + descendants(p.pid)):
+        assert time.monotonic() - start < WAIT_S
+        time.sleep(0.1)
+    assert not (tmp_path / "rows.json").exists()
