@@ -88,7 +88,12 @@ def _client(workers: int):
     import dask
     from distributed import Client, LocalCluster
     if address:
-        client = Client(address, set_as_default=False)
+        try:
+            client = Client(address, set_as_default=False)
+        except (OSError, ValueError, TypeError) as e:       # refused, timed out, not an address
+            from flightctl.errors import InputError
+            raise InputError(f"--scheduler {address}: no Dask scheduler answers there ({type(e).__name__}: "
+                             f"{str(e).splitlines()[0] if str(e) else ''})") from None
         cluster = None
     else:
         _workers_deaf_to_ctrl_c()

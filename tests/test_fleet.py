@@ -224,3 +224,13 @@ def test_the_monte_carlo_on_the_engine_is_the_in_process_one_draw_for_draw():
         montecarlo.run("paper-as-flown", "step_roll", 2, seed=seed, jobs=1)
     assert montecarlo.run_batch("paper-as-flown", "step_roll", 4, seed=seed, workers=2) == \
         montecarlo.run_batch("paper-as-flown", "step_roll", 4, seed=seed, workers=1)
+
+
+def test_a_scheduler_that_does_not_answer_is_one_line_and_nothing_written(corpus, tmp_path):
+    address = f"tcp://127.0.0.1:{free_port()}"             # nothing listens there
+    p = command(corpus, tmp_path / "rows.json", "--scheduler", address, "--quiet",
+                env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "2s"})
+    _, err = p.communicate(timeout=WAIT_S)
+    assert p.returncode == 2, err
+    assert len(err.strip().splitlines()) == 1 and f"--scheduler {address}: no Dask scheduler answers there" in err
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["logs"]
