@@ -88,7 +88,13 @@ def _client(workers: int):
     import dask
     from distributed import Client, LocalCluster
     if address:
+        from distributed.comm.addressing import parse_address, parse_host_port
+        from distributed.comm.registry import get_backend
         try:
+            scheme, where = parse_address(address)
+            get_backend(scheme)                             # a known scheme and (tcp, tls) a port,
+            if scheme in ("tcp", "tls"):                    # before a client is made of it
+                parse_host_port(where)
             client = Client(address, set_as_default=False)
         except (OSError, ValueError, TypeError) as e:       # refused, timed out, not an address
             from flightctl.errors import InputError

@@ -226,8 +226,9 @@ def test_the_monte_carlo_on_the_engine_is_the_in_process_one_draw_for_draw():
         montecarlo.run_batch("paper-as-flown", "step_roll", 4, seed=seed, workers=1)
 
 
-def test_a_scheduler_that_does_not_answer_is_one_line_and_nothing_written(corpus, tmp_path):
-    address = f"tcp://127.0.0.1:{free_port()}"             # nothing listens there
+@pytest.mark.parametrize("address", ["tcp://127.0.0.1:{port}", "127.0.0.1", "udp://127.0.0.1:{port}"])
+def test_a_scheduler_that_does_not_answer_is_one_line_and_nothing_written(corpus, tmp_path, address):
+    address = address.format(port=free_port())             # nothing listens there, or not an address
     p = command(corpus, tmp_path / "rows.json", "--scheduler", address, "--quiet",
                 env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "2s"})
     _, err = p.communicate(timeout=WAIT_S)
