@@ -210,7 +210,8 @@ def corpus(folder: Path, jobs: int | None = None, progress=None, results: Path |
 
     def died(k: int, e: Exception) -> Row:
         row = todo[k]
-        row.status, row.reason = "failed", f"{e}: a fault to report"
+        row.status, row.reason = "failed", "worker died: its process ended while diagnosing this log (a crash or " \
+                                           "the memory exhausted): a fault to report"
         return row
     rows += engine.run(run_one, todo, workers, finished, died, isolate=True)
     return sorted(rows, key=lambda r: (r.path, r.index or 0))
