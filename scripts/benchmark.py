@@ -336,6 +336,37 @@ def diagnose_rows() -> list[tuple[str, str, str]]:
     return rows
 
 
+def fleet_rate(workers: int, logs: int = 6) -> float:
+    """Logs per hour of `flightctl diagnose --corpus` on `workers` of the engine's local workers
+    (sim/engine.py, Dask; in this process without it): `logs` simulated 21 s flights (the tests' quick
+    plan, tests/test_diagnose_cases.py, each its own seed), diagnosed end to end, the engine's start
+    and each worker's imports included (docs/fleet.md)."""
+    import contextlib
+    import io
+    import sys
+    from flightctl.cli import main as cli
+    from flightctl.sim import engine
+    from flightctl.sim.identify.diagnose.corpus import corpus
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from test_diagnose_cases import quick_plan
+    tmp = Path(tempfile.mkdtemp())
+    folder = tmp / "logs"
+    folder.mkdir()
+    plan = quick_plan(tmp)
+    with contextlib.redirect_stdout(io.StringIO()):
+        for k in range(logs):
+            cli(["sim", "--plan", str(plan), "--log", str(folder / f"flight{k:02d}.csv"), "--seed", str(k),
+                 "--no-plot", "--quiet"])
+    engine.use(None, quiet=True)
+    engine.close()
+    start = time.perf_counter()
+    rows = corpus(folder, workers, results=tmp / f"r{workers}.jsonl")
+    wall = time.perf_counter() - start
+    engine.close()
+    assert len(rows) == logs
+    return logs / wall * 3600.0
+
+
 HEADER = ("| what | figure | target |", "|---|---|---|")
 STAMP = "Measured by `python scripts/benchmark.py --markdown` on {date}: {machine}."
 
@@ -404,6 +435,14 @@ def figures(repeat: int) -> list[tuple[str, str, str]]:
     airborne = max(batch_rate(n=2000, seconds=10.0)[0] for _ in range(repeat))
     rows.append(("batched simulator, 2,000 as-flown vehicles for 12 s on 1 core (10 s after arming: mostly in the "
                  "air, as a Monte Carlo flies)", f"{airborne / 1e6:.2f} M vehicle-steps/s (best of {repeat})", "-"))
+    from flightctl.sim import engine
+    what = ("`flightctl diagnose --corpus` of 6 simulated 21 s flights (sim/engine.py: Dask's local workers, "
+            "start-up included)")
+    if engine.available():
+        rates = {w: fleet_rate(w) for w in (1, 2)}
+        rows.append((what, f"{rates[1]:.0f} logs/h on 1 worker, {rates[2]:.0f} on 2 ({rates[2] / rates[1]:.2f}x)", "-"))
+    else:
+        rows.append((what, "not measured: the fleet extra (Dask) is not installed", "-"))
     rows += diagnose_rows()
     return rows
 

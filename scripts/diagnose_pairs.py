@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from flightctl.sim.docs import marked, publish
-from flightctl.sim.pool import run_all
+from flightctl.sim import engine
 from flightctl.sim.progress import Progress
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -92,7 +92,7 @@ def sweep(name: str, fn, jobs: list, n: int, describe) -> list | None:
     Ctrl-C, said in one line."""
     bar = Progress(len(jobs), f"{name} ")
     try:
-        return run_all(fn, jobs, n, lambda k, row: bar.step(describe(row)))
+        return engine.run(fn, jobs, n, lambda k, row: bar.step(describe(row)))
     except KeyboardInterrupt:
         print(f"{name}: interrupted; nothing written", file=sys.stderr)
         return None

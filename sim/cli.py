@@ -24,7 +24,7 @@ from flightctl.cli import EXIT_INTERRUPTED, ctrl_c_sets
 from flightctl.control.estimator import ESTIMATORS
 from flightctl.errors import InputError, Parser, output_dir, output_file, seed, write_atomic
 from flightctl.params import GAIN_SETS, shipped
-from flightctl.sim import causes
+from flightctl.sim import causes, engine
 from flightctl.sim.world import faults
 from flightctl.sim.flights.metrics import LEGEND, SETTLE_AFTER_S, SETTLED_DEG, hold_metrics, settled_errors, step_metrics
 from flightctl.plans import load_plan
@@ -69,6 +69,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--batch", action="store_true",
                    help="with --monte-carlo: fly the draws on the batched simulator (sim/sweeps/batch.py: compiled, "
                         "each draw flown as the full onboard path flies it, take-off to landing)")
+    engine.add_flag(p, "with --monte-carlo")
     return p
 
 
@@ -137,6 +138,7 @@ def main(argv: list[str]) -> int:
     if (args.scenario is None) == (args.plan is None):
         p.error("give exactly one of SCENARIO and --plan PLAN.toml")
     if args.monte_carlo is not None:
+        engine.use(args.scheduler, args.quiet)
         return monte_carlo_main(args)
     if args.batch:
         p.error("--batch goes with --monte-carlo N")

@@ -24,8 +24,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from flightctl.params import Gains, Params
+from flightctl.sim import engine
 from flightctl.plans.plan import Plan
-from flightctl.sim.pool import run_all
 from flightctl.sim.sweeps import flight as fl
 from flightctl.sim.sweeps import onboard as ob
 from flightctl.sim.world.board import SIM_CALIBRATE_S
@@ -312,7 +312,7 @@ def simulate(params: Params, plan: Plan, n: int, draws: dict[tuple[str, str], np
     """Fly `plan` with n vehicles from power-on, each with its own draws of the parameters ((N,)
     arrays), its own gains (None: the file's) and its own seed (None: 0 .. n-1; the seed of
     `flightctl sim --seed`), to its end (or to `until` s after arming). `record`: the span (s since
-    arming) of the judged record. `workers` processes share the vehicles (sim/pool.py: Ctrl-C ends
+    arming) of the judged record. `workers` processes share the vehicles (sim/engine.py: Ctrl-C ends
     them at once). `progress(fraction)`: the share of the vehicles flown, as each group of them lands."""
     draws = {key: np.broadcast_to(np.asarray(v, dtype=float), (n,)) for key, v in (draws or {}).items()}
     seeds = list(range(n)) if seeds is None else [int(s) for s in seeds]
@@ -336,7 +336,7 @@ def simulate(params: Params, plan: Plan, n: int, draws: dict[tuple[str, str], np
             parts.append(_fly_group(job))
             done(k, parts[-1])
     else:
-        parts = run_all(_fly_group, jobs, workers, done)
+        parts = engine.run(_fly_group, jobs, workers, done)
     judged = [j for part in parts for j in part[0]]
     rec = np.concatenate([part[1] for part in parts], axis=0)
     dt = params.airframe.dt

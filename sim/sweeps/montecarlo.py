@@ -16,7 +16,7 @@ within 3 degrees of its command from 3 s after the step to the next: `metrics.se
 paper judged (sim/sweeps/judge.py: ringing, damping, the held error apart from the estimator's bias);
 paired, draw by draw, the share where Table 6 beats Table 4 and the share where the paper's account
 holds (Table 4 flies, Table 6 flies and beats it), and a figure of which ranges decide it
-(`plot_deciding`). Flights run in parallel processes, one per core.
+(`plot_deciding`). Flights run on the engine (sim/engine.py: Dask, one worker per core).
 
 `--batch` flies the draws on the batched simulator instead (sim/sweeps/batch.py: the compiled per-vehicle
 loop, thousands of vehicles a minute): draw k's vehicle with seed + k, as the full path flies it (the
@@ -32,7 +32,7 @@ from pathlib import Path
 
 from flightctl.errors import InputError
 from flightctl.params import GAIN_SETS
-from flightctl.sim.pool import run_all
+from flightctl.sim import engine
 
 GAINS = ("table4", "table6")
 
@@ -139,12 +139,12 @@ def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, j
     draws = [one_draw(drawn, i) for i in range(n)]
     jobs_list = [(spec, scenario, g, d, seed + k) for k, d in enumerate(draws) for g in GAINS]
 
-    def done(k: int, r: dict) -> None:          # as each flight finishes (sim/pool.py)
+    def done(k: int, r: dict) -> None:          # as each flight finishes (sim/engine.py)
         job = jobs_list[k]
         progress.step(f"{job[2]}: " + ", ".join(f"{c}.{n} {v:.4g}" for (c, n), v in job[3].items())
                  + f": {r['outcome']}{', settles' if r['settles'] else ''}"
                  + (f", score {r['score']:.2f}" if r.get("score") is not None else ""))
-    results = run_all(_fly, jobs_list, jobs or os.cpu_count() or 1, done if progress is not None else None)
+    results = engine.run(_fly, jobs_list, jobs, done if progress is not None else None)
     rows = [{"draw": {f"{c}.{name}": v for (c, name), v in d.items()},
              **{g: results[2 * k + j] for j, g in enumerate(GAINS)}} for k, d in enumerate(draws)]
     return _result(spec, scenario, n, seed, spans, rows)

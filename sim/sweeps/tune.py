@@ -46,6 +46,7 @@ import numpy as np
 
 from flightctl.errors import InputError, Parser, output_file, seed, write_atomic
 from flightctl.params import TABLE4, TABLE6, Gains, dumps
+from flightctl.sim import engine
 
 SETTLE_S = 3.0
 STEPS = {"alt": 2.0, "roll": math.radians(5), "pitch": math.radians(5), "yaw": math.radians(30)}
@@ -343,7 +344,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scenario", default="paper", help="the scenario whose attitude steps --robust flies (default: paper)")
     p.add_argument("--doc", metavar="FILE.md", help="write what was found into FILE's block (<!-- tune procedure: "
                    "begin --> ... end -->, or tune strict, tune robust: docs/tune.md)")
+    engine.add_flag(p, "with --robust")
     args = p.parse_args(argv)
+    engine.use(args.scheduler)
     if args.robust is not None and not 1 <= args.robust <= 10000:
         raise InputError(f"--robust {args.robust}: between 1 and 10000 draws")
     from flightctl.sim.flights.scenarios import SCENARIOS

@@ -42,6 +42,7 @@ from pathlib import Path
 from flightctl import params as paramfile
 from flightctl.errors import InputError, Parser, output_file, write_atomic
 from flightctl.logfile import read_flight_log
+from flightctl.sim import engine
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
 from flightctl.sim.identify.diagnose import report as diagnose_report
 from flightctl.sim.identify.diagnose.verdict import diagnose, say, validate
@@ -77,6 +78,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--table", metavar="OUT.md",
                    help="with --corpus: the table, written between OUT.md's corpus markers if it has them")
     p.add_argument("--jobs", type=int, metavar="N", help="with --corpus: processes (default: the cores, at most)")
+    p.add_argument("--results", metavar="R.jsonl",
+                   help="with --corpus: each log's row as it finishes; a run started again skips the logs in it "
+                        "(default: beside --json: OUT.results.jsonl; rows written by another version of the code are diagnosed again)")
+    engine.add_flag(p, "with --corpus")
     p.add_argument("--plot", metavar="PREFIX",
                    help="write PREFIX-residuals.png (residual vs time, base and after each cause), "
                         "PREFIX-explained.png (residual vs the variable that explains it) and, per log, "
@@ -146,6 +151,7 @@ def _main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
     if args.corpus is not None:
         from flightctl.sim.identify.diagnose.corpus import main as corpus
+        engine.use(args.scheduler, args.quiet)
         return corpus(args)
     if not args.logs:
         raise InputError("name the flight logs to diagnose, or a folder of them with --corpus DIR")

@@ -6,7 +6,9 @@ once (docs/real-flights.md, whose table it writes).
 
 Each log is read (`flightctl.sim.logs.count_logs`, then each log on its own as `each_log` reads it, or
 this project's CSV)
-and diagnosed in a process of its own (at most the machine's cores, one BLAS thread each); a log that
+and diagnosed on the engine (sim/engine.py: Dask's workers, at most the machine's cores, one BLAS thread
+each; a log that kills its worker is that log's failure), each row written to the results table as
+it finishes (`--results`, sim/identify/diagnose/results.py; a run started again skips the logs in it); a log that
 cannot be read, never flew, or whose data contradict its layout is that log's refusal, with its one
 line. The rows are a function of the logs and the code only: sorted by path and index, paths relative
 to DIR. `--table` writes the table between OUT.md's markers (`TABLE_BEGIN`, `TABLE_END`) when it has
@@ -17,16 +19,17 @@ from __future__ import annotations
 import json
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from flightctl.errors import InputError, output_file, write_atomic
 from flightctl.sim.identify.static import summary
+from flightctl.sim.identify.diagnose.results import default_path
 
 TABLE_BEGIN = "<!-- diagnose --corpus table: begin -->"
 TABLE_END = "<!-- diagnose --corpus table: end -->"
 CSV_SUFFIXES = (".csv",)
+CRASH_ENV = "FLIGHTCTL_TEST_CRASH_ON"   # tests only: the worker diagnosing the log of this file name exits at once
 COLUMNS = ("log", "vehicle", "what was read", "airborne", "tier", "static tier", "causes (each on top of the ones before)",
            "fits, but not physical", "base model: effectiveness (t = value / its jackknife error)", "refused")
 
@@ -154,6 +157,8 @@ def run_one(row: Row) -> Row:
     from flightctl.sim.identify.diagnose.cli import read_logs
     from flightctl.sim.identify.diagnose.verdict import diagnose
     quiet = lambda *a: None   # noqa: E731
+    if os.environ.get(CRASH_ENV) == Path(row.path).name:    # tests/test_fleet.py: a log that kills its worker
+        os._exit(3)
     try:
         tables = read_logs([row.path], row.index, quiet)
         row.meta = dict(tables[0].meta) if tables else {}
@@ -180,32 +185,42 @@ def write_table(path: Path, text: str) -> None:
         write_atomic(path, f"{TABLE_BEGIN}\n{text}\n{TABLE_END}\n")
 
 
-def corpus(folder: Path, jobs: int | None = None, progress=None) -> list[Row]:
-    """Every log under `folder` diagnosed or refused, rows sorted by path and index."""
+def corpus(folder: Path, jobs: int | None = None, progress=None, results: Path | None = None) -> list[Row]:
+    """Every log under `folder` diagnosed or refused, rows sorted by path and index, on the engine
+    (sim/engine.py). `results`: the results table (sim/identify/diagnose/results.py), each log's row
+    written as it finishes; the logs already in it are not diagnosed again."""
     if not folder.is_dir():
         raise InputError(f"--corpus {folder}: not a folder")
     files = find_logs(folder)
     if not files:
         raise InputError(f"--corpus {folder}: no flight logs in it (.csv, {', '.join(_suffixes())})")
     todo, rows = _jobs(folder, files)
+    from flightctl.sim import engine
+    from flightctl.sim.identify.diagnose.results import Results
+    table_ = Results(results) if results is not None else None
+    if table_ is not None:
+        done = table_.done()
+        skipped = [table_.restore(r, done[table_.key(r)]) for r in todo if table_.key(r) in done]
+        todo = [r for r in todo if table_.key(r) not in done]
+        rows += skipped
+        if progress and skipped:
+            print(f"diagnose --corpus: {len(skipped)} logs already in {results}, not run again", file=sys.stderr)
     workers = max(1, min(jobs or os.cpu_count() or 1, os.cpu_count() or 1, len(todo) or 1))
     from flightctl.sim.progress import Progress
     bar = Progress(len(todo), "diagnose --corpus ", out=sys.stderr) if progress else None
-    if todo:
-        import multiprocessing
-        saved = os.environ.get("OPENBLAS_NUM_THREADS")
-        os.environ["OPENBLAS_NUM_THREADS"] = "1"       # the processes share the cores: one BLAS thread each
-        try:
-            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-                for row in pool.map(run_one, todo):
-                    rows.append(row)
-                    if bar is not None:
-                        bar.step(f"{row.log}: {row.status}")
-        finally:
-            if saved is None:
-                os.environ.pop("OPENBLAS_NUM_THREADS", None)
-            else:
-                os.environ["OPENBLAS_NUM_THREADS"] = saved
+
+    def finished(k: int, row: Row) -> None:
+        if table_ is not None:
+            table_.write(row)
+        if bar is not None:
+            bar.step(f"{row.log}: {row.status}")
+
+    def died(k: int, e: Exception) -> Row:
+        row = todo[k]
+        row.status, row.reason = "failed", "worker died: its process ended while diagnosing this log (a crash or " \
+                                           "the memory exhausted): a fault to report"
+        return row
+    rows += engine.run(run_one, todo, workers, finished, died, isolate=True)
     return sorted(rows, key=lambda r: (r.path, r.index or 0))
 
 
@@ -229,7 +244,11 @@ def main(args) -> int:
     for path, flag in ((out_table, "--table"), (out_json, "--json")):
         if path is not None:
             output_file(path, flag)
-    rows = corpus(Path(args.corpus), args.jobs, progress=not args.quiet)
+    # the results table: --results, else beside --json (a table alone, such as docs/'s, keeps none)
+    results = Path(args.results) if getattr(args, "results", None) else (default_path(out_json) if out_json else None)
+    if results is not None:
+        output_file(results, "--results")
+    rows = corpus(Path(args.corpus), args.jobs, progress=not args.quiet, results=results)
     text = table(rows)
     if out_table is not None:
         write_table(out_table, text)
