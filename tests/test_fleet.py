@@ -235,3 +235,20 @@ def test_a_scheduler_that_does_not_answer_is_one_line_and_nothing_written(corpus
     assert p.returncode == 2, err
     assert len(err.strip().splitlines()) == 1 and f"--scheduler {address}: no Dask scheduler answers there" in err
     assert sorted(x.name for x in tmp_path.iterdir()) == ["logs"]
+
+
+def test_a_results_row_of_other_code_is_not_reused(tmp_path, monkeypatch):
+    """A row is reused only by the code that wrote it: the same log judged by other readers or another
+    diagnosis (another digest of their sources) is diagnosed again, not read back."""
+    from flightctl.sim.identify.diagnose import results as res
+    from flightctl.sim.identify.diagnose.corpus import Row
+    log = tmp_path / "a.csv"
+    log.write_text("t,P1\n0,1\n")
+    table = res.Results(tmp_path / "r.results.jsonl")
+    row = Row(log="a.csv", path=str(log), index=None, status="refused", reason="too short to judge")
+    table.write(row)
+    assert table.key(row) in table.done()
+    monkeypatch.setattr(res, "code_digest", lambda: "another-version")
+    assert res.Results(table.path).done() == {}
+    log.write_text("t,P1\n0,2\n")                                  # and a log rewritten is not the same log
+    assert res.Results(table.path).key(row) != table.key(row)
