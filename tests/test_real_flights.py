@@ -10,11 +10,15 @@ published (bench 20 ms; in flight 25.9-26.6 ms) and whose logs carry the rotors'
 from __future__ import annotations
 
 import json
+import re
+from pathlib import Path
 
 import pytest
 
 from flightctl.cli import main
 from real import FLIGHTS, INDIFLIGHT, need
+
+ARDUPILOT = Path(__file__).parent / "data" / "ardupilot"     # this project's test logs (tests/data)
 
 BENCH_TAU = 0.020                    # s, the paper's Table I: the motor's time constant on the bench
 FLIGHT_TAU = (0.0259, 0.0266)        # s, its onboard fit in flight, motors 1-3
@@ -70,39 +74,51 @@ def test_the_imported_csv_gives_the_same_diagnosis_as_the_foreign_log(flight):
 
 def _doc_table() -> list[str]:
     """The rows of docs/real-flights.md's corpus table."""
-    from pathlib import Path
-
     from flightctl.sim.identify.diagnose.corpus import TABLE_BEGIN, TABLE_END
     doc = (Path(__file__).resolve().parents[1] / "docs" / "real-flights.md").read_text()
     return doc.split(TABLE_BEGIN, 1)[1].split(TABLE_END, 1)[0].strip().splitlines()
 
 
-def _corpus(folder, tmp_path) -> list[str]:
+def _corpus(folders, tmp_path) -> list[str]:
     out = tmp_path / "table.md"
-    assert main(["diagnose", "--corpus", str(folder), "--table", str(out), "--quiet"]) == 0
+    assert main(["diagnose", "--corpus", *map(str, folders), "--table", str(out), "--quiet"]) == 0
     from flightctl.sim.identify.diagnose.corpus import TABLE_BEGIN, TABLE_END
     return out.read_text().split(TABLE_BEGIN, 1)[1].split(TABLE_END, 1)[0].strip().splitlines()
 
 
+def _headline(lines: list[str]) -> tuple[int, int]:
+    """(flights diagnosed, airborne flights) from the table's headline."""
+    m = re.match(r"\*\*(\d+) of (\d+) airborne flights get a diagnosis", lines[0])
+    assert m, lines[0]
+    return int(m[1]), int(m[2])
+
+
 def test_the_docs_table_is_what_the_corpus_command_computes_quick(tmp_path):
-    """Two rows recomputed (a short log, and a refused one) from a folder that holds them where the
-    shipped folder does; every row under -m slow: the rows are a function of the logs and the code."""
-    names = ["indiflight/LOG00258.BFL", "px4/roboto-test.ulg"]
-    for name in names:
-        (tmp_path / "corpus" / name).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / "corpus" / name).symlink_to(need(INDIFLIGHT.parent / name).resolve())
-    rows = _corpus(tmp_path / "corpus", tmp_path)
+    """Three rows recomputed (a short flight, a refused one, and a log of no flight) from two folders
+    that hold them where the shipped folders do, and the headline's count of them; every row under -m
+    slow: the rows are a function of the logs and the code."""
+    names = ["flights/indiflight/LOG00258.BFL", "flights/px4/roboto-test.ulg", "data/ardupilot/backend_log_80k.bin"]
+    sources = [INDIFLIGHT.parent / "indiflight/LOG00258.BFL", INDIFLIGHT.parent / "px4/roboto-test.ulg",
+               ARDUPILOT / "backend_log_80k.bin"]
+    for name, source in zip(names, sources):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).symlink_to(need(source).resolve())
+    lines = _corpus([tmp_path / "flights", tmp_path / "data"], tmp_path)
     doc = _doc_table()
-    assert rows[:2] == doc[:2]                                   # the header
-    for name, row in zip(names, rows[2:]):
-        assert row.startswith(f"| {name} |")
-        assert row in doc, (row, [r for r in doc if r.startswith(f"| {name} |")])
+    rows = [line for line in lines if line.startswith("|")]
+    assert rows[:2] == [line for line in doc if line.startswith("|")][:2]      # the columns
+    assert {r.split(" | ")[0] for r in rows[2:]} == {f"| {n}" for n in names}
+    for row in rows[2:]:
+        assert row in doc, (row, [r for r in doc if r.startswith(row.split(" | ")[0])])
+    diagnosed = sum("| refused |" not in r for r in rows[2:])
+    flights = sum(not any(w in r for w in ("| never armed", "| header only", "| too short to judge")) for r in rows[2:])
+    assert _headline(lines) == (diagnosed, flights)
 
 
 @pytest.mark.slow
 @pytest.mark.timeout(1800)   # every shipped log, two at a time: 5-10 min on this machine when shared
 def test_every_shipped_log_is_diagnosed_or_refused_as_the_docs_table_says(tmp_path):
-    assert _corpus(need(INDIFLIGHT.parent), tmp_path) == _doc_table()
+    assert _corpus([need(INDIFLIGHT.parent), ARDUPILOT.parent], tmp_path) == _doc_table()
 
 
 def _refusal(capsys, log, tmp_path, *index) -> str:

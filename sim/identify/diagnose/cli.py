@@ -2,7 +2,7 @@
 
     flightctl diagnose FLIGHT.csv|F.ulg|F.bin|F.bbl|F.bfl|F.txt [...] [--index N] [--params PARAMS.toml]
                        --json REPORT.json [--validate OTHER ...] [--plot PREFIX] [--quiet]
-    flightctl diagnose --corpus DIR [--table OUT.md] [--json OUT.json] [--jobs N] [--quiet]
+    flightctl diagnose --corpus DIR [DIR ...] [--table OUT.md] [--json OUT.json] [--jobs N] [--quiet]
 
 Logs of other autopilots (PX4's ULog, ArduPilot's DataFlash, the blackbox of Betaflight and INAV) are
 read by `flightctl.sim.logs` into the same table as `flightctl log import` writes; their vehicle's
@@ -72,9 +72,10 @@ def _parser() -> argparse.ArgumentParser:
                         "airframe, no effects)")
     p.add_argument("--json", metavar="REPORT.json",
                    help="the report (its keys: docs/diagnose.md); with --corpus, every log's report and refusal")
-    p.add_argument("--corpus", metavar="DIR",
-                   help="diagnose every log in DIR and its folders (every log of a file of many), in parallel, "
-                        "one row per log (docs/real-flights.md)")
+    p.add_argument("--corpus", metavar="DIR", nargs="+",
+                   help="diagnose every log in each DIR and its folders (every log of a file of many), in parallel, "
+                        "one row per log, the share of the airborne flights that get a diagnosis on top "
+                        "(docs/real-flights.md)")
     p.add_argument("--table", metavar="OUT.md",
                    help="with --corpus: the table, written between OUT.md's corpus markers if it has them")
     p.add_argument("--jobs", type=int, metavar="N", help="with --corpus: processes (default: the cores, at most)")

@@ -129,12 +129,13 @@ def find_logs(folder: Path) -> list[Path]:
     return out
 
 
-def _jobs(folder: Path, files: list[Path]) -> tuple[list[Row], list[Row]]:
-    """(rows to diagnose, one per log, and rows already refused: files that cannot be read)."""
+def _jobs(folder: Path, files: list[Path], name: str = "") -> tuple[list[Row], list[Row]]:
+    """(rows to diagnose, one per log, and rows already refused: files that cannot be read); each log
+    named by its path under `folder`, after `name/` when given."""
     from flightctl.sim.logs import count_logs, reason
     todo, refused = [], []
     for p in files:
-        rel = p.relative_to(folder).as_posix()
+        rel = (f"{name}/" if name else "") + p.relative_to(folder).as_posix()
         if p.suffix.lower() in CSV_SUFFIXES:
             todo.append(Row(rel, str(p), None))
             continue
@@ -173,9 +174,33 @@ def run_one(row: Row) -> Row:
     return row
 
 
+# A refusal that says the log holds no flight (data.py, verdict.py and the readers word them so): such a
+# log is not counted among the airborne flights of the corpus' headline.
+NO_FLIGHT = ("header only", "never armed", "too short to judge")
+
+
+def flew(row: Row) -> bool:
+    """The log holds a flight: it was diagnosed (a tier answered), or refused for a reason other than
+    holding no flight (a failure of diagnose's counts as a flight not answered)."""
+    return row.status == "diagnosed" or not any(w in row.reason for w in NO_FLIGHT)
+
+
+def headline(rows: list[Row]) -> str:
+    """The share of the airborne flights that get a diagnosis, and of which tier."""
+    flights = [r for r in rows if flew(r)]
+    done = [r for r in flights if r.status == "diagnosed"]
+    static_only = sum((r.report or {}).get("tier") == "static" for r in done)
+    share = f"{100 * len(done) / len(flights):.0f} %" if flights else "-"
+    return (f"**{len(done)} of {len(flights)} airborne flights get a diagnosis ({share})**: "
+            f"{len(done) - static_only} the dynamic tier, {static_only} the static tier only; "
+            f"{len(rows) - len(flights)} of the {len(rows)} logs hold no flight (header only, never armed, "
+            "too short or idle)")
+
+
 def table(rows: list[Row]) -> str:
+    """The headline, then one row per log."""
     from flightctl.sim.docs import table as markdown_table
-    return "\n".join(markdown_table(COLUMNS, [r.cells() for r in rows]))
+    return headline(rows) + "\n\n" + "\n".join(markdown_table(COLUMNS, [r.cells() for r in rows]))
 
 
 def write_table(path: Path, text: str) -> None:
@@ -185,16 +210,23 @@ def write_table(path: Path, text: str) -> None:
         write_atomic(path, f"{TABLE_BEGIN}\n{text}\n{TABLE_END}\n")
 
 
-def corpus(folder: Path, jobs: int | None = None, progress=None, results: Path | None = None) -> list[Row]:
-    """Every log under `folder` diagnosed or refused, rows sorted by path and index, on the engine
-    (sim/engine.py). `results`: the results table (sim/identify/diagnose/results.py), each log's row
-    written as it finishes; the logs already in it are not diagnosed again."""
-    if not folder.is_dir():
-        raise InputError(f"--corpus {folder}: not a folder")
-    files = find_logs(folder)
-    if not files:
-        raise InputError(f"--corpus {folder}: no flight logs in it (.csv, {', '.join(_suffixes())})")
-    todo, rows = _jobs(folder, files)
+def corpus(folders: Path | list[Path], jobs: int | None = None, progress=None,
+           results: Path | None = None) -> list[Row]:
+    """Every log under the folders diagnosed or refused, rows sorted by path and index, on the engine
+    (sim/engine.py); with several folders each row's log is named from its folder's name on. `results`:
+    the results table (sim/identify/diagnose/results.py), each log's row written as it finishes; the
+    logs already in it are not diagnosed again."""
+    folders = [folders] if isinstance(folders, Path) else list(folders)
+    todo, rows = [], []
+    for folder in folders:
+        if not folder.is_dir():
+            raise InputError(f"--corpus {folder}: not a folder")
+        files = find_logs(folder)
+        if not files:
+            raise InputError(f"--corpus {folder}: no flight logs in it (.csv, {', '.join(_suffixes())})")
+        t, r = _jobs(folder, files, folder.resolve().name if len(folders) > 1 else "")
+        todo += t
+        rows += r
     from flightctl.sim import engine
     from flightctl.sim.identify.diagnose.results import Results
     table_ = Results(results) if results is not None else None
@@ -231,7 +263,7 @@ def _suffixes() -> tuple[str, ...]:
 
 def main(args) -> int:
     if args.logs:
-        raise InputError("--corpus DIR takes no other logs: put them in the folder")
+        raise InputError("--corpus DIR [DIR ...] takes no other logs: put them in a folder")
     if args.table is None and args.json is None:
         raise InputError("--corpus: say where the rows go: --table OUT.md and/or --json OUT.json")
     for flag in ("index", "validate", "params", "plot"):
@@ -248,12 +280,12 @@ def main(args) -> int:
     results = Path(args.results) if getattr(args, "results", None) else (default_path(out_json) if out_json else None)
     if results is not None:
         output_file(results, "--results")
-    rows = corpus(Path(args.corpus), args.jobs, progress=not args.quiet, results=results)
+    rows = corpus([Path(c) for c in args.corpus], args.jobs, progress=not args.quiet, results=results)
     text = table(rows)
     if out_table is not None:
         write_table(out_table, text)
     if out_json is not None:
-        write_atomic(out_json, json.dumps({"corpus": str(args.corpus), "logs": [
+        write_atomic(out_json, json.dumps({"corpus": [str(c) for c in args.corpus], "logs": [
             {"log": r.log, "status": r.status, "refused": r.reason or None, "report": r.report} for r in rows]},
             indent=1, allow_nan=False) + "\n")
     print(text)

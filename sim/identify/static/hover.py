@@ -186,9 +186,9 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
                               f"{com_sd[0]:.2g}, {dy:+.3f} +- {com_sd[1]:.2g}) {unit} (chi-square {best['chi2']} on "
                               f"{best['dof']} dof)")
                 if not size_ok:
-                    out["verdict"], out["why"] = "none", out["why"] + f": further than {MAX_COM} arm lengths, not physical"
+                    out["verdict"], out["why"] = "not physical", out["why"] + f": further than {MAX_COM} arm lengths"
             elif best["hypothesis"] == "yaw trim" and abs(split) > MAX_YAW_SPLIT:
-                out["verdict"] = "none"
+                out["verdict"] = "not physical"
                 out["why"] = (f"a pattern of the spins alone, but the pairs differ by {100 * abs(split):.0f} % of thrust, "
                               f"more than a trim's {100 * MAX_YAW_SPLIT:g} %: not physical (a motor order or spin the log "
                               "declares that is not the vehicle's?)")
