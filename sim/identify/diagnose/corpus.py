@@ -174,9 +174,9 @@ def run_one(row: Row) -> Row:
     return row
 
 
-# A refusal that says the log holds no flight (data.py, verdict.py and the readers word them so): such a
-# log is not counted among the airborne flights of the corpus' headline.
-NO_FLIGHT = ("header only", "never armed", "too short to judge")
+# A refusal that says the log holds no flight (data.py, verdict.py, base.py and the readers word them so):
+# such a log is not counted among the airborne flights of the corpus' headline.
+NO_FLIGHT = ("header only", "never armed", "too short to judge", "may never have left the ground")
 
 
 def flew(row: Row) -> bool:
@@ -194,7 +194,7 @@ def headline(rows: list[Row]) -> str:
     return (f"**{len(done)} of {len(flights)} airborne flights get a diagnosis ({share})**: "
             f"{len(done) - static_only} the dynamic tier, {static_only} the static tier only; "
             f"{len(rows) - len(flights)} of the {len(rows)} logs hold no flight (header only, never armed, "
-            "too short or idle)")
+            "too short or idle, or by its barometer never off the ground)")
 
 
 def table(rows: list[Row]) -> str:
