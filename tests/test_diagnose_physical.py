@@ -99,7 +99,7 @@ def test_the_corpus_command_writes_one_row_per_log_in_parallel(tmp_path, capsys)
     assert main(["diagnose", "--corpus", str(folder), "--table", str(doc), "--json", str(out), "--jobs", "2",
                  "--quiet"]) == 0
     text = doc.read_text()
-    assert text.startswith("# before\n") and text.endswith("after\n") and "old" not in text
+    assert text.startswith("# before\n") and text.endswith("after\n") and "\nold\n" not in text
     rows = [r for r in text.splitlines() if r.startswith("| ") and not r.startswith("| log |")]
     assert [r.split(" | ")[0] for r in rows] == ["| LOG00258.csv", "| sub/broken.bbl"]
     assert "not a blackbox log" in rows[1]

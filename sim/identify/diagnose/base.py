@@ -76,6 +76,11 @@ WHAT = ("h1 l / Jxx: roll", "h1 l / Jyy: pitch", "h1 g1 / Jzz: yaw", "h1 / M: sp
         "gamma1 / Jzz: eq. 6's yaw drag")
 
 
+class LayoutContradicted(InputError):
+    """The log's data contradict its declared rotor layout, signs or scaling: the log is refused whole
+    (measured-data.md), the static tier too, whose motor shares are read through the same layout."""
+
+
 def equivalent(h2: float, theta=None) -> Airframe:
     """The equivalent airframe of the coefficients `theta` (NAMES order); unit effectiveness and
     h2 = 0 without them (the identification's own predictions: drive P^2 and P)."""
@@ -292,7 +297,7 @@ def _refuse(files: list[FileData], layout: Layout, theta: np.ndarray, sd: np.nda
                          f"yaw effectiveness a quadrotor of this roll and pitch effectiveness has, {k_min:.2g})")
     if contradicted:
         axes = " and ".join(w.split(" ", 1)[0] for w in contradicted)
-        raise InputError(f"{paths}: the log's layout, signs or scaling contradict its data on {axes}: "
+        raise LayoutContradicted(f"{paths}: the log's layout, signs or scaling contradict its data on {axes}: "
                          f"{'; '.join(contradicted)}; no base model for causes")
     if unshown:
         axes = " and ".join(a for a, *_ in unshown)

@@ -18,7 +18,8 @@ from flightctl.logfile import Table
 from flightctl.params import Airframe, EffectSpec
 from flightctl.sim.causes import CAUSES, make
 from flightctl.sim.causes.battery_sag import pack_range
-from flightctl.sim.identify.diagnose.base import YAW_UNKNOWN, identify, yaw_identified
+from flightctl.sim.identify.diagnose.base import YAW_UNKNOWN, LayoutContradicted, identify, yaw_identified
+from flightctl.sim.identify.diagnose.rates import faster, motor_rate, sensor_rate
 from flightctl.sim.identify.diagnose.candidate import Result, columns_of
 from flightctl.sim.identify.diagnose.data import MIN_AIRBORNE_S, MIN_STRETCH_S, Layout, load_file
 from flightctl.sim.identify.diagnose.dataset import (CHANNELS, DYNAMIC_MIN_HZ, LOWPASS_HZ, N_BLOCKS, OFFSET, UNITS, Change,
@@ -269,34 +270,6 @@ def _files(tables: list[Table], a: Airframe, notes: list[str], progress):
     return files
 
 
-def _motor_rate(tables: list[Table]) -> float | None:
-    """The slowest motor-output rate any log declares (`# motor_rate_hz:`), or None."""
-    rates = []
-    for t in tables:
-        try:
-            rates.append(float(t.meta["motor_rate_hz"]))
-        except (KeyError, ValueError):
-            pass
-    return min(rates) if rates else None
-
-
-def _faster(tables: list[Table]) -> str:
-    """'; to log them faster: ...' from a log's `# log_faster:` line (what its autopilot's logger needs), or ''."""
-    how = next((t.meta["log_faster"] for t in tables if t.meta.get("log_faster")), "")
-    return f"; to log them faster: {how}" if how else ""
-
-
-def _sensor_rate(tables: list[Table], files) -> None:
-    """InputError when the gyro and accelerometer were logged slower than DYNAMIC_MIN_HZ: a quadrotor's
-    motion under control has tens of Hz, and samples this sparse, each one reading and not an average
-    over its period, alias it (and the motors' vibration) into what is left (docs/real-flights.md)."""
-    rate = min(1.0 / float(np.median(np.diff(f.t))) for f in files)
-    if rate < DYNAMIC_MIN_HZ:
-        raise InputError(f"{', '.join(t.path for t in tables)}: its gyro and accelerometer were logged at {rate:.1f} Hz: "
-                         f"too slow to follow the vehicle's motion, which needs them at {DYNAMIC_MIN_HZ:g} Hz or more"
-                         + _faster(tables) + "; not judged")
-
-
 def _vehicle(files, a: Airframe, given: bool, lowpass_hz: float, speeds, notes: list[str], progress,
              slow: str | None = None) -> Vehicle:
     """The base model: a foreign vehicle's identified from the flight unless a parameter file is
@@ -389,19 +362,21 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
     notes: list[str] = []
     files = _files(tables, a, notes, progress)
     try:
-        _sensor_rate(tables, files)
+        sensor_rate(tables, files)
         lowpass, static_only, slow = LOWPASS_HZ, None, None
-        rate = _motor_rate(tables)
+        rate = motor_rate(tables)
         if rate is not None and rate < DYNAMIC_MIN_HZ:
             lowpass = rate / 4.0
             static_only = (f"the motor outputs were logged at {rate:.1f} Hz: a lag or a delay of tens of ms needs "
                            f"them at {DYNAMIC_MIN_HZ:g} Hz or more")
             notes.append(f"{static_only}; only static effects are judged, on data low-passed at {lowpass:.2g} Hz")
             slow = (f"its motor commands were logged at {rate:.1f} Hz, held between samples that miss what the motors "
-                    f"did in between" + _faster(tables))
+                    f"did in between" + faster(tables))
         speeds = rotor_speed_lag(files)
         vehicle = _vehicle(files, a, params_given or bool(effects), lowpass, speeds, notes, progress, slow)
-    except InputError as e:     # the dynamic tier refused: the static tier's report, if it answers anything
+    except InputError as e:     # the dynamic tier refused: the static tier's report, if it answers anything,
+        if isinstance(e, LayoutContradicted):   # unless the data contradict the layout: refused whole
+            raise
         return StaticOnly.instead_of(e, tables, files, a, notes, progress, accepted)
     ds = DataSet(files, vehicle, lowpass)
     ds.rotor_speeds = speeds
