@@ -1,6 +1,6 @@
-"""What every foreign log becomes: streams on their own clocks, put on one time base (the gyro's), and
-written as this project's flight log (measured-data.md) with the facts the diagnosis needs in
-`# key: value` lines (docs/log-import.md).
+"""What every foreign log becomes: streams on their own clocks, put on one time base (the gyro's; the
+attitude's in a log without one: `time_base`), and written as this project's flight log (measured-data.md)
+with the facts the diagnosis needs in `# key: value` lines (docs/log-import.md).
 
 A reader fills a `Imported`: each stream is its own sample times and values (SI, our frames already:
 the reader converts at its edge), the metadata, and notes. `flight_text` turns it into the flight-log
@@ -89,7 +89,7 @@ def rate_notes(imp: Imported, motors: str, how: str) -> None:
     base = time_base(imp)
     rate = base.rate_hz()
     if "gyro" not in imp.streams:
-        imp.notes.append(f"no gyro or accelerometer ({imp.meta['imu']}): the rows are {base.name}'s samples "
+        imp.notes.append(f"no gyro or accelerometer ({imp.meta['imu'].removeprefix('none: ')}): the rows are {base.name}'s samples "
                          f"({rate:.1f} Hz), the gyro and acc columns empty")
     elif rate < DYNAMIC_MIN_HZ:
         slow = True

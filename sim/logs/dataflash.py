@@ -195,8 +195,8 @@ def _read(path: str, text: bool):
             if m is None:
                 break
             us, ms = getattr(m, "TimeUS", None), getattr(m, "TimeMS", None)
-            if m.get_type() == "GPS" and us is None:       # GPS's TimeMS is its week's; T (3.0-3.2) the board's
-                ms = getattr(m, "T", None)
+            if m.get_type() == "GPS" and us is None:   # TimeMS is the GPS week's; T (3.1-3.2) the board's ms
+                ms = getattr(m, "T", None)                 # (as pymavlink's DFReaderClock_msec reads it)
             stamped = us is not None or ms is not None
             boot = us * 1e-6 if us is not None else ms * 1e-3 if ms is not None else boot
             m.boot_s, m.stamped = boot, stamped
@@ -215,12 +215,14 @@ def _spread(msgs: dict) -> None:
     from the stamp before them to the next one in the log: the n of a type that share a stamp get
     stamp + j (next - stamp) / n, j = 0..n-1 (two ATT between two 5 Hz GPS fixes are 0.1 s apart; one
     MOT after each 50 Hz IMU keeps that IMU's time). After the last stamp: the type's median spacing."""
-    stamps = np.unique([m.boot_s for ms in msgs.values() for m in ms
-                        if getattr(m, "stamped", False) and m.boot_s is not None])
+    stamps = np.unique([m.boot_s for name, ms in msgs.items() if not name.startswith("_") for m in ms
+                        if m.stamped and m.boot_s is not None])
     if stamps.size == 0:
         return
-    for ms in msgs.values():
-        loose = [m for m in ms if not getattr(m, "stamped", True) and m.boot_s is not None]
+    for name, ms in msgs.items():
+        if name.startswith("_"):               # (the reader's own notes of damage)
+            continue
+        loose = [m for m in ms if not m.stamped and m.boot_s is not None]
         if not loose:
             continue
         b = np.array([m.boot_s for m in loose])

@@ -1,5 +1,6 @@
 """Reading a flight log for diagnose: one file reduced to per-row arrays (commands, gyro,
-accelerometer, battery, altitude, the attitude from the integrated gyro), the rotor layout and the
+accelerometer, battery, altitude, the attitude from the integrated gyro, or from the logged attitude in
+a log without an IMU: `# imu: none`), the rotor layout and the
 sensor filters the log declares, and the mask of its usable airborne rows (docs/diagnose.md, "Only
 airborne data are used"; docs/real-flights.md for logs of other vehicles)."""
 from __future__ import annotations
@@ -124,7 +125,7 @@ class FileData:
     acc: np.ndarray         # (3, n)
     battery_v: np.ndarray   # (n,), NaN where unknown
     z: np.ndarray           # (n,) altitude above the ground, NaN where unknown
-    Rm: np.ndarray          # (9, n) attitude from the integrated gyro
+    Rm: np.ndarray          # (9, n) attitude from the integrated gyro (the logged attitude without an IMU)
     airborne: np.ndarray    # (n,) bool, for input rows k whose pair (k, k+1) is usable
     running: np.ndarray     # (n,) bool, every motor running
     layout: Layout
