@@ -332,20 +332,16 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc:
     height = None
     if "height" in table and np.isfinite(table["height"]).any() and running.any():
         h = table["height"]
-        before = h[:int(np.argmax(running))]
-        before = before[np.isfinite(before)]
-        height = h - (float(np.median(before)) if before.size else float(np.nanpercentile(h, 2)))
-        if not imu and not np.isfinite(z).any():
-            up &= _off_the_ground(table["t"], height, up, notes)
-    if "height" in table and meta.get("height_source", "") not in HEIGHT_SOURCES and running.any():
-        h = table["height"]
         rest = h[:int(np.argmax(running))]
         rest = rest[np.isfinite(rest)]
-        flying = h[up | running]
-        flying = flying[np.isfinite(flying)]
-        if flying.size:
-            level = float(np.median(rest)) if rest.size else float(np.percentile(flying, 2))
+        flying = h[running & np.isfinite(h)]
+        level = (float(np.median(rest)) if rest.size else float(np.percentile(flying, 2)) if flying.size
+                 else float(np.nanpercentile(h, 2)))
+        height = h - level            # above its level at rest
+        if meta.get("height_source", "") not in HEIGHT_SOURCES and flying.size:
             baro = float(np.percentile(flying, 95)) - level
+        if not imu and not np.isfinite(z).any():
+            up &= _off_the_ground(table["t"], height, up, notes)
     if all(f"omega{i}" in table for i in range(1, 5)):
         omega = np.vstack([table[f"omega{i}"] for i in range(1, 5)])
     return layout, up, z, omega, baro, height
