@@ -141,3 +141,20 @@ def test_what_docs_say_of_the_failure_is_in_the_data(tmp):
     h = t["height"]
     fall = h[k] - h[(t["t"] > t["t"][k] + 14.0) & (t["t"] < t["t"][k] + 16.0)].min()
     assert 80.0 < fall < 110.0, fall
+
+
+def test_a_log_with_neither_imu_nor_attitude_is_refused_naming_both(tmp, capsys):
+    from dataflash import DataFlash
+    f = DataFlash(without=("IMU", "ATT"))
+    f.add("MSG", 1000, "ArduCopter V4.5.7 (1a2b3c4d)")
+    for k, v in {"FRAME_CLASS": 1, "FRAME_TYPE": 1, "LOG_BITMASK": 1024, "MOT_PWM_MIN": 1000, "MOT_PWM_MAX": 2000}.items():
+        f.add("PARM", 1000, k, float(v))
+    for k in range(200):
+        f.add("RCOU", 2000 + 100_000 * k, *([1500] * 4 + [0] * 10))
+    path = tmp / "blind.bin"
+    path.write_bytes(f.bytes())
+    capsys.readouterr()
+    assert main(["log", "import", str(path), str(tmp / "blind.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "lacks bit 7 (IMU, 128)" in err and "nor ATT" in err, err
+    assert not (tmp / "blind.csv").exists()

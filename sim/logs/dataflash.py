@@ -403,7 +403,8 @@ def _gyro(p: dict, msgs, imp: Imported) -> tuple[bool, str, str]:
         motors = any(msgs[k] for k in ("RCOU", "MOT"))
         why = arducopter3.unlogged(p, False, motors)
         if not motors or len(msgs["ATT"]) < MIN_ROWS:
-            imp.fail("no IMU or GYR messages: " + why + ("" if motors else "; nor ATT to read the hover from"))
+            imp.fail("no IMU or GYR messages: " + why + ("" if len(msgs["ATT"]) >= MIN_ROWS else
+                                                         "; nor ATT, the attitude a log without IMU is read on"))
         imp.meta["imu"] = f"none: {why}"       # ATT is the time base (common.time_base), gyro and acc empty
         return False, "none (no IMU or GYR messages)", "none"
     imp.streams["gyro"] = Stream(gsource.split(" ")[0], tg, g * FRD)
