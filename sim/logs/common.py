@@ -36,7 +36,11 @@ GAP_PERIODS = 3.0        # a measured stream is empty across gaps longer than th
 MIN_ROWS = 10
 ISLAND_GAP_S = 1.0       # a few rows cut off from the log by a gap this long at its start or end are not data
 ISLAND_SHARE = 0.01      # ... when they are under this share of the rows
-CELL_FULL_V = 4.2        # a LiPo cell at full charge: the cell count of a resting pack is ceil(V / 4.2)
+CELL_FULL_V = 4.2        # a LiPo cell at full charge
+# ... as a log reads it: a charger ends within about 1 % of 4.2 V and a power module's divider reads within a
+# few %, so the cell count of a resting pack is ceil(V / 4.25) (mechanical_fail.log's pack reads 16.91 V at rest:
+# 4S by its FS_BATT_VOLTAGE, 14 V or 3.5 V a cell; ceil(V / 4.2) made it 5S at 3.4 V a cell)
+CELL_READ_V = 4.25
 FRD = np.array([[1.0], [-1.0], [-1.0]])     # body FRD (or earth NED) to ours (conventions.md): y and z change sign
 DEG = math.pi / 180.0
 
@@ -184,8 +188,8 @@ def battery_cells(imp: Imported, P: np.ndarray | None = None) -> None:
     v = float(np.median(rest if rest.size else s.values[0, :10]))
     if v <= 0:
         return
-    imp.meta["battery_cells"] = str(max(1, math.ceil(v / CELL_FULL_V - 1e-9)))
-    imp.meta["battery_cells_source"] = (f"estimated: ceil(V / {CELL_FULL_V:g} V) of the resting voltage "
+    imp.meta["battery_cells"] = str(max(1, math.ceil(v / CELL_READ_V - 1e-9)))
+    imp.meta["battery_cells_source"] = (f"estimated: ceil(V / {CELL_READ_V:g} V) of the resting voltage "
                                         f"{v:.2f} V ({'before the motors start' if rest.size else 'the first readings'})")
 
 
