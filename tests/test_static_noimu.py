@@ -74,6 +74,8 @@ def test_the_real_log_without_an_imu_reaches_the_static_tier(real):
     near = np.all(np.abs(share - 1.0) <= 3.0 * err)
     assert near or st["pattern"]["verdict"] in NAMED, st["pattern"]
     assert st["not_judged"]["vibration"] == "neither VIBE nor an accelerometer in the log"
+    # its pack is a 4S (FS_BATT_VOLTAGE 14 V, 3.5 V a cell) resting at 16.91 V: 4 cells, not ceil(16.91 / 4.2) = 5
+    assert st["battery"]["cells"] == 4 and st["battery"]["resistance"]["passed"], st["battery"]
 
 
 def test_the_imported_csv_gives_the_same_static_findings(tmp, real):
