@@ -26,6 +26,7 @@ FLIGHT_COLUMNS = ("t", "P1", "P2", "P3", "P4", "gyro_x", "gyro_y", "gyro_z", "ac
                   "range", "battery_v", "roll", "pitch", "yaw", "alt",
                   "roll_sp", "pitch_sp", "yaw_sp", "alt_sp")
 MAG_COLUMNS = ("mag_x", "mag_y", "mag_z")
+IMU_COLUMNS = ("gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z")
 # Columns that may be empty on most rows: range is only written on rows where an echo arrived.
 SPARSE_COLUMNS = ("range",) + MAG_COLUMNS
 # The controller's own estimates and setpoints: a log of another autopilot may not have them
@@ -185,8 +186,14 @@ def read_flight_log(path: str | Path, min_seconds: float = 0.0, min_rows: int = 
     """A flight log as the contract defines it; time must be strictly increasing. `extra` names
     further columns to keep when present (they may be empty). `text`: as for `read_table`."""
     table = read_table(path, FLIGHT_COLUMNS, optional=MAG_COLUMNS + tuple(extra), min_rows=min_rows,
-                       allow_missing=SPARSE_COLUMNS + ESTIMATE_COLUMNS + ("battery_v",) + tuple(extra), text=text,
-                       whole_lines=text is None)
+                       allow_missing=SPARSE_COLUMNS + ESTIMATE_COLUMNS + IMU_COLUMNS + ("battery_v",) + tuple(extra),
+                       text=text, whole_lines=text is None)
+    for name in IMU_COLUMNS:     # a sensor not logged is empty on every row (`# imu: none ...`), not on a few
+        gaps = np.flatnonzero(np.isnan(table[name]))
+        if gaps.size and (gaps.size < table[name].size or "imu" not in table.meta):
+            table.fail("an empty cell" + ("" if gaps.size < table[name].size else
+                                          " on every row without a '# imu: none ...' line saying the IMU was not logged"),
+                       row=int(gaps[0]), column=name)
     t = table["t"]
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:

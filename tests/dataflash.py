@@ -30,18 +30,25 @@ def _pack(fmt: str, values) -> bytes:
 
 
 class DataFlash:
-    def __init__(self):
+    """A log being written. `without`: message types left out, as ArduPilot's logger leaves out what
+    LOG_BITMASK does not ask for (IMU without bit 7): no FMT for them, and `add` of one writes nothing."""
+
+    def __init__(self, without: tuple[str, ...] = ()):
         self.buf = bytearray()
+        self.without = set(without)
         fmt = (128, "BBnNZ", "Type,Length,Name,Format,Columns")
         self._fmt("FMT", *fmt)
         for name, (tid, f, cols) in FORMATS.items():
-            self._fmt(name, tid, f, cols)
+            if name not in self.without:
+                self._fmt(name, tid, f, cols)
 
     def _fmt(self, name, tid, f, cols):
         length = 3 + struct.calcsize("<" + "".join(CODES[c] for c in f))
         self.buf += HEAD + bytes([128]) + _pack("BBnNZ", (tid, length, name, f, cols))
 
     def add(self, name: str, *values) -> None:
+        if name in self.without:
+            return
         tid, f, _ = FORMATS[name]
         self.buf += HEAD + bytes([tid]) + _pack(f, values)
 

@@ -37,6 +37,9 @@ A = Airframe()
 AP_FROM_SIM = (4, 2, 1, 3)            # ArduPilot motor m is the simulator's motor AP_FROM_SIM[m - 1]
 IMU_EVERY, SLOW_EVERY = 18, 45        # of the simulator's 450 Hz rows: 25 Hz and 10 Hz
 PWM = (1000.0, 2000.0)
+# ArduCopter's default LOG_BITMASK (config.h): ATTITUDE_MED, GPS, PM, CTUN, NTUN, RCIN, IMU (bit 7), CMD, CURRENT,
+# RCOUT, OPTFLOW, COMPASS, CAMERA, MOTBATT (defines.h's MASK_LOG_ bits 1-11, 13, 15, 17)
+LOG_BITMASK = sum(1 << b for b in (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 13, 15, 17))
 
 
 def current(log) -> np.ndarray:
@@ -58,14 +61,16 @@ def vibe(log) -> np.ndarray:
     return np.sqrt(mean((acc - mean(acc, 0.2)) ** 2, 0.5))
 
 
-def arducopter(log, path, r_hidden: float = 0.0, clips=None):
+def arducopter(log, path, r_hidden: float = 0.0, clips=None, baro=None, imu: bool = True):
     """The flight as an ArduCopter 4.x log at the default rates, the thrust curve declared as eq. 26
     (MOT_THST_EXPO 1 above MOT_SPIN_MIN = h2 / 255), the pack's voltage lowered by r_hidden I; with
-    `clips` ((3, n) cumulative counts per IMU), VIBE at 10 Hz."""
-    f = DataFlash()
+    `clips` ((3, n) cumulative counts per IMU), VIBE at 10 Hz; with `baro` ((n,) m), BARO at 10 Hz;
+    `imu` False: LOG_BITMASK without its IMU bit (7), no IMU messages."""
+    f = DataFlash(without=() if imu else ("IMU",))
     f.add("MSG", 1000, "ArduCopter V4.5.7 (1a2b3c4d)")
     params = {"FRAME_CLASS": 1, "FRAME_TYPE": 0, "MOT_PWM_MIN": PWM[0], "MOT_PWM_MAX": PWM[1], "MOT_BAT_VOLT_MAX": 16.8,
-              "MOT_THST_EXPO": 1.0, "MOT_SPIN_MIN": A.h2 / 255.0, "MOT_SPIN_MAX": 1.0}
+              "MOT_THST_EXPO": 1.0, "MOT_SPIN_MIN": A.h2 / 255.0, "MOT_SPIN_MAX": 1.0,
+              "LOG_BITMASK": LOG_BITMASK if imu else LOG_BITMASK & ~128}
     params.update({f"SERVO{m}_FUNCTION": 32 + m for m in range(1, 5)})
     for k, v in params.items():
         f.add("PARM", 1000, k, float(v))
@@ -85,6 +90,8 @@ def arducopter(log, path, r_hidden: float = 0.0, clips=None):
             f.add("BAT", us, 0, float(log["battery_v"][k] - r_hidden * cur[k]), float(cur[k]))
             f.add("ATT", us, 0.0, math.degrees(log["roll"][k]), 0.0, -math.degrees(log["pitch"][k]), 0.0,
                   -math.degrees(log["yaw"][k]) % 360.0)
+            if baro is not None:
+                f.add("BARO", us, 0, float(baro[k]))
             if clips is not None:
                 f.add("VIBE", us, *(float(v) for v in levels[:, k]), *(int(c) for c in clips[:, k]))
     path.write_bytes(f.bytes())

@@ -1,6 +1,6 @@
-"""What every foreign log becomes: streams on their own clocks, put on one time base (the gyro's), and
-written as this project's flight log (measured-data.md) with the facts the diagnosis needs in
-`# key: value` lines (docs/log-import.md).
+"""What every foreign log becomes: streams on their own clocks, put on one time base (the gyro's; the
+attitude's in a log without one: `time_base`), and written as this project's flight log (measured-data.md)
+with the facts the diagnosis needs in `# key: value` lines (docs/log-import.md).
 
 A reader fills a `Imported`: each stream is its own sample times and values (SI, our frames already:
 the reader converts at its edge), the metadata, and notes. `flight_text` turns it into the flight-log
@@ -28,7 +28,7 @@ EXTRA = (("current", "height", "omega1", "omega2", "omega3", "omega4", "gyro_f_x
          + tuple(f"setpoint_{a}" for a in AXES) + ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle")
          + tuple(f"pid_{term}_{a}" for term in "pidf" for a in AXES) + ("vibe_x", "vibe_y", "vibe_z", "clip"))
 # stream name -> its columns (streams of one value write the stream's name)
-GROUPS = {"acc": tuple(f"acc_{a}" for a in AXES), "gyro_f": tuple(f"gyro_f_{a}" for a in AXES),
+GROUPS = {"gyro": tuple(f"gyro_{a}" for a in AXES), "acc": tuple(f"acc_{a}" for a in AXES), "gyro_f": tuple(f"gyro_f_{a}" for a in AXES),
           "omega": tuple(f"omega{i}" for i in range(1, 5)), "attitude": ("roll", "pitch", "yaw"),
           "setpoint": tuple(f"setpoint_{a}" for a in AXES), "rc": ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle"),
           "pid": tuple(c for c in EXTRA if c.startswith("pid_")), "vibe": ("vibe_x", "vibe_y", "vibe_z")}
@@ -36,7 +36,11 @@ GAP_PERIODS = 3.0        # a measured stream is empty across gaps longer than th
 MIN_ROWS = 10
 ISLAND_GAP_S = 1.0       # a few rows cut off from the log by a gap this long at its start or end are not data
 ISLAND_SHARE = 0.01      # ... when they are under this share of the rows
-CELL_FULL_V = 4.2        # a LiPo cell at full charge: the cell count of a resting pack is ceil(V / 4.2)
+CELL_FULL_V = 4.2        # a LiPo cell at full charge
+# ... as a log reads it: a charger ends within about 1 % of 4.2 V and a power module's divider reads within a
+# few %, so the cell count of a resting pack is ceil(V / 4.25) (mechanical_fail.log's pack reads 16.91 V at rest:
+# 4S by its FS_BATT_VOLTAGE, 14 V or 3.5 V a cell; ceil(V / 4.2) made it 5S at 3.4 V a cell)
+CELL_READ_V = 4.25
 FRD = np.array([[1.0], [-1.0], [-1.0]])     # body FRD (or earth NED) to ours (conventions.md): y and z change sign
 DEG = math.pi / 180.0
 
@@ -86,8 +90,12 @@ def rate_notes(imp: Imported, motors: str, how: str) -> None:
     than diagnose needs (DYNAMIC_MIN_HZ: sensors slower are not judged, motors slower for static effects
     only), and `# log_faster:` with `how` (what the autopilot's logger needs) for its refusals."""
     slow = False
-    rate = imp.streams["gyro"].rate_hz()
-    if rate < DYNAMIC_MIN_HZ:
+    base = time_base(imp)
+    rate = base.rate_hz()
+    if "gyro" not in imp.streams:
+        imp.notes.append(f"no gyro or accelerometer ({imp.meta['imu'].removeprefix('none: ')}): the rows are {base.name}'s samples "
+                         f"({rate:.1f} Hz), the gyro and acc columns empty")
+    elif rate < DYNAMIC_MIN_HZ:
         slow = True
         imp.notes.append(f"{imp.streams['gyro'].name} at {rate:.1f} Hz: too slow to follow the vehicle's motion "
                          f"(diagnose needs {DYNAMIC_MIN_HZ:g} Hz); " + how)
@@ -98,6 +106,17 @@ def rate_notes(imp: Imported, motors: str, how: str) -> None:
                          "only; " + how)
     if slow:
         imp.meta["log_faster"] = how
+
+
+def time_base(imp: Imported) -> Stream:
+    """The stream whose samples are the rows: the gyro; in a log without one (`# imu: none ...`, the reason
+    in the metadata: ArduCopter's LOG_BITMASK without IMU) the attitude, with the gyro and accelerometer
+    columns left empty (measured-data.md: missing values), which only diagnose's static tier reads."""
+    if "gyro" in imp.streams:
+        return imp.streams["gyro"]
+    if "imu" in imp.meta and "attitude" in imp.streams:
+        return imp.streams["attitude"]
+    imp.fail("no gyro and no attitude: nothing to put the log's rows on")
 
 
 def command_p(imp: Imported, raw: np.ndarray, lo, hi, outside: str) -> np.ndarray:
@@ -169,8 +188,8 @@ def battery_cells(imp: Imported, P: np.ndarray | None = None) -> None:
     v = float(np.median(rest if rest.size else s.values[0, :10]))
     if v <= 0:
         return
-    imp.meta["battery_cells"] = str(max(1, math.ceil(v / CELL_FULL_V - 1e-9)))
-    imp.meta["battery_cells_source"] = (f"estimated: ceil(V / {CELL_FULL_V:g} V) of the resting voltage "
+    imp.meta["battery_cells"] = str(max(1, math.ceil(v / CELL_READ_V - 1e-9)))
+    imp.meta["battery_cells_source"] = (f"estimated: ceil(V / {CELL_READ_V:g} V) of the resting voltage "
                                         f"{v:.2f} V ({'before the motors start' if rest.size else 'the first readings'})")
 
 
@@ -180,44 +199,48 @@ def _format(x: np.ndarray, fmt: str) -> list[str]:
 
 
 def flight_text(imp: Imported, progress=None) -> str:
-    """The flight log (measured-data.md) of an imported log, as text: one row per gyro sample."""
-    gyro = imp.streams["gyro"]
-    t = gyro.t
+    """The flight log (measured-data.md) of an imported log, as text: one row per sample of its time base
+    (`time_base`: the gyro's, else the attitude's)."""
+    base = time_base(imp)
+    imu = "gyro" in imp.streams
+    what = "gyro" if imu else base.name
+    t = base.t
     keep = np.concatenate([[True], np.diff(t) > 0])      # a repeated or backward time is not a new sample
     if not keep.all():
-        imp.notes.append(f"{int((~keep).sum())} gyro samples with a repeated or backward time dropped")
+        imp.notes.append(f"{int((~keep).sum())} {what} samples with a repeated or backward time dropped")
     t = t[keep]
-    g = gyro.values[:, keep]
+    own = base.values[:, keep]                           # the time base's own samples, as they are
     if t.size < MIN_ROWS:
-        imp.fail(f"{t.size} gyro samples: too short to be a flight log")
+        imp.fail(f"{t.size} {what} samples: too short to be a flight log")
     island = _islands(t, imp.notes)
-    t, g = t[island], g[:, island]
+    t, own = t[island], own[:, island]
     cols: dict[str, np.ndarray] = {"t": t - t[0]}
-    for j, a in enumerate(AXES):
-        cols[f"gyro_{a}"] = g[j]
     P = _on(t, imp.streams["motors"])
     for i in range(4):
         cols[f"P{i + 1}"] = P[i]
     for name, s in imp.streams.items():
-        if name in ("gyro", "motors", "range"):
+        if name in ("motors", "range"):
             continue
-        v = _on(t, s)
+        v = own if s is base else _on(t, s)
         for j, c in enumerate(GROUPS.get(name, (name,))):
             cols[c] = v[j]
     if "range" in imp.streams:
         cols["range"] = _new_samples(t, imp.streams["range"])
-    for name in ("acc_x", "acc_y", "acc_z", "P1"):
+    needed = ("acc_x", "acc_y", "acc_z", "P1", "P2", "P3", "P4") if imu else ("P1", "P2", "P3", "P4", "roll", "pitch", "yaw")
+    for name in needed[:4]:
         if name not in cols or not np.isfinite(cols[name]).any():
-            imp.fail(f"no {name} on the gyro's time base")
+            imp.fail(f"no {name} on the {what}'s time base")
     ok = np.ones(t.size, bool)
-    for name in ("acc_x", "acc_y", "acc_z", "P1", "P2", "P3", "P4"):
+    for name in needed:
         ok &= np.isfinite(cols[name])
     if not ok.all():          # before the first command or accelerometer sample, after the last
-        imp.notes.append(f"{int((~ok).sum())} rows without a command or accelerometer sample dropped")
+        imp.notes.append(f"{int((~ok).sum())} rows without a command or {'accelerometer' if imu else 'attitude'} "
+                         "sample dropped")
         cols = {k: v[ok] for k, v in cols.items()}
         cols["t"] = cols["t"] - cols["t"][0]
     if cols["t"].size < MIN_ROWS:
-        imp.fail(f"{cols['t'].size} rows with a command and an accelerometer sample: too short to be a flight log")
+        imp.fail(f"{cols['t'].size} rows with a command and an {'accelerometer' if imu else 'attitude'} sample: too "
+                 "short to be a flight log")
     battery_cells(imp)
     meta = dict(imp.meta)
     meta["rate_hz"] = f"{1.0 / float(np.median(np.diff(cols['t']))):.1f}"

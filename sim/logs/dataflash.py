@@ -3,7 +3,9 @@
 
 ArduPilot's body frame is x forward, y right, z down (FRD), its earth frame North-East-Down: to ours
 (x forward, y left, z up) y and z change sign; the accelerometer reads -g on z at rest in FRD. The
-gyro's messages are the time base: `GYR` (the raw high-rate samples, where logged) else `IMU`.
+gyro's messages are the time base: `GYR` (the raw high-rate samples, where logged) else `IMU`; a log
+without either (LOG_BITMASK without IMU) has ATT's as its time base and no gyro or accelerometer (`# imu:
+none`), which the static tier reads (docs/diagnose.md, "Static tier").
 
 The vehicle: the firmware (ArduCopter, ArduPlane, ...), FRAME_CLASS and FRAME_TYPE with ArduPilot's
 motor positions and spins (AP_MotorsMatrix: motor angle from the nose, clockwise positive seen from
@@ -25,7 +27,7 @@ import numpy as np
 
 from flightctl.errors import InputError, read_bytes
 from flightctl.sim.logs import arducopter3
-from flightctl.sim.logs.common import CELL_FULL_V, DEG, FRD, Imported, Stream, command_p, rate_notes
+from flightctl.sim.logs.common import CELL_FULL_V, DEG, FRD, MIN_ROWS, Imported, Stream, command_p, rate_notes
 
 MOTOR_FUNCTION = 33                    # SERVOn_FUNCTION of motor 1 (33-44: motors 1-12)
 FRAME_CLASSES = {0: "an undefined frame", 2: "a hexacopter", 3: "an octocopter", 4: "an octo-quad (coaxial)",
@@ -49,7 +51,7 @@ RATE_NOTE = ("set LOG_BITMASK's IMU_FAST (and RCOUT) bits, or INS_RAW_LOG_OPT fo
              "the raw gyro (GYR)")
 OLD_RATE_NOTE = ("ArduCopter before 3.3 logs IMU in its 50 Hz loop and the motor outputs in its 10 Hz loop, "
                  "whatever LOG_BITMASK says: with a newer firmware, ")
-WANTED = ["PARM", "MSG", "VER", "IMU", "GYR", "ACC", "RCOU", "RCO2", "RCO3", "BAT", "BARO", "RFND", "ATT", "RATE",
+WANTED = ["PARM", "MSG", "VER", "GPS", "IMU", "GYR", "ACC", "RCOU", "RCO2", "RCO3", "BAT", "BARO", "RFND", "ATT", "RATE",
           "ESC", "ARM", "EV", "MOT", "CURR", "CTUN", "VIBE"]
 ARMED_EVENTS = (10, 11)               # EV's ARMED and DISARMED (ArduCopter's LogEvent, the same since 3.0)
 HEADER = b"\xa3\x95"                   # every binary message starts so (then its type byte)
@@ -192,16 +194,53 @@ def _read(path: str, text: bool):
                 break
             if m is None:
                 break
-            us, ms = getattr(m, "TimeUS", None), getattr(m, "TimeMS", None)     # (GPS, whose TimeMS is its week's, is not read)
+            us, ms = getattr(m, "TimeUS", None), getattr(m, "TimeMS", None)
+            if m.get_type() == "GPS" and us is None:   # TimeMS is the GPS week's; T (3.1-3.2) the board's ms
+                ms = getattr(m, "T", None)                 # (as pymavlink's DFReaderClock_msec reads it)
+            stamped = us is not None or ms is not None
             boot = us * 1e-6 if us is not None else ms * 1e-3 if ms is not None else boot
-            m.boot_s = boot
+            m.boot_s, m.stamped = boot, stamped
             msgs[m.get_type()].append(m)
+    _spread(msgs)
     texts = [str(getattr(m, "Message", "")) for m in msgs["MSG"]]
     if text:
         with open(path, "rb") as f:
             texts += preamble(f.read(4096)) or []
     formats = {f.name: f for f in r.formats.values()}
     return r.params, msgs, formats, texts
+
+
+def _spread(msgs: dict) -> None:
+    """Messages without a time stamp (ArduCopter 3.0-3.1's MOT, ATT, CTUN) spread evenly over the interval
+    from the stamp before them to the next one in the log: the n of a type that share a stamp get
+    stamp + j (next - stamp) / n, j = 0..n-1 (two ATT between two 5 Hz GPS fixes are 0.1 s apart; one
+    MOT after each 50 Hz IMU keeps that IMU's time). After the last stamp: the type's median spacing."""
+    stamps = np.unique([m.boot_s for name, ms in msgs.items() if not name.startswith("_") for m in ms
+                        if m.stamped and m.boot_s is not None])
+    if stamps.size == 0:
+        return
+    for name, ms in msgs.items():
+        if name.startswith("_"):               # (the reader's own notes of damage)
+            continue
+        loose = [m for m in ms if not m.stamped and m.boot_s is not None]
+        if not loose:
+            continue
+        b = np.array([m.boot_s for m in loose])
+        first = np.concatenate([[True], b[1:] != b[:-1]])
+        start = np.flatnonzero(first)
+        count = np.diff(np.append(start, b.size))
+        j = np.arange(b.size) - np.repeat(start, count)
+        n = np.repeat(count, count)
+        k = np.searchsorted(stamps, b, side="right")
+        nxt = stamps[np.minimum(k, stamps.size - 1)]
+        step = (nxt - b) / n
+        inside = k < stamps.size
+        if inside.any():
+            step[~inside] = float(np.median(step[inside]))
+        else:
+            step[:] = 0.0
+        for m, t in zip(loose, b + j * step):
+            m.boot_s = float(t)
 
 
 def _col(ms: list, name: str, instance: int | None = None, key: str = "I") -> np.ndarray:
@@ -362,7 +401,12 @@ def _gyro(p: dict, msgs, imp: Imported) -> tuple[bool, str, str]:
         gsource, asource, filtered = "IMU (the filtered gyro the controller uses)", "IMU", True
     else:
         motors = any(msgs[k] for k in ("RCOU", "MOT"))
-        imp.fail("no IMU or GYR messages: " + arducopter3.unlogged(p, False, motors))
+        why = arducopter3.unlogged(p, False, motors)
+        if not motors or len(msgs["ATT"]) < MIN_ROWS:
+            imp.fail("no IMU or GYR messages: " + why + ("" if len(msgs["ATT"]) >= MIN_ROWS else
+                                                         "; nor ATT, the attitude a log without IMU is read on"))
+        imp.meta["imu"] = f"none: {why}"       # ATT is the time base (common.time_base), gyro and acc empty
+        return False, "none (no IMU or GYR messages)", "none"
     imp.streams["gyro"] = Stream(gsource.split(" ")[0], tg, g * FRD)
     imp.streams["acc"] = Stream("accelerometer", ta, a * FRD)
     return filtered, gsource, asource
@@ -399,9 +443,9 @@ def read(path: str, text: bool = False) -> Imported:
     filtered, gsource, asource = _gyro(p, msgs, imp)
     rotors, source = _rotors(p, imp)
     imp.streams["motors"] = _motors(p, msgs, imp)
+    _measurements(p, msgs, imp)
     old = arducopter3.is_legacy(p) and _version(firmware) < (3, 3)
     rate_notes(imp, f"motor commands ({imp.streams['motors'].name})", (OLD_RATE_NOTE if old else "") + RATE_NOTE)
-    _measurements(p, msgs, imp)
     gyro_filter, acc_filter = _filters(p, firmware, texts, filtered, imp)
     notches = "harmonic notch (INS_HNTCH_ENABLE)" if p.get("INS_HNTCH_ENABLE") else "none"
     imp.meta.update({

@@ -342,7 +342,8 @@ def main(argv: list[str]) -> int:
     i = sub.add_parser("import", help="write another autopilot's log (PX4 .ulg, ArduPilot .bin, Betaflight/INAV "
                                       ".bbl/.bfl/.txt) as a flight log (CSV, docs/formats.md); needs the logs extra",
                        description="Read a PX4 ULog, an ArduPilot DataFlash log or a Betaflight/INAV blackbox log and "
-                                   "write it as this project's flight log, on the gyro's time base, with the rotor "
+                                   "write it as this project's flight log, on the gyro's time base (the attitude's in "
+                                   "a log without one), with the rotor "
                                    "layout, the command scale and the sensor filters in '# key: value' lines "
                                    "(docs/log-import.md). Of a file of many logs without --index: which hold a flight.")
     i.add_argument("foreign", metavar="FOREIGN_LOG", help="a .ulg, .bin, .bbl, .bfl, .BFL or INAV .TXT file")

@@ -1,5 +1,6 @@
 """Reading a flight log for diagnose: one file reduced to per-row arrays (commands, gyro,
-accelerometer, battery, altitude, the attitude from the integrated gyro), the rotor layout and the
+accelerometer, battery, altitude, the attitude from the integrated gyro, or from the logged attitude in
+a log without an IMU: `# imu: none`), the rotor layout and the
 sensor filters the log declares, and the mask of its usable airborne rows (docs/diagnose.md, "Only
 airborne data are used"; docs/real-flights.md for logs of other vehicles)."""
 from __future__ import annotations
@@ -9,9 +10,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flightctl.logfile import Table
+from flightctl.logfile import IMU_COLUMNS, Table
 from flightctl.params import Airframe
 from flightctl.physics import G, thrust_from_command
+from flightctl.sim.world.model import rotation
 
 MIN_AIRBORNE_S = 1.0     # s of airborne data needed in total to judge anything
 Z_AIRBORNE = 0.10        # m: below this the legs may touch and the range is near its 2 cm limit
@@ -19,7 +21,6 @@ EDGE_S = 0.1             # s trimmed at both ends of each airborne stretch
 MIN_STRETCH_S = 0.5      # s: shorter airborne stretches are dropped
 RANGE_GAP_S = 0.25       # s: a range older than this does not give the altitude
 MOTOR_ON_MARGIN = 1.0    # P units above the dead zone h2 for a motor to count as running
-IMU_COLUMNS = ("gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z")
 # Logs of other vehicles (docs/real-flights.md): the command is the ESC's range mapped onto 0-255, so a
 # motor runs above 1 % of it; without a height above the ground, airborne needs the mean command at
 # least THROTTLE_SHARE of its median while all four run (a vehicle on the ground idles far below it).
@@ -124,7 +125,7 @@ class FileData:
     acc: np.ndarray         # (3, n)
     battery_v: np.ndarray   # (n,), NaN where unknown
     z: np.ndarray           # (n,) altitude above the ground, NaN where unknown
-    Rm: np.ndarray          # (9, n) attitude from the integrated gyro
+    Rm: np.ndarray          # (9, n) attitude from the integrated gyro (the logged attitude without an IMU)
     airborne: np.ndarray    # (n,) bool, for input rows k whose pair (k, k+1) is usable
     running: np.ndarray     # (n,) bool, every motor running
     layout: Layout
@@ -135,6 +136,21 @@ class FileData:
     battery_cells: int | None = None  # the pack's cell count when the log says it (`# battery_cells:`)
     notes: list[str] = field(default_factory=list)
     baro_climb: float | None = None   # m: how far a coarse height (a barometer) rose while the motors ran
+    imu: bool = True                  # False: no gyro or accelerometer logged (`# imu: none ...`; NaN above)
+    rates: np.ndarray | None = None   # (3, n) body rates: the gyro, or without one the attitude's (`attitude_rates`)
+    height: np.ndarray | None = None  # (n,) a logged height above its level at rest (any source), NaN where unknown
+
+
+def attitude_rates(t: np.ndarray, att: np.ndarray) -> np.ndarray:
+    """(3, n) body rates p, q, r from logged Z-Y-X Euler angles (3, n: roll, pitch, yaw, rad) by their
+    central differences, through the inverse of `model.euler_rates` (eq. 7's Z-Y-X Euler-angle kinematics): p = phi' -
+    psi' sin(theta), q = theta' cos(phi) + psi' sin(phi) cos(theta), r = psi' cos(phi) cos(theta) - theta'
+    sin(phi). At a 10 Hz attitude they are the rates averaged over 0.2 s: enough to tell a vehicle
+    holding its attitude from one turning, not to follow the loop."""
+    phi, theta, psi = att[0], att[1], np.unwrap(att[2])
+    d_phi, d_theta, d_psi = (np.gradient(a, t) for a in (phi, theta, psi))
+    sf, cf, st, ct = np.sin(phi), np.cos(phi), np.sin(theta), np.cos(theta)
+    return np.vstack([d_phi - d_psi * st, d_theta * cf + d_psi * sf * ct, d_psi * cf * ct - d_theta * sf])
 
 
 def _rotations(t, gyro, R0):
@@ -268,13 +284,15 @@ def at_rest(t: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> np.ndarray:
     return still & (moved(force) < REST_ACC) & (np.abs(_smoothed(t, force) - G) < REST_G * G)
 
 
-def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc: np.ndarray, notes: list[str]):
+def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc: np.ndarray, notes: list[str],
+             imu: bool = True):
     """A log of another vehicle (docs/real-flights.md): its rotor layout from the metadata, its height
     above the ground (a precise logged height, else a downward range levelled), and its airborne rows:
     all four motors running, the mean command at least THROTTLE_SHARE of its median while they run,
     above Z_AIRBORNE when the height is known, not on its side or back (`acc_z`, the body-z specific
     force, averaged over SMOOTH_S at least CONTACT_ACC_Z), and not held still (`at_rest`: on the ground
-    whatever the motors do)."""
+    whatever the motors do). Without an IMU (`imu` False) neither of the last two can be asked: the
+    ground is told by a logged height instead (`_off_the_ground`)."""
     acc_z = acc[2]
     meta = table.meta
     if "rotors" not in meta:
@@ -287,7 +305,7 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc:
     else:
         z = _levelled_range(table["t"], table["range"], Rm)
     mean_p = P.mean(axis=0)
-    rest = at_rest(table["t"], gyro, acc)
+    rest = at_rest(table["t"], gyro, acc) if imu else np.zeros(P.shape[1], bool)
     dt = float(np.median(np.diff(table["t"])))
     if (running & rest).any():
         notes.append(f"{(running & rest).sum() * dt:.1f} s with the motors running and the IMU held still (the gyro, "
@@ -296,7 +314,7 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc:
     flown = running & ~rest
     hover = float(np.median(mean_p[flown])) if flown.any() else 0.0
     up = flown & (mean_p >= THROTTLE_SHARE * hover)
-    contact = _smoothed(table["t"], acc_z) < CONTACT_ACC_Z
+    contact = (_smoothed(table["t"], acc_z) < CONTACT_ACC_Z) if imu else rest
     if (up & contact).any():
         notes.append(f"{(up & contact).sum() * dt:.1f} s with the motors running and the body-z specific force "
                      f"(acc_z, averaged over {SMOOTH_S:g} s) below {CONTACT_ACC_Z:g} m/s^2, which the rotors cannot "
@@ -311,18 +329,37 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc:
                      f"(averaged over {SMOOTH_S:g} s: the take-off) to the last (the landing)")
     omega = None
     baro = None
-    if "height" in table and meta.get("height_source", "") not in HEIGHT_SOURCES and running.any():
+    height = None
+    if "height" in table and np.isfinite(table["height"]).any() and running.any():
         h = table["height"]
         rest = h[:int(np.argmax(running))]
         rest = rest[np.isfinite(rest)]
-        flying = h[up | running]
-        flying = flying[np.isfinite(flying)]
-        if flying.size:
-            level = float(np.median(rest)) if rest.size else float(np.percentile(flying, 2))
+        flying = h[running & np.isfinite(h)]
+        level = (float(np.median(rest)) if rest.size else float(np.percentile(flying, 2)) if flying.size
+                 else float(np.nanpercentile(h, 2)))
+        height = h - level            # above its level at rest
+        if meta.get("height_source", "") not in HEIGHT_SOURCES and flying.size:
             baro = float(np.percentile(flying, 95)) - level
+        if not imu and not np.isfinite(z).any():
+            up &= _off_the_ground(table["t"], height, up, notes)
     if all(f"omega{i}" in table for i in range(1, 5)):
         omega = np.vstack([table[f"omega{i}"] for i in range(1, 5)])
-    return layout, up, z, omega, baro
+    return layout, up, z, omega, baro, height
+
+
+def _off_the_ground(t: np.ndarray, height: np.ndarray, up: np.ndarray, notes: list[str]) -> np.ndarray:
+    """(n,) bool, for a log without an IMU (no `at_rest`, no contact test): the rows from the first time
+    its logged height (above its level at rest, averaged over SMOOTH_S) is BARO_CLIMB_M up to the last
+    time it is, within the command's take-off and landing (`up`): a barometer cannot time a take-off to
+    the tenth of a second, but a vehicle on its legs, whatever its motors do, does not rise half a metre."""
+    h = np.where(np.isfinite(height), height, 0.0)
+    high = np.flatnonzero(up & (_smoothed(t, h) >= BARO_CLIMB_M))
+    out = np.zeros(t.size, bool)
+    if high.size:
+        out[high[0]:high[-1] + 1] = True
+    notes.append(f"no IMU: the ground is told by the logged height (airborne from the first time it is {BARO_CLIMB_M:g} m "
+                 f"above its level at rest, averaged over {SMOOTH_S:g} s, to the last), not by a gyro at rest")
+    return out
 
 
 def _smoothed(t: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -374,25 +411,29 @@ def load_file(table: Table, a: Airframe) -> FileData:
     # at rest before the first take-off: the initial tilt
     first_on = int(np.argmax(on)) if on.any() else n
     still = slice(0, first_on)
-    if first_on >= 20:
+    imu = not np.isnan(gyro).all()
+    if not imu:        # no IMU (`# imu: none`): the attitude the autopilot logged, its rates for the gyro's
+        Rm, rates = _logged_attitude(table)
+    elif first_on >= 20:
         # the gyro is calibrated by contract (bias removed): only the initial tilt is taken here
         R0 = _tilt_rotation(acc[:, still].mean(axis=1))
     else:
         notes.append("no rest before the motors start: initial tilt taken as zero")
         R0 = np.eye(3)
-    # attitude: the gyro integrated from the first motor start (at rest before it: R0)
-    Rm = np.empty((9, n))
-    Rm[:, :first_on] = R0.reshape(9, 1)
-    if first_on < n:
-        Rm[:, first_on:] = _rotations(t[first_on:], gyro[:, first_on:], R0)
+    if imu:   # attitude: the gyro integrated from the first motor start (at rest before it: R0)
+        rates = gyro
+        Rm = np.empty((9, n))
+        Rm[:, :first_on] = R0.reshape(9, 1)
+        if first_on < n:
+            Rm[:, first_on:] = _rotations(t[first_on:], gyro[:, first_on:], R0)
     bv = table["battery_v"].copy()
     if np.isfinite(bv).sum() >= 2:
         ok = np.isfinite(bv)
         bv = np.interp(t, t[ok], bv[ok])
     if foreign:
-        layout, up, z, omega, baro = _foreign(table, P, Rm, gyro, acc, notes)
+        layout, up, z, omega, baro, height = _foreign(table, P, Rm, gyro, acc, notes, imu)
     else:
-        layout, omega, baro = Layout.plus(a.l), None, None
+        layout, omega, baro, height = Layout.plus(a.l), None, None, None
         z = _levelled_range(t, table["range"], Rm)
         if np.isfinite(z).any():
             up = on & (np.nan_to_num(z, nan=-1.0) > Z_AIRBORNE)
@@ -411,4 +452,13 @@ def load_file(table: Table, a: Airframe) -> FileData:
         if (i1 - i0) * dt_nom >= MIN_STRETCH_S:
             keep[i0:i1] = True
     return FileData(table.path, t, P, gyro, acc, bv, z, Rm, keep, on, layout, foreign, gyro_filter, acc_filter,
-                    omega, _cells(table), notes, baro)
+                    omega, _cells(table), notes, baro, imu, rates, height)
+
+
+def _logged_attitude(table: Table) -> tuple[np.ndarray, np.ndarray]:
+    """(Rm (9, n), body rates (3, n)) of a log without an IMU from its logged attitude (roll, pitch, yaw:
+    the autopilot's estimate; `attitude_rates`); a log with neither is refused."""
+    if not all(c in table and np.isfinite(table[c]).all() for c in ("roll", "pitch", "yaw")):
+        table.fail("no gyro or accelerometer and no attitude on every row: nothing says how the vehicle moved")
+    att = np.vstack([table["roll"], table["pitch"], table["yaw"]])
+    return np.vstack(rotation(att[0], att[1], att[2])), attitude_rates(table["t"], att)

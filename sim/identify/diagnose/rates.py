@@ -27,9 +27,12 @@ def faster(tables: list[Table]) -> str:
 
 
 def sensor_rate(tables: list[Table], files) -> None:
-    """InputError when the gyro and accelerometer were logged slower than DYNAMIC_MIN_HZ: a quadrotor's
-    motion under control has tens of Hz, and samples this sparse, each one reading and not an average
-    over its period, alias it (and the motors' vibration) into what is left (docs/real-flights.md)."""
+    """InputError when the gyro and accelerometer were not logged (`# imu: none: why`), or slower than
+    DYNAMIC_MIN_HZ: a quadrotor's motion under control has tens of Hz, and samples this sparse, each one
+    reading and not an average over its period, alias it (and the motors' vibration) into what is left
+    (docs/real-flights.md)."""
+    if blind := [t for t, f in zip(tables, files) if not f.imu]:
+        raise InputError(f"{blind[0].path}: no gyro or accelerometer logged ({blind[0].meta['imu'][6:]}): not judged")
     rate = min(1.0 / float(np.median(np.diff(f.t))) for f in files)
     if rate < DYNAMIC_MIN_HZ:
         raise InputError(f"{', '.join(t.path for t in tables)}: its gyro and accelerometer were logged at {rate:.1f} Hz: "

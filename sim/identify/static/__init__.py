@@ -15,7 +15,7 @@ import numpy as np
 
 from flightctl.sim.identify.diagnose.data import BARO_CLIMB_M
 from flightctl.sim.identify.static.battery import battery
-from flightctl.sim.identify.static.blocks import MIN_HOVER_S, Blocks, hover_mask
+from flightctl.sim.identify.static.blocks import MIN_HOVER_S, Blocks, body_z_force, hover_mask
 from flightctl.sim.identify.static.curve import of_log
 from flightctl.sim.identify.static.hover import pattern, shares, speed_gains, throttle
 from flightctl.sim.identify.static.vibration import VIBE_COLUMNS, vibration
@@ -61,7 +61,9 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
            "not_judged": {}}
     if hv.enough and hv.seconds >= MIN_HOVER_S:
         c = hv.rows([curve.thrust(f.P) for f in files])
-        out["hover"] = throttle(hv, c, hv.rows([f.P for f in files]), hv.rows([f.acc[2] for f in files])[0], curve)
+        force = [body_z_force(f) for f in files]
+        out["hover"] = throttle(hv, c, hv.rows([f.P for f in files]), hv.rows([z for z, _ in force])[0], curve)
+        out["hover"]["acc_z_source"] = "; ".join(dict.fromkeys(w for _, w in force))
         out["motors"], m, _ = shares(hv, c)
         out["pattern"] = pattern(hv, m, layout, speed_gains(files, masks))
         progress(f"static tier: hover {hv.seconds:.1f} s, thrust share {out['hover']['thrust_share']}, "
@@ -81,7 +83,8 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
                                             f"{bat['v_range']} V, no current"))
     vib = vibration(tabs, files, air if air.enough else None, hv)
     if vib is None:
-        out["not_judged"]["vibration"] = "neither VIBE nor enough hover to measure the accelerometer's spread"
+        out["not_judged"]["vibration"] = ("neither VIBE nor enough hover to measure the accelerometer's spread" if
+                                          all(f.imu for f in files) else "neither VIBE nor an accelerometer in the log")
     else:
         out["vibration"] = vib
     if not any(k in out for k in ("hover", "battery", "vibration")):

@@ -17,6 +17,8 @@ HOVER_RATE = 0.5        # rad/s: body rates below this (a quadrotor holding its 
 HOVER_ACC = 0.25        # the specific force within this share of g (not climbing hard, not falling)
 FULL_P = 250.0          # a motor at or above this command is saturated: the torques are not balanced there
 SMOOTH_S = 0.2          # s: the rates and the specific force averaged over this for the hover test
+STEADY_S = 1.0          # s: without an IMU, the logged height's climb rate averaged over this ...
+STEADY_CLIMB = 0.5      # m/s: ... below this is a steady altitude (in place of the specific force's test)
 MIN_HOVER_S = 2.5       # s of hover needed for the hover findings
 BLOCK_S = 0.5           # s: blocks at least this long ...
 MAX_BLOCKS, MIN_BLOCKS = 20, 5   # ... and this many of them
@@ -38,11 +40,28 @@ def moving_mean(t: np.ndarray, x: np.ndarray, seconds: float) -> np.ndarray:
 
 def hover_mask(f: FileData) -> np.ndarray:
     """(n,) bool: the rows of `f` in hover (the module's docstring), on the body rates and the specific
-    force averaged over SMOOTH_S (a small vehicle's accelerometer shakes by g with its motors)."""
-    rate = np.linalg.norm(moving_mean(f.t, f.gyro, SMOOTH_S), axis=0)
-    acc = np.linalg.norm(moving_mean(f.t, f.acc, SMOOTH_S), axis=0)
-    return (f.airborne & all_running(f.P) & (f.P < FULL_P).all(axis=0) & (rate < HOVER_RATE)
-            & (np.abs(acc / G - 1.0) < HOVER_ACC))
+    force averaged over SMOOTH_S (a small vehicle's accelerometer shakes by g with its motors). Without an
+    IMU the rates are the logged attitude's (`data.attitude_rates`) and the specific force's test is
+    `steady` on the logged height."""
+    rate = np.linalg.norm(moving_mean(f.t, f.rates, SMOOTH_S), axis=0)
+    if f.imu:
+        acc = np.linalg.norm(moving_mean(f.t, f.acc, SMOOTH_S), axis=0)
+        level = np.abs(acc / G - 1.0) < HOVER_ACC
+    else:
+        level = steady(f)
+    return f.airborne & all_running(f.P) & (f.P < FULL_P).all(axis=0) & (rate < HOVER_RATE) & level
+
+
+def steady(f: FileData) -> np.ndarray:
+    """(n,) bool, for a log without an IMU: the rows at a steady altitude, the logged height's climb rate
+    (averaged over STEADY_S) under STEADY_CLIMB: no climb or descent under way, so no vertical acceleration
+    held for long (HOVER_ACC g for STEADY_S would change the climb rate by 2.5 m/s); False on every row
+    when no height was logged."""
+    if f.height is None or not np.isfinite(f.height).any():
+        return np.zeros(f.t.size, bool)
+    h = moving_mean(f.t, f.height, STEADY_S / 2)[0]
+    climb = np.gradient(h, f.t)
+    return np.abs(moving_mean(f.t, climb, STEADY_S)[0]) < STEADY_CLIMB
 
 
 class Blocks:
@@ -100,3 +119,12 @@ def drift(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     r = (y - y.mean(axis=0)) - np.outer(tc, slope)
     se = np.sqrt((r * r).sum(axis=0) / max(t.size - 2, 1) / sxx)
     return slope, se
+
+
+def body_z_force(f: FileData) -> tuple[np.ndarray, str]:
+    """((n,) the body-z specific force, what it is): the accelerometer's acc_z; without an IMU, at a steady
+    altitude (`steady`), the force that holds the weight through the logged tilt, g / (cos(roll) cos(pitch))
+    (Rm's z-z entry, eq. 7 with no vertical acceleration)."""
+    if f.imu:
+        return f.acc[2], "the accelerometer's acc_z"
+    return G / np.maximum(f.Rm[8], 0.1), "g / (cos(roll) cos(pitch)) of the logged attitude at a steady altitude (no IMU)"

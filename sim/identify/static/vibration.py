@@ -54,7 +54,7 @@ def vibration(tables, files, airborne: Blocks | None, hover: Blocks | None) -> d
                                                 ": many, a vibration problem to fix")),
                 "acceptable": bool(peak < PROBLEM and clip < CLIPS_OK),
                 "physical": _physical(v, tables)}
-    if hover is None or not hover.enough:
+    if hover is None or not hover.enough or not all(f.imu for f in hover.files):
         return None
     spread = []
     for f in hover.files:
