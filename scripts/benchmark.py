@@ -435,6 +435,7 @@ def figures(repeat: int) -> list[tuple[str, str, str]]:
     airborne = max(batch_rate(n=2000, seconds=10.0)[0] for _ in range(repeat))
     rows.append(("batched simulator, 2,000 as-flown vehicles for 12 s on 1 core (10 s after arming: mostly in the "
                  "air, as a Monte Carlo flies)", f"{airborne / 1e6:.2f} M vehicle-steps/s (best of {repeat})", "-"))
+    rows += diagnose_rows()            # before the engine's workers: their CPU is reaped into this process's children
     from flightctl.sim import engine
     what = ("`flightctl diagnose --corpus` of 6 simulated 21 s flights (sim/engine.py: Dask's local workers, "
             "start-up included)")
@@ -443,7 +444,6 @@ def figures(repeat: int) -> list[tuple[str, str, str]]:
         rows.append((what, f"{rates[1]:.0f} logs/h on 1 worker, {rates[2]:.0f} on 2 ({rates[2] / rates[1]:.2f}x)", "-"))
     else:
         rows.append((what, "not measured: the fleet extra (Dask) is not installed", "-"))
-    rows += diagnose_rows()
     return rows
 
 
