@@ -73,7 +73,7 @@ BLOCKS = (
     Block("paper-table", "README.md", *marked("paper_comparison"), SCRIPT + ("scripts/paper_comparison.py",),
           minutes=6),
     Block("benchmark", "README.md", *marked("benchmark"), SCRIPT + ("scripts/benchmark.py", "--markdown"),
-          minutes=5, measured=True),
+          minutes=11, measured=True),
     Block("hil-latency", "docs/hil.md", *marked("hil latency"), SCRIPT + ("scripts/hil_latency.py", "--markdown"),
           minutes=4, measured=True),
     Block("fault-matrix", "docs/safety.md", "<!-- fault matrix: begin (written by `flightctl sim faults`) -->",
