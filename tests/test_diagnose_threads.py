@@ -36,7 +36,7 @@ UNSET = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 def _child(code: str, *args) -> str:
     env = {k: v for k, v in os.environ.items() if k not in UNSET}
-    done = subprocess.run([sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True, env=env,
+    done = subprocess.run([sys.executable, "-P", "-c", code, *map(str, args)], capture_output=True, text=True, env=env,
                           timeout=1800)
     assert done.returncode == 0, done.stderr[-2000:]
     return done.stdout.strip().splitlines()[-1]

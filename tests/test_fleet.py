@@ -36,7 +36,7 @@ def corpus(tmp_path) -> Path:
 
 def command(folder: Path, out: Path, *extra: str, env: dict | None = None) -> subprocess.Popen:
     """`flightctl diagnose --corpus` as its own process group (Ctrl-C reaches the group, as a terminal's)."""
-    return subprocess.Popen([sys.executable, "-m", "flightctl.cli", "diagnose", "--corpus", str(folder), "--json",
+    return subprocess.Popen([sys.executable, "-P", "-m", "flightctl.cli", "diagnose", "--corpus", str(folder), "--json",
                              str(out), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True, env={**os.environ, **(env or {})})
 
