@@ -128,17 +128,23 @@ def _workers_deaf_to_ctrl_c() -> None:
     ignored: an ignored signal stays ignored across fork and exec, Python then installs no handler of
     its own, and the server hands its children the handlers it started with (signal(7); CPython's
     multiprocessing/forkserver.py). This process ignores Ctrl-C only while the server starts. The
-    server ends when this process does (its pipe from here closes)."""
+    server ends when this process does (its pipe from here closes).
+    A Ctrl-C pressed in that moment is not lost: SIGINT is also blocked here meanwhile (this process
+    has one thread then), and the kernel keeps a blocked signal pending even while it is ignored
+    (kernel/signal.c, sig_ignored: "Blocked signals are never ignored"); it is delivered to the
+    restored handler when unblocked. The server inherits the block, harmless in a process deaf to it."""
     if threading.current_thread() is not threading.main_thread():
         return
     from multiprocessing import forkserver
     saved = {k: os.environ.get(k) for k in ONE_THREAD}
     os.environ.update(ONE_THREAD)             # the server's environment is its children's
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         forkserver.ensure_running()
     finally:
         signal.signal(signal.SIGINT, handler)
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)      # a Ctrl-C meanwhile: raised now
         for k, v in saved.items():
             if v is None:
                 os.environ.pop(k, None)
