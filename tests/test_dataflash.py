@@ -20,7 +20,7 @@ from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe
 from flightctl.sim.identify.diagnose.data import load_file
 from flightctl.sim.logs import each_log, read_foreign
-from dataflash import DataFlash, text_log
+from flightctl.sim.logs.dfwrite import DataFlash, text_log
 from real import delay_fit, delayed, rows_and_header, write as write_csv
 
 pytest.importorskip("pymavlink")

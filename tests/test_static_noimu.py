@@ -146,7 +146,7 @@ def test_what_docs_say_of_the_failure_is_in_the_data(tmp):
 
 
 def test_a_log_with_neither_imu_nor_attitude_is_refused_naming_both(tmp, capsys):
-    from dataflash import DataFlash
+    from flightctl.sim.logs.dfwrite import DataFlash
     f = DataFlash(without=("IMU", "ATT"))
     f.add("MSG", 1000, "ArduCopter V4.5.7 (1a2b3c4d)")
     for k, v in {"FRAME_CLASS": 1, "FRAME_TYPE": 1, "LOG_BITMASK": 1024, "MOT_PWM_MIN": 1000, "MOT_PWM_MAX": 2000}.items():

@@ -28,7 +28,7 @@ from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe
 from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command
 from flightctl.sim.world.power import SimBattery
-from dataflash import DataFlash
+from flightctl.sim.logs.dfwrite import DataFlash
 
 pytest.importorskip("pymavlink")
 A = Airframe()

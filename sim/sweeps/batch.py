@@ -33,6 +33,7 @@ from flightctl.sim.world.board import SIM_CALIBRATE_S
 GROUP = 256          # vehicles whose arrays are set up and flown together
 CHUNK = 225          # loop periods flown per call of the compiled loop (the uniforms refilled between)
 SPARE = 8            # chunks' worth of uniforms each vehicle holds (refilled when less than one is left)
+WIDE = ("P1", "P2", "P3", "P4", "acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z", "alt")  # fl.N_WIDE's
 LAND_MARGIN_S = 45.0   # s past the plan's end a loop's own landing may take (its ramp and slack)
 
 
@@ -255,7 +256,7 @@ def _arm_and_record(dt: float, record: tuple[float, float] | None) -> tuple[int,
 
 
 def _fly_group_now(job) -> tuple:
-    params, plan, draws, gains, seeds, record, until, structure = job
+    params, plan, draws, gains, seeds, record, until, structure, wide = job
     a = params.airframe
     dt = a.dt
     template = _template(params)
@@ -273,7 +274,7 @@ def _fly_group_now(job) -> tuple:
         t = i * dt - SIM_CALIBRATE_S
         sp[i] = plan.at(t) if t <= plan.duration else plan.at(plan.duration)
     rows = int(round((record[1] - record[0]) / dt)) + 1 if record else 0
-    rec = np.full((veh.n, rows, fl.N_REC), np.nan)
+    rec = np.full((veh.n, rows, fl.N_WIDE if wide else fl.N_REC), np.nan)
     run = fl.compiled_fly() or fl.fly
     i0 = 0
     while i0 < i_end and not veh.w[:, fl.W_DONE].all():
@@ -308,12 +309,14 @@ def with_draws(params: Params, draws: dict[tuple[str, str], np.ndarray] | None =
 def simulate(params: Params, plan: Plan, n: int, draws: dict[tuple[str, str], np.ndarray] | None = None,
              gains: Sequence[Gains] | None = None, seeds: Sequence[int] | None = None,
              record: tuple[float, float] | None = None, workers: int = 1, until: float | None = None,
-             structure: str = "flight", progress: Callable[[float], None] | None = None) -> BatchFlight:
+             structure: str = "flight", progress: Callable[[float], None] | None = None,
+             wide: bool = False) -> BatchFlight:
     """Fly `plan` with n vehicles from power-on, each with its own draws of the parameters ((N,)
     arrays), its own gains (None: the file's) and its own seed (None: 0 .. n-1; the seed of
     `flightctl sim --seed`), to its end (or to `until` s after arming). `record`: the span (s since
     arming) of the judged record. `workers` processes share the vehicles (sim/engine.py: Ctrl-C ends
-    them at once). `progress(fraction)`: the share of the vehicles flown, as each group of them lands."""
+    them at once). `progress(fraction)`: the share of the vehicles flown, as each group of them lands.
+    `wide`: the record holds a log's columns too (WIDE; NaN where the vehicle's loop had ended)."""
     draws = {key: np.broadcast_to(np.asarray(v, dtype=float), (n,)) for key, v in (draws or {}).items()}
     seeds = list(range(n)) if seeds is None else [int(s) for s in seeds]
     if gains is not None and len(gains) != n:
@@ -323,7 +326,7 @@ def simulate(params: Params, plan: Plan, n: int, draws: dict[tuple[str, str], np
     groups = max(1, min(n, max(workers, math.ceil(n / GROUP))))
     cuts = np.linspace(0, n, groups + 1).astype(int)
     jobs = [(params, plan, {key: v[a:b] for key, v in draws.items()}, None if gains is None else list(gains[a:b]),
-             seeds[a:b], record, until, structure) for a, b in zip(cuts[:-1], cuts[1:])]
+             seeds[a:b], record, until, structure, wide) for a, b in zip(cuts[:-1], cuts[1:])]
     flown = [0]
 
     def done(k: int, part) -> None:
@@ -342,7 +345,7 @@ def simulate(params: Params, plan: Plan, n: int, draws: dict[tuple[str, str], np
     dt = params.airframe.dt
     _, rec0 = _arm_and_record(dt, record)
     t = (rec0 + np.arange(rec.shape[1])) * dt - SIM_CALIBRATE_S if record else np.zeros(0)
-    names = ("true_roll", "true_pitch", "true_yaw", "roll", "pitch", "yaw")
+    names = ("true_roll", "true_pitch", "true_yaw", "roll", "pitch", "yaw") + (WIDE if wide else ())
     log = {"t": t, **{name: np.ascontiguousarray(rec[:, :, j].T) for j, name in enumerate(names)}}
     return BatchFlight([j[0] for j in judged], np.array([j[1] for j in judged]), np.array([j[2] for j in judged]),
                        log, sum(part[2] for part in parts), np.concatenate([part[3] for part in parts]))

@@ -94,6 +94,9 @@ RUNNING, ENDED, CRASH, IMU_BAD, NO_TOUCHDOWN, NEVER_LEFT, DIVERGED = range(7)
  T_ARM, TEMP_LO, TEMP_HI, POWER_EVERY, SONAR_EVERY, N_WORLD) = range(19)
 # rows of the judged record: the true roll, pitch and yaw (wrapped), and the estimate's
 N_REC = 6
+# a wide record (a log's columns, sim/flights/fleet.py) adds: the commands P1..P4 the motors took, the
+# sample (acc_x..z, gyro_x..z: the driver's, less the calibration's gyro bias), the altitude estimate
+N_WIDE = N_REC + 11
 
 
 def uniform(w, uni) -> float:
@@ -526,6 +529,12 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI, SP, R
                     REC[v, row, 0], REC[v, row, 1] = x[PHI], x[THETA]
                     REC[v, row, 2] = (x[PSI] + pi) % TWOPI - pi
                     REC[v, row, 3], REC[v, row, 4], REC[v, row, 5] = e[ob.ROLL], e[ob.PITCH], e[ob.YAW]
+                    if REC.shape[2] == N_WIDE:
+                        for j in range(4):
+                            REC[v, row, N_REC + j] = w[W_NEXT + j]
+                        for j in range(6):
+                            REC[v, row, N_REC + 4 + j] = w[W_S + j]
+                        REC[v, row, N_REC + 10] = e[ob.ALT]
                 w[W_ROWS] += 1.0
             if finished or (w[W_ARMED] != 0.0 and w[W_FLYING] == 0.0 and w[W_GROUND] != 0.0):
                 # the loop's own landing ends the flight; after the plan's, nothing moves on the floor

@@ -25,7 +25,7 @@ import sys
 import tempfile
 import types
 from pathlib import Path
-from math import copysign, cos, sin
+from math import copysign, cos, sin, sqrt
 
 import numpy as np
 
@@ -134,10 +134,11 @@ def rebound(fn, **dependencies):
 # The effects the compiled plant carries, by their wrench hooks' codes (`layout`); a model with any other
 # effect integrates in plain Python (Plant._rk4). `gyro_lag` acts on the simulated IMU, not the plant.
 INFLOW, REACTION, DRAG = 1, 2, 3
-COMPILED_CAUSES = ("rotor_inflow", "motor_dynamics", "rotor_drag", "actuation_delay", "gyro_lag")
+COMPILED_CAUSES = ("rotor_inflow", "motor_dynamics", "rotor_drag", "actuation_delay", "gyro_lag", "motor_weak")
 # q: the parameters of `stage`, by index
-# (_ROOT: sqrt(c1 / B), a rotor's `airflow_root` per rad/s of its speed)
-_C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _H1, _H2, _JP, _ROOT, _RIGID = range(16)
+# (_ROOT: sqrt(c1 / B), a rotor's `airflow_root` per rad/s of its speed; _WEAK, _SCALE: motor_weak's
+# rotor, 0-3, -1 without one, and its scale)
+_C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _H1, _H2, _JP, _ROOT, _WEAK, _SCALE, _RIGID = range(18)
 N_OUT = 18   # `period`'s output: the fields of `Forces` (f, tau, force, torque, w) one after another
 
 
@@ -165,7 +166,7 @@ def _layout(model):
         return None
     a = model.a
     B = a.M * a.g / 4.0
-    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, B, 0.0, 0.0, 0.0, a.h1, a.h2, a.Jp, (a.c1 / B) ** 0.5]
+    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, B, 0.0, 0.0, 0.0, a.h1, a.h2, a.Jp, (a.c1 / B) ** 0.5, -1.0, 1.0]
     codes = []
     for e in model.effects:
         p = e.parameters
@@ -180,6 +181,8 @@ def _layout(model):
         elif e.cause == "rotor_drag":
             q[_K_DRAG], q[_YAW] = p["k"], p.get("yaw", 0.0)
             codes.append(DRAG)
+        elif e.cause == "motor_weak":       # a scale hook: no wrench code
+            q[_WEAK], q[_SCALE] = e._i, p["scale"]
     return np.array(codes, dtype=np.int64), q + list(model.rigid_constants)
 
 
@@ -239,6 +242,13 @@ def rotors(x, xo, cmd, codes, q, Rm, xdot, do):
     g1, g2 = q[_G1], q[_G2]
     tau4 = (rotor_torque(f[0], g1, g2), rotor_torque(f[1], g1, g2), rotor_torque(f[2], g1, g2),
             rotor_torque(f[3], g1, g2))
+    if q[_WEAK] >= 0.0:        # motor_weak's `scale` hook (Model._forces): its rotor's thrust and torque times
+        m, s = q[_WEAK], q[_SCALE]     # the scale, its speed eq. 27's of the thrust scaled
+        s1, s2, s3, s4 = (s if m == 0.0 else 1.0), (s if m == 1.0 else 1.0), (s if m == 2.0 else 1.0), \
+            (s if m == 3.0 else 1.0)
+        f = (f[0] * s1, f[1] * s2, f[2] * s3, f[3] * s4)
+        tau4 = (tau4[0] * s1, tau4[1] * s2, tau4[2] * s3, tau4[3] * s4)
+        w = (w[0] * sqrt(s1), w[1] * sqrt(s2), w[2] * sqrt(s3), w[3] * sqrt(s4))
     vb = body_velocity(Rm, x[xo + 3], x[xo + 4], x[xo + 5])
     k = q[_ROOT]
     r1, r2, r3, r4 = w[0] * k, w[1] * k, w[2] * k, w[3] * k

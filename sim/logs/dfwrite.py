@@ -1,12 +1,14 @@
-"""A DataFlash (`.bin`) writer for the tests: ArduPilot's log format as pymavlink's DFReader reads it
-(each message 0xA3 0x95, its type, its fields packed little-endian; FMT messages define the types), so
-that a flight of this project's simulator can be written as an ArduCopter log and read back."""
+"""A DataFlash (`.bin`) writer: ArduPilot's log format as pymavlink's DFReader reads it (each message
+0xA3 0x95, its type, its fields packed little-endian; FMT messages define the types), so that a flight
+of this project's simulator can be written as an ArduCopter log and read back (the tests, and the
+simulated fleet of sim/flights/fleet.py). The field layouts are ArduPilot's own (its LogStructure.h);
+GPS as ArduPilot 4.x logs it: GMS the GPS time of week (ms), GWk the GPS week, Lat/Lng 1e-7 degrees."""
 from __future__ import annotations
 
 import struct
 
 HEAD = b"\xa3\x95"
-CODES = {"B": "B", "H": "H", "I": "I", "f": "f", "Q": "Q", "n": "4s", "N": "16s", "Z": "64s"}
+CODES = {"B": "B", "H": "H", "I": "I", "f": "f", "Q": "Q", "n": "4s", "N": "16s", "Z": "64s", "L": "i"}
 FORMATS = {  # name: (type id, format, columns)
     "PARM": (129, "QNf", "TimeUS,Name,Value"),
     "MSG": (130, "QZ", "TimeUS,Message"),
@@ -19,6 +21,7 @@ FORMATS = {  # name: (type id, format, columns)
     "ARM": (137, "QB", "TimeUS,ArmState"),
     "BARO": (138, "QBf", "TimeUS,I,Alt"),
     "VIBE": (139, "QfffIII", "TimeUS,VibeX,VibeY,VibeZ,Clip0,Clip1,Clip2"),   # ArduCopter 3.3-4.0's
+    "GPS": (140, "QBBIHBfLLffff", "TimeUS,I,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ"),
 }
 
 
