@@ -26,12 +26,18 @@ EFFECTS = {"rotor_inflow": {"k": 0.32, "hub": 0.02}, "motor_dynamics": {"tau": 0
            "rotor_drag": {"k": 1.1, "yaw": 0.05}}
 
 
+WEAK = {"motor": 3, "scale": 0.83}     # motor_weak: a scale hook (its place among the effects does not matter)
+
+
 def models():
-    """The base model and every ordered choice of one to three compiled effects (the wrench order matters)."""
+    """The base model and every ordered choice of one to three compiled effects (the wrench order matters),
+    each without and with a weak motor."""
     a = Airframe()
     for n in range(len(EFFECTS) + 1):
         for names in itertools.permutations(EFFECTS, n):
-            yield names, Model(a, tuple(causes.make(name, **EFFECTS[name]) for name in names))
+            effects = tuple(causes.make(name, **EFFECTS[name]) for name in names)
+            yield names, Model(a, effects)
+            yield names + ("motor_weak",), Model(a, effects + (causes.make("motor_weak", **WEAK),))
 
 
 def random_state(rng, model):
@@ -72,7 +78,7 @@ def test_the_compiled_step_and_forces_equal_the_plain_ones():
                                            atol=1e-12)
             assert not np.allclose(stepped[:N_RIGID], x[:N_RIGID], rtol=0, atol=1e-9)   # it moved in the air
             seen += 1
-    assert seen == 16 * 40
+    assert seen == 2 * 16 * 40
 
 
 @needs_numba
