@@ -15,6 +15,7 @@ import struct
 import numpy as np
 
 from flightctl.physics import G
+from flightctl.sim.logs import identity
 from flightctl.sim.logs.common import DEG, Imported, Stream, command_p, euler_from_frd_ned
 
 QUAD_X = ((-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0))   # motors 1-4: rear right, front right,
@@ -249,6 +250,7 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
         "acc_source": acc_source, "acc_filter": acc_filter,
         "height_source": height_source,
     })
+    imp.meta.update(identity.blackbox(h))
     return imp
 
 

@@ -26,7 +26,7 @@ import tempfile
 import numpy as np
 
 from flightctl.errors import InputError, read_bytes
-from flightctl.sim.logs import arducopter3
+from flightctl.sim.logs import arducopter3, identity
 from flightctl.sim.logs.common import CELL_FULL_V, DEG, FRD, MIN_ROWS, Imported, Stream, command_p, rate_notes
 
 MOTOR_FUNCTION = 33                    # SERVOn_FUNCTION of motor 1 (33-44: motors 1-12)
@@ -453,6 +453,7 @@ def read(path: str, text: bool = False) -> Imported:
         "craft": "", "rotors": rotors, "rotors_source": source, "gyro_source": gsource, "gyro_filter": gyro_filter,
         "gyro_notches": notches, "acc_source": asource, "acc_filter": acc_filter,
     })
+    imp.meta.update(identity.ardupilot(texts, p, msgs["GPS"]))
     return imp
 
 

@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from flightctl.errors import InputError
+from flightctl.sim.logs import identity
 from flightctl.sim.logs.common import FRD, Imported, Stream, euler_from_frd_ned, rate_notes
 
 ARMED = 2                                    # vehicle_status.arming_state ARMED (every PX4 version)
@@ -86,6 +87,7 @@ def read(path: str) -> Imported:
                         f"{cutoff:g} Hz filters the controller's copy, not this one)"),
         "gyro_filter": "none", "acc_source": "sensor_combined.accelerometer_m_s2", "acc_filter": "none",
     })
+    imp.meta.update(identity.px4(info))
     return imp
 
 

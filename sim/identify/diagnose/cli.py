@@ -3,6 +3,7 @@
     flightctl diagnose FLIGHT.csv|F.ulg|F.bin|F.bbl|F.bfl|F.txt [...] [--index N] [--params PARAMS.toml]
                        --json REPORT.json [--validate OTHER ...] [--plot PREFIX] [--quiet]
     flightctl diagnose --corpus DIR [DIR ...] [--table OUT.md] [--json OUT.json] [--jobs N] [--quiet]
+                       [--fleet REPORT [--vehicles MAP.csv]]
 
 Logs of other autopilots (PX4's ULog, ArduPilot's DataFlash, the blackbox of Betaflight and INAV) are
 read by `flightctl.sim.logs` into the same table as `flightctl log import` writes; their vehicle's
@@ -82,6 +83,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--results", metavar="R.jsonl",
                    help="with --corpus: each log's row as it finishes; a run started again skips the logs in it "
                         "(default: beside --json: OUT.results.jsonl; rows written by another version of the code are diagnosed again)")
+    p.add_argument("--fleet", metavar="REPORT",
+                   help="with --corpus: the fleet report into the folder REPORT (fleet.md, fleet.json, vehicle-N.png): the "
+                        "logs grouped by vehicle, in flight order, what changed on which vehicle from which flight (docs/fleet.md)")
+    p.add_argument("--vehicles", metavar="MAP.csv",
+                   help="with --fleet: which vehicle each log is of, rows 'log,vehicle' (default: the logs' headers, else "
+                        "their folders)")
     engine.add_flag(p, "with --corpus")
     p.add_argument("--plot", metavar="PREFIX",
                    help="write PREFIX-residuals.png (residual vs time, base and after each cause), "

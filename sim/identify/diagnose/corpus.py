@@ -264,8 +264,8 @@ def _suffixes() -> tuple[str, ...]:
 def main(args) -> int:
     if args.logs:
         raise InputError("--corpus DIR [DIR ...] takes no other logs: put them in a folder")
-    if args.table is None and args.json is None:
-        raise InputError("--corpus: say where the rows go: --table OUT.md and/or --json OUT.json")
+    if args.table is None and args.json is None and not args.fleet:
+        raise InputError("--corpus: say where the rows go: --table OUT.md, --json OUT.json and/or --fleet REPORT")
     for flag in ("index", "validate", "params", "plot"):
         if getattr(args, flag, None):
             raise InputError(f"--corpus: --{flag} applies to one diagnosis, not to a folder of logs")
@@ -276,10 +276,16 @@ def main(args) -> int:
     for path, flag in ((out_table, "--table"), (out_json, "--json")):
         if path is not None:
             output_file(path, flag)
-    # the results table: --results, else beside --json (a table alone, such as docs/'s, keeps none)
-    results = Path(args.results) if getattr(args, "results", None) else (default_path(out_json) if out_json else None)
-    if results is not None:
+    from flightctl.sim.identify.fleet import cli as fleet
+    fleet_dir, mapping = fleet.check(args, [Path(c) for c in args.corpus], find_logs, _jobs)
+    # the results table: --results, else beside --json, else in the fleet report's folder (a table alone,
+    # such as docs/'s, keeps none)
+    results = Path(args.results) if getattr(args, "results", None) else (
+        default_path(out_json) if out_json else fleet_dir / "results.jsonl" if fleet_dir else None)
+    if results is not None and results.parent != fleet_dir:
         output_file(results, "--results")
+    if fleet_dir is not None:
+        fleet_dir.mkdir(parents=True, exist_ok=True)
     rows = corpus([Path(c) for c in args.corpus], args.jobs, progress=not args.quiet, results=results)
     text = table(rows)
     if out_table is not None:
@@ -289,6 +295,8 @@ def main(args) -> int:
             {"log": r.log, "status": r.status, "refused": r.reason or None, "report": r.report} for r in rows]},
             indent=1, allow_nan=False) + "\n")
     print(text)
+    if fleet_dir is not None:
+        fleet.report(rows, results, fleet_dir, mapping, args.quiet)
     done = sum(r.status == "diagnosed" for r in rows)
     failed = sum(r.status == "failed" for r in rows)
     if not args.quiet:

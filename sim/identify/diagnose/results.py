@@ -5,7 +5,9 @@ A row is keyed by the log file's content (its sha256) and its index in a file of
 log renamed or moved is still done and a log rewritten is diagnosed again; and it names the code that
 judged it (`code`: a digest of the readers' and the diagnosis' sources), so that a row of another
 version of flightctl is diagnosed again rather than reused. It holds the key figures
-(status, the refusal's or failure's line, the seconds airborne, the causes named, what was read) and
+(status, the refusal's or failure's line, the seconds airborne, the causes named, what was read: the
+vehicle's identity and the flight's start among it; the figures the fleet report follows across flights,
+sim/identify/fleet/figures.py, each with its standard error) and
 the path of the log's whole report, a JSON file of its own in the folder beside the table
 (`R.reports/`). A log whose worker died (it crashed the process: sim/engine.py's `WorkerDied`) is a
 row too, status "failed", its reason "worker died: ...": the run goes on, and a run started again
@@ -19,7 +21,10 @@ import os
 import time
 from pathlib import Path
 
-META = ("craft", "firmware", "format", "rate_hz", "motor_rate_hz", "omega_source", "battery_cells")
+from flightctl.sim.identify.fleet.figures import figures
+
+META = ("craft", "firmware", "format", "rate_hz", "motor_rate_hz", "omega_source", "battery_cells", "vehicle_id",
+        "vehicle_id_source", "start_utc", "start_source")
 
 
 def sha256(path: str | Path) -> str:
@@ -94,7 +99,7 @@ class Results:
                 "causes": [c["cause"] for c in r.get("causes", [])],
                 "not_physical": [c["cause"] for c in r.get("not_physical", [])],
                 "meta": {k: _plain(row.meta[k]) for k in META if k in (row.meta or {})},
-                "report": str(report) if report else None,
+                "figures": figures(row.report), "report": str(report) if report else None,
                 "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
         with open(self.path, "a") as f:
             f.write(json.dumps(line, allow_nan=False) + "\n")
