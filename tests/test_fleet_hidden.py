@@ -13,10 +13,6 @@ family-wise error rate over the fleet's series is trends.ALPHA)."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,15 +20,10 @@ import pytest
 pytest.importorskip("pymavlink")
 
 from flightctl.sim.flights.fleet import simulate_fleet  # noqa: E402
+from test_fleet_report import diagnose  # noqa: E402  (the command as a user runs it)
 
 SEED = 3801
 ONSET_TOL = {"motor": 1, "battery": 3}
-
-
-def diagnose(folder: Path, report: Path, *extra: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-P", "-m", "flightctl.cli", "diagnose", "--corpus", str(folder), "--fleet",
-                           str(report), "--quiet", "--jobs", "2", *extra], capture_output=True, text=True,
-                          env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
 
 
 @pytest.fixture(scope="module")

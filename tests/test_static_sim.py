@@ -26,39 +26,24 @@ import pytest
 from flightctl.cli import main
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe
-from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command
-from flightctl.sim.world.power import SimBattery
+from flightctl.sim.flights import fleet
+from flightctl.sim.flights.fleet import AP_FROM_SIM, LOG_BITMASK, PWM
+from flightctl.sim.world.power import SimBattery, power_of_commands
 from flightctl.sim.logs.dfwrite import DataFlash
 
 pytest.importorskip("pymavlink")
 A = Airframe()
-# ArduPilot's QUAD/PLUS (AP_MotorsMatrix): motor 1 right CCW, 2 left CCW, 3 front CW, 4 back CW; the
-# paper's + layout (conventions.md): 1 North (front) CW, 2 West (left) CCW, 3 South CW, 4 East CCW.
-AP_FROM_SIM = (4, 2, 1, 3)            # ArduPilot motor m is the simulator's motor AP_FROM_SIM[m - 1]
 IMU_EVERY, SLOW_EVERY = 18, 45        # of the simulator's 450 Hz rows: 25 Hz and 10 Hz
-PWM = (1000.0, 2000.0)
-# ArduCopter's default LOG_BITMASK (config.h): ATTITUDE_MED, GPS, PM, CTUN, NTUN, RCIN, IMU (bit 7), CMD, CURRENT,
-# RCOUT, OPTFLOW, COMPASS, CAMERA, MOTBATT (defines.h's MASK_LOG_ bits 1-11, 13, 15, 17)
-LOG_BITMASK = sum(1 << b for b in (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 13, 15, 17))
 
 
 def current(log) -> np.ndarray:
     """The pack's current (A) on each row: SimBattery's definition on the logged commands (eq. 26-28)."""
-    P = np.vstack([log[f"P{i}"] for i in range(1, 5)])
-    f = thrust_from_command(P, A.h1, A.h2)
-    power = (rotor_torque(f, A.g1, A.g2) * rotor_speed(f, A.c1) * (f > 0)).sum(axis=0) / SimBattery.EFFICIENCY
-    return power / log["battery_v"]
+    return power_of_commands(np.vstack([log[f"P{i}"] for i in range(1, 5)]), A) / log["battery_v"]
 
 
 def vibe(log) -> np.ndarray:
-    """(3, n) ArduPilot's VIBE of the logged accelerometer (AP_InertialSensor::calc_vibration_and_clipping:
-    the square root of the low-passed (2 Hz) square of the accelerometer less its 5 Hz low-pass; here
-    moving means of 0.2 s and 0.5 s stand for the two low-passes), m/s^2."""
-    def mean(x, seconds):
-        k = np.ones(int(round(seconds * 450))) / int(round(seconds * 450))
-        return np.vstack([np.convolve(v, k, mode="same") for v in x])
-    acc = np.vstack([log[c] for c in ("acc_x", "acc_y", "acc_z")])
-    return np.sqrt(mean((acc - mean(acc, 0.2)) ** 2, 0.5))
+    """(3, n) ArduPilot's VIBE of the logged accelerometer (sim/flights/fleet.py's)."""
+    return fleet.vibe(np.vstack([log[c] for c in ("acc_x", "acc_y", "acc_z")]), A.loop_hz)
 
 
 def arducopter(log, path, r_hidden: float = 0.0, clips=None, baro=None, imu: bool = True):

@@ -39,10 +39,9 @@ from pathlib import Path
 import numpy as np
 
 from flightctl.params import EffectSpec, Params, load
-from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command
 from flightctl.plans.plan import Move, Plan
 from flightctl.sim.world.devices import SensorNoise
-from flightctl.sim.world.power import SimBattery
+from flightctl.sim.world.power import SimBattery, power_of_commands
 
 WEAK_SCALE = (0.80, 0.92)      # the weak motor's thrust for its command, drawn in this range
 R_NEW = (0.020, 0.030)         # ohm: a new pack's internal resistance with its leads, drawn per vehicle
@@ -50,6 +49,7 @@ AGED_FACTOR = (1.8, 2.5)       # the aging pack's resistance at the last flight 
 R_JITTER = 0.03                # the resistance's spread from flight to flight (temperature), relative
 SOC = (0.85, 1.0)              # the pack's charge at take-off
 MOTOR_SPREAD = 0.02            # each vehicle's motors differ by this much thrust (one motor_weak each)
+CHUNK = 40                     # flights flown at once by the batched simulator
 ONSET_MARGIN = 6               # an effect starts no earlier than this flight and this many before the last
 EPOCH_UTC = dt.datetime(2026, 3, 2, 8, 0, tzinfo=dt.timezone.utc)
 GPS_EPOCH = dt.datetime(1980, 1, 6, tzinfo=dt.timezone.utc)
@@ -61,6 +61,10 @@ FIRMWARE = "ArduCopter V4.5.7 (1a2b3c4d)"
 AP_FROM_SIM = (4, 2, 1, 3)     # ArduPilot motor m is the simulator's motor AP_FROM_SIM[m - 1]
 PWM = (1000.0, 2000.0)
 IMU_HZ, SLOW_HZ, GPS_HZ = 25.0, 10.0, 5.0
+ULOG_HZ = 150.0                # the ULog's rows (every topic): PX4 logs its IMU topic at this order of rate
+AMPS_PER_VOLT_LSB = 10e-6 / 0.002 / 0.004    # the INA219's current noise per volt of its bus noise: as many
+#                              LSBs (4 mV on the bus, 10 uV over the 2 mOhm shunt: sim/world/power.py)
+SUFFIX = {"dataflash": ".BIN", "ulog": ".ulg"}
 # ArduCopter's default LOG_BITMASK (config.h): ATTITUDE_MED, GPS, PM, CTUN, NTUN, RCIN, IMU (bit 7), CMD,
 # CURRENT, RCOUT, OPTFLOW, COMPASS, CAMERA, MOTBATT (defines.h's MASK_LOG_ bits 1-11, 13, 15, 17)
 LOG_BITMASK = sum(1 << b for b in (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 13, 15, 17))
@@ -80,8 +84,7 @@ def plan(seconds: float) -> Plan:
 def battery(t: np.ndarray, P: np.ndarray, a, soc: float, ohm: float) -> tuple[np.ndarray, np.ndarray]:
     """(terminal voltage, current) of SimBattery (open-circuit 14.0 + 2.6 soc V, the charge drawn by the
     current) behind `ohm`, on the flown commands: V = E - R I with I = power / V solved per row."""
-    f = thrust_from_command(P, a.h1, a.h2)
-    power = (rotor_torque(f, a.g1, a.g2) * rotor_speed(f, a.c1) * (f > 0)).sum(axis=0) / SimBattery.EFFICIENCY
+    power = power_of_commands(P, a)
     step = np.diff(t, prepend=t[0])
     E = np.full(t.size, 14.0 + 2.6 * soc)
     for _ in range(3):                   # the charge drawn by the current of the last pass
@@ -130,7 +133,7 @@ def write_dataflash(path: Path, cols: dict, a, uid: str, start: dt.datetime, rng
         f.add("PARM", 300_000, k, float(v))
     f.add("ARM", int(boot * 1e6) - 1000, 1)
     sigma = SensorNoise().battery_sigma
-    amp_sigma = sigma / 0.004 * 10e-6 / 0.002    # the same LSBs: 4 mV bus, 10 uV over the 2 mOhm shunt
+    amp_sigma = sigma * AMPS_PER_VOLT_LSB
     levels = vibe(np.vstack([cols["acc_x"], cols["acc_y"], cols["acc_z"]]), hz)
     every = {n: max(1, int(round(hz / r))) for n, r in (("imu", IMU_HZ), ("slow", SLOW_HZ), ("gps", GPS_HZ))}
     lat0, lng0 = 52.4556 + rng.uniform(-0.01, 0.01), 10.5586 + rng.uniform(-0.01, 0.01)
@@ -154,20 +157,53 @@ def write_dataflash(path: Path, cols: dict, a, uid: str, start: dt.datetime, rng
     path.write_bytes(f.bytes())
 
 
+def write_ulog(path: Path, cols: dict, a, uuid: str, start: dt.datetime, rng: np.random.Generator, flight: Plan) -> None:
+    """One flight as PX4's ULog through the project's exporter (sim/logs/export.py: PX4's topics and frames),
+    every topic at ULOG_HZ (a third of the loop's rows), the board's UUID as `sys_uuid` and the start as
+    the GPS topic's UTC; the voltage and current with the power monitor's noise (`write_dataflash`)."""
+    from flightctl.logfile import FLIGHT_COLUMNS
+    from flightctl.sim.logs.export import export
+    every = max(1, int(round(1.0 / float(np.median(np.diff(cols["t"]))) / ULOG_HZ)))
+    rows = np.arange(0, cols["t"].size, every)
+    sigma = SensorNoise().battery_sigma
+    flight.restart()
+    sp = np.array([flight.at(float(t))[:] for t in cols["t"][rows]])     # roll, pitch, yaw, alt setpoints
+    out = {"t": cols["t"][rows], "range": np.full(rows.size, np.nan), "roll_sp": sp[:, 0], "pitch_sp": sp[:, 1],
+           "yaw_sp": sp[:, 2], "alt_sp": sp[:, 3],
+           "battery_v": cols["battery_v"][rows] + rng.normal(0.0, sigma, rows.size),
+           "current": cols["current"][rows] + rng.normal(0.0, sigma * AMPS_PER_VOLT_LSB, rows.size)}
+    for c in FLIGHT_COLUMNS:
+        if c not in out:
+            out[c] = cols[c][rows]
+    names = list(FLIGHT_COLUMNS) + ["current"]
+    head = [f"# vehicle_id: {uuid}", f"# start_utc: {start.isoformat()}", "# calibrate_s: 0", ",".join(names)]
+    table = np.column_stack([out[c] for c in names])
+    body = "\n".join(",".join("" if v != v else f"{v:.6g}" for v in row) for row in table)
+    csv = path.with_suffix(".csv")
+    csv.write_text("\n".join(head) + "\n" + body + "\n")
+    try:
+        export(csv, path)
+    finally:
+        csv.unlink()
+
+
 def _uid(rng: np.random.Generator) -> str:
     words = rng.integers(0, 1 << 32, 3, dtype=np.uint64)
     return f"{BOARDS[int(rng.integers(len(BOARDS)))]} " + " ".join(f"{int(w):08X}" for w in words)
 
 
-def _draw_effects(rng, vehicles: int, flights: int, weak: bool, aging: bool) -> dict:
+def _draw_effects(rng, vehicles: int, flights: int, weak: bool, aging: bool, fmt: str) -> dict:
     lo, hi = ONSET_MARGIN, flights - ONSET_MARGIN
-    if hi <= lo:
+    if hi <= lo and (weak or aging):
         raise ValueError(f"{flights} flights: at least {2 * ONSET_MARGIN + 1} for an effect's onset")
+    if vehicles < (2 if weak and aging else 1):
+        raise ValueError(f"{vehicles} vehicles: the weak motor and the aging pack are on two")
     who = rng.permutation(vehicles)
     out = {}
     if weak:
         sim_motor = int(rng.integers(1, 5))
-        out["weak"] = {"vehicle": int(who[0]), "motor": AP_FROM_SIM.index(sim_motor) + 1, "sim_motor": sim_motor,
+        motor = AP_FROM_SIM.index(sim_motor) + 1 if fmt == "dataflash" else sim_motor    # as the log numbers it
+        out["weak"] = {"vehicle": int(who[0]), "motor": motor, "sim_motor": sim_motor,
                        "scale": round(float(rng.uniform(*WEAK_SCALE)), 4), "onset": int(rng.integers(lo, hi))}
     if aging:
         out["battery"] = {"vehicle": int(who[1 if weak and vehicles > 1 else 0]), "onset": int(rng.integers(lo, hi)),
@@ -177,22 +213,26 @@ def _draw_effects(rng, vehicles: int, flights: int, weak: bool, aging: bool) -> 
 
 def simulate_fleet(folder: str | Path, rng: np.random.Generator, vehicles: int = 4, flights: int = 40,
                    seconds: float = 30.0, weak: bool = True, aging: bool = True, layout: str = "flat",
-                   params: Params | None = None, progress=None) -> dict:
-    """Fly `vehicles` x `flights` and write each flight into `folder` as an ArduCopter DataFlash log (the
-    module's docstring); returns the truth, which the code under test is never told:
+                   fmt: str = "dataflash", params: Params | None = None, progress=None) -> dict:
+    """Fly `vehicles` x `flights` and write each flight into `folder` as an ArduCopter DataFlash log (`fmt`
+    "dataflash") or a PX4 ULog ("ulog"; the module's docstring); returns the truth, which the code under test is never told:
     {"vehicles": [{"uid", "logs": [file names in flight order], "start_utc": [...], "ohm": [...],
-    "motor_scale": [[4 per flight, ArduPilot's motor order]]}], "weak": {vehicle, motor (ArduPilot's
-    numbering, as the log names it), sim_motor, scale, onset (0-based flight index)} and "battery":
+    "motor_scale": [[4 per flight, in the log's motor order]]}], "weak": {vehicle, motor (as the log numbers
+    it: ArduPilot's, or the simulator's in a ULog), sim_motor, scale, onset (0-based flight index)} and "battery":
     {vehicle, onset, factor}, each present when drawn (`weak`, `aging`).
     `layout`: "flat", every log in `folder` under a name that says nothing of its vehicle or order (as
     logs pooled from many SD cards and numbered), or "folders", one folder per vehicle with
     ArduPilot's numbered names in flight order. `progress(text)`: told as each vehicle is flown."""
     from flightctl.sim.sweeps.batch import simulate
+    if fmt not in SUFFIX:
+        raise ValueError(f"fmt {fmt!r}: one of {', '.join(SUFFIX)}")
+    if layout not in ("flat", "folders"):
+        raise ValueError(f"layout {layout!r}: flat or folders")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     params = params or load(None)
     a = params.airframe
-    truth = _draw_effects(rng, vehicles, flights, weak, aging)
+    truth = _draw_effects(rng, vehicles, flights, weak, aging, fmt)
     total = vehicles * flights
     names = rng.permutation(total) + 1
     out = []
@@ -219,26 +259,32 @@ def simulate_fleet(folder: str | Path, rng: np.random.Generator, vehicles: int =
         p = dataclasses.replace(params, effects=params.effects + (
             EffectSpec("motor_weak", (("motor", float(motor)), ("scale", 1.0))),))
         seeds = [int(s) for s in rng.integers(0, 2 ** 31, flights)]
-        fl = simulate(p, plan(seconds), flights, draws={("motor_weak", "scale"): scale}, seeds=seeds,
-                      record=(0.0, seconds + 10.0), wide=True)
-        logs = []
+        logs, outcomes = [], []
         motor_scale = np.ones((flights, 4))
-        motor_scale[:, AP_FROM_SIM.index(motor)] = scale
+        motor_scale[:, AP_FROM_SIM.index(motor) if fmt == "dataflash" else motor - 1] = scale
         for j in range(flights):
-            cols = {c: fl.log[c][:, j] for c in fl.log if c != "t"}
+            if j % CHUNK == 0:        # a few tens of flights at a time: the wide record is ~2 MB a flight
+                part = slice(j, min(j + CHUNK, flights))
+                fl = simulate(p, plan(seconds), len(seeds[part]), draws={("motor_weak", "scale"): scale[part]},
+                              seeds=seeds[part], record=(0.0, seconds + 10.0), wide=True)
+                outcomes += fl.outcome
+            cols = {c: fl.log[c][:, j % CHUNK] for c in fl.log if c != "t"}
             n = int(np.flatnonzero(np.isfinite(cols["P1"]))[-1]) + 1
             cols = {c: x[:n] for c, x in cols.items()}
             cols["t"] = fl.log["t"][:n]
             P = np.vstack([cols[f"P{i}"] for i in range(1, 5)])
             cols["battery_v"], cols["current"] = battery(cols["t"], P, a, float(soc[j]), float(ohm[j]))
             if layout == "folders":
-                name = f"vehicle{v + 1}/{j + 1:08d}.BIN"
+                name = f"vehicle{v + 1}/{j + 1:08d}{SUFFIX[fmt]}"
             else:
-                name = f"{int(names[v * flights + j]):08d}.BIN"
+                name = f"{int(names[v * flights + j]):08d}{SUFFIX[fmt]}"
             (folder / name).parent.mkdir(parents=True, exist_ok=True)
-            write_dataflash(folder / name, cols, a, uid, start[j], rng)
+            if fmt == "ulog":
+                write_ulog(folder / name, cols, a, uid, start[j], rng, plan(seconds))
+            else:
+                write_dataflash(folder / name, cols, a, uid, start[j], rng)
             logs.append(name)
-        out.append({"uid": uid, "logs": logs, "outcomes": list(fl.outcome),
+        out.append({"uid": uid, "logs": logs, "outcomes": outcomes,
                     "start_utc": [s.isoformat() for s in start], "ohm": [round(float(x), 5) for x in ohm],
                     "motor_scale": motor_scale.round(4).tolist()})
         if progress:

@@ -20,7 +20,7 @@ the loop started (the log's time plus its calibration time).
 | vehicle_rates_setpoint | roll, pitch, yaw (rad/s, FRD), thrust_body[3] | setpoint_* where logged, else the rate the PD commands: kp/kd times the angle error (eq. 24 as an angle loop feeding a rate loop, the integral left out); thrust: -mean P / 255 on z |
 | vehicle_status | arming_state (2 armed: the log starts at arming), nav_state (3, a mission: a plan), vehicle_type (1, rotary wing), is_vtol | one sample a second |
 | input_rc | channel_count, rssi, values[18] (us) | rc_* where logged (an imported log): 1500 + 500 stick, throttle 1000 + 1000 |
-| battery_status | voltage_v, voltage_filtered_v (V) | battery_v (rows with a reading) |
+| battery_status | voltage_v, voltage_filtered_v (V), current_a (A, -1 unknown) | battery_v (rows with a reading), current |
 | distance_sensor | current_distance, min_distance, max_distance (m), orientation, type | range (rows with an echo) |
 | vehicle_attitude_groundtruth, vehicle_local_position_groundtruth | q[4]; x, y, z (m) | true_* (simulator only) |
 
@@ -30,10 +30,13 @@ counter-clockwise), PWM_MAIN_FUNC1..4 = 101..104 with PWM_MAIN_MIN/MAX the pulse
 The log's `# params:` file is flattened (`kp_z` is `gains.kp_z`) into float parameters named as PX4
 allows (at most 16 characters: `FC_` and the section's letter, `FC_G_KP_Z`; a longer name keeps its
 first 12 characters and a 3-character hash), and the `flightctl_params` information message lists
-`SHORT=full.name` for each.
+`SHORT=full.name` for each. A log whose header has `# vehicle_id:` and `# start_utc:` (sim/flights/fleet.py)
+gets them as PX4 has them: the `sys_uuid` information message, and vehicle_gps_position's `time_utc_usec`
+once a second.
 """
 from __future__ import annotations
 
+import datetime
 import hashlib
 import struct
 import sys
@@ -142,10 +145,11 @@ TOPICS = {t.name: t for t in (
                              ("uint8_t", "vehicle_type", 0), ("bool", "is_vtol", 0)]),
     Topic("input_rc", [("uint64_t", "timestamp_last_signal", 0), ("int32_t", "rssi", 0),
                        ("uint8_t", "channel_count", 0), ("uint16_t", "values", 18)]),
-    Topic("battery_status", [("float", "voltage_v", 0), ("float", "voltage_filtered_v", 0)]),
+    Topic("battery_status", [("float", "voltage_v", 0), ("float", "voltage_filtered_v", 0), ("float", "current_a", 0)]),
     Topic("distance_sensor", [("float", "min_distance", 0), ("float", "max_distance", 0),
                               ("float", "current_distance", 0), ("uint8_t", "type", 0),
                               ("uint8_t", "orientation", 0)]),
+    Topic("vehicle_gps_position", [("uint64_t", "time_utc_usec", 0), ("uint8_t", "fix_type", 0)]),
     Topic("vehicle_attitude_groundtruth", [("float", "q", 4)]),
     Topic("vehicle_local_position_groundtruth", [("float", "x", 0), ("float", "y", 0), ("float", "z", 0)]),
 )}
@@ -225,8 +229,14 @@ def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
         stamps["input_rc"] = ts[ok]
     volts = col["battery_v"]
     has_v = np.isfinite(volts)
-    data["battery_status"] = dict(voltage_v=volts[has_v], voltage_filtered_v=volts[has_v])
+    amps = col["current"][has_v] if "current" in log else np.full(int(has_v.sum()), -1.0)   # PX4: -1 unknown
+    data["battery_status"] = dict(voltage_v=volts[has_v], voltage_filtered_v=volts[has_v], current_a=amps)
     stamps["battery_status"] = ts[has_v]
+    if meta.get("start_utc"):     # UTC (us) at each second of the log: PX4's vehicle_gps_position.time_utc_usec
+        zero = datetime.datetime.fromisoformat(meta["start_utc"].replace("Z", "+00:00")).timestamp()
+        data["vehicle_gps_position"] = dict(time_utc_usec=np.round(zero * 1e6 + ts[second].astype(float)).astype(np.uint64),
+                                            fix_type=3)
+        stamps["vehicle_gps_position"] = ts[second]
     rng = col["range"]
     echo = np.isfinite(rng)
     data["distance_sensor"] = dict(min_distance=SONAR_RANGE_M[0], max_distance=SONAR_RANGE_M[1],
@@ -249,6 +259,9 @@ def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
     head += _info("ver_hw", meta.get("board", "unknown"))
     head += _info("sys_toolchain", "python")
     head += _info("source_log", Path(log.path).name)
+    if meta.get("vehicle_id"):                       # the vehicle and the flight's start, as PX4's logger writes them
+        head += _info("sys_uuid", meta["vehicle_id"])
+
     short = {short_name(name): name for name in params}
     if len(short) < len(params):
         raise InputError(f"{log.path}: two parameters shorten to one PX4 name: rename one")

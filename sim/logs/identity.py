@@ -7,8 +7,10 @@ report (sim/identify/fleet/) groups and orders the logs by them.
   writes `hal.util->get_system_id`), else BRD_SERIAL_NUM when it is set (not 0); the start from the
   first GPS message with a fix (GWk, GMS: the GPS week and its ms, GPS time, ahead of UTC by the leap
   seconds since 1980: 18 s since 2017-01-01).
-- PX4 (ULog): the `sys_uuid` information message (the logger's: the board's UUID); the start from the
-  `time_ref_utc` information message (s since 1970, the logger's) when the log has one.
+- PX4 (ULog): the `sys_uuid` information message (the logger's: the board's UUID); the start from the GPS
+  topic's `time_utc_usec` (vehicle_gps_position, or sensor_gps: UTC in microseconds) of its first fix,
+  less its timestamp (PX4's `time_ref_utc` information message is the UTC offset of the local time, not
+  a time: 0 in ../shared/data/real/flights/px4's logs).
 - Betaflight and INAV (blackbox): `Board information` and `Craft name` from the header (which craft the
   pilot named, on which board); the start from `Log start datetime` (its RTC's: 0000-01-01 when unset).
 """
@@ -54,15 +56,19 @@ def ardupilot(texts: list[str], params: dict, gps: list) -> dict[str, str]:
     return out
 
 
-def px4(info: dict) -> dict[str, str]:
+def px4(info: dict, gps: dict | None) -> dict[str, str]:
+    """The information messages and the GPS topic's data (vehicle_gps_position or sensor_gps) of a ULog."""
     out = {}
     uuid = str(info.get("sys_uuid", "")).strip()
     if uuid:
         out["vehicle_id"], out["vehicle_id_source"] = uuid, "PX4's sys_uuid"
-    ref = info.get("time_ref_utc")
-    if isinstance(ref, (int, float)) and ref > 0:
-        out["start_utc"] = _iso(dt.datetime.fromtimestamp(float(ref), dt.timezone.utc))
-        out["start_source"] = "PX4's time_ref_utc"
+    if gps is not None and "time_utc_usec" in gps:
+        fix = [k for k, v in enumerate(gps["time_utc_usec"]) if v > 0]
+        if fix:
+            k = fix[0]
+            zero = (int(gps["time_utc_usec"][k]) - int(gps["timestamp"][k])) * 1e-6
+            out["start_utc"] = _iso(dt.datetime.fromtimestamp(zero, dt.timezone.utc))
+            out["start_source"] = "PX4's GPS time (time_utc_usec of the first fix, less its timestamp)"
     return out
 
 

@@ -87,7 +87,8 @@ def read(path: str) -> Imported:
                         f"{cutoff:g} Hz filters the controller's copy, not this one)"),
         "gyro_filter": "none", "acc_source": "sensor_combined.accelerometer_m_s2", "acc_filter": "none",
     })
-    imp.meta.update(identity.px4(info))
+    gps = topic(u, "vehicle_gps_position")
+    imp.meta.update(identity.px4(info, gps if gps is not None else topic(u, "sensor_gps")))
     return imp
 
 

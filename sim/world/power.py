@@ -38,6 +38,14 @@ class SimBattery:
         self.voltage = self._ocv() - self.R_INT * self.current
 
 
+def power_of_commands(P, a):
+    """The power (W) SimBattery draws for the commands P (4, n) held steady: the rotors' torque times speed
+    (eq. 26-28 through the airframe `a`) over EFFICIENCY; the pack's current is this over its voltage."""
+    from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command
+    f = thrust_from_command(P, a.h1, a.h2)
+    return (rotor_torque(f, a.g1, a.g2) * rotor_speed(f, a.c1) * (f > 0)).sum(axis=0) / SimBattery.EFFICIENCY
+
+
 class SimIna219:
     """The INA219 on the battery lead (TI SBOS448), answering register reads and writes from the
     battery's true voltage and current. The shunt (`shunt_ohm`) is on the high side: the chip measures

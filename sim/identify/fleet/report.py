@@ -120,8 +120,9 @@ def _finding(v: Vehicle, name: str, s: dict, also: list[str]) -> dict:
             "with_it": also, "physical": {"passed": ok, "check": why}}
 
 
-def _num(name: str, x: float) -> str:
-    return f"{1e3 * x:.1f} mOhm" if name == "battery_ohm" else f"{1e3 * x:.1f} ms" if name == "timing_s" else f"{x:.4g}"
+def _num(name: str, x: float, digits: str = ".4g") -> str:
+    k, unit = {"battery_ohm": (1e3, " mOhm"), "timing_s": (1e3, " ms")}.get(name, (1.0, ""))
+    return f"{k * x:{digits}}{unit}"
 
 
 def markdown(rep: dict) -> str:
@@ -135,10 +136,10 @@ def markdown(rep: dict) -> str:
               "|---|---|---|---|---|---|---|"]
         for c in rep["changes"]:
             n = c["series"]
-            size = (f"{_num(n, c['before'])} -> {_num(n, c['after'])} (step {_num(n, c['size'])} +- {_num(n, c['size_se'])})"
+            size = (f"{_num(n, c['before'])} -> {_num(n, c['after'])} (step {_num(n, c['size'])} +- {_num(n, c['size_se'], '.2g')})"
                     if c["shape"] == "step" else
                     f"{_num(n, c['before'])} -> {_num(n, c['after'])} (a rise of {_num(n, c['size'])} +- "
-                    f"{_num(n, c['size_se'])} a flight)")
+                    f"{_num(n, c['size_se'], '.2g')} a flight)")
             also = f"; with it: {', '.join(a.replace('share_', 'motor ') for a in c['with_it'])}" if c["with_it"] else ""
             L.append(f"| {c['vehicle']} | {c['what']}: {c['label']}{also} | {c['onset_log']} (flight {c['onset_flight']} of "
                      f"{c['flights']}, from 0) | flights {c['onset_set_flights'][0]}-{c['onset_set_flights'][1]} | {size} | "
