@@ -124,3 +124,22 @@ def test_the_change_test_finds_a_drawn_step_and_names_nothing_on_series_without_
     c = changes[0]
     assert abs(c.onset - truth[0]) <= 1 and c.onset_set[0] <= truth[0] <= c.onset_set[1], (truth[0], c)
     assert c.size > 2.0 * c.size_se
+
+
+@pytest.mark.parametrize("fmt", ["dataflash", "ulog"])
+def test_the_simulated_fleet_writes_the_vehicle_and_the_start_as_its_autopilot_does(tmp_path, fmt):
+    """sim/flights/fleet.py's logs read back (sim/logs/identity.py) with the board the generator drew and
+    each flight's start time, as the readers take them from a real log of that autopilot."""
+    import datetime as dt
+    pytest.importorskip("pymavlink" if fmt == "dataflash" else "pyulog")
+    from flightctl.sim.flights.fleet import simulate_fleet
+    from flightctl.sim.identify.diagnose.cli import read_logs
+    truth = simulate_fleet(tmp_path, np.random.default_rng(3803), vehicles=1, flights=2, seconds=22.0, weak=False,
+                           aging=False, fmt=fmt)
+    v = truth["vehicles"][0]
+    for name, start in zip(v["logs"], v["start_utc"]):
+        meta = read_logs([str(tmp_path / name)], None, lambda *a: None)[0].meta
+        assert meta["vehicle_id"] == v["uid"]
+        read = dt.datetime.fromisoformat(meta["start_utc"].replace("Z", "+00:00"))
+        # the log's time zero: ArduPilot's boot (seconds before arming), PX4's first row (the arming here)
+        assert dt.timedelta(0) <= dt.datetime.fromisoformat(start) - read < dt.timedelta(seconds=30), (start, read)

@@ -1,6 +1,7 @@
 """A simulated fleet: vehicles flown many times each by the batched simulator (sim/sweeps/batch.py, the
 compiled full path: the onboard loop, the chip, the sonar; `wide` records a log's columns), each flight
-written as the log its autopilot would keep, with two hidden effects drawn from a seeded generator:
+written as the log its autopilot would keep, with two hidden effects drawn from a seeded generator
+(`simulate_fleet`'s truth; a flight whose loop stopped before logging a row has no log, None in it):
 
 - **a motor that loses efficiency**: on one vehicle, one motor gives a drawn fraction of its thrust and
   torque (`motor_weak`, sim/causes/motor_weak.py) from a drawn flight on. The fraction is drawn in
@@ -27,7 +28,10 @@ Formats: ArduCopter DataFlash (`.BIN`, sim/logs/dfwrite.py) at ArduPilot's defau
 25 Hz; RCOU, BAT, ATT and VIBE 10 Hz; GPS 5 Hz), the vehicle named the way ArduPilot does (the board's
 name and its three 32-bit UID words in a MSG line at boot, as `Pixhawk4 0047002B 34385105 36363539` in
 tests/data/ardupilot/backend_log_80k.bin) and the flight's start in its GPS time (GWk, GMS: GPS time,
-UTC + 18 s since 2017). `simulate_fleet` is the API (the hidden-effect test and the scale measurement call it).
+UTC + 18 s since 2017); or PX4 ULog (`.ulg`, through the project's exporter sim/logs/export.py) at
+ULOG_HZ, the board's UID as `sys_uuid` and the start as vehicle_gps_position's UTC. No blackbox: the
+project has no blackbox writer. `simulate_fleet` is the API (the hidden-effect test and the scale
+measurement call it).
 """
 from __future__ import annotations
 
@@ -269,7 +273,11 @@ def simulate_fleet(folder: str | Path, rng: np.random.Generator, vehicles: int =
                               seeds=seeds[part], record=(0.0, seconds + 10.0), wide=True)
                 outcomes += fl.outcome
             cols = {c: fl.log[c][:, j % CHUNK] for c in fl.log if c != "t"}
-            n = int(np.flatnonzero(np.isfinite(cols["P1"]))[-1]) + 1
+            logged = np.flatnonzero(np.isfinite(cols["P1"]))
+            if logged.size < 2:              # the loop stopped before a row (the outcome says why): no log
+                logs.append(None)
+                continue
+            n = int(logged[-1]) + 1
             cols = {c: x[:n] for c, x in cols.items()}
             cols["t"] = fl.log["t"][:n]
             P = np.vstack([cols[f"P{i}"] for i in range(1, 5)])

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from flightctl.sim.identify.fleet.figures import SERIES
 from flightctl.sim.identify.fleet.grouping import Vehicle, group
-from flightctl.sim.identify.fleet.trends import ALPHA, BOOTSTRAP, Change, correct, test
+from flightctl.sim.identify.fleet.trends import ALPHA, PERMUTATIONS, Change, correct, test
 
 HINGED = ("battery_ohm", "vibration")       # may rise gradually: step and hinge both tried
 MOST_CELLS = 14
@@ -58,21 +58,21 @@ def _check(name: str, c: Change, v: Vehicle) -> tuple[bool, str]:
     return True, "no physical bound (a level, not a cause)"
 
 
-def build(rows: list[dict], mapping: dict[str, str] | None = None, bootstrap: int = BOOTSTRAP) -> dict:
+def build(rows: list[dict], mapping: dict[str, str] | None = None, permutations: int = PERMUTATIONS) -> dict:
     """The fleet report as JSON (the module's docstring) of the results table's rows."""
     vehicles = group(rows, mapping)
     tests, changes = [], []
     for vi, v in enumerate(vehicles):
         for name in SERIES:
             at, y, se = _series(v, name)
-            c = test(y, se, hinge=name in HINGED, bootstrap=bootstrap) if at else None
+            c = test(y, se, hinge=name in HINGED, permutations=permutations) if at else None
             tests.append((vi, name, at, y, se))
             changes.append(c)
     named = correct(changes)
-    out = {"alpha": ALPHA, "bootstrap": bootstrap, "series_tested": sum(c is not None for c in changes),
+    out = {"alpha": ALPHA, "permutations": permutations, "series_tested": sum(c is not None for c in changes),
            "method": "per series: step (and, for the battery and the vibration, hinge) models with the flights' standard "
                      "errors and a spread between flights, the largest likelihood ratio over the split points, its p-value "
-                     "from a parametric bootstrap under no change, Holm's correction over every series of the fleet "
+                     "from the flights in random orders (a permutation test), Holm's correction over every series of the fleet "
                      "(sim/identify/fleet/trends.py)", "vehicles": [], "changes": []}
     for vi, v in enumerate(vehicles):
         series = {}
@@ -129,7 +129,7 @@ def markdown(rep: dict) -> str:
     """The report's table of what changed, then each vehicle's flights and what was tested."""
     L = ["# Fleet report", "", f"{len(rep['vehicles'])} vehicles, {rep['series_tested']} series tested; a change is named "
          f"when its Holm-adjusted p-value is below {rep['alpha']:g} (family-wise over the fleet) and its size passes its "
-         f"physical check. Method: {rep['method']}; {rep['bootstrap']} bootstrap replicates.", "",
+         f"physical check. Method: {rep['method']}; {rep['permutations']} permutations.", "",
          "## What changed", ""]
     if rep["changes"]:
         L += ["| vehicle | what | from flight (log, its index in the vehicle's order) | onset's 95 % set | change | how sure | check |",

@@ -14,10 +14,12 @@ variance, log-spaced). The models:
   and then a linear rise or fall from k (k = 0: a trend over every flight).
 
 The statistic is the largest likelihood ratio over the split points (and the two shapes), LR = 2 (l_1 -
-l_0): the split point is searched, so its distribution is not chi-square; its p-value is from a
-parametric bootstrap under the fitted no-change model (BOOTSTRAP replicates, each searched the same
-way; Davison and Hinkley, Bootstrap Methods and their Application, 1997, ch. 4), with the add-one
-estimate (1 + #{LR* >= LR}) / (B + 1). Over every series of the fleet, Holm's step-down correction (Holm,
+l_0): the split point is searched, so its distribution is not chi-square; its p-value is a permutation
+test's: under no change the flights are exchangeable, so the same statistic of the series with its
+flights (each value with its own standard error) in random orders (PERMUTATIONS of them, each searched
+the same way) is its null distribution whatever the values' distribution (a vibration level is not
+normal from flight to flight), with the add-one estimate (1 + #{LR* >= LR}) / (B + 1) (Phipson and
+Smyth, "Permutation p-values should never be zero", Stat. Appl. Genet. Mol. Biol. 9, 2010). Over every series of the fleet, Holm's step-down correction (Holm,
 "A simple sequentially rejective multiple test procedure", Scand. J. Statist. 6, 1979) holds the chance
 of naming anything on a fleet where nothing changed at ALPHA. The onset's interval is the split points
 whose likelihood is within the chi-square(1) 95 % quantile of the best (a likelihood-ratio confidence
@@ -33,7 +35,7 @@ import numpy as np
 from scipy import stats
 
 ALPHA = 0.05                 # the family-wise error rate over the fleet's series
-BOOTSTRAP = 1999             # replicates of the no-change null (p-values from 1/2000)
+PERMUTATIONS = 1999          # random orders of the flights (p-values from 1/2000)
 MIN_SIDE = 3                 # flights on each side of a step
 MIN_FLIGHTS = 2 * MIN_SIDE + 2   # a series shorter than this is not tested
 TAU_GRID = 24
@@ -42,7 +44,7 @@ LR_SET = float(stats.chi2.ppf(0.95, 1))   # the onset's 95 % likelihood set
 
 @dataclass
 class Change:
-    """A series' test: `lr` and `p` (the bootstrap's), `shape` ("step" or "hinge"), `onset` (the position
+    """A series' test: `lr` and `p` (the permutation test's), `shape` ("step" or "hinge"), `onset` (the position
     in the series of the first flight changed: the new level's first, or the first after the hinge),
     `onset_set` (lo, hi), `size`
     and `size_se` (the step, or the hinge's slope per flight), `before` and `after` (the levels either
@@ -68,38 +70,38 @@ def _grid(y: np.ndarray, s2: np.ndarray) -> np.ndarray:
 
 
 def _weights(s2: np.ndarray, tau2: np.ndarray) -> np.ndarray:
-    """(G, n) weights 1 / (s_i^2 + tau^2)."""
-    return 1.0 / (s2[None, :] + tau2[:, None])
+    """(..., G, n) weights 1 / (s_i^2 + tau^2) of s2 (..., n)."""
+    return 1.0 / (s2[..., None, :] + tau2[:, None])
 
 
 def _null(Y: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """(B,) the no-change model's log-likelihood (less constants), profiled over the grid: Y (B, n)."""
-    logdet = np.log(w).sum(axis=1)                                  # (G,)
-    Sw, Swy = w.sum(axis=1), Y @ w.T                                # (G,), (B, G)
-    Swyy = (Y * Y) @ w.T
-    sse = Swyy - Swy ** 2 / Sw
-    return (0.5 * (logdet[None, :] - sse)).max(axis=1)
+    """(B,) the no-change model's log-likelihood (less constants), profiled over the grid: Y (B, n), w
+    (B, G, n) or (G, n)."""
+    wy = w * Y[:, None, :]
+    sse = (wy * Y[:, None, :]).sum(axis=-1) - wy.sum(axis=-1) ** 2 / w.sum(axis=-1)
+    return (0.5 * (np.log(w).sum(axis=-1) - sse)).max(axis=1)
 
 
 def _steps(Y: np.ndarray, w: np.ndarray) -> np.ndarray:
     """(B, K) the step model's profiled log-likelihood at each split k = MIN_SIDE .. n - MIN_SIDE."""
     n = Y.shape[1]
-    logdet = np.log(w).sum(axis=1)
-    cw = np.cumsum(w, axis=1)                                        # (G, n)
-    cwy = np.cumsum(Y[:, None, :] * w[None], axis=2)                 # (B, G, n)
-    cwyy = np.cumsum(Y[:, None, :] ** 2 * w[None], axis=2)
+    logdet = np.log(w).sum(axis=-1)[..., None]                       # (B or 1, G, 1)
+    cw = np.cumsum(w, axis=-1)
+    cwy = np.cumsum(w * Y[:, None, :], axis=-1)                      # (B, G, n)
+    cwyy = np.cumsum(w * Y[:, None, :] ** 2, axis=-1)
     k = np.arange(MIN_SIDE, n - MIN_SIDE + 1)
-    left_w, left_y, left_yy = cw[:, k - 1], cwy[..., k - 1], cwyy[..., k - 1]
-    right_w = cw[:, -1:] - left_w
+    left_w, left_y, left_yy = cw[..., k - 1], cwy[..., k - 1], cwyy[..., k - 1]
+    right_w = cw[..., -1:] - left_w
     right_y, right_yy = cwy[..., -1:] - left_y, cwyy[..., -1:] - left_yy
     sse = (left_yy - left_y ** 2 / left_w) + (right_yy - right_y ** 2 / right_w)
-    return (0.5 * (logdet[None, :, None] - sse)).max(axis=1)
+    return (0.5 * (logdet - sse)).max(axis=1)
 
 
 def _hinge_fit(Y: np.ndarray, w: np.ndarray, x: np.ndarray):
-    """(B, G) sse, and the coefficients (a, b) and their inverse-information matrices, of mu = a + b x."""
-    Sw, Swx, Swxx = w.sum(axis=1), w @ x, w @ (x * x)
-    Swy, Swxy, Swyy = Y @ w.T, (Y * x) @ w.T, (Y * Y) @ w.T
+    """(B, G) sse, and the coefficients (a, b) and b's variance, of mu = a + b x by weighted least squares."""
+    wy = w * Y[:, None, :]
+    Sw, Swx, Swxx = w.sum(axis=-1), (w * x).sum(axis=-1), (w * x * x).sum(axis=-1)
+    Swy, Swxy, Swyy = wy.sum(axis=-1), (wy * x).sum(axis=-1), (wy * Y[:, None, :]).sum(axis=-1)
     det = Sw * Swxx - Swx ** 2
     a = (Swxx * Swy - Swx * Swxy) / det
     b = (Sw * Swxy - Swx * Swy) / det
@@ -108,15 +110,27 @@ def _hinge_fit(Y: np.ndarray, w: np.ndarray, x: np.ndarray):
 
 
 def _hinges(Y: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """(B, K) the hinge model's profiled log-likelihood at each hinge k = 0 .. n - MIN_SIDE - 1."""
+    """(B, K) the hinge model's profiled log-likelihood at each hinge k = 0 .. n - MIN_SIDE - 1, every k at
+    once: the sums over the flights after k (x_i = i - k there, 0 before) from suffix sums of w, w i, w i^2,
+    w y and w y i."""
     n = Y.shape[1]
-    logdet = np.log(w).sum(axis=1)
-    out = []
-    for k in range(0, n - MIN_SIDE):
-        x = np.maximum(0.0, np.arange(n) - k).astype(float)
-        sse = _hinge_fit(Y, w, x)[0]
-        out.append((0.5 * (logdet[None, :] - sse)).max(axis=1))
-    return np.stack(out, axis=1)
+    i = np.arange(n, dtype=float)
+    wy = w * Y[:, None, :]
+
+    def after(a):                            # sums over the flights from index j on, for every j
+        return np.cumsum(a[..., ::-1], axis=-1)[..., ::-1]
+    k = np.arange(0, n - MIN_SIDE, dtype=float)
+    j = k.astype(int) + 1
+    W, WI, WII = after(w)[..., j], after(w * i)[..., j], after(w * i * i)[..., j]
+    WY, WYI = after(wy)[..., j], after(wy * i)[..., j]
+    Sw, Swy = w.sum(axis=-1)[..., None], wy.sum(axis=-1)[..., None]
+    Swyy = (wy * Y[:, None, :]).sum(axis=-1)[..., None]
+    Swx, Swxx, Swxy = WI - k * W, WII - 2.0 * k * WI + k * k * W, WYI - k * WY
+    det = Sw * Swxx - Swx ** 2
+    a = (Swxx * Swy - Swx * Swxy) / det
+    b = (Sw * Swxy - Swx * Swy) / det
+    sse = Swyy - a * Swy - b * Swxy
+    return (0.5 * (np.log(w).sum(axis=-1)[..., None] - sse)).max(axis=1)
 
 
 def _search(Y, w, hinge: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -131,9 +145,9 @@ def _seed(y: np.ndarray) -> int:
     return int.from_bytes(hashlib.sha256(np.ascontiguousarray(y, dtype=float).tobytes()).digest()[:8], "little")
 
 
-def test(y, se, hinge: bool = False, bootstrap: int = BOOTSTRAP) -> Change | None:
+def test(y, se, hinge: bool = False, permutations: int = PERMUTATIONS) -> Change | None:
     """The change test of one series (the module's docstring); None when it has fewer than MIN_FLIGHTS
-    values. `se` None or NaN: no standard error (tau then holds all the scatter). The bootstrap's
+    values. `se` None or NaN: no standard error (tau then holds all the scatter). The permutations'
     generator is seeded from the data: the same series gives the same p-value."""
     y = np.asarray(y, dtype=float)
     s2 = np.nan_to_num(np.asarray(se, dtype=float), nan=0.0) ** 2
@@ -141,19 +155,15 @@ def test(y, se, hinge: bool = False, bootstrap: int = BOOTSTRAP) -> Change | Non
     if n < MIN_FLIGHTS:
         return None
     tau2 = _grid(y, s2)
-    w = _weights(s2, tau2)
+    w = _weights(s2, tau2)                                         # (G, n)
     best, st, hi = _search(y[None, :], w, hinge)
     lr = float(best[0])
-    # the fitted no-change model: its mean and tau at the profile's best
-    Sw, Swy, Swyy = w.sum(axis=1), w @ y, w @ (y * y)
-    g0 = int(np.argmax(0.5 * (np.log(w).sum(axis=1) - (Swyy - Swy ** 2 / Sw))))
-    mu0, sd0 = Swy[g0] / Sw[g0], np.sqrt(s2 + tau2[g0])
     rng = np.random.default_rng(_seed(y))
     exceed = 0
-    for start in range(0, bootstrap, 200):
-        Ystar = mu0 + sd0 * rng.standard_normal((min(200, bootstrap - start), n))
-        exceed += int((_search(Ystar, w, hinge)[0] >= lr - 1e-9).sum())
-    p = (1 + exceed) / (bootstrap + 1)
+    for start in range(0, permutations, 200):      # the flights' values with their errors, in random orders
+        order = np.argsort(rng.random((min(200, permutations - start), n)), axis=1)
+        exceed += int((_search(y[order], _weights(s2[order], tau2), hinge)[0] >= lr - 1e-9).sum())
+    p = (1 + exceed) / (permutations + 1)
     use_hinge = hi is not None and hi.max() > st.max()
     prof = (hi if use_hinge else st)[0]
     ks = np.arange(0, n - MIN_SIDE) if use_hinge else np.arange(MIN_SIDE, n - MIN_SIDE + 1)
@@ -165,7 +175,7 @@ def test(y, se, hinge: bool = False, bootstrap: int = BOOTSTRAP) -> Change | Non
         x = np.maximum(0.0, np.arange(n) - k).astype(float)
         sse, a, b, var_b = _hinge_fit(y[None, :], w, x)
         g = int(np.argmax(ll - 0.5 * sse[0]))
-        size, size_se = float(b[0, g]), float(np.sqrt(var_b[g]))
+        size, size_se = float(b[0, g]), float(np.sqrt(np.broadcast_to(var_b, b.shape)[0, g]))
         before, after = float(a[0, g]), float(a[0, g] + b[0, g] * x[-1])
     else:
         wl, wr = w[:, :k], w[:, k:]
