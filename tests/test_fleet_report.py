@@ -83,7 +83,7 @@ def one_log(tmp_path) -> Path:
 
 
 @pytest.mark.parametrize("case", ["fleet is a file", "vehicles without fleet", "bad header", "a row of one cell",
-                                  "unknown log", "no map"])
+                                  "unknown log", "no map", "fleet without corpus"])
 def test_bad_fleet_input_is_one_line_exit_2_and_nothing_written(one_log, tmp_path, capsys, case):
     report, mapping = tmp_path / "report", tmp_path / "map.csv"
     args = ["diagnose", "--corpus", str(one_log), "--fleet", str(report), "--quiet"]
@@ -95,14 +95,17 @@ def test_bad_fleet_input_is_one_line_exit_2_and_nothing_written(one_log, tmp_pat
         report.write_text("not a folder")
     if case == "vehicles without fleet":
         args = ["diagnose", "--corpus", str(one_log), "--json", str(tmp_path / "out.json"), "--vehicles", str(mapping)]
-    if case != "fleet is a file":
-        args += ["--vehicles", str(mapping)] if case != "vehicles without fleet" else []
+    if case == "fleet without corpus":
+        args = ["diagnose", str(one_log / "f.bin"), "--json", str(tmp_path / "out.json"), "--fleet", str(report)]
+    if case not in ("fleet is a file", "vehicles without fleet", "fleet without corpus"):
+        args += ["--vehicles", str(mapping)]
     before = sorted(p.name for p in tmp_path.rglob("*"))
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
     word = {"fleet is a file": "--fleet", "vehicles without fleet": "--vehicles", "bad header": "row 1",
-            "a row of one cell": "row 2", "unknown log": "g.bin", "no map": "--vehicles"}[case]
+            "a row of one cell": "row 2", "unknown log": "g.bin", "no map": "--vehicles",
+            "fleet without corpus": "--corpus"}[case]
     assert word in err[0], err
     assert sorted(p.name for p in tmp_path.rglob("*")) == before
 

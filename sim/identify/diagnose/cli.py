@@ -161,6 +161,9 @@ def _main(argv: list[str]) -> int:
         from flightctl.sim.identify.diagnose.corpus import main as corpus
         engine.use(args.scheduler, args.quiet)
         return corpus(args)
+    for flag in ("fleet", "vehicles"):
+        if getattr(args, flag):
+            raise InputError(f"--{flag}: the fleet report is of a corpus: add --corpus DIR")
     if not args.logs:
         raise InputError("name the flight logs to diagnose, or a folder of them with --corpus DIR")
     if args.json is None:
