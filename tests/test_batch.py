@@ -20,7 +20,7 @@ from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import SCENARIOS
 from flightctl.sim.sweeps import montecarlo
 from flightctl.sim.sweeps import onboard
-from flightctl.sim.sweeps.batch import simulate, uniforms
+from flightctl.sim.sweeps.batch import WIDE, simulate, uniforms
 from flightctl.sim.sweeps.montecarlo import draw, drawn_params
 from flightctl.sim.world import compiled
 
@@ -123,20 +123,21 @@ def test_the_batchs_uniforms_are_the_mersenne_twisters_random_calls():
 @pytest.mark.skipif(not compiled.enabled(), reason="the batch's speed needs numba (the default install)")
 def test_a_batch_vehicle_flies_the_full_paths_flight():
     """Two draws of paper-as-flown's ranges, each with its seed: the batch's record of the true and
-    estimated attitude is the full onboard path's log, to the bit, and its outcome is the same."""
+    estimated attitude is the full onboard path's log, to the bit, and its outcome is the same; its wide
+    record (sim/flights/fleet.py's logs) is the log's commands, IMU sample and altitude estimate."""
     params = load("paper-as-flown")
     sc = SCENARIOS["step_roll"]()
     draws = draw(params, 2, seed=8)
     seeds = [11, 12]
-    batch = simulate(params, sc.plan, 2, draws, seeds=seeds, record=(0.0, sc.plan.duration - 1.0))
+    batch = simulate(params, sc.plan, 2, draws, seeds=seeds, record=(0.0, sc.plan.duration - 1.0), wide=True)
     for v, seed in enumerate(seeds):
         vehicle = drawn_params(params, {key: float(val[v]) for key, val in draws.items()})
         full = fly(sc, vehicle, os.devnull, seed=seed)
         assert batch.outcome[v] == full.outcome
         rows = min(len(batch.log["t"]), len(full.log))   # (a crash ends the full path's log early)
         np.testing.assert_array_equal(batch.log["t"][:rows], full.log["t"][:rows])
-        for column in ("true_roll", "true_pitch", "true_yaw", "roll", "pitch", "yaw"):
-            np.testing.assert_array_equal(batch.log[column][:rows, v], full.log[column][:rows])
+        for column in ("true_roll", "true_pitch", "true_yaw", "roll", "pitch", "yaw") + WIDE:
+            np.testing.assert_array_equal(batch.log[column][:rows, v], full.log[column][:rows], err_msg=column)
         assert np.isnan(batch.log["true_roll"][rows:, v]).all()
         assert rows > 4000                                # it flew past the step (at 10 s)
 
