@@ -102,7 +102,8 @@ def corpus_run(folder: Path, workers: int, out: Path) -> dict:
     rows = json.loads(out.read_text())["logs"]
     # a Dask worker is forked from multiprocessing's fork server (its command line names the server)
     workers_kib = [k for pid, (k, c) in peaks.items() if pid != p.pid and "forkserver" in c]
-    return {"wall_s": wall, "rows": len(rows), "diagnosed": sum(r["status"] == "diagnosed" for r in rows), "logs_per_h": len(rows) / wall * 3600.0,
+    return {"wall_s": wall, "rows": len(rows), "diagnosed": sum(r["status"] == "diagnosed" for r in rows),
+            "logs_per_h": len(rows) / wall * 3600.0,
             "tiers": sorted({f"{r['status']}" + (f" ({r['report']['tier']} tier)" if r.get("report") else "")
                          for r in rows}),
             "main_mib": peaks.get(p.pid, (0, ""))[0] / 1024.0,
