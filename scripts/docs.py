@@ -101,6 +101,8 @@ BLOCKS = (
           SCRIPT + ("scripts/diagnose_pairs.py", "--pairs", "30", "--doc", "{doc}"), minutes=40),
     Block("diagnose-sweep", "docs/diagnose.md", *marked("diagnose_sweep"),
           SCRIPT + ("scripts/diagnose_sweep.py", "--doc", "{doc}"), minutes=6),
+    Block("fleet-scale", "docs/fleet.md", "<!-- fleet-scale:begin -->", "<!-- fleet-scale:end -->",
+          SCRIPT + ("scripts/fleet_scale.py", "--doc", "{doc}"), minutes=8, measured=True),
     Block("static-tier", "docs/diagnose.md", *marked("static tier"), SCRIPT + ("scripts/static_tier.py", "--doc", "{doc}"),
           minutes=1.5),
     Block("tune-table", "docs/tune.md", *marked("tune procedure"), FLIGHTCTL + ("tune", "--out", "{tmp}/t.toml", "--doc", "{doc}"),
