@@ -80,10 +80,16 @@ def alive(pid: int) -> bool:
 def test_a_run_stopped_by_ctrl_c_resumes_without_running_the_done_logs_again(corpus, tmp_path):
     out = tmp_path / "rows.json"
     results = tmp_path / "rows.results.jsonl"
-    p = command(corpus, out, "--jobs", "1", "--quiet")
-    wait_for_rows(p, results, 1)
-    os.killpg(p.pid, signal.SIGINT)
-    _, err = p.communicate(timeout=WAIT_S)
+    for attempt in range(3):       # a busy machine may pause this test until the run has finished: again
+        p = command(corpus, out, "--jobs", "1", "--quiet")
+        wait_for_rows(p, results, 1)
+        os.killpg(p.pid, signal.SIGINT)
+        _, err = p.communicate(timeout=WAIT_S)
+        if not (p.returncode == 0 and len(rows(results)) == len(LOGS)):
+            break
+        out.unlink()
+        results.unlink()
+        shutil.rmtree(tmp_path / "rows.results.reports", ignore_errors=True)
     assert p.returncode == 130 and err.strip() == "flightctl diagnose: interrupted", err
     assert not out.exists()
     first = rows(results)
