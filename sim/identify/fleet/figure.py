@@ -28,20 +28,20 @@ def draw(v: dict, changes: list[dict], path: Path) -> None:
                 continue
             err = [0.0 if e is None else k * e for e in s["stderr"]]
             label = f"motor {name[-1]}" if name.startswith("share_") else None
-            ax.errorbar(s["flight"], k * np.asarray(s["value"]), yerr=err, fmt="o", ms=3, capsize=2, label=label)
+            ax.errorbar(np.asarray(s["flight"]) + 1, k * np.asarray(s["value"]), yerr=err, fmt="o", ms=3, capsize=2, label=label)
             drawn = True
         for c in changes:
             if c["series"] not in names:
                 continue
             lo, hi = c["onset_set_flights"]
-            ax.axvspan(lo - 0.5, hi + 0.5, color="tab:red", alpha=0.12)
-            ax.axvline(c["onset_flight"] - 0.5, color="tab:red", lw=1.2)
-            x0, x1 = c["onset_flight"], n - 1
+            ax.axvspan(lo + 0.5, hi + 1.5, color="tab:red", alpha=0.12)
+            ax.axvline(c["onset_flight"] + 0.5, color="tab:red", lw=1.2)
+            x0, x1 = c["onset_flight"] + 1, n          # counted from 1, as fleet.md counts them
             if c["shape"] == "step":
-                ax.plot([0, x0 - 0.5], [k * c["before"]] * 2, color="tab:red", lw=1)
+                ax.plot([1, x0 - 0.5], [k * c["before"]] * 2, color="tab:red", lw=1)
                 ax.plot([x0 - 0.5, x1], [k * c["after"]] * 2, color="tab:red", lw=1)
             else:
-                ax.plot([0, x0 - 1, x1], [k * c["before"], k * c["before"], k * c["after"]], color="tab:red", lw=1)
+                ax.plot([1, x0 - 1, x1], [k * c["before"], k * c["before"], k * c["after"]], color="tab:red", lw=1)
             ax.text(x0, ax.get_ylim()[1], f" {c['what']}: from flight {x0}", color="tab:red", va="top", fontsize=8)
         if not drawn:
             why = v["timing"] if panel == "timing" and v["timing"] else f"no {panel} figure in these logs"
@@ -51,6 +51,8 @@ def draw(v: dict, changes: list[dict], path: Path) -> None:
             ax.set_ylabel(unit)
             if panel == "shares":
                 legend(ax)
-    axes[-1, 0].set_xlabel(f"flight (in order: {v['order'][:60]})")
+    from matplotlib.ticker import MaxNLocator
+    axes[-1, 0].xaxis.set_major_locator(MaxNLocator(integer=True))
+    axes[-1, 0].set_xlabel(f"flight, from 1 (in order: {v['order'][:60]})")
     axes[0, 0].set_title(f"{v['vehicle']}: {n} flights")
     save(fig, path)

@@ -129,7 +129,8 @@ def markdown(rep: dict) -> str:
     """The report's table of what changed, then each vehicle's flights and what was tested."""
     L = ["# Fleet report", "", f"{len(rep['vehicles'])} vehicles, {rep['series_tested']} series tested; a change is named "
          f"when its Holm-adjusted p-value is below {rep['alpha']:g} (family-wise over the fleet) and its size passes its "
-         f"physical check. Method: {rep['method']}; {rep['permutations']} permutations.", "",
+         f"physical check; flights are counted from 1 in each vehicle's order (fleet.json counts from 0). "
+         f"Method: {rep['method']}; {rep['permutations']} permutations.", "",
          "## What changed", ""]
     if rep["changes"]:
         L += ["| vehicle | what | from flight (log, its index in the vehicle's order) | onset's 95 % set | change | how sure | check |",
@@ -141,8 +142,8 @@ def markdown(rep: dict) -> str:
                     f"{_num(n, c['before'])} -> {_num(n, c['after'])} (a rise of {_num(n, c['size'])} +- "
                     f"{_num(n, c['size_se'], '.2g')} a flight)")
             also = f"; with it: {', '.join(a.replace('share_', 'motor ') for a in c['with_it'])}" if c["with_it"] else ""
-            L.append(f"| {c['vehicle']} | {c['what']}: {c['label']}{also} | {c['onset_log']} (flight {c['onset_flight']} of "
-                     f"{c['flights']}, from 0) | flights {c['onset_set_flights'][0]}-{c['onset_set_flights'][1]} | {size} | "
+            L.append(f"| {c['vehicle']} | {c['what']}: {c['label']}{also} | {c['onset_log']} (flight {c['onset_flight'] + 1} of "
+                     f"{c['flights']}) | flights {c['onset_set_flights'][0] + 1}-{c['onset_set_flights'][1] + 1} | {size} | "
                      f"p = {c['p']:.2g}, Holm-adjusted {c['p_adjusted']:.2g} | {c['physical']['check']} |")
     else:
         L.append("Nothing changed on any vehicle beyond what the flights' own scatter explains.")
@@ -154,7 +155,7 @@ def markdown(rep: dict) -> str:
             t = s["test"]
             L.append(f"- {LABEL[name]}: {len(s['flight'])} flights; " + (
                 "too few to test" if t is None else
-                f"best split at flight {t['onset_flight']} ({t['shape']}), LR {t['lr']:.1f}, p = {t['p']:.2g} "
+                f"best split at flight {t['onset_flight'] + 1} ({t['shape']}), LR {t['lr']:.1f}, p = {t['p']:.2g} "
                 f"(Holm {t['p_adjusted']:.2g}){': named' if s['significant'] else ''}"))
         if v["timing"]:
             L.append(f"- timing: not followed: {v['timing']}")
