@@ -10,11 +10,13 @@ seed), timed by the wall clock, its workers' memory read from the kernel.
 - the whole `--logs` corpus end to end on the machine's cores: its wall time, its rows (every log
   one), the workers' and the command's peak resident memory (VmHWM of /proc/PID/status, read every
   0.2 s from each process under the command until it ends: each worker's high-water mark);
-- on paper, what 10,000 logs need on a cluster of N machines of C cores: the per-log worker-seconds
-  measured here (the 2-worker run's wall time x 2 / logs: the engine's overhead counted in), divided
-  over N x C workers; memory: C workers' peak a machine. Dask's own overhead, about 1 ms of the
-  scheduler per task (docs.dask.org, "Best practices": "each task comes with some overhead, somewhere
-  between 200us and 1ms"), is 10 s for 10,000 logs, within the per-log figure's noise.
+- on paper, what 10,000 logs need on a cluster of N machines of C cores, from a line through the two
+  2-worker runs (the sample's and the whole corpus's wall times): its slope is what a log costs a worker,
+  its intercept the start-up (the cluster's, the workers' imports); the command's own CPU a log is
+  serial (it hashes each log, writes its row, keeps the table, and on the local cluster runs Dask's
+  scheduler, whose cost docs.dask.org's "Dask Best Practices" puts at "somewhere between 200us and 1ms"
+  a task): 10,000 logs take the start-up plus the larger of the workers' share and the serial part.
+  Memory: C workers' peak a machine, and the command's, on a line through its two 2-worker peaks.
 
 The figures are this machine's on the day; the block says when and where (tests/test_docs.py checks
 the block's form, never its numbers)."""
@@ -36,7 +38,7 @@ import numpy as np
 
 BEGIN, END = "<!-- fleet-scale:begin -->", "<!-- fleet-scale:end -->"
 FLIGHT_S = 22.0                 # each simulated flight, from arming (sim/flights/fleet.py's shortest plan)
-CLUSTERS = ((1, 2), (4, 8), (16, 8), (64, 8))     # (machines, cores each) for the estimate
+CLUSTERS = ((1, 2), (1, 8), (4, 8), (16, 8))      # (machines, cores each) for the estimate
 
 
 def peak_kib(pid: int) -> int:
@@ -66,6 +68,15 @@ def tree(pid: int) -> list[int]:
     return out
 
 
+def cpu_s(pid: int) -> float:
+    """The process's own CPU time (utime + stime of /proc/PID/stat), s; 0 once it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return 0.0
+
+
 def comm(pid: int) -> str:
     try:
         return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
@@ -81,12 +92,15 @@ def corpus_run(folder: Path, workers: int, out: Path) -> dict:
     start = time.perf_counter()
     p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     peaks: dict[int, tuple[int, str]] = {}
+    cpu = [0.0]                        # the command's own CPU (not its children's), s
     stop = threading.Event()
 
     def watch() -> None:
         while not stop.is_set():
             for pid in [p.pid] + tree(p.pid):
                 kib = peak_kib(pid)
+                if pid == p.pid:
+                    cpu[0] = max(cpu[0], cpu_s(pid))
                 if kib:
                     peaks[pid] = (max(kib, peaks.get(pid, (0, ""))[0]), peaks.get(pid, (0, comm(pid)))[1] or comm(pid))
             stop.wait(0.2)
@@ -103,7 +117,7 @@ def corpus_run(folder: Path, workers: int, out: Path) -> dict:
     # a Dask worker is forked from multiprocessing's fork server (its command line names the server)
     workers_kib = [k for pid, (k, c) in peaks.items() if pid != p.pid and "forkserver" in c]
     return {"wall_s": wall, "rows": len(rows), "diagnosed": sum(r["status"] == "diagnosed" for r in rows),
-            "logs_per_h": len(rows) / wall * 3600.0,
+            "logs_per_h": len(rows) / wall * 3600.0, "command_cpu_s": cpu[0],
             "tiers": sorted({f"{r['status']}" + (f" ({r['report']['tier']} tier)" if r.get("report") else "")
                          for r in rows}),
             "main_mib": peaks.get(p.pid, (0, ""))[0] / 1024.0,
@@ -149,7 +163,10 @@ STAMP = "Measured by `python scripts/fleet_scale.py` on {date}: {machine}."
 def markdown(m: dict) -> str:
     """The block (scripts/docs.py's measured form: the stamp, a blank line, one table)."""
     one, two, full = m["by_workers"][1], m["by_workers"][2], m["all"]
-    per_log = full["wall_s"] * m["cores"] / full["rows"]          # worker-seconds a log, overhead in
+    slope = (full["wall_s"] - two["wall_s"]) / (full["rows"] - two["rows"])      # s of wall a log, 2 workers
+    per_log, startup = slope * 2, two["wall_s"] - slope * two["rows"]             # worker-s a log; s
+    grows = (full["main_mib"] - two["main_mib"]) / (full["rows"] - two["rows"])   # the command's MiB a log
+    serial = full["command_cpu_s"] / full["rows"]     # s a log, one at a time (the local scheduler in it)
     machine = (f"{platform.machine()}, {m['cores']} cores, Python {platform.python_version()}; {m['logs']:,} simulated "
                f"{FLIGHT_S:g} s flights (ArduCopter DataFlash at the default rates, made in {m['sim_s']:.0f} s), "
                f"{full['diagnosed']:,} of them diagnosed ({full['rows']:,} rows: {', '.join(full['tiers'])})")
@@ -162,9 +179,11 @@ def markdown(m: dict) -> str:
                  f"{full['logs_per_h']:,.0f} | {full['worker_mib']:.0f} / {full['main_mib']:.0f} MiB |")
     for machines, cores in CLUSTERS:
         n = machines * cores
-        lines.append(f"| on paper: {machines} machine{'s' * (machines > 1)} x {cores} cores, {per_log:.2f} "
-                     f"worker-s a log | 10,000 | {10000 * per_log / n / 60:.1f} min | {n * 3600 / per_log:,.0f} | "
-                     f"{cores * full['worker_mib'] / 1024:.1f} GiB a machine |")
+        t = startup + 10000 * max(per_log / n, serial)
+        lines.append(f"| on paper: {machines} machine{'s' * (machines > 1)} x {cores} cores ({per_log:.3f} worker-s "
+                     f"a log, {startup:.1f} s start-up, {serial * 1e3:.1f} ms a log serial) | 10,000 | {t / 60:.1f} min | "
+                     f"{10000 / t * 3600:,.0f} | {cores * full['worker_mib'] / 1024:.1f} GiB a machine; the command "
+                     f"{two['main_mib'] + grows * (10000 - two['rows']):.0f} MiB |")
     return "\n".join(lines)
 
 
