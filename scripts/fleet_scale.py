@@ -52,8 +52,9 @@ def peak_kib(pid: int) -> int:
     return 0
 
 
-def tree(pid: int) -> list[int]:
-    """The processes under `pid` (from /proc's parent links)."""
+def descendants(pid: int) -> list[int]:
+    """The processes under `pid`: its children, theirs, ... (from /proc's parent links; tests/test_fleet.py
+    uses it too)."""
     parent = {}
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit():
@@ -97,7 +98,7 @@ def corpus_run(folder: Path, workers: int, out: Path) -> dict:
 
     def watch() -> None:
         while not stop.is_set():
-            for pid in [p.pid] + tree(p.pid):
+            for pid in [p.pid] + descendants(p.pid):
                 kib = peak_kib(pid)
                 if pid == p.pid:
                     cpu[0] = max(cpu[0], cpu_s(pid))

@@ -19,6 +19,9 @@ import pytest
 pytest.importorskip("distributed")
 
 from flightctl.sim.identify.diagnose.corpus import CRASH_ENV  # noqa: E402
+from script import load  # noqa: E402
+
+descendants = load("fleet_scale").descendants      # the processes under a pid (from /proc)
 
 EXAMPLES = Path(__file__).parent / "data" / "ardupilot"
 LOGS = ("backend_log_80k.bin", "mechanical_fail.log", "nan.log", "tradheli_brownout.log", "underpowered.log")
@@ -51,22 +54,6 @@ def wait_for_rows(p: subprocess.Popen, results: Path, n: int) -> None:
         assert p.poll() is None, f"the command ended ({p.returncode}) before {n} rows: {p.communicate()}"
         assert time.monotonic() - start < WAIT_S, "no row written"
         time.sleep(0.05)
-
-
-def descendants(pid: int) -> list[int]:
-    """The processes under `pid`: its children, theirs, ... (from /proc)."""
-    parent = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                parent[int(entry.name)] = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except OSError:
-                continue
-    out, frontier = [], [pid]
-    while frontier:
-        frontier = [p for p, pp in parent.items() if pp in frontier]
-        out += frontier
-    return out
 
 
 def alive(pid: int) -> bool:
