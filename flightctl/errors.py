@@ -72,16 +72,18 @@ def temporary_beside(path) -> Path:
     raise FileExistsError(f"{folder}: no free temporary name for {p.name}")
 
 
-def write_atomic(path, data: str | bytes) -> Path:
+def write_atomic(path, data) -> Path:
     """Write a whole output file: into a temporary name in the same folder, then renamed onto `path`,
     so that a reader (or a second run writing the same file) never sees it half-written, and a full
-    disk leaves the old file (or none), never a truncated one. OSError is raised as an InputError."""
+    disk leaves the old file (or none), never a truncated one. OSError is raised as an InputError.
+    `data`: str, bytes, or an iterable of str written piece by piece (a file too large to hold)."""
     p = Path(path)
     tmp = None
     try:
         tmp = temporary_beside(p)
         with open(tmp, "wb") as f:
-            f.write(data.encode() if isinstance(data, str) else data)
+            for piece in ([data] if isinstance(data, (str, bytes)) else data):
+                f.write(piece.encode() if isinstance(piece, str) else piece)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, p)

@@ -245,3 +245,19 @@ def test_a_results_row_of_other_code_is_not_reused(tmp_path, monkeypatch):
     assert res.Results(table.path).done() == {}
     log.write_text("t,P1\n0,2\n")                                  # and a log rewritten is not the same log
     assert res.Results(table.path).key(row) != table.key(row)
+
+
+def test_a_corpus_with_a_results_table_holds_no_report_in_memory_and_its_json_reads_them_back(corpus, tmp_path):
+    """Each finished log's report goes to the results table's folder and leaves the row (a corpus of
+    thousands is not held until the end); the table's cells and `--json`'s reports are still the logs'."""
+    from flightctl.sim.identify.diagnose.corpus import corpus as run_corpus, corpus_json, table
+    rows = run_corpus(corpus, 2, results=tmp_path / "r.jsonl")
+    diagnosed = [r for r in rows if r.status == "diagnosed"]
+    assert diagnosed and all(r.report is None and Path(r.report_file).is_file() for r in diagnosed)
+    text = table(rows)
+    assert all(r.log in text for r in rows)
+    logs = json.loads("".join(corpus_json([str(corpus)], rows)))["logs"]
+    assert [e["log"] for e in logs] == sorted(LOGS)
+    for e, r in zip(logs, rows):
+        assert e["report"] == (json.loads(Path(r.report_file).read_text()) if r.report_file else None)
+        assert (e["report"] is not None) == (r.status == "diagnosed")

@@ -43,8 +43,28 @@ class Row:
     reason: str = ""            # the refusal's one line
     meta: dict = field(default_factory=dict)
     report: dict | None = None
+    report_file: str | None = None   # where the report is kept once the row is `stored`
+    _cells: list[str] | None = None
+    _tier: str | None = None
+
+    def stored(self, report_file: str | None) -> None:
+        """The report is in `report_file` (the results table's): keep only the table's cells and the
+        tier, so that a corpus of many logs is not held in memory until the end."""
+        self._cells, self._tier = self.cells(), self.tier()
+        self.report_file, self.report = report_file, None
+
+    def tier(self) -> str | None:
+        return self.report.get("tier") if self.report is not None else self._tier
+
+    def full_report(self) -> dict | None:
+        """The report, read back from its file when the row was `stored`."""
+        if self.report is None and self.report_file:
+            return json.loads(Path(self.report_file).read_text())
+        return self.report
 
     def cells(self) -> list[str]:
+        if self._cells is not None:
+            return self._cells
         read = _read(self.meta, self.report) if self.meta else ""
         vehicle = _vehicle(self.meta) if self.meta else ""
         if self.status != "diagnosed":
@@ -189,7 +209,7 @@ def headline(rows: list[Row]) -> str:
     """The share of the airborne flights that get a diagnosis, and of which tier."""
     flights = [r for r in rows if flew(r)]
     done = [r for r in flights if r.status == "diagnosed"]
-    static_only = sum((r.report or {}).get("tier") == "static" for r in done)
+    static_only = sum(r.tier() == "static" for r in done)
     share = f"{100 * len(done) / len(flights):.0f} %" if flights else "-"
     return (f"**{len(done)} of {len(flights)} airborne flights get a diagnosis ({share})**: "
             f"{len(done) - static_only} the dynamic tier, {static_only} the static tier only; "
@@ -233,6 +253,8 @@ def corpus(folders: Path | list[Path], jobs: int | None = None, progress=None,
     if table_ is not None:
         done = table_.done()
         skipped = [table_.restore(r, done[table_.key(r)]) for r in todo if table_.key(r) in done]
+        for r in skipped:
+            r.stored(done[table_.key(r)].get("report"))
         todo = [r for r in todo if table_.key(r) not in done]
         rows += skipped
         if progress and skipped:
@@ -243,7 +265,7 @@ def corpus(folders: Path | list[Path], jobs: int | None = None, progress=None,
 
     def finished(k: int, row: Row) -> None:
         if table_ is not None:
-            table_.write(row)
+            row.stored(table_.write(row))
         if bar is not None:
             bar.step(f"{row.log}: {row.status}")
 
@@ -254,6 +276,16 @@ def corpus(folders: Path | list[Path], jobs: int | None = None, progress=None,
         return row
     rows += engine.run(run_one, todo, workers, finished, died, isolate=True)
     return sorted(rows, key=lambda r: (r.path, r.index or 0))
+
+
+def corpus_json(folders: list[str], rows: list[Row]):
+    """`--json`'s text, piece by piece: {"corpus": folders, "logs": [one entry a log, its report read
+    back from the results table's file]}, never the whole corpus's reports in memory at once."""
+    yield '{"corpus": ' + json.dumps(folders) + ', "logs": ['
+    for k, r in enumerate(rows):
+        entry = {"log": r.log, "status": r.status, "refused": r.reason or None, "report": r.full_report()}
+        yield ("," if k else "") + "\n" + json.dumps(entry, indent=1, allow_nan=False)
+    yield "\n]}\n"
 
 
 def _suffixes() -> tuple[str, ...]:
@@ -291,9 +323,7 @@ def main(args) -> int:
     if out_table is not None:
         write_table(out_table, text)
     if out_json is not None:
-        write_atomic(out_json, json.dumps({"corpus": [str(c) for c in args.corpus], "logs": [
-            {"log": r.log, "status": r.status, "refused": r.reason or None, "report": r.report} for r in rows]},
-            indent=1, allow_nan=False) + "\n")
+        write_atomic(out_json, corpus_json([str(c) for c in args.corpus], rows))
     print(text)
     if fleet_dir is not None:
         fleet.report(rows, results, fleet_dir, mapping, args.quiet)

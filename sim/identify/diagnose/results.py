@@ -87,8 +87,9 @@ class Results:
         row.report = json.loads(Path(d["report"]).read_text()) if d.get("report") else None
         return row
 
-    def write(self, row) -> None:
-        """The row of a finished log: its report into the reports folder, its line appended and flushed."""
+    def write(self, row) -> str | None:
+        """The row of a finished log: its report into the reports folder, its line appended and flushed;
+        the report's file (None: no report)."""
         digest, index = self.key(row)
         report = None
         if row.report is not None:
@@ -107,6 +108,7 @@ class Results:
             f.write(json.dumps(line, allow_nan=False) + "\n")
             f.flush()
             os.fsync(f.fileno())
+        return line["report"]
 
 
 def _plain(v):

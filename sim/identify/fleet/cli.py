@@ -56,7 +56,7 @@ def report(rows, results: Path, folder: Path, mapping: dict | None, quiet: bool)
     rep = build(table_rows(rows, results), mapping)
     write(rep, folder)
     if not quiet:
-        named = "; ".join(f"{c['vehicle']}: {c['what']} from flight {c['onset_flight']} ({c['onset_log']})"
+        named = "; ".join(f"{c['vehicle']}: {c['what']} from flight {c['onset_flight'] + 1} ({c['onset_log']})"
                           for c in rep["changes"]) or "nothing changed"
         print(f"diagnose --fleet: {len(rep['vehicles'])} vehicles, {rep['series_tested']} series tested; {named}; "
               f"report in {folder}/fleet.md", file=sys.stderr)
