@@ -29,9 +29,12 @@ def flights(tmp_path_factory):
     for board in ("pi", "pi5"):
         d = tmp_path_factory.mktemp(board)
         (d / "hop.toml").write_text(PLAN)
+        # the dead-man at 1 s: a busy machine may pause the simulated loop past the shipped 100 ms (the
+        # dead-man's own tests keep 100 ms: test_safety_boards, test_safety_pi5_stop)
+        (d / "board.toml").write_text("[esc]\ndeadman_ms = 1000\n")
         with FakeQuad(params, board, d, seed=3) as quad:
-            rc = main(["--board", board, "--plan", str(d / "hop.toml"), "--log", str(d), "--calibrate", "1"],
-                      devices=quad.devices)
+            rc = main(["--board", board, "--board-file", str(d / "board.toml"), "--plan", str(d / "hop.toml"),
+                       "--log", str(d), "--calibrate", "1"], devices=quad.devices)
             outputs = quad.outputs()
             errors = list(getattr(quad.fake, "errors", []))
             exported = quad.fake.exported() if board == "pi5" else None

@@ -36,7 +36,7 @@ def sonar_on_fake():
 
 
 def test_echo_width_gives_the_distance_across_the_tick_wrap():
-    with running(tick0=(1 << 32) - 100_000) as (fake, pi):   # the 32-bit tick wraps 0.1 s in
+    with running(tick0=(1 << 32) - 100_000) as (fake, pi):   # the 32-bit tick wraps within an echo
         fake.attach_sonar(TRIG, ECHO)
         sonar = HcSr04(pi, TRIG, ECHO)
         sonar.start()
@@ -45,6 +45,8 @@ def test_echo_width_gives_the_distance_across_the_tick_wrap():
         for k in range(60):                                   # until the echoes have crossed the wrap
             d = distances[k % len(distances)]
             fake.sonar.distance_m = d
+            if not wrapped:      # the wrap put mid-echo again: a busy machine may let it pass between two echoes
+                fake.tick0 = ((1 << 32) - int(fake.now_us()) - int(d / 343.0 * 1e6)) & 0xFFFFFFFF
             before = fake.tick(fake.now_us())
             r = measure(sonar)
             assert r == pytest.approx(d, abs=0.001), (d, r)
