@@ -49,7 +49,8 @@ from flightctl.sim.world.imu import (_BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_K
                                     _i16, chip_frame, normals_per_read)
 from flightctl.sim.world.compiled import attitude_trig, commanded, forces, rebound, rk4, work
 from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VX, VY, VZ, Z, rotation_from_trig
-from flightctl.sim.world.plant import CONTACT_S, time_weighted
+from flightctl.sim.world.compiled import _B, _L, _RIGID
+from flightctl.sim.world.plant import CONTACT_S, floor_brake, floor_spin, time_weighted
 
 ECHO_DELAY_S, NO_ECHO_S = SimGpio.ECHO_DELAY_S, SimGpio.NO_ECHO_S
 WATCHDOG_S = WATCHDOG_MS / 1000.0
@@ -223,9 +224,12 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
                 if vz < -0.01 and -vz > w[W_TOUCHDOWN]:
                     w[W_TOUCHDOWN] = -vz
                 w[W_T_STOP], w[W_VZ_STOP] = t_end, vz
-                for j in (Z, VX, VY, VZ, PHI, THETA, P, Q, R):
+                for j in (Z, VX, VY, VZ, PHI, THETA, P, Q):
                     x[j] = 0.0
                 w[W_GROUND] = 1.0
+    if w[W_GROUND] != 0.0 and x[R] != 0.0:   # a spin it landed with, braked by its feet (`Plant.advance`)
+        x[R], turned = floor_spin(x[R], dt, floor_brake(4.0 * q[_B], q[_L], q[_RIGID + 2]))
+        x[PSI] += turned
     return True
 
 
@@ -559,7 +563,7 @@ def compiled_fly():
     return cc(fly, allocates=True, work=plant["work"], normals=cc(normals, allocates=True),
               normals_per_read=cc(imu.normals_per_read),
               plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held,
-                              time_weighted=cc(time_weighted)),
+                              time_weighted=cc(time_weighted), floor_spin=cc(floor_spin), floor_brake=cc(floor_brake)),
               sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
               chip_read=cc(chip_read, forces=at, held_command=held, chip_words=imu.chip_frame_compiled(put_word),
                            rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],
