@@ -58,8 +58,6 @@ class Airframe:
     loop_hz: float = _p(450.0, "Hz", 50.0, 2000.0, "paper, sections 3.3 and 4.4.1", "control loop rate")
     esc_pwm_hz: float = _p(449.0, "Hz", 30.0, 450.0, "paper, section 4.4.1", "ESC signal frequency")
     sonar_hz: float = _p(45.0, "Hz", 5.0, 60.0, "paper, section 4.2", "ultrasonic trigger rate")
-    p_full: float = _p(255.0, "P units", 1.0, 255.0, "eq. 26 as identified, to the end of the ESC's frame",
-                       "the ESC's full throttle: eq. 26's thrust stops rising above this command (its ceiling)")
 
     def check(self) -> None:
         """Physical consistency beyond the ranges: principal inertias obey the triangle inequality.

@@ -154,6 +154,13 @@ def as_flown(d: dict) -> Params:
                "the file adds the other pair's, (k / 2) l^2, range 0 to k l^2 at the largest k")
     src_in += (f"; hub: a rigid rotor's hub moment N_b rho a c Omega R^4 / 16 per rotor, {d['hub']:.4f} N m s/rad "
                f"for four (an upper estimate: flapping relieves it; range down to 0)")
+    a0 = Params().airframe
+    src_md += (f"; p_full: the ESC's full throttle, {ESC_FULL_S * 1e3:.1f} ms of its {d['esc_frame'] * 1e3:.3f} ms frame "
+               f"(P = {d['p_full']:.1f}): an RC ESC's input runs 1.0-2.0 ms and a longer pulse is full throttle, so "
+               f"eq. 26's thrust stops rising there, at h1 (p_full - h2)^2, {d['f_full_nominal']:.1f} N at the reference "
+               f"default, ranged through the draws of h1 and h2 (h1's range is derived from this ceiling over c1's span, "
+               f"{d['f_full'][0]:.1f}-{d['f_full'][1]:.1f} N); eq. 26 to P = 255 would give "
+               f"{a0.h1 * (255 - a0.h2) ** 2:.1f} N")
     period = 1.0 / ESC_HZ
     delay_hi = LOOP_EXEC + 2 * period
     src_delay = (f"the delay chain from the IMU read to the rotor, each link a span, the nominal their middles: the "
@@ -182,12 +189,12 @@ def as_flown(d: dict) -> Params:
                     ("sensors", "accel_vibration", *ACCEL_LINE), ("sensors", "gyro_vibration", *line),
                     ("sensors", "harmonic2", *HARMONIC2), ("sensors", "harmonic3", *HARMONIC3),
                     ("sensors", "gyro_broadband", *bb_span))
-    return Params(airframe=dataclasses.replace(a0, Jp=J_BLADE_MODEL, p_full=round(d["p_full"], 2)), filters=filters,
-                  sensors=sensors,
+    return Params(airframe=dataclasses.replace(a0, Jp=J_BLADE_MODEL), filters=filters, sensors=sensors,
                   ranges=spans, table_ranges=table_ranges, effects=(
         EffectSpec("rotor_inflow", (("k", k_in), ("hub", hub)), src_in,
                    (("k", round(0.7 * k_in, 4), round(d["k_inflow_max"], 4)), ("hub", 0.0, hub))),
-        EffectSpec("motor_dynamics", (("tau", tau_mid),), src_md, (("tau", TAU_RANGE[0], tau_hi),)),
+        EffectSpec("motor_dynamics", (("tau", tau_mid), ("p_full", round(d["p_full"], 2))), src_md,
+                   (("tau", TAU_RANGE[0], tau_hi),)),
         EffectSpec("rotor_drag", (("k", k_dr), ("yaw", round(0.5 * k_dr * l2, 5))), src_dr,
                    (("k", round(K_OVER_M[0] * d['M'], 3), k_dr), ("yaw", 0.0, round(k_dr * l2, 5)))),
         EffectSpec("actuation_delay", (("delay", round(0.5 * delay_hi, 6)),), src_delay,
@@ -215,12 +222,8 @@ def sources(d: dict) -> dict[str, str]:
                f"over c1's span gives {d['f_full'][0]:.1f}-{d['f_full'][1]:.1f} N, h1 = f / (P_full - h2)^2; the reference "
                f"default 1.49e-3 ({d['f_full_nominal']:.1f} N at full throttle, hover at P = {d['p_hover']:.0f}) in it. "
                f"The mixer's cap 2B (Table 3) is P = {d['p_mixer_top']:.0f} at the default, below full throttle in "
-               f"every draw, so the ceiling never binds; identified on the bench as h2"),
-        "p_full": (f"the ESC's full throttle, {ESC_FULL_S * 1e3:.1f} ms of its {d['esc_frame'] * 1e3:.3f} ms frame: an RC "
-                   f"ESC's input runs 1.0-2.0 ms and a longer pulse is full throttle, so eq. 26's thrust stops rising "
-                   f"there, at h1 (P_full - h2)^2 ({d['f_full_nominal']:.1f} N at the reference default, the range of "
-                   f"h1 and h2 its range: {d['f_full'][0]:.1f}-{d['f_full'][1]:.1f} N); above it eq. 26 would give "
-                   f"{Params().airframe.h1 * (255 - Params().airframe.h2) ** 2:.1f} N at P = 255"),
+               f"every draw; the two-rotor mode (flightctl/control/spin.py) goes up to the ceiling (motor_dynamics' p_full); "
+               f"identified on the bench as h2"),
         "c1": (f"eq. 27 from the static thrust coefficient, c1 = CT rho D^4 / (4 pi^2): CT {CT_RANGE[0]:g}-{CT_RANGE[1]:g} "
                f"(UIUC Propeller Database, static tests of two-blade 10-13 inch propellers, 0.08-0.12; the reference "
                f"default's {d['ct_default']:.3f}, a hover near 5000 RPM, at the bottom)"),

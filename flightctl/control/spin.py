@@ -51,7 +51,7 @@ class SpinController:
         self.r_bar = spin_design.equilibrium_spin(d)
         self.kw = a.dt / self.tau_m if self.tau_m > a.dt else 1.0   # the rotors' speeds per loop
         self.idle = count_from_thrust(0.0, a.h1, a.h2)   # the dead zone's edge: no thrust, the ESC armed
-        self.f_full = thrust_from_command(a.p_full, a.h1, a.h2)   # eq. 26 at the ESC's full throttle, N
+        self.f_full = thrust_from_command(spin_design.esc_full_throttle(params), a.h1, a.h2)   # its ceiling, N
         self.Jp, self.g = a.Jp, a.g
         # the design's model, as the loop runs it: the pair's torque through the motor time constant and
         # the delay chain (tau_{k+1} = phi tau_k + ga u_{k-m-1} + gb u_{k-m}), the commands still in the
@@ -208,11 +208,15 @@ class SpinController:
         # pair (1, 3): tau_theta = l (f3 - f1); pair (2, 4): tau_phi = l (f2 - f4)
         fi, fj = (half - d, half + d) if self.pair == (0, 2) else (half + d, half - d)
         # up to the ESC's full throttle: on two rotors the limits of Table 3 (f <= 2B) would leave no
-        # margin, and the motors give more (eq. 26 at the file's p_full, its thrust ceiling)
+        # margin, and the motors give more (eq. 26 at the ESC's full throttle, the file's p_full)
+        # past it, both give up the excess alike: the torque (their difference) before the collective, as
+        # a mixer that saturates keeps the attitude (ArduPilot's AP_MotorsMatrix::output_armed_stabilizing)
         counts = self.counts
-        top = self.f_full
-        fi = top if fi > top else fi if fi > 0.0 else 0.0
-        fj = top if fj > top else fj if fj > 0.0 else 0.0
+        over = (fi if fi > fj else fj) - self.f_full
+        if over > 0.0:
+            fi, fj = fi - over, fj - over
+        fi = fi if fi > 0.0 else 0.0
+        fj = fj if fj > 0.0 else 0.0
         counts[i] = count_from_thrust(fi, a.h1, a.h2)
         counts[j] = count_from_thrust(fj, a.h1, a.h2)
         o1, o2 = self.off

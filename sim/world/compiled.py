@@ -30,7 +30,7 @@ from math import copysign, cos, sin
 import numpy as np
 
 from flightctl.physics import esc_command, rotor_speed, rotor_torque, thrust_from_command, thrust_from_speed
-from flightctl.sim.causes.motor_dynamics import SPIN, reaction_torque, speed_rate
+from flightctl.sim.causes.motor_dynamics import FULL_P, SPIN, reaction_torque, speed_rate
 from flightctl.sim.causes.rotor_drag import drag_wrench
 from flightctl.sim.causes.rotor_inflow import airflow, inflow_wrench
 from flightctl.sim.world.model import N_RIGID, aggregate, body_velocity, rigid_derivative, rotation_from_trig
@@ -136,7 +136,8 @@ def rebound(fn, **dependencies):
 INFLOW, REACTION, DRAG = 1, 2, 3
 COMPILED_CAUSES = ("rotor_inflow", "motor_dynamics", "rotor_drag", "actuation_delay", "gyro_lag")
 # q: the parameters of `stage`, by index
-# (_ROOT: sqrt(c1 / B), a rotor's `airflow_root` per rad/s of its speed; _P_FULL: the ESC's full throttle)
+# (_ROOT: sqrt(c1 / B), a rotor's `airflow_root` per rad/s of its speed; _P_FULL: the ESC's full throttle,
+# motor_dynamics' `p_full`)
 _C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _H1, _H2, _JP, _ROOT, _P_FULL, _RIGID = range(17)
 N_OUT = 18   # `period`'s output: the fields of `Forces` (f, tau, force, torque, w) one after another
 
@@ -165,7 +166,7 @@ def _layout(model):
         return None
     a = model.a
     B = a.M * a.g / 4.0
-    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, B, 0.0, 0.0, 0.0, a.h1, a.h2, a.Jp, (a.c1 / B) ** 0.5, a.p_full]
+    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, B, 0.0, 0.0, 0.0, a.h1, a.h2, a.Jp, (a.c1 / B) ** 0.5, FULL_P]
     codes = []
     for e in model.effects:
         p = e.parameters
@@ -175,7 +176,7 @@ def _layout(model):
         elif e.cause == "motor_dynamics":
             if e.offset != N_RIGID:
                 return None
-            q[_TAU], q[_DOWN] = p["tau"], p.get("tau_down", p["tau"])
+            q[_TAU], q[_DOWN], q[_P_FULL] = p["tau"], p.get("tau_down", p["tau"]), p.get("p_full", FULL_P)
             codes.append(REACTION)
         elif e.cause == "rotor_drag":
             q[_K_DRAG], q[_YAW] = p["k"], p.get("yaw", 0.0)

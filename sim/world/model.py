@@ -22,7 +22,7 @@ import numpy as np
 from math import cos, sin
 
 from flightctl.params import Airframe
-from flightctl.physics import esc_command, rotor_speed, rotor_torque, thrust_from_command, yaw_drag
+from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, yaw_drag
 
 N_RIGID = 12
 _ZERO = (0.0, 0.0, 0.0)
@@ -237,12 +237,10 @@ class Model:
         key = tuple(u)
         if key != self._command_u:
             a = self.a
-            h1, h2, top = a.h1, a.h2, a.p_full
+            h1, h2 = a.h1, a.h2
             self._command_u = key
-            self._f_cmd = [thrust_from_command(esc_command(u[0], top), h1, h2),
-                           thrust_from_command(esc_command(u[1], top), h1, h2),
-                           thrust_from_command(esc_command(u[2], top), h1, h2),
-                           thrust_from_command(esc_command(u[3], top), h1, h2)]
+            self._f_cmd = [thrust_from_command(u[0], h1, h2), thrust_from_command(u[1], h1, h2),
+                           thrust_from_command(u[2], h1, h2), thrust_from_command(u[3], h1, h2)]
             for e in self._rotor:
                 e.command(self._f_cmd)
         return self._f_cmd
