@@ -23,7 +23,9 @@ from flightctl.sim import causes
 from flightctl.sim.causes.rotor_drag import RotorDrag
 from flightctl.sim.sweeps import montecarlo
 from flightctl.sim.sweeps.batch import with_draws
-from flightctl.sim.world import compiled
+from flightctl.sim.flights.run import fly
+from flightctl.sim.flights.scenarios import SCENARIOS
+from flightctl.sim.world import compiled, faults
 from flightctl.sim.world.devices import SensorNoise
 from flightctl.sim.world.imu import (_BURST, _C_A_LSB, _C_G_LSB, _C_PERIOD, BROADBAND_HP_HZ, chip_die, chip_frame,
                                     normals_per_read)
@@ -200,3 +202,21 @@ def test_each_nominal_is_the_middle_of_the_range_as_it_is_drawn(table, name):
     log = montecarlo._logarithmic(p, table, name)
     middle = math.sqrt(lo * hi) if log else 0.5 * (lo + hi)
     assert nominal == pytest.approx(middle, rel=5e-3)          # (the file keeps three or four figures)
+
+
+def test_at_the_top_of_g1_and_g2_the_two_rotor_spin_stays_within_the_gyros_full_scale(tmp_path):
+    """The spin a pair settles at is eq. 6's drag against the pair's eq. 28: with g1 and g2 at the top of
+    their ranges it comes near the gyro's 2000 deg/s. With the sensors' noise and lines at the top of
+    theirs too, no gyro word reaches full scale and the two-rotor landing holds."""
+    told = load("paper-as-flown")
+    tops = {n: hi for n, lo, hi in told.ranges if n in ("g1", "g2")}
+    noise = {name: hi for table, name, lo, hi in told.table_ranges if table == "sensors"}
+    flown = dataclasses.replace(told, sensors=dataclasses.replace(told.sensors, **noise))
+    plant = dataclasses.replace(told.airframe, **tops)
+    d = spin_design.design_inputs(dataclasses.replace(told, airframe=plant))
+    full_scale = math.radians(2000.0)
+    assert spin_design.equilibrium_spin(d) > 0.9 * full_scale          # the corner the review found
+    flight = fly(SCENARIOS["hover"](), flown, tmp_path / "f.csv", faults=[faults.parse("motor_stop:motor=2,at=8")],
+                 plant_airframe=plant, seed=int(RNG.integers(1, 100)))
+    assert flight.outcome == "landed upright" and flight.result.reason.startswith("landed: motor 2 lost")
+    assert not [w for _, w in flight.result.events if w.startswith("IMU saturated")]
