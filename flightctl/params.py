@@ -136,17 +136,22 @@ class Sensors:
                                 "(docs/estimator.md)", "each rotor's 1/rev specific force at hover thrust, "
                                 "before the DLPF; it grows with the thrust")
     gyro_vibration: float = _p(0.0, "rad/s", 0.0, 5.0, "none in the reference airframe",
-                               "each rotor's 1/rev body rate (roll and pitch) at hover thrust, before the DLPF")
+                               "each rotor's 1/rev body rate (roll and pitch) at hover thrust, before the DLPF", log=True)
     harmonic2: float = _p(0.0, "-", 0.0, 5.0, "none in the reference airframe",
                           "the 2/rev (blade-pass, two blades) line's amplitude over the 1/rev's, both sensors")
     harmonic3: float = _p(0.0, "-", 0.0, 5.0, "none in the reference airframe",
                           "the 3/rev line's amplitude over the 1/rev's, both sensors")
     gyro_broadband: float = _p(0.0, "rad/s", 0.0, 5.0, "none in the reference airframe",
                                "the roll and pitch rates' broadband (frame and airflow) noise at hover thrust, "
-                               "rms per read; it grows with the thrust")
+                               "rms per read; it grows with the thrust", log=True)
     yaw_share: float = _p(0.6, "-", 0.0, 2.0,
                           "paper, sec. 4.4.4: r within 0.006 rad/s where p and q were within 0.01",
-                          "the yaw rate's vibration and broadband noise over the roll and pitch rates'")
+                          "the yaw rate's broadband noise over the roll and pitch rates'")
+    yaw_lines: float = _p(2.94, "-", 0.0, 10.0,
+                          "rigid body: a rotor's imbalance force F at the arm l and the hub height h rocks the "
+                          "frame by F h / (Jxx w) in roll and F l / (Jzz w) in yaw, l Jxx / (h Jzz) at h = 4 cm "
+                          "(scripts/as_flown.py)",
+                          "the yaw rate's rotor lines over the roll and pitch rates'")
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,12 @@ def thrust_from_command(P, h1: float, h2: float):
     return h1 * d * d
 
 
+def esc_command(P: float, p_full: float) -> float:
+    """The command an ESC acts on: P, up to its full throttle p_full, above which eq. 26's thrust stops
+    rising (an RC ESC's input runs 1.0-2.0 ms: a longer pulse is full throttle). Floats only."""
+    return P if P < p_full else p_full
+
+
 def command_from_thrust(f: float, h1: float, h2: float) -> float:
     """Eq. 26 inverted, the mixer's side: P = h2 + sqrt(f / h1) for a thrust f >= 0 (floats only).
     Zero thrust gives P = h2, the edge of the dead zone, so the command is continuous in f."""

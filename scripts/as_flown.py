@@ -41,6 +41,7 @@ ESC_FULL_S = 2.0e-3         # s: full throttle
 LOADED = 0.8                # the loaded motor turns at ~80 % of KV x V
 K_OVER_M = (0.3, 0.6)       # 1/s: rotor drag over mass measured on quadrotors (docs/as-flown.md)
 TAU_TILT_AIR = 8192 / 450.0 # s, the in-flight accelerometer correction: 8192 dt, long beside M/k (docs/estimator.md)
+RATE_SPAN = (1, 128)        # loop periods: the D term's rate filter, from none to the text's 128 dt (Table 5)
 
 
 def derive(params: Params = Params()) -> dict:
@@ -115,11 +116,15 @@ def sensors_derived(a, omega_h: float) -> dict:
     imbalance at the hover speed omega_h (rad/s, `derive`'s)."""
     force = IMBALANCE * omega_h ** 2                 # N, rotating at 1/rev
     rock = force * HUB_HEIGHT / (a.Jxx * omega_h)    # rad/s: the rigid frame's roll rate at 1/rev
+    # the force F at the hub (l, 0, h) turning in the x-y plane: r x F = (-h F_y, h F_x, l F_y), so
+    # Euler's equations rock the rigid frame by F h / (Jxx w) in roll and F l / (Jzz w) in yaw
+    yaw_lines = a.l * a.Jxx / (HUB_HEIGHT * a.Jzz)
     # the filtered rate stayed within 0.01 at 128 periods, not at 64: as an rms, the raw rms lies in
     # (0.01 / pass(64), 0.01 / pass(128)]; as a swing of 3 sigma, in the same over 3
     rms = (TUNED / ema_pass(EMA_FAILED), TUNED / ema_pass(EMA_STOP))
     return {"ema_pass_64": ema_pass(EMA_FAILED), "ema_pass_128": ema_pass(EMA_STOP), "broadband_rms": rms,
-            "broadband_peak": (rms[0] / PEAK, rms[1] / PEAK), "imbalance_force": force, "rigid_rock": rock}
+            "broadband_peak": (rms[0] / PEAK, rms[1] / PEAK), "imbalance_force": force, "rigid_rock": rock,
+            "yaw_lines": yaw_lines}
 
 
 def as_flown(d: dict) -> Params:
@@ -140,14 +145,22 @@ def as_flown(d: dict) -> Params:
               f"an upper estimate; measured quadrotors give k/M = {K_OVER_M[0]:g}-{K_OVER_M[1]:g} 1/s "
               f"({K_OVER_M[0] * d['M']:.2f}-{K_OVER_M[1] * d['M']:.2f} N s/m here): the range runs from there "
               f"to the momentum value")
-    src_md += (f"; tau_down (the rotor slowing down): the same as tau for an ESC that brakes (the E600's "
-               f"sine-wave drive is taken to: not measured); one that does not lets it coast on its drag, "
+    src_md += (f"; tau_down (the rotor slowing down) is not carried: the effect then takes tau's drawn value for it, "
+               f"the same as tau for an ESC that brakes (the E600's sine-wave drive is taken to: not measured); one "
+               f"that does not lets it coast on its drag, "
                f"Jp/(2Q/W) = {d['tau_coast_blade_J']:.2f}-{d['tau_coast_table2_Jp']:.2f} s, outside the range drawn")
     src_dr += ("; yaw: it acts at the rotors, so it damps yaw, k l^2 r for four; the paper's yaw-drag rig spun "
                "the vehicle on rotors 1 and 3 with 2 and 4 off, so eq. 6's gamma1 holds the running pair's share: "
                "the file adds the other pair's, (k / 2) l^2, range 0 to k l^2 at the largest k")
     src_in += (f"; hub: a rigid rotor's hub moment N_b rho a c Omega R^4 / 16 per rotor, {d['hub']:.4f} N m s/rad "
                f"for four (an upper estimate: flapping relieves it; range down to 0)")
+    a0 = Params().airframe
+    src_md += (f"; p_full: the ESC's full throttle, {ESC_FULL_S * 1e3:.1f} ms of its {d['esc_frame'] * 1e3:.3f} ms frame "
+               f"(P = {d['p_full']:.1f}): an RC ESC's input runs 1.0-2.0 ms and a longer pulse is full throttle, so "
+               f"eq. 26's thrust stops rising there, at h1 (p_full - h2)^2, {d['f_full_nominal']:.1f} N at the reference "
+               f"default, ranged through the draws of h1 and h2 (h1's range is derived from this ceiling over c1's span, "
+               f"{d['f_full'][0]:.1f}-{d['f_full'][1]:.1f} N); eq. 26 to P = 255 would give "
+               f"{a0.h1 * (255 - a0.h2) ** 2:.1f} N")
     period = 1.0 / ESC_HZ
     delay_hi = LOOP_EXEC + 2 * period
     src_delay = (f"the delay chain from the IMU read to the rotor, each link a span, the nominal their middles: the "
@@ -157,7 +170,7 @@ def as_flown(d: dict) -> Params:
                  f"own input handling, 0 to one frame (not measured); range: 0 to their sum. The gyro's and accelerometer's DLPF delays "
                  f"(2.9 and 1.9 ms) are the simulated chip's (sim/world/imu.py), declared in its logs for diagnose")
     dt = d["dt"]
-    filters = dataclasses.replace(Filters(), tau_tilt_air=TAU_TILT_AIR, tau_rate=8 * dt)
+    filters = dataclasses.replace(Filters(), tau_tilt_air=TAU_TILT_AIR, tau_rate=round(math.sqrt(RATE_SPAN[0] * RATE_SPAN[1]) * dt, 6))
     k_in, k_dr, hub = round(d["k_inflow"], 4), round(d["k_drag"], 3), round(d["hub"], 4)
     tau_hi = round(d["tau_open_table2_Jp"], 3)
     l2 = Params().airframe.l ** 2
@@ -166,12 +179,13 @@ def as_flown(d: dict) -> Params:
     geo = lambda span: round(math.sqrt(span[0] * span[1]), 4)   # the middle of a span in its logarithm
     mid = lambda span: round(0.5 * (span[0] + span[1]), 4)
     sensors = Sensors(accel_vibration=0.5, gyro_vibration=geo(line), harmonic2=mid(HARMONIC2),
-                      harmonic3=mid(HARMONIC3), gyro_broadband=geo(bb_span), yaw_share=0.6)
+                      harmonic3=mid(HARMONIC3), gyro_broadband=geo(bb_span), yaw_share=0.6,
+                      yaw_lines=round(d["yaw_lines"], 2))
     a0 = Params().airframe
     ranged = {"Jp": J_RANGE, "h1": d["h1_range"], "h2": d["h2_range"], "c1": (min(d["c1_range"][0], a0.c1), d["c1_range"][1]),
               "g1": d["g1_range"], "g2": d["g2_range"]}
     spans = tuple((k, float(f"{lo:.4g}"), float(f"{hi:.4g}")) for k, (lo, hi) in ranged.items())
-    table_ranges = (("filters", "tau_rate", round(dt, 6), round(128 * dt, 6)),
+    table_ranges = (("filters", "tau_rate", round(RATE_SPAN[0] * dt, 6), round(RATE_SPAN[1] * dt, 6)),
                     ("sensors", "accel_vibration", *ACCEL_LINE), ("sensors", "gyro_vibration", *line),
                     ("sensors", "harmonic2", *HARMONIC2), ("sensors", "harmonic3", *HARMONIC3),
                     ("sensors", "gyro_broadband", *bb_span))
@@ -179,8 +193,8 @@ def as_flown(d: dict) -> Params:
                   ranges=spans, table_ranges=table_ranges, effects=(
         EffectSpec("rotor_inflow", (("k", k_in), ("hub", hub)), src_in,
                    (("k", round(0.7 * k_in, 4), round(d["k_inflow_max"], 4)), ("hub", 0.0, hub))),
-        EffectSpec("motor_dynamics", (("tau", tau_mid), ("tau_down", tau_mid)), src_md,
-                   (("tau", TAU_RANGE[0], tau_hi), ("tau_down", TAU_RANGE[0], tau_hi))),
+        EffectSpec("motor_dynamics", (("tau", tau_mid), ("p_full", round(d["p_full"], 2))), src_md,
+                   (("tau", TAU_RANGE[0], tau_hi),)),
         EffectSpec("rotor_drag", (("k", k_dr), ("yaw", round(0.5 * k_dr * l2, 5))), src_dr,
                    (("k", round(K_OVER_M[0] * d['M'], 3), k_dr), ("yaw", 0.0, round(k_dr * l2, 5)))),
         EffectSpec("actuation_delay", (("delay", round(0.5 * delay_hi, 6)),), src_delay,
@@ -208,7 +222,8 @@ def sources(d: dict) -> dict[str, str]:
                f"over c1's span gives {d['f_full'][0]:.1f}-{d['f_full'][1]:.1f} N, h1 = f / (P_full - h2)^2; the reference "
                f"default 1.49e-3 ({d['f_full_nominal']:.1f} N at full throttle, hover at P = {d['p_hover']:.0f}) in it. "
                f"The mixer's cap 2B (Table 3) is P = {d['p_mixer_top']:.0f} at the default, below full throttle in "
-               f"every draw, so the ceiling never binds; identified on the bench as h2"),
+               f"every draw; the two-rotor mode (flightctl/control/spin.py) goes up to the ceiling (motor_dynamics' p_full); "
+               f"identified on the bench as h2"),
         "c1": (f"eq. 27 from the static thrust coefficient, c1 = CT rho D^4 / (4 pi^2): CT {CT_RANGE[0]:g}-{CT_RANGE[1]:g} "
                f"(UIUC Propeller Database, static tests of two-blade 10-13 inch propellers, 0.08-0.12; the reference "
                f"default's {d['ct_default']:.3f}, a hover near 5000 RPM, at the bottom)"),
@@ -222,7 +237,8 @@ def sources(d: dict) -> dict[str, str]:
                      f"p, q, r before the fusion and differentiates the fused angle (eq. 24), which with this model's "
                      f"loop crashes both gain sets (docs/estimator.md), while the vehicle flew; so the span runs from "
                      f"one loop period (the gyro almost as the chip gives it) to the text's 128 dt, drawn in its "
-                     f"logarithm as the paper tuned (powers of two of dt); nominal 8 dt, the middle in the logarithm"),
+                     f"logarithm as the paper tuned (powers of two of dt); nominal {math.sqrt(RATE_SPAN[0] * RATE_SPAN[1]):.1f} dt, "
+                     f"the middle in the logarithm"),
         "gyro_broadband": (f"paper, sec. 4.4.4 and Table 5: tau_EMA was doubled until p and q varied within 0.01 rad/s "
                            f"and stopped at 128 dt; an EMA of 64 dt passes {d['ema_pass_64'] * 100:.1f} % of white noise, "
                            f"of 128 dt {d['ema_pass_128'] * 100:.2f} %, so the raw rate's rms was "
@@ -243,7 +259,13 @@ def sources(d: dict) -> dict[str, str]:
                       "gyro and accelerometer spectra show lines at the rotor frequency and its harmonics, the 2nd "
                       "next to the 1st (ArduPilot, harmonic notch filtering); range 0.2-1, nominal its middle"),
         "harmonic3": "the 3/rev line over the 1/rev, as the 2/rev: range 0-0.5, nominal its middle",
-        "yaw_share": "paper, sec. 4.4.4: r within 0.006 rad/s where p and q were within 0.01, with the same EMA",
+        "yaw_share": ("paper, sec. 4.4.4: r within 0.006 rad/s where p and q were within 0.01, with the same EMA: "
+                      "the broadband noise's yaw share"),
+        "yaw_lines": (f"the rotor lines' yaw share, a rigid body's: a rotor's imbalance force F at the hub (l, 0, h) "
+                      f"turning in the x-y plane makes the torque r x F = (-h F_y, h F_x, l F_y), which rocks the "
+                      f"frame by F h / (Jxx w) in roll and F l / (Jzz w) in yaw (Euler's equations): l Jxx / (h Jzz) "
+                      f"= {d['yaw_lines']:.2f} with Table 2's inertias and the hubs {HUB_HEIGHT * 100:g} cm above the "
+                      f"centre of mass"),
     }
 
 

@@ -5,6 +5,7 @@ paper-as-flown --monte-carlo N --seed S --json MC.json`, sim/sweeps/montecarlo.p
 it, or reads its JSON, and renders them.
 
     python scripts/as_flown_mc.py [--n 200] [--seed 1]      # fly the draws (minutes on two cores)
+    python scripts/as_flown_mc.py --batch                   # the same draws on the batched simulator (a minute)
     python scripts/as_flown_mc.py --from docs/as-flown-mc.json    # re-judge a Monte Carlo's JSON, render it
 
 Each draw is judged from its stored per-flight figures (sim/sweeps/judge.py: `verdict`, `bounded`), so a
@@ -32,6 +33,7 @@ BOUND_PNG = DOC.parent / "as-flown-bound.png"
 SCALES = [i / 20 for i in range(0, 81)]   # the bound over RING_BOUND_DEG: 0 to 4 times the tuning step
 GIVEN_MIN = 10    # draws: the conditional share is drawn where at least this many hold
 LANDING = "paper's account, landing only"
+ACCOUNT = "paper's account"
 NAMES = {"table4": "Table 4 (tuned in simulation)", "table6": "Table 6 (retuned on the vehicle)"}
 
 
@@ -110,6 +112,53 @@ def _at(result: dict, scale: float = 1.0) -> tuple[int, int, int, int]:
     return b4, b6, account, given
 
 
+def _path(result: dict) -> str:
+    """Which simulator flew the draws, as the docs say it."""
+    if "simulator" in result:
+        return ("the batched simulator (`--batch`: sim/sweeps/batch.py, each draw flown as the full onboard path "
+                "flies it, draw for draw: tests/test_batch.py)")
+    return "the full onboard path"
+
+
+def headline(result: dict) -> dict:
+    """The figures the docs compare across Monte Carlos: per gain set the share that flies and that
+    holds, the medians of the worst bank ringing and of the estimator's bank bias; paired, the paper's
+    account, where Table 6 holds, by landing alone, and Table 6 beating Table 4."""
+    n, rows = result["n"], result["draws"]
+    b4, b6, account, given = _at(result)
+    out = {"n": n, "paper's account": account / n, "given table6 holds": given / b6 if b6 else None,
+           "landing only": sum(r[LANDING] for r in rows) / n,
+           "table6 beats table4": result["paired"]["table6 beats table4"]}
+    for g, held in (("table4", b4), ("table6", b6)):
+        flown = [r[g] for r in rows if r[g]["flies"] and "roll" in r[g]]
+        med = lambda key: statistics.median([max(f[ch][key] for ch in ("roll", "pitch")) for f in flown]) \
+            if flown else None   # noqa: E731
+        out[g] = {"flies": result["share"][g]["flies"], "holds": held / n, "ringing": med("ringing_deg"),
+                  "bias": med("bias_deg"), "true held": med("true_held_deg") if _stored(rows) else None}
+    return out
+
+
+def moved(result: dict) -> list[str]:
+    """The table of what moved against the Monte Carlo before (`before` in the JSON, `--before`)."""
+    b, now = result["before"], headline(result)
+    pct = lambda v: "-" if v is None else f"{100 * v:.0f} %"   # noqa: E731
+    deg = lambda v: "-" if v is None else f"{v:.2f}"   # noqa: E731
+    lines = ["", f"What moved against the Monte Carlo before ({b['what']}; {b['n']} draws, seed {b['seed']}):", "",
+             "| | before | now |", "|---|---|---|"]
+    for g in montecarlo.GAINS:
+        lines += [f"| {NAMES[g]}: flies | {pct(b[g]['flies'])} | {pct(now[g]['flies'])} |",
+                  f"| {NAMES[g]}: holds | {pct(b[g]['holds'])} | {pct(now[g]['holds'])} |",
+                  f"| {NAMES[g]}: worst bank ringing, median (deg) | {deg(b[g]['ringing'])} | {deg(now[g]['ringing'])} |",
+                  f"| {NAMES[g]}: estimator's bank bias, median (deg) | {deg(b[g]['bias'])} | {deg(now[g]['bias'])} |",
+                  f"| {NAMES[g]}: true held bank error, median (deg) | {deg(b[g].get('true held'))} | "
+                  f"{deg(now[g]['true held'])} |"]
+    lines += [f"| Table 6 beats Table 4 | {pct(b['table6 beats table4'])} | {pct(now['table6 beats table4'])} |",
+              f"| the paper's account | {pct(b[ACCOUNT])} | {pct(now[ACCOUNT])} |",
+              f"| ... where Table 6 holds | {pct(b['given table6 holds'])} | {pct(now['given table6 holds'])} |",
+              f"| ... by landing alone | {pct(b['landing only'])} | {pct(now['landing only'])} |"]
+    return lines
+
+
 def render(result: dict) -> str:
     """The docs block: the shares per gain set, the paired verdicts, the held error by the vehicle's
     own estimate beside the estimator's bias, and the ranges that decide the paper's account."""
@@ -118,7 +167,7 @@ def render(result: dict) -> str:
     bank, turn = judge.RING_BOUND_DEG["roll"], judge.RING_BOUND_DEG["yaw"]
     lines = [f"`flightctl sim {result['scenario']} --params {result['params']} --monte-carlo {n} --seed "
              f"{result['seed']}` (`python scripts/as_flown_mc.py`): {len(result['ranges'])} ranges drawn, both gain "
-             f"sets on each draw, the full onboard path. \"Flies\": left the ground, no crash, landed upright; "
+             f"sets on each draw, {_path(result)}. \"Flies\": left the ground, no crash, landed upright; "
              f"\"holds\": flies, and every bank rings by at most {bank:g} degrees and every turn by at most {turn:g} "
              f"(peak-to-peak of the true angle from {judge.RING_AFTER_S:g} s after each step to the next: the size "
              f"of sec. 3.3's tuning steps, of which the tuning allowed a single overshoot), its own held error "
@@ -158,6 +207,8 @@ def render(result: dict) -> str:
         lines.append(f"| `{key}` | {100 * low:.0f} % ({n_low}) | {100 * high:.0f} % ({n_high}) |")
     lines += ["", "![Which ranges decide the paper's account](as-flown-deciding.png)", "",
               "![Outcomes over the motor time constant and the delay chain](as-flown-monte-carlo.png)"]
+    if "before" in result:
+        lines += moved(result)
     return "\n".join(lines)
 
 
@@ -170,7 +221,7 @@ def facts(result: dict) -> str:
     b4, b6, account, given = _at(result)
     return "\n".join([
         f"| the paper's fact (sec. 4.4.5, figures 17-20) | share of {n} draws of every range of paper-as-flown, "
-        f"full onboard path (`python scripts/as_flown_mc.py`) |", "|---|---|",
+        f"{_path(result).split(' (')[0]} (`python scripts/as_flown_mc.py`) |", "|---|---|",
         f"| Table 4's gains, tuned in simulation, fly and land on the vehicle | {pct(count(lambda r: r['table4']['flies']))} |",
         f"| ... and hold every bank and turn: ringing within the bound (below), own held error within 1 and 3 degrees "
         f"| {pct(b4)} |",
@@ -201,6 +252,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=200)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--batch", action="store_true", help="fly the draws on the batched simulator (the same flights)")
+    ap.add_argument("--before", nargs=2, metavar=("JSON", "WHAT"),
+                    help="keep this earlier Monte Carlo's headline figures in the new one, to say what moved (WHAT: "
+                         "which model it flew)")
     ap.add_argument("--from", dest="source", help="render this Monte Carlo JSON instead of flying the draws")
     ap.add_argument("--doc", help="write only docs/as-flown.md's block, into this copy of it (scripts/docs.py)")
     ap.add_argument("--readme", help="write only the README's block of the paper's facts, into this copy of it")
@@ -214,8 +269,13 @@ def main() -> None:
     if args.source:
         result = rejudge(json.loads(Path(args.source).read_text()))
     else:
-        bar = Progress(2 * args.n, "monte carlo")
-        result = montecarlo.run("paper-as-flown", "paper", args.n, args.seed, progress=bar)
+        if args.batch:
+            result = montecarlo.run_batch("paper-as-flown", "paper", args.n, args.seed, progress=Progress(2, "monte carlo"))
+        else:
+            result = montecarlo.run("paper-as-flown", "paper", args.n, args.seed, progress=Progress(2 * args.n, "monte carlo"))
+    if args.before:
+        earlier = rejudge(json.loads(Path(args.before[0]).read_text()))
+        result["before"] = {"what": args.before[1], "seed": earlier["seed"], **headline(earlier)}
     montecarlo.write_json(result, JSON)
     montecarlo.plot(result, DOC.parent / "as-flown-monte-carlo.png")
     montecarlo.plot_deciding(result, DOC.parent / "as-flown-deciding.png")

@@ -5,12 +5,13 @@ chain, at the file's nominal values and at the fast end of the motor time consta
 (docs/as-flown.md; the shares over every range are the Monte Carlo's).
 
 Tolerances, and why:
-- the paper's account, judged as the paper judged it (sim/sweeps/judge.py): Table 4 (tuned in
-  simulation) flies and lands, Table 6 (retuned on the vehicle) flies, lands, holds every bank and
-  turn within the pilot's bound (the size of sec. 3.3's tuning steps) and rings less; not a band on
-  the true error, which both tables share with the estimator's bias. Table 4 itself does not hold
-  within the bound at these two points (its banks limit-cycle, docs/as-flown.md): the whole account,
-  both within the bound, holds in a minority of the Monte Carlo's draws, which the README counts.
+- the paper's account, judged as the paper judged it (sim/sweeps/judge.py): at the fast end of the
+  motors Table 4 (tuned in simulation) flies and lands, Table 6 (retuned on the vehicle) flies, lands,
+  holds every bank and turn within the pilot's bound (the size of sec. 3.3's tuning steps) and rings
+  less; not a band on the true error, which both tables share with the estimator's bias. At the
+  file's nominal Table 4 does not hold (its banks limit-cycle or it crashes, docs/as-flown.md) and
+  Table 6 does: the whole account holds in a minority of the Monte Carlo's draws, which the README
+  counts.
 - touchdown below 1 m/s: a fall from the 1.5 m hover lands at 5.4 m/s.
 - the 5-minute hover: 2 deg of true tilt is about 0.34 m/s^2 of unintended horizontal acceleration, what a
   pilot notices as a drift; 10 cm of altitude is 2.5 % of the HC-SR04's range and many times its
@@ -37,7 +38,7 @@ def as_flown(gains: str, tau: float | None = None):
     p = load("paper-as-flown", GAIN_SETS[gains])
     if tau is None:
         return p
-    effects = tuple(EffectSpec(e.cause, (("tau", tau), ("tau_down", tau)), e.source)
+    effects = tuple(EffectSpec(e.cause, (("tau", tau),) + tuple(kv for kv in e.parameters if kv[0] != "tau"), e.source)
                     if e.cause == "motor_dynamics" else e for e in p.effects)
     assert effects != p.effects
     return dataclasses.replace(p, effects=effects)
@@ -48,22 +49,38 @@ def settled_errors(flight) -> list[tuple[str, float]]:
     return metrics.settled_errors(flight.log, flight.scenario.steps, flight.t_arm)
 
 
-@pytest.mark.parametrize("tau", TAUS)
-def test_on_the_as_flown_model_both_tables_land_and_table6_holds_and_rings_less(tmp_path, tau):
-    """Sec. 4.4.5: the simulation's gains flew the vehicle, the retuned ones improved it."""
+def _judged(tmp_path, tau) -> dict:
     sc = SCENARIOS["paper"]()
     judged = {}
     for gains in ("table4", "table6"):
         flight = fly(sc, as_flown(gains, tau), tmp_path / f"{gains}.csv", seed=3)
-        assert flight.result.reason == "plan complete"
-        assert any("landed" in what for _, what in flight.result.events)
-        assert flight.touchdowns and max(abs(vz) for _, vz in flight.touchdowns) < 1.0
-        figures = judge.step_figures(flight.log, sc.steps, flight.t_arm)
-        assert len(figures) == 12
-        judged[gains] = {"flies": flight.outcome == "landed upright", **judge.summary(figures)}
+        lands = flight.result.reason == "plan complete" and any("landed" in what for _, what in flight.result.events)
+        if lands:
+            assert flight.touchdowns and max(abs(vz) for _, vz in flight.touchdowns) < 1.0
+            figures = judge.step_figures(flight.log, sc.steps, flight.t_arm)
+            assert len(figures) == 12
+        judged[gains] = {"flies": lands and flight.outcome == "landed upright",
+                         **(judge.summary(figures) if lands else {"score": None})}
+    return judged
+
+
+def test_at_the_fast_end_of_the_motors_both_tables_land_and_table6_holds_and_rings_less(tmp_path):
+    """Sec. 4.4.5: the simulation's gains flew the vehicle, the retuned ones improved it."""
+    judged = _judged(tmp_path, TAUS[0])
     verdict = judge.verdict(judged["table4"], judged["table6"])
-    assert judge.bounded(judged["table6"]), judged["table6"]
+    assert judged["table4"]["flies"] and judge.bounded(judged["table6"]), judged
     assert verdict["table6 beats table4"] and verdict["paper's account, landing only"], judged
+
+
+def test_at_the_files_nominal_table6_holds_where_table4_does_not(tmp_path):
+    """At the nominal point (its rate path at the log-middle of its range, 11.3 dt, since issue 37),
+    Table 4's high gains do not hold the banks: the paper's account does not hold there even by
+    landing alone, while Table 6 holds within the bound and so beats it (the Monte Carlo gives the
+    shares over the ranges)."""
+    judged = _judged(tmp_path, TAUS[1])
+    verdict = judge.verdict(judged["table4"], judged["table6"])
+    assert judged["table6"]["flies"] and judge.bounded(judged["table6"]), judged["table6"]
+    assert not judge.bounded(judged["table4"]) and verdict["table6 beats table4"], judged
 
 
 def test_the_as_flown_model_damps_what_the_base_model_lets_ring(tmp_path):

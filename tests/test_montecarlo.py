@@ -39,12 +39,12 @@ def test_draws_stay_in_their_ranges_and_the_shares_count_them(tmp_path):
     assert set(spans) == {"airframe.Jp", "airframe.h1", "airframe.h2", "airframe.c1", "airframe.g1", "airframe.g2",
                           "filters.tau_rate", "sensors.accel_vibration", "sensors.gyro_vibration", "sensors.harmonic2",
                           "sensors.harmonic3", "sensors.gyro_broadband", "rotor_inflow.k", "rotor_inflow.hub",
-                          "motor_dynamics.tau", "motor_dynamics.tau_down", "rotor_drag.k", "rotor_drag.yaw",
+                          "motor_dynamics.tau", "rotor_drag.k", "rotor_drag.yaw",
                           "actuation_delay.delay"}
     for d in r["draws"]:
         for key, v in d["draw"].items():
             assert spans[key][0] <= v <= spans[key][1]
-        for key in ("motor_dynamics.tau", "motor_dynamics.tau_down"):   # their top follows the drawn Jp
+        for key in ("motor_dynamics.tau",):   # its top follows the drawn Jp (tau_down takes its value)
             lo, hi = spans[key]
             assert d["draw"][key] <= max(lo, hi * d["draw"]["airframe.Jp"] / spans["airframe.Jp"][1]) + 1e-12
     assert len({d["draw"]["motor_dynamics.tau"] for d in r["draws"]}) == 3     # drawn, not the nominal

@@ -29,6 +29,7 @@ from flightctl.control.mixer import count_from_thrust
 from flightctl.control.motor_loss import OPPOSITE
 from flightctl.hal import ImuSample
 from flightctl.params import Params
+from flightctl.physics import thrust_from_command
 
 BRAKE_S = 1.5                 # s: the horizontal speed's time constant while braking
 BRAKE_TILT = radians(8.0)     # rad: the largest tilt given to braking
@@ -38,7 +39,7 @@ class SpinController:
     """The loop's controller after a motor is lost: `start(lost, ...)` once, `step(...)` every loop.
     `why_not`: why the two-rotor mode cannot work on this vehicle ('' when it can)."""
     __slots__ = ("a", "tau_m", "r_bar", "why_not", "sched", "rates", "r0", "nk", "hstep", "nj", "pair",
-                 "off", "sign", "e", "u_act", "u_prev", "counts", "idle", "yaw", "w", "kw", "Jp", "vx", "vy",
+                 "off", "sign", "e", "u_act", "u_prev", "counts", "idle", "f_full", "yaw", "w", "kw", "Jp", "vx", "vy",
                  "amax", "kv", "g", "K", "ng", "chain", "phi", "ga", "gb", "m", "a_rate", "ph", "qh", "fresh",
                  "jx", "jy", "ex", "ey", "bx", "by", "d")
 
@@ -50,6 +51,7 @@ class SpinController:
         self.r_bar = spin_design.equilibrium_spin(d)
         self.kw = a.dt / self.tau_m if self.tau_m > a.dt else 1.0   # the rotors' speeds per loop
         self.idle = count_from_thrust(0.0, a.h1, a.h2)   # the dead zone's edge: no thrust, the ESC armed
+        self.f_full = thrust_from_command(spin_design.esc_full_throttle(params), a.h1, a.h2)   # its ceiling, N
         self.Jp, self.g = a.Jp, a.g
         # the design's model, as the loop runs it: the pair's torque through the motor time constant and
         # the delay chain (tau_{k+1} = phi tau_k + ga u_{k-m-1} + gb u_{k-m}), the commands still in the
@@ -205,9 +207,14 @@ class SpinController:
         half, d = 0.5 * F, u / (2.0 * a.l)
         # pair (1, 3): tau_theta = l (f3 - f1); pair (2, 4): tau_phi = l (f2 - f4)
         fi, fj = (half - d, half + d) if self.pair == (0, 2) else (half + d, half - d)
-        # up to the ESC's full command: on two rotors the limits of Table 3 (f <= 2B) would leave no
-        # margin, and the motors give far more (eq. 26 at P = 255)
+        # up to the ESC's full throttle: on two rotors the limits of Table 3 (f <= 2B) would leave no
+        # margin, and the motors give more (eq. 26 at the ESC's full throttle, the file's p_full)
+        # past it, both give up the excess alike: the torque (their difference) before the collective, as
+        # a mixer that saturates keeps the attitude (ArduPilot's AP_MotorsMatrix::output_armed_stabilizing)
         counts = self.counts
+        over = (fi if fi > fj else fj) - self.f_full
+        if over > 0.0:
+            fi, fj = fi - over, fj - over
         fi = fi if fi > 0.0 else 0.0
         fj = fj if fj > 0.0 else 0.0
         counts[i] = count_from_thrust(fi, a.h1, a.h2)

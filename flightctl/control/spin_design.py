@@ -103,6 +103,15 @@ def motor_time_constant(params: Params) -> float:
     return 0.0
 
 
+def esc_full_throttle(params: Params) -> float:
+    """The ESC's full-throttle command P the file carries (`motor_dynamics`' `p_full`: eq. 26's thrust
+    stops rising there), else 255, the end of its frame."""
+    for e in params.effects:
+        if e.cause == "motor_dynamics":
+            return float(dict(e.parameters).get("p_full", 255.0))
+    return 255.0
+
+
 def effect_value(params: Params, cause: str, name: str) -> float:
     """A parameter of an effect the parameter file carries, 0 where it carries none."""
     for e in params.effects:

@@ -24,13 +24,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from flightctl.physics import rotor_speed, thrust_from_speed
+from flightctl.physics import rotor_speed, thrust_from_command, thrust_from_speed
 from flightctl.sim.causes.motor_lag import MotorLagFit, lag_held
 from flightctl.sim.identify.diagnose.candidate import TIMING_CHECK, GridCandidate, timing_not_physical, too_short_to_time
 from flightctl.sim.identify.diagnose.dataset import C, Change
 from flightctl.sim.world.model import Effect, Parameter
 
 SPIN = (-1.0, 1.0, -1.0, 1.0)   # s_i: +1 counter-clockwise seen from above (motors 2, 4), -1 clockwise
+FULL_P = 255.0                  # `p_full`'s default: eq. 26 to the end of the ESC's frame (no ceiling)
 
 
 def speed_rate(w_cmd, w, tau, tau_down):
@@ -53,10 +54,15 @@ class MotorDynamics(Effect):
     `tau_down` (optional, default tau): the time constant while the rotor slows down. An ESC that
     brakes (active freewheeling, "damped light") drives the speed down as it drives it up; one that
     does not lets the rotor coast on its aerodynamic drag alone, J / (2 Q / Omega), several times
-    slower (scripts/as_flown.py). Diagnose fits the symmetric lag (`tau` only)."""
+    slower (scripts/as_flown.py). Diagnose fits the symmetric lag (`tau` only).
+
+    `p_full` (optional, P units, default 255): the ESC's full throttle. An RC ESC's input runs 1.0-2.0 ms
+    and a longer pulse is full throttle, so the commanded speed stops rising there: eq. 26 at p_full is
+    the rotor's thrust ceiling (the as-flown file: 2.0 ms of the 449 Hz frame, P = 229; the two-rotor
+    mode, flightctl/control/spin.py, commands up to it)."""
     cause, n_states, uses_rotor, uses_wrench = "motor_dynamics", 4, True, True
     required = {"tau": Parameter("s", 1e-4, 5.0)}
-    optional = {"tau_down": Parameter("s", 1e-4, 5.0)}
+    optional = {"tau_down": Parameter("s", 1e-4, 5.0), "p_full": Parameter("P units", 1.0, FULL_P)}
     # the rotor's speed changes at J dOmega/dt = the motor's torque less the drag's: at a given torque
     # both time constants are proportional to the rotor inertia, so their slowest plausible value is
     range_scales = {"tau": "Jp", "tau_down": "Jp"}
@@ -66,8 +72,11 @@ class MotorDynamics(Effect):
         return [rotor_speed(f, self.a.c1) for f in f_cmd]
 
     def command(self, f_cmd):
-        c1 = self.a.c1
-        self._w_cmd = [rotor_speed(f, c1) for f in f_cmd]   # Omega_cmd, once per input (eq. 27)
+        a = self.a
+        top = thrust_from_command(self.parameters.get("p_full", FULL_P), a.h1, a.h2)
+        # Omega_cmd, once per input (eq. 27), up to the ESC's full throttle (`physics.esc_command`: the same
+        # as capping the command, eq. 26 being monotonic above its dead zone)
+        self._w_cmd = [rotor_speed(f if f < top else top, a.c1) for f in f_cmd]
 
     def rotor(self, t, x, f_cmd, xdot):
         o, tau, c1, w_cmd = self.offset, self.parameters["tau"], self.a.c1, self._w_cmd

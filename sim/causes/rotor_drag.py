@@ -9,11 +9,15 @@ because a yaw drag identified on the spinning vehicle holds part of it already: 
 includes the edgewise drag of the two running rotors; in flight, 2 and 4 add theirs, (k / 2) l^2
 (scripts/as_flown.py). The fit below predicts the accelerometer's x and y and reports k only.
 
-Both terms come from the air the rotors move: they scale with the rotors that run
-(`rotor_inflow.airflow`, the summed shares s, 4 for four rotors carrying thrust). The force is the
-four rotors' k times s / 4; `yaw` holds the rotors beyond the two whose share eq. 6's gamma1 holds
-already, so it is yaw (s - 2) / 2, none below two: on one pair (a lost motor and the one across it
-stopped, flightctl/control/spin.py) the yaw drag is eq. 6's alone, as on the rig.
+Both terms come from the air the rotors move. The force is momentum theory's ram drag: a rotor
+turns the free stream's horizontal momentum at its mass flow rho A v_i, and its induced velocity v_i
+is v_h sqrt(f_i / B) (v_i = sqrt(f_i / (2 rho A)): Leishman, *Principles of Helicopter
+Aerodynamics*, ch. 2), so each rotor's drag is k / 4 times its `rotor_inflow.airflow_root`
+sqrt(f_i / B), and the force is k times their sum over 4: k at hover, and on one pair carrying the
+weight (2 B each: a lost motor and the one across it stopped, flightctl/control/spin.py) 2 sqrt(2) / 4
+= 0.71 k, not half of it. `yaw` holds the rotors beyond the two whose share eq. 6's gamma1 holds
+already (`rotor_inflow.airflow`, the summed shares s, 4 for four rotors carrying thrust), so it is
+yaw (s - 2) / 2, none below two: on one pair the yaw drag is eq. 6's alone, as on the rig.
 """
 from __future__ import annotations
 
@@ -29,10 +33,11 @@ from flightctl.sim.identify.diagnose.scoring import linear_stats, solve
 from flightctl.sim.world.model import R, Effect, Parameter
 
 
-def drag_wrench(k: float, yaw: float, running, u, v, r):
-    """The body-frame drag force -k (u, v) and the rotors' yaw damping -yaw r, for `running` rotors'
-    worth of airflow (`airflow`: 4 for four rotors carrying thrust)."""
-    kr = 0.25 * k * running
+def drag_wrench(k: float, yaw: float, running, flow, u, v, r):
+    """The body-frame drag force -k (u, v) flow / 4 and the rotors' yaw damping -yaw r: `flow` the
+    rotors' summed `airflow_root`s (momentum theory's ram drag, 4 at hover), `running` their summed
+    shares (`airflow`: 4 for four rotors carrying thrust, 2 for one pair)."""
+    kr = 0.25 * k * flow
     beyond = 0.5 * (running - 2.0 + abs(running - 2.0))      # max(running - 2, 0): beyond gamma1's pair
     return -kr * u, -kr * v, -0.5 * yaw * beyond * r
 
@@ -51,8 +56,9 @@ class RotorDrag(Effect):
 
     def wrench(self, t, x, f, vb, force, torque):
         B = self._B
-        running = airflow(airflow_root(f[0], B), airflow_root(f[1], B), airflow_root(f[2], B), airflow_root(f[3], B))
-        fx, fy, tz = drag_wrench(self.parameters["k"], self.parameters.get("yaw", 0.0), running, vb[0], vb[1], x[R])
+        r1, r2, r3, r4 = airflow_root(f[0], B), airflow_root(f[1], B), airflow_root(f[2], B), airflow_root(f[3], B)
+        fx, fy, tz = drag_wrench(self.parameters["k"], self.parameters.get("yaw", 0.0), airflow(r1, r2, r3, r4),
+                                 r1 + r2 + r3 + r4, vb[0], vb[1], x[R])
         force[0] += fx
         force[1] += fy
         torque[2] += tz   # each rotor's drag at r l, arm l

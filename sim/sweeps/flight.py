@@ -46,10 +46,11 @@ from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
 from flightctl.sim.sweeps import onboard as ob
 from flightctl.sim.world.devices import EARTH_FIELD_T, NoisePool, SimGpio
 from flightctl.sim.world.imu import (_BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, _C_PERIOD, AMBIENT_C, SimMpu9250,
-                                    _i16, chip_frame)
+                                    _i16, chip_frame, normals_per_read)
 from flightctl.sim.world.compiled import attitude_trig, commanded, forces, rebound, rk4, work
 from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VX, VY, VZ, Z, rotation_from_trig
-from flightctl.sim.world.plant import CONTACT_S, time_weighted
+from flightctl.sim.world.compiled import _B, _L, _RIGID
+from flightctl.sim.world.plant import CONTACT_S, floor_brake, floor_spin, time_weighted
 
 ECHO_DELAY_S, NO_ECHO_S = SimGpio.ECHO_DELAY_S, SimGpio.NO_ECHO_S
 WATCHDOG_S = WATCHDOG_MS / 1000.0
@@ -226,9 +227,12 @@ def plant_period(x, w, ring, q, codes, nring: int, frac: float, i: int, k, wk) -
                 if vz < -0.01 and -vz > w[W_TOUCHDOWN]:
                     w[W_TOUCHDOWN] = -vz
                 w[W_T_STOP], w[W_VZ_STOP] = t_end, vz
-                for j in (Z, VX, VY, VZ, PHI, THETA, P, Q, R):
+                for j in (Z, VX, VY, VZ, PHI, THETA, P, Q):
                     x[j] = 0.0
                 w[W_GROUND] = 1.0
+    if w[W_GROUND] != 0.0 and x[R] != 0.0:   # a spin it landed with, braked by its feet (`Plant.advance`)
+        x[R], turned = floor_spin(x[R], dt, floor_brake(4.0 * q[_B], q[_L], q[_RIGID + 2]))
+        x[PSI] += turned
     return True
 
 
@@ -241,7 +245,7 @@ def held_command(w):
 def chip_read(x, w, q, codes, burst, cs, cc, e, ie: int, im: int, jump, k, t: float, held: float, temp: float,
               gains, wk) -> bool:
     """`SimMpu9250._sample` at t (the plant's specific force, rates, rotors) and `Mpu9250.read` of the
-    burst, with the chip's nine normals e[ie:ie + 9] and the magnetometer's three e[im:im + 3], `held`
+    burst, with the chip's normals e[ie:] (`normals_per_read`) and the magnetometer's three e[im:im + 3], `held`
     = t % the chip's output period, the die's temperature at t and `gains` (the read interval from the
     last period and the DLPF stage's gains for it), the same for every vehicle: `fly` finds them once a
     period; the sample in w[W_S:], the gyro less the calibration's bias. False: the frame is refused."""
@@ -385,7 +389,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI, SP, R
     dt, t_arm = k[DT], k[T_ARM]
     cnt = np.zeros(4, dtype=np.int64)
     wk = work(X.shape[1])
-    e9 = np.empty(12)                        # a read's normals: the chip's nine, the magnetometer's three
+    e9 = np.empty(15)                        # a read's normals: the chip's nine or twelve, the magnetometer's three
     held, temp = np.empty(n), np.empty(n)    # each period's, the same for every vehicle: found once
     gains = np.empty((n, 3))
     power, sonar = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.bool_)   # the periods of their reads
@@ -403,6 +407,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI, SP, R
         x, w, e, kc, q, ring, burst, cs, cc = X[v], W[v], E[v], KC[v], Q[v], RING[v], WORDS[v], CS[v], CC[v]
         uni, gen = UNI[v], GEN[v]
         nring, frac = NRING[v], FRAC[v]
+        nn = normals_per_read(cc)
         for step in range(n):
             if w[W_DONE] != 0.0:
                 break
@@ -412,10 +417,10 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI, SP, R
                 w[W_REASON], w[W_DONE] = DIVERGED, 1.0
                 break
             sonar_edges(w, t)
-            normals(gen, w, e9, 0, 9)
+            normals(gen, w, e9, 0, nn)
             if i % MAG_EVERY == 1 % MAG_EVERY:      # read i's magnetometer sample (`chip_read`)
-                normals(gen, w, e9, 9, 3)
-            if chip_read(x, w, q, codes, burst, cs, cc, e9, 0, 9, jump, k, t, held[step], temp[step], gains[step], wk):
+                normals(gen, w, e9, nn, 3)
+            if chip_read(x, w, q, codes, burst, cs, cc, e9, 0, nn, jump, k, t, held[step], temp[step], gains[step], wk):
                 w[W_BAD] = 0.0
             else:
                 w[W_BAD] += 1.0
@@ -565,8 +570,9 @@ def compiled_fly():
     at = plant["forces"]
     held = cc(held_command)
     return cc(fly, allocates=True, work=plant["work"], normals=cc(normals, allocates=True),
+              normals_per_read=cc(imu.normals_per_read),
               plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held,
-                              time_weighted=cc(time_weighted)),
+                              time_weighted=cc(time_weighted), floor_spin=cc(floor_spin), floor_brake=cc(floor_brake)),
               sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
               chip_read=cc(chip_read, forces=at, held_command=held, chip_words=imu.chip_frame_compiled(put_word),
                            rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],

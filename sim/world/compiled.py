@@ -29,8 +29,8 @@ from math import copysign, cos, sin, sqrt
 
 import numpy as np
 
-from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, thrust_from_speed
-from flightctl.sim.causes.motor_dynamics import SPIN, reaction_torque, speed_rate
+from flightctl.physics import esc_command, rotor_speed, rotor_torque, thrust_from_command, thrust_from_speed
+from flightctl.sim.causes.motor_dynamics import FULL_P, SPIN, reaction_torque, speed_rate
 from flightctl.sim.causes.rotor_drag import drag_wrench
 from flightctl.sim.causes.rotor_inflow import airflow, inflow_wrench
 from flightctl.sim.world.model import N_RIGID, aggregate, body_velocity, rigid_derivative, rotation_from_trig
@@ -137,8 +137,9 @@ INFLOW, REACTION, DRAG = 1, 2, 3
 COMPILED_CAUSES = ("rotor_inflow", "motor_dynamics", "rotor_drag", "actuation_delay", "gyro_lag", "motor_weak")
 # q: the parameters of `stage`, by index
 # (_ROOT: sqrt(c1 / B), a rotor's `airflow_root` per rad/s of its speed; _WEAK, _SCALE: motor_weak's
-# rotor, 0-3, -1 without one, and its scale)
-_C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _H1, _H2, _JP, _ROOT, _WEAK, _SCALE, _RIGID = range(18)
+# rotor, 0-3, -1 without one, and its scale; _P_FULL: the ESC's full throttle, motor_dynamics' `p_full`)
+_C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _H1, _H2, _JP, _ROOT, _WEAK, _SCALE, _P_FULL, _RIGID = \
+    range(19)
 N_OUT = 18   # `period`'s output: the fields of `Forces` (f, tau, force, torque, w) one after another
 
 
@@ -166,7 +167,8 @@ def _layout(model):
         return None
     a = model.a
     B = a.M * a.g / 4.0
-    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, B, 0.0, 0.0, 0.0, a.h1, a.h2, a.Jp, (a.c1 / B) ** 0.5, -1.0, 1.0]
+    q = [a.c1, a.g1, a.g2, a.l, 0.0, 0.0, 0.0, B, 0.0, 0.0, 0.0, a.h1, a.h2, a.Jp, (a.c1 / B) ** 0.5, -1.0, 1.0,
+         FULL_P]
     codes = []
     for e in model.effects:
         p = e.parameters
@@ -176,7 +178,7 @@ def _layout(model):
         elif e.cause == "motor_dynamics":
             if e.offset != N_RIGID:
                 return None
-            q[_TAU], q[_DOWN] = p["tau"], p.get("tau_down", p["tau"])
+            q[_TAU], q[_DOWN], q[_P_FULL] = p["tau"], p.get("tau_down", p["tau"]), p.get("p_full", FULL_P)
             codes.append(REACTION)
         elif e.cause == "rotor_drag":
             q[_K_DRAG], q[_YAW] = p["k"], p.get("yaw", 0.0)
@@ -214,9 +216,9 @@ def attitude_trig(x, xo, wk):
 def commanded(P1, P2, P3, P4, q):
     """The commanded thrusts (eq. 26) and speeds (eq. 27) of the command values P1..P4: (f1, f2, f3, f4,
     w1, w2, w3, w4), `rotors`' cmd."""
-    h1, h2, c1 = q[_H1], q[_H2], q[_C1]
-    f1, f2 = thrust_from_command(P1, h1, h2), thrust_from_command(P2, h1, h2)
-    f3, f4 = thrust_from_command(P3, h1, h2), thrust_from_command(P4, h1, h2)
+    h1, h2, c1, top = q[_H1], q[_H2], q[_C1], q[_P_FULL]
+    f1, f2 = thrust_from_command(esc_command(P1, top), h1, h2), thrust_from_command(esc_command(P2, top), h1, h2)
+    f3, f4 = thrust_from_command(esc_command(P3, top), h1, h2), thrust_from_command(esc_command(P4, top), h1, h2)
     return f1, f2, f3, f4, rotor_speed(f1, c1), rotor_speed(f2, c1), rotor_speed(f3, c1), rotor_speed(f4, c1)
 
 
@@ -263,7 +265,7 @@ def rotors(x, xo, cmd, codes, q, Rm, xdot, do):
         elif code == REACTION:
             Tz += reaction_torque(q[_JP], spin_up)
         else:
-            dx, dy, dz = drag_wrench(q[_K_DRAG], q[_YAW], running, vb[0], vb[1], x[xo + 11])
+            dx, dy, dz = drag_wrench(q[_K_DRAG], q[_YAW], running, r1 + r2 + r3 + r4, vb[0], vb[1], x[xo + 11])
             Fx += dx
             Fy += dy
             Tz += dz
@@ -395,7 +397,8 @@ def functions() -> dict:
     one = c(stage, rotors=wrenches, rigid_derivative=rigid, rotation_from_trig=m["rotation_from_trig"],
             attitude_trig=trig, rotor_rates=rates, aggregate=m["aggregate"])
     step = c(rk4, stage=one)
-    command = c(commanded, thrust_from_command=c(physics.thrust_from_command), rotor_speed=eq["rotor_speed"])
+    command = c(commanded, thrust_from_command=c(physics.thrust_from_command), rotor_speed=eq["rotor_speed"],
+                esc_command=c(physics.esc_command))
     at = c(forces, rotors=wrenches, rotation_from_trig=m["rotation_from_trig"], attitude_trig=trig)
     scratch = c(work, allocates=True)
     once = c(period, allocates=True, rk4=step, forces=at, commanded=command, work=scratch)

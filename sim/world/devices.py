@@ -75,7 +75,8 @@ class SensorNoise:
     harmonic2: float = 0.0             # the 2/rev and 3/rev lines over the 1/rev, both sensors
     harmonic3: float = 0.0
     gyro_broadband: float = 0.0        # rad/s rms per read at hover thrust, roll and pitch (frame and airflow)
-    yaw_share: float = 0.6             # the yaw rate's vibration and broadband over roll's and pitch's
+    yaw_share: float = 0.6             # the yaw rate's broadband noise over roll's and pitch's
+    yaw_lines: float = 2.94            # the yaw rate's rotor lines over roll's and pitch's (a rigid frame)
     from_vehicle: bool = True          # `vehicle_noise` replaces the vibration terms by the vehicle file's
     mag_sigma: float = 0.3e-6          # T
     sonar_sigma_us: float = 15.0       # echo width jitter
@@ -99,7 +100,8 @@ def vehicle_noise(noise: SensorNoise, sensors) -> SensorNoise:
         return noise
     return replace(noise, vibration=sensors.accel_vibration, gyro_vibration=sensors.gyro_vibration,
                    harmonic2=sensors.harmonic2, harmonic3=sensors.harmonic3,
-                   gyro_broadband=sensors.gyro_broadband, yaw_share=sensors.yaw_share)
+                   gyro_broadband=sensors.gyro_broadband, yaw_share=sensors.yaw_share,
+                   yaw_lines=sensors.yaw_lines)
 
 
 class NoisePool:

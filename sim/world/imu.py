@@ -25,6 +25,14 @@ if TYPE_CHECKING:
 
 AMBIENT_C = 25.0   # degC: the room at power-on; the datasheet's typical values are at 25 degC (PS 3.1)
 SPIN = (-1.0, 1.0, -1.0, 1.0)   # rotors 1 and 3 turn clockwise seen from above (eq. 9)
+# Hz: the gyro's broadband (frame and airflow) noise passes a first-order high-pass at this corner. It is
+# vibration, not motion: what moves the frame below its structural modes moves the rigid body, which the
+# plant flies; a multirotor's vibration sits at 40-300 Hz (its rotors' 1/rev and blade passing, the frame's
+# resonances: ArduPilot's forum, "Frames and frame resonances and vibrations", frame peaks above 100 Hz;
+# diydrones.com, "Vibration analysis", an MPU-9250 on a Raspberry Pi: noise at 40-300 Hz, the vehicle's
+# useful band under 10 Hz). The corner lies between the two; white down to DC the noise made an attitude
+# random walk (12.6-26 deg/sqrt(h)) that the chip's own 0.6 does not (issue 37)
+BROADBAND_HP_HZ = 20.0
 _CONFIG_REGS = frozenset((reg.SMPLRT_DIV, reg.CONFIG, reg.GYRO_CONFIG, reg.ACCEL_CONFIG, reg.ACCEL_CONFIG2))
 _TAU = 2.0 * math.pi
 
@@ -160,7 +168,7 @@ class SimMpu9250:
             self._c[_C_KA], self._c[_C_KG] = 1.0 - math.exp(-dt / self._a_delay), 1.0 - math.exp(-dt / self._g_delay)
         (f1, f2, f3, f4), (w1, w2, w3, w4) = (rotors := plant.forces()).f, rotors.w
         normal = w.normal
-        i = normal.index(9)
+        i = normal.index(normals_per_read(self._c))
         self._frame(self._regs, self._s, self._c, normal.array if self._arrays else normal.values, i,
                     fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, t % float(self._c[_C_PERIOD]), dt,
                     self.die_temperature(t), self._started)
@@ -180,17 +188,20 @@ class SimMpu9250:
 
 
 # `chip_frame`'s state s, by index: the DLPF stage's outputs fx, fy, fz, p, q, r (0-5), the gyro's
-# random walk (_S_WALK, 3), each rotor's angle (_S_PHASE, 4)
-_S_WALK, _S_PHASE, N_CHIP_STATE = 6, 9, 13
+# random walk (_S_WALK, 3), each rotor's angle (_S_PHASE, 4), the broadband noise's high-pass (_S_BB, 3:
+# its low-pass part, which the high-pass takes away)
+_S_WALK, _S_PHASE, _S_BB, N_CHIP_STATE = 6, 9, 13, 16
 # its constants c, by index: the DLPF stage's gains for the read interval, the LSBs per unit, the white
 # noise per sample, the bias walk K, the vibration per newton, the accelerometer DLPF's time constant
 # squared, the output sample period, the accelerometer's DLPF delay; then per axis the zero-g offset and
 # its temperature slope, the zero-rate offset and its slope; per arm the cosine and sine of its bending;
 # then the gyro's vibration per newton, its DLPF's time constant squared and delay, the 2/rev and 3/rev
-# lines over the 1/rev, the gyro's broadband noise per newton of the total thrust, the yaw share
+# lines over the 1/rev, the gyro's broadband noise per newton of the total thrust, its yaw share, the
+# yaw share of the rotor lines
 (_C_KA, _C_KG, _C_A_LSB, _C_G_LSB, _C_SA, _C_SG, _C_WALK, _C_KV, _C_TC2, _C_PERIOD, _C_A_DELAY,
  _C_A0, _C_AC, _C_G0, _C_GC, _C_ZC, _C_ZS, _C_KVG, _C_TCG2, _C_G_DELAY, _C_H2, _C_H3, _C_BB, _C_YAW,
- N_CHIP_CONST) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14, 17, 20, 23, 27, 31, 32, 33, 34, 35, 36, 37, 38)
+ _C_YAWL, N_CHIP_CONST) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14, 17, 20, 23, 27, 31, 32, 33, 34, 35, 36, 37,
+                           38, 39)
 _BURST = reg.ACCEL_XOUT_H
 _GYRO_WORDS = struct.Struct(">3h")   # the gyro's three words in the burst, from _BURST + 8
 
@@ -208,7 +219,7 @@ def chip_die(noise: SensorNoise, airframe, rng) -> tuple[list, list]:
     gyro_temp_coeff = (g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff), g(0, n.gyro_temp_coeff))
     accel_temp_coeff = (g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff), g(0, n.accel_temp_coeff))
     s = [0.0] * N_CHIP_STATE
-    s[_S_PHASE:] = [rng.uniform(0.0, _TAU) for _ in range(4)]
+    s[_S_PHASE:_S_PHASE + 4] = [rng.uniform(0.0, _TAU) for _ in range(4)]
     z = [rng.uniform(0.0, _TAU) for _ in range(4)]   # phase of each arm's bending
     c = [0.0] * N_CHIP_CONST
     c[_C_A0:_C_A0 + 3], c[_C_AC:_C_AC + 3] = accel_bias, accel_temp_coeff
@@ -227,8 +238,14 @@ def vibration_constants(c, noise: SensorNoise, airframe) -> None:
     B = a.M * a.g / 4.0                          # hover thrust per rotor
     c[_C_KV] = n.vibration / B                   # m/s^2 per newton of the rotor's thrust
     c[_C_KVG] = n.gyro_vibration / B             # rad/s per newton
-    c[_C_H2], c[_C_H3], c[_C_YAW] = n.harmonic2, n.harmonic3, n.yaw_share
+    c[_C_H2], c[_C_H3], c[_C_YAW], c[_C_YAWL] = n.harmonic2, n.harmonic3, n.yaw_share, n.yaw_lines
     c[_C_BB] = n.gyro_broadband / (4.0 * B)      # rad/s rms per newton of the four rotors' thrust
+
+
+def normals_per_read(c) -> int:
+    """The standard normal numbers a read of `chip_frame` takes: nine, and three more for the gyro's
+    broadband noise where the vehicle has it (so that a chip without it draws as it always did)."""
+    return 12 if c[_C_BB] != 0.0 else 9
 
 
 def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, held, dt, temp, started):
@@ -236,12 +253,15 @@ def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3
     (fx, fy, fz) and rates (p, q, r) at time t, dt after the last read, `held` = t % c[_C_PERIOD] s after
     the chip's last output sample (the caller's: the batch finds it once a period for all its vehicles),
     the rotors' thrusts f and speeds w, the die at temp (degC), with the chip's state s and constants c
-    (`SimMpu9250`; `started`: not the first read) and nine standard normal numbers e[i:i + 9]:
+    (`SimMpu9250`; `started`: not the first read) and `normals_per_read(c)` standard normal numbers
+    from e[i]:
 
     - the DLPF's first-order stage on the rigid-body signals (gains c[_C_KA], c[_C_KG] for dt);
     - the zero-rate offset's random walk, variance K^2 dt over the time since the last sample;
-    - the offsets and their temperature slopes, white noise per sample (the chip's, and on the gyro
-      the frame's broadband part, in proportion to the rotors' thrust), the rotors' vibration.
+    - the offsets and their temperature slopes, the chip's white noise per sample, the rotors'
+      vibration, and on the gyro the frame's broadband noise in proportion to the rotors' thrust,
+      through a first-order high-pass at BROADBAND_HP_HZ (its rms per read kept: the gain
+      sqrt((1 + a) / 2) / a undoes the filter's a^2 2 / (1 + a) on white noise).
 
     Plain arithmetic on indexable values: lists in plain Python, arrays compiled (`chip_frame_compiled`)."""
     if not started:
@@ -265,15 +285,26 @@ def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3
         vx, vy, vz, vp, vq, vr = vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, held, dt)
         fx, fy, fz, p, q, r = fx + vx, fy + vy, fz + vz, p + vp, q + vq, r + vr
     a_lsb, g_lsb, sa, sg = c[_C_A_LSB], c[_C_G_LSB], c[_C_SA], c[_C_SG]
-    bb = c[_C_BB] * (f1 + f2 + f3 + f4)       # the frame's broadband rate noise, rms per read
-    sp, sr = math.sqrt(sg * sg + bb * bb), math.sqrt(sg * sg + c[_C_YAW] * c[_C_YAW] * bb * bb)
+    if c[_C_BB] != 0.0 and dt > 0.0:          # the frame's broadband rate noise, rms per read, high-passed
+        a = math.exp(-_TAU * BROADBAND_HP_HZ * dt)
+        bb = c[_C_BB] * (f1 + f2 + f3 + f4) * math.sqrt(0.5 * (1.0 + a)) / a
+        b = 1.0 - a
+        x = bb * e[i + 9]
+        s[_S_BB] = a * s[_S_BB] + b * x
+        p += x - s[_S_BB]
+        x = bb * e[i + 10]
+        s[_S_BB + 1] = a * s[_S_BB + 1] + b * x
+        q += x - s[_S_BB + 1]
+        x = c[_C_YAW] * bb * e[i + 11]
+        s[_S_BB + 2] = a * s[_S_BB + 2] + b * x
+        r += x - s[_S_BB + 2]
     put16(regs, _BURST, (fx + c[_C_A0] + c[_C_AC] * d + sa * e[i]) * a_lsb)
     put16(regs, _BURST + 2, (fy + c[_C_A0 + 1] + c[_C_AC + 1] * d + sa * e[i + 1]) * a_lsb)
     put16(regs, _BURST + 4, (fz + c[_C_A0 + 2] + c[_C_AC + 2] * d + sa * e[i + 2]) * a_lsb)
     put16(regs, _BURST + 6, (temp - reg.TEMP_OFFSET_C) * reg.TEMP_LSB_PER_C)
-    put16(regs, _BURST + 8, (p + c[_C_G0] + s[_S_WALK] + c[_C_GC] * d + sp * e[i + 3]) * g_lsb)
-    put16(regs, _BURST + 10, (q + c[_C_G0 + 1] + s[_S_WALK + 1] + c[_C_GC + 1] * d + sp * e[i + 4]) * g_lsb)
-    put16(regs, _BURST + 12, (r + c[_C_G0 + 2] + s[_S_WALK + 2] + c[_C_GC + 2] * d + sr * e[i + 5]) * g_lsb)
+    put16(regs, _BURST + 8, (p + c[_C_G0] + s[_S_WALK] + c[_C_GC] * d + sg * e[i + 3]) * g_lsb)
+    put16(regs, _BURST + 10, (q + c[_C_G0 + 1] + s[_S_WALK + 1] + c[_C_GC + 1] * d + sg * e[i + 4]) * g_lsb)
+    put16(regs, _BURST + 12, (r + c[_C_G0 + 2] + s[_S_WALK + 2] + c[_C_GC + 2] * d + sg * e[i + 5]) * g_lsb)
 
 
 def vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, held, dt):
@@ -283,10 +314,10 @@ def vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, held, dt):
     last output sample (SMPLRT_DIV) and through each sensor's DLPF as a first-order low-pass with the
     register map's bandwidth and delay; each rotor's angle advances in s. On the accelerometer the
     imbalance force turns with the rotor in x-y (eq. 9's sense) and bends its arm in z; on the gyro
-    the bending arm rocks the frame in roll and pitch (and yaw, by c[_C_YAW]), with each arm's phase;
+    the bending arm rocks the frame in roll and pitch (and yaw, by c[_C_YAWL]), with each arm's phase;
     `held`: s since the last output sample."""
     kv, kg, tc2, tg2 = c[_C_KV], c[_C_KVG], c[_C_TC2], c[_C_TCG2]
-    h2, h3, yaw = c[_C_H2], c[_C_H3], c[_C_YAW]
+    h2, h3, yaw = c[_C_H2], c[_C_H3], c[_C_YAWL]
     back_a, back_g = held + c[_C_A_DELAY], held + c[_C_G_DELAY]   # how long ago each entered its register
     vx = vy = vz = vp = vq = vr = 0.0
     thrusts, speeds = (f1, f2, f3, f4), (w1, w2, w3, w4)

@@ -10,7 +10,9 @@ would take two. Time is counted
 in integers, loop periods, and computed from them (`t = n dt` plus the offset within one), never
 summed: after n periods it is `n dt` whatever the substep count, so that the loop sees the same clock
 at 1 and at 20 substeps. The floor: the vehicle rests on z = 0 until its thrust lifts it, and
-a touchdown stops it (level, at rest), recording the touchdown speed. The floor's stopping force is
+a touchdown stops it (level, at rest), recording the touchdown speed; a yaw spin it lands with (a
+two-rotor landing's 25 rad/s, flightctl/control/spin.py) is braked by its feet's friction on the
+floor (`floor_spin`), not stopped at once. The floor's stopping force is
 in the accelerometer's truth: the speed lost, spread evenly over CONTACT_S after the contact (a stiff
 landing gear; what matters is its integral, the speed lost, which an integrating estimator needs;
 the chip clips the peak at its full scale as a real one does).
@@ -22,6 +24,9 @@ from collections import deque
 import numpy as np
 
 CONTACT_S = 0.02   # s: the landing gear's stopping time at a touchdown
+# the landing feet's dry friction on the floor (plastic or rubber feet on a hard floor: 0.3-0.8, engineering
+# tables of friction coefficients; the middle), at the arm's length l from the centre (legs under the motors)
+FEET_MU = 0.5
 # RK4 steps per loop period (per segment): one. The fastest poles of the models, 1/tau = 50 1/s for
 # 20 ms motors and the bank loops' 10-30 rad/s, are 0.11 and under 0.07 of dt = 2.2 ms, where RK4's
 # error is (lambda h)^5 / 120, under 1e-7 per step (tests/test_model.py: 1 against 20 substeps).
@@ -38,6 +43,23 @@ class Diverged(Exception):
 
 from flightctl.sim.world import compiled
 from flightctl.sim.world.model import N_RIGID, PHI, PSI, Q, R, THETA, VX, VY, VZ, X, Y, Z, Forces, Model, P
+
+
+def floor_brake(weight: float, l: float, Jzz: float) -> float:
+    """rad/s^2: the yaw deceleration of a vehicle of this weight (N) spinning on its feet, Coulomb
+    friction FEET_MU weight at the arm l over the yaw inertia Jzz (eq. 7's yaw row)."""
+    return FEET_MU * weight * l / Jzz
+
+
+def floor_spin(r: float, dt: float, brake: float) -> tuple[float, float]:
+    """(the yaw rate, the yaw angle turned) dt after a spin r on the floor, decelerated at `brake`
+    rad/s^2 to rest (the angle exact: the mean rate while it turns)."""
+    dr = brake * dt
+    if r > dr:
+        return r - dr, (r - 0.5 * dr) * dt
+    if r < -dr:
+        return r + dr, (r + 0.5 * dr) * dt
+    return 0.0, 0.5 * r * abs(r) / brake if brake > 0.0 else 0.0
 
 
 def time_weighted(before: float, now: float, frac: float) -> float:
@@ -118,6 +140,11 @@ class Plant:
             if not ground and self.x[Z] < 0.0:
                 self._touch_down()
             fresh = ground or not self.on_ground          # (a touchdown changes the state in place)
+        if self.on_ground and self.x[R] != 0.0:           # a spin it landed with, braked by its feet
+            a = self.model.a
+            self.x[R], turned = floor_spin(self.x[R], self.dt, floor_brake(a.M * a.g, a.l, a.Jzz))
+            self.x[PSI] += turned
+            fresh = False
         self.periods += 1
         self.t = self.periods * self.dt
         if fresh and self._period is not None:            # the compiled step's forces prime `forces()`
@@ -169,7 +196,7 @@ class Plant:
         if x[VZ] < -0.01:   # not the hop of a thrust that only just equals the weight
             self.touchdowns.append((self.t, x[VZ]))
         self._stop = (self.t, x[VZ])
-        for i in (Z, VX, VY, VZ, PHI, THETA, P, Q, R):
+        for i in (Z, VX, VY, VZ, PHI, THETA, P, Q):    # the yaw spin goes on, braked (`floor_spin`)
             x[i] = 0.0
         self.on_ground = True
 
