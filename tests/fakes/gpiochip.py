@@ -53,6 +53,7 @@ class Sonar:
     mode: str = "echo"      # "echo", "none", "stuck", "far"
     triggers: int = 0       # trigger pulses the module answered
     ignored: int = 0        # trigger pulses too short to answer
+    widths_ns: list = field(default_factory=list)   # every trigger pulse's width, as the module saw it
 
 
 @dataclass
@@ -151,6 +152,7 @@ class FakeGpioDevice:
         s = self.sonar
         if s is None or offset != s.trigger or not falling:
             return
+        s.widths_ns.append(now - line.rose_ns)
         if now - line.rose_ns < MIN_TRIGGER_NS:
             s.ignored += 1
             return
