@@ -106,10 +106,7 @@ def motor_time_constant(params: Params) -> float:
 def esc_full_throttle(params: Params) -> float:
     """The ESC's full-throttle command P the file carries (`motor_dynamics`' `p_full`: eq. 26's thrust
     stops rising there), else 255, the end of its frame."""
-    for e in params.effects:
-        if e.cause == "motor_dynamics":
-            return float(dict(e.parameters).get("p_full", 255.0))
-    return 255.0
+    return effect_value(params, "motor_dynamics", "p_full") or 255.0
 
 
 def effect_value(params: Params, cause: str, name: str) -> float:

@@ -86,15 +86,15 @@ def plan(seconds: float) -> Plan:
 
 
 def battery(t: np.ndarray, P: np.ndarray, a, soc: float, ohm: float) -> tuple[np.ndarray, np.ndarray]:
-    """(terminal voltage, current) of SimBattery (open-circuit 14.0 + 2.6 soc V, the charge drawn by the
+    """(terminal voltage, current) of SimBattery (its open-circuit voltage at the charge left by the
     current) behind `ohm`, on the flown commands: V = E - R I with I = power / V solved per row."""
     power = power_of_commands(P, a)
     step = np.diff(t, prepend=t[0])
-    E = np.full(t.size, 14.0 + 2.6 * soc)
+    E = np.full(t.size, SimBattery.open_circuit(soc))
     for _ in range(3):                   # the charge drawn by the current of the last pass
         V = 0.5 * (E + np.sqrt(np.maximum(E * E - 4.0 * ohm * power, 0.0)))
         current = power / V
-        E = 14.0 + 2.6 * (soc - np.cumsum(current * step) / SimBattery.CAPACITY_C)
+        E = SimBattery.open_circuit(soc - np.cumsum(current * step) / SimBattery.CAPACITY_C)
     return V, current
 
 

@@ -26,8 +26,13 @@ class SimBattery:
         self.current = 0.0
         self.voltage = self._ocv()
 
+    @staticmethod
+    def open_circuit(soc):
+        """The open-circuit voltage at the charge `soc` (0-1; a float or an array), V."""
+        return 14.0 + 2.6 * soc
+
     def _ocv(self) -> float:
-        return 14.0 + 2.6 * self.soc
+        return self.open_circuit(self.soc)
 
     def advance(self, dt: float) -> None:
         rotors = self.world.plant.forces()
