@@ -98,7 +98,7 @@ BLOCKS = (
     Block("real-data", "docs/identification.md", "<!-- real-data:begin -->", "<!-- real-data:end -->",
           FLIGHTCTL + ("identify", "real-data", "--out", "{dir}"), minutes=1),
     Block("diagnose-pairs", "docs/diagnose.md", *marked("diagnose_pairs"),
-          SCRIPT + ("scripts/diagnose_pairs.py", "--pairs", "30", "--doc", "{doc}"), minutes=40),
+          SCRIPT + ("scripts/diagnose_pairs.py", "--pairs", "30", "--doc", "{doc}"), minutes=2),
     Block("diagnose-sweep", "docs/diagnose.md", *marked("diagnose_sweep"),
           SCRIPT + ("scripts/diagnose_sweep.py", "--doc", "{doc}"), minutes=6),
     Block("fleet-scale", "docs/fleet.md", "<!-- fleet-scale:begin -->", "<!-- fleet-scale:end -->",
