@@ -106,7 +106,13 @@ def _client(workers: int):
         with _ctrl_c_deferred(), dask.config.set({"distributed.worker.multiprocessing-method": "forkserver",
                               "distributed.scheduler.allowed-failures": 0,
                               "distributed.scheduler.worker-saturation": 1.0,
-                              **{f"distributed.nanny.pre-spawn-environ.{k}": 1 for k in ONE_THREAD}}):
+                              **{f"distributed.nanny.pre-spawn-environ.{k}": 1 for k in ONE_THREAD},
+                              # Dask's default MALLOC_TRIM_THRESHOLD_ = 65536 (distributed.yaml) fixes glibc's
+                              # trim and mmap thresholds, so every array over 128 KiB is mapped and unmapped
+                              # anew: diagnose took twice the CPU (better_tune.BBL 65 s against 33 s), in the
+                              # workers and in every later child of this process, which the nanny's
+                              # os.environ.update leaks it into (nanny.py). None unsets it (_get_env_variables).
+                              "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    dashboard_address=":0", silence_logs=quiet)
             client = Client(cluster, set_as_default=False)

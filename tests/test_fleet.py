@@ -219,6 +219,18 @@ def test_the_monte_carlo_on_the_engine_is_the_in_process_one_draw_for_draw():
         montecarlo.run_batch("paper-as-flown", "step_roll", 4, seed=seed, workers=1)
 
 
+def test_the_local_workers_run_with_one_blas_thread_and_glibc_s_own_memory_thresholds():
+    """The local cluster's workers get one BLAS thread each, and not Dask's MALLOC_TRIM_THRESHOLD_, which
+    maps and unmaps every array over 128 KiB anew (diagnose of better_tune.BBL took 65 s of CPU with it,
+    33 s without); nor does this process, into which Dask's nanny writes its variables (and from which
+    every later child, a log diagnosed or a command the benchmark times, would inherit it)."""
+    from flightctl.sim import engine
+    assert "MALLOC_TRIM_THRESHOLD_" not in os.environ
+    names = ["MALLOC_TRIM_THRESHOLD_", "OPENBLAS_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_", "OPENBLAS_NUM_THREADS"]
+    assert engine.run(os.getenv, names, 2, isolate=True) == [None, "1", None, "1"]
+    assert "MALLOC_TRIM_THRESHOLD_" not in os.environ
+
+
 @pytest.mark.parametrize("address", ["tcp://127.0.0.1:{port}", "127.0.0.1", "udp://127.0.0.1:{port}"])
 def test_a_scheduler_that_does_not_answer_is_one_line_and_nothing_written(corpus, tmp_path, address):
     address = address.format(port=free_port())             # nothing listens there, or not an address
