@@ -48,8 +48,8 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-from flightctl.drivers import mpu9250_regs as reg
 from flightctl.cachedir import REFUSED, own_folder
+from flightctl.drivers import mpu9250_regs as reg
 from flightctl.errors import InputError, write_atomic
 from flightctl.params import Params
 
