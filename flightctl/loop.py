@@ -5,8 +5,8 @@
 
 Lifecycle: calibrate sitting still (motors stopped), arm (the motors refuse for a named reason),
 fly the plan, disarm on touchdown. The log starts at arming (its gyro columns are calibrated). Checks, each with a named reason: IMU frames going bad, a crash
-(flightctl/safety.py: tilt past 60 degrees), a low battery (land), the altitude lost (land on the
-accelerometer).
+(flightctl/safety.py: tilt past 60 degrees), a low battery (land), a battery reading no pack can give
+(flightctl/battery.py: not armed; in the air, land), the altitude lost (land on the accelerometer).
 The motors are cut in the air only for a crash, bad IMU frames or a stop request (SIGTERM, the kill
 command); every ordinary event lands under control (`_land`: level, descend at LAND_SPEED on the
 vertical estimate, feel for the floor, stop when the accelerometer confirms it: control/landing.py): the plan ending in the air (a landing move after `duration` included), the log writer
@@ -22,6 +22,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Callable
 
+from flightctl.battery import implausible
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import Calibration
 from flightctl.control.motor_loss import MotorLossDetector, flown_on_four
@@ -120,6 +121,8 @@ class FlightLoop:
         imu_seen: set[str] = set()   # reasons of refused IMU frames already named in an event
         imu_saturated = False
         battery_v, _ = power.read()
+        battery_why = implausible(battery_v, CELLS)   # None, or why the reading is no pack's
+        battery_said = False
         last_echo = t_touch = None
         landing = log_failed = blind = finished = False
         max_alt = 0.0
@@ -168,6 +171,7 @@ class FlightLoop:
                     break
             if i % power_every == 0:
                 battery_v, _ = power.read()
+                battery_why = implausible(battery_v, CELLS)
             if i % sonar_every == 0:
                 sonar.trigger()
             echo = sonar.poll()
@@ -176,6 +180,10 @@ class FlightLoop:
                 calibration.add(sample)
                 counts = stop_counts
                 sp = plan.sp
+                if t >= t_arm and battery_why is not None:    # pre-arm: a reading no pack gives
+                    res.reason = f"stopped: not armed: {battery_why}"
+                    self._event(t, res.reason)
+                    break
                 if t >= t_arm and (tel is None or tel.may_arm()):
                     if tel is not None and tel.arm_required:   # armed by the ground station: the log starts now
                         self.t_arm = t_arm = t
@@ -258,6 +266,13 @@ class FlightLoop:
                         off_loops = 0
                     if ctl.alt > max_alt:
                         max_alt = ctl.alt
+                    if battery_why is not None and not battery_said:   # the low check is blind on it
+                        battery_said = True
+                        if landing:
+                            self._event(t, battery_why + ": the landing goes on")
+                        else:
+                            landing = self._land(t, ctl.alt, battery_why + ": landing")
+                            plan = self.plan
                     if not landing and battery_v < LOW_CELL_V * CELLS:
                         landing = self._land(t, ctl.alt, "battery low: landing")
                         plan = self.plan

@@ -51,7 +51,11 @@ class Airframe:
     h1: float = _p(1.49e-3, "N", 1e-7, 1.0, "plausible default (hover at P = 172)", "eq. 26 gain")
     h2: float = _p(120.0, "P units", 0.0, 250.0, "plausible default", "eq. 26 dead zone")
     c1: float = _p(1.47e-5, "N/(rad/s)^2", 1e-9, 1e-2, "plausible default (hover near 5000 RPM)", "eq. 27")
-    g1: float = _p(0.020, "N m/N", 0.0, 1.0, "plausible default", "eq. 28 slope")
+    # g1's range: eq. 28's slope tau / f = (CP / CT) D / (2 pi) (scripts/as_flown.py); CP / CT is below 0.9
+    # for any propeller that hovers (a figure of merit CT^1.5 / (sqrt 2 CP) above 0.35, with CT up to
+    # 0.2) and D at most rotor_radius' 2 m top: 0.29, rounded up to 0.3. The old top, 1.0, drew 50
+    # times the rotors' power at hover: a battery current no pack delivers.
+    g1: float = _p(0.020, "N m/N", 0.0, 0.3, "plausible default", "eq. 28 slope")
     g2: float = _p(0.002, "N m", -0.1, 0.1, "plausible default", "eq. 28 offset")
     rotor_radius: float = _p(0.1524, "m", 0.005, 1.0, "12-inch propeller", "for ground effect")
     battery_nominal_v: float = _p(14.8, "V", 1.0, 60.0, "4S LiPo", "voltage of the propeller identification")

@@ -225,6 +225,7 @@ def test_the_schedule_is_cached_on_disk_by_the_parameters_it_depends_on(tmp_path
 def test_a_cache_folder_that_cannot_be_written_is_no_error(tmp_path, monkeypatch):
     (tmp_path / "file").write_text("")
     monkeypatch.setenv("FLIGHTCTL_CACHE", str(tmp_path / "file" / "below"))   # under a file: never a folder
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "file" / "xdg"))      # nor the next candidate
     monkeypatch.setattr(spin_design, "_MEMORY", {})
     d = spin_design.design_inputs(load(None))
     assert spin_design.load(d)["rates"][0] == spin_design.R_LO

@@ -129,14 +129,6 @@ def test_a_queued_plan_whose_name_holds_a_nul_is_refused_naming_it(tmp_path):
     assert "holds a NUL character" in reason and "slash" not in reason.split("holds", 1)[1].split(":")[0]
 
 
-def test_the_compiled_simulators_cache_goes_where_it_can_be_written(tmp_path):
-    from flightctl.sim.world.compiled import writable_folder
-    blocked = tmp_path / "a-file"
-    blocked.write_text("")
-    assert writable_folder([blocked / "cache", blocked / "other"]) is None         # nowhere: no cache
-    assert writable_folder([blocked / "cache", tmp_path / "user" / "cache"]) == tmp_path / "user" / "cache"
-
-
 @pytest.mark.skipif(not shutil.which("unshare") or os.geteuid() != 0, reason="needs unshare and root")
 def test_a_service_user_without_a_writable_package_or_home_still_flies(tmp_path):
     """The package folder and HOME mounted read-only (a service user): numba's cache goes to the

@@ -44,9 +44,11 @@ import hashlib
 import json
 import math
 import os
+import sys
 from pathlib import Path
 from typing import NamedTuple
 
+from flightctl.cachedir import REFUSED, own_folder
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.errors import InputError, write_atomic
 from flightctl.params import Params
@@ -491,12 +493,24 @@ def schedule(d: Inputs) -> dict:
 
 
 def cache_dir() -> Path | None:
-    """FLIGHTCTL_CACHE, else $XDG_CACHE_HOME/flightctl, else ~/.cache/flightctl (None: no home)."""
-    if os.environ.get("FLIGHTCTL_CACHE"):
-        return Path(os.environ["FLIGHTCTL_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or (os.path.join(os.path.expanduser("~"), ".cache")
-                                                 if os.path.expanduser("~") != "~" else "")
-    return Path(base) / "flightctl" if base else None
+    """The first of FLIGHTCTL_CACHE, $XDG_CACHE_HOME/flightctl, ~/.cache/flightctl that is a folder only
+    this user can write (flightctl/cachedir.py: another user's could hold planted gains), made where
+    absent; None where none is (the schedule is then computed at each start). A folder passed over
+    as another user's is said once on stderr (one that cannot be made, no home, is no news)."""
+    global _SAID
+    given = os.environ.get("FLIGHTCTL_CACHE")
+    home = os.path.expanduser("~")
+    base = os.environ.get("XDG_CACHE_HOME") or (os.path.join(home, ".cache") if home != "~" else "")
+    candidates = ([Path(given)] if given else []) + ([Path(base) / "flightctl"] if base else [])
+    folder, passed = own_folder(candidates, "FLIGHTCTL_CACHE" if given else None)
+    if not _SAID and any(REFUSED in why for why in passed):
+        _SAID = True
+        where = f"it is kept in {folder}" if folder is not None else "it is computed at each start"
+        print(f"flightctl: the two-rotor landing's gain cache: {'; '.join(passed)}: {where}", file=sys.stderr)
+    return folder
+
+
+_SAID = False   # a cache folder passed over has been said
 
 
 _MEMORY: dict = {}
@@ -531,7 +545,6 @@ def load(d: tuple) -> dict:
         s["inputs"] = list(d)
         if path is not None:
             try:
-                folder.mkdir(parents=True, exist_ok=True)
                 write_atomic(path, json.dumps(s))
             except (OSError, InputError):
                 pass

@@ -49,6 +49,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from flightctl import __version__
+from flightctl.battery import implausible
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, opener, stop_motors
 from flightctl.clock import freeze_gc
 from flightctl.control.controller import FlightController
@@ -56,7 +57,7 @@ from flightctl.control.spin import SpinController
 from flightctl.errors import InputError, output_dir, seed, write_atomic
 from flightctl.hal import ArmingRefused, Hal, ImuSample
 from flightctl.logfile import MAG_COLUMNS, FlightLogWriter
-from flightctl.loop import FlightLoop, FlightResult
+from flightctl.loop import CELLS, FlightLoop, FlightResult
 from flightctl.params import Params, dumps, load
 from flightctl.plans.plan import Plan
 from flightctl.service.queue import PLAN_MAX_AGE_S, PlanQueue, check_name, new_path
@@ -111,7 +112,10 @@ def prearm(hal: Hal, params: Params, min_battery_v: float) -> list[str]:
         elif not REST_ACCEL[0] <= a <= REST_ACCEL[1]:
             reasons.append(f"IMU: |a| = {a:.2f} g at rest (expected 1 g): vehicle moving or IMU faulty")
     v, _ = hal.power.read()
-    if not v >= min_battery_v:
+    why = implausible(v, CELLS)
+    if why is not None:
+        reasons.append(why)
+    elif not v >= min_battery_v:
         reasons.append(f"battery {v:.2f} V below {min_battery_v:.2f} V")
     try:
         hal.motors.arm()

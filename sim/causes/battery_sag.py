@@ -5,14 +5,11 @@ import math
 
 import numpy as np
 
+from flightctl.battery import CELL_V
 from flightctl.sim.identify.diagnose.candidate import AffineCandidate
 from flightctl.sim.world.model import Effect, Parameter
 
 SAG_MIN_SPAN = 0.01      # battery_sag needs the voltage to vary by 1 % (5th to 95th percentile)
-# A lithium-polymer cell between fully discharged and fully charged (a high-voltage cell, LiHV, to 4.35 V):
-# the manufacturers' cut-off and charge voltages (Betaflight's vbat_min_cell_voltage 3.3 V default and
-# vbat_max_cell_voltage 4.3 V bracket a pack's flying range inside it)
-CELL_V = (3.0, 4.35)
 PACK_PERCENTILES = (0.5, 99.5)   # the pack's measured range: every logged voltage but single-sample dropouts
 
 

@@ -11,10 +11,13 @@ misbehaves); `enabled()` says whether it is on. numba is in the default install 
 first flight of a fresh install compiles for a few seconds, later ones load it. numba's cache checks
 only each function's own file, not the files of the functions it calls or of the constants it reads:
 the cache's folder (sim/__pycache__/numba-<hash>, unless NUMBA_CACHE_DIR is set) is named by a hash
-of every such file, so that a change to any of them compiles afresh. Where that folder cannot be
-written (a package installed for another user, a service user without a home), the cache goes to the
-user's cache folder, else to the temporary folder, else nowhere (every process compiles afresh),
-each said once on stderr.
+of every such file, so that a change to any of them compiles afresh. The folder must be one only
+this user can write (flightctl/cachedir.py: made with mode 0700, not a link, owned by this user, no
+write bit for others), since numba loads the machine code it finds there: where it is not (a package
+installed for another user, a service user without a home, a NUMBA_CACHE_DIR of another user's), the
+cache goes to the user's cache folder, else to the temporary folder under a name with the user's id
+(predictable, so a folder planted there by another user is refused), else nowhere (every process
+compiles afresh), said once on stderr.
 """
 from __future__ import annotations
 
@@ -29,6 +32,7 @@ from math import copysign, cos, sin, sqrt
 
 import numpy as np
 
+from flightctl.cachedir import own_folder
 from flightctl.physics import esc_command, rotor_speed, rotor_torque, thrust_from_command, thrust_from_speed
 from flightctl.sim.causes.motor_dynamics import FULL_P, SPIN, reaction_torque, speed_rate
 from flightctl.sim.causes.rotor_drag import drag_wrench
@@ -42,32 +46,20 @@ def enabled() -> bool:
     if os.environ.get("FLIGHTCTL_JIT", "1") == "0":
         return False
     if "numba" not in sys.modules:
-        import flightctl.drivers.mpu9250_regs
-        import flightctl.physics
-        here = Path(__file__).parent
-        compiled_files = [Path(flightctl.physics.__file__), Path(flightctl.drivers.mpu9250_regs.__file__)]
-        compiled_files += [here / name for name in ("model.py", "compiled.py", "imu.py")]
-        compiled_files += [here.parent / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
-        compiled_files += [here.parent / "sweeps" / f"{name}.py" for name in ("onboard", "flight")]
-        compiled_files += [Path(sys.modules["flightctl"].__file__).parent / name for name in (
-            "control/estimator.py", "control/mixer.py", "control/landing.py", "control/controller.py", "loop.py",
-            "safety.py", "drivers/hcsr04.py")]
-        compiled_files += [here / name for name in ("devices.py", "plant.py")]
-        digest = hashlib.sha1(b"".join(path.read_bytes() for path in compiled_files)).hexdigest()[:12]
+        digest = source_digest()
         given = os.environ.get("NUMBA_CACHE_DIR")
-        user = Path(os.environ.get("XDG_CACHE_HOME") or Path(os.path.expanduser("~")) / ".cache")
-        candidates = ([given] if given else []) + [here / "__pycache__" / f"numba-{digest}",
-                                                   user / "flightctl" / f"numba-{digest}",
-                                                   Path(tempfile.gettempdir()) / f"flightctl-numba-{os.getuid() if hasattr(os, 'getuid') else 0}-{digest}"]
-        folder = writable_folder(candidates)
+        folder, passed = own_folder(cache_candidates(digest, given), "NUMBA_CACHE_DIR" if given else None)
         global CACHE
+        said = os.environ.get(CACHE_SAID)     # once: a pool's workers inherit the variable
+        os.environ[CACHE_SAID] = "1"
         if folder is None:
             CACHE = False
-            print(f"flightctl: no writable folder for the compiled simulator's cache ({candidates[0]} and the "
-                  "others): it compiles afresh in this process", file=sys.stderr)
+            if not said:
+                print(f"flightctl: no folder only this user can write for the compiled simulator's cache "
+                      f"({'; '.join(passed)}): it compiles afresh in this process", file=sys.stderr)
         else:
-            if str(folder) != str(candidates[0]):
-                print(f"flightctl: the compiled simulator's cache is in {folder} ({candidates[0]} cannot be written)",
+            if passed and not said:
+                print(f"flightctl: the compiled simulator's cache is in {folder} ({'; '.join(passed)})",
                       file=sys.stderr)
             os.environ["NUMBA_CACHE_DIR"] = str(folder)
     try:
@@ -84,21 +76,37 @@ def enabled() -> bool:
 PLAIN_SAID = "FLIGHTCTL_PLAIN_SAID"   # set once the plain-Python fallback has been said, for child processes
 
 
-CACHE = True        # numba's cache=True, unless no folder for it can be written
+CACHE = True        # numba's cache=True, unless no folder only this user can write is found
+CACHE_SAID = "FLIGHTCTL_CACHE_SAID"   # set once the cache's folder has been chosen, for child processes
 
 
-def writable_folder(candidates) -> Path | None:
-    """The first folder of `candidates` that exists or can be made, and takes a new file."""
-    for c in candidates:
-        try:
-            folder = Path(c)
-            folder.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryFile(dir=folder):
-                pass
-            return folder
-        except OSError:
-            continue
-    return None
+def source_digest() -> str:
+    """The hash of every file the compiled code depends on: it names the cache's folder (the module's
+    docstring)."""
+    import flightctl.drivers.mpu9250_regs
+    import flightctl.physics
+    here = Path(__file__).parent
+    compiled_files = [Path(flightctl.physics.__file__), Path(flightctl.drivers.mpu9250_regs.__file__)]
+    compiled_files += [here / name for name in ("model.py", "compiled.py", "imu.py")]
+    compiled_files += [here.parent / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
+    compiled_files += [here.parent / "sweeps" / f"{name}.py" for name in ("onboard", "flight")]
+    compiled_files += [Path(sys.modules["flightctl"].__file__).parent / name for name in (
+        "control/estimator.py", "control/mixer.py", "control/landing.py", "control/controller.py", "loop.py",
+        "safety.py", "drivers/hcsr04.py")]
+    compiled_files += [here / name for name in ("devices.py", "plant.py")]
+    return hashlib.sha1(b"".join(path.read_bytes() for path in compiled_files)).hexdigest()[:12]
+
+
+def cache_candidates(digest: str, given: str | None = None, uid: int | None = None) -> list[Path]:
+    """Where numba's cache may go, in order: NUMBA_CACHE_DIR where the user gives it, the package's
+    own sim/__pycache__, the user's cache folder, the temporary folder (a name with this user's id:
+    predictable, so it is used only if it is this user's own, flightctl/cachedir.py)."""
+    here = Path(__file__).parent
+    user = Path(os.environ.get("XDG_CACHE_HOME") or Path(os.path.expanduser("~")) / ".cache")
+    uid = uid if uid is not None else os.geteuid() if hasattr(os, "geteuid") else 0
+    return ([Path(given)] if given else []) + [here / "__pycache__" / f"numba-{digest}",
+                                                 user / "flightctl" / f"numba-{digest}",
+                                                 Path(tempfile.gettempdir()) / f"flightctl-numba-{uid}-{digest}"]
 
 
 def compiled_copy(fn, allocates: bool = False, **dependencies):

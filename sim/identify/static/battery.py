@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from flightctl.sim.causes.battery_sag import CELL_V as E_CELL   # a lithium-polymer cell, discharged to charged
+from flightctl.battery import CELL_V as E_CELL   # a lithium-polymer cell, discharged to charged
 from flightctl.sim.identify.diagnose.data import FileData, all_running
 from flightctl.sim.identify.static.blocks import moving_mean
 
