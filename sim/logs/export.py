@@ -38,6 +38,8 @@ from __future__ import annotations
 
 import datetime
 import hashlib
+import json
+import re
 import struct
 import sys
 import tomllib
@@ -48,8 +50,9 @@ import numpy as np
 from flightctl import __version__
 from flightctl.errors import InputError, Parser, output_file
 from flightctl.comms.frames import euler_ned, pulse_us, quaternion, vector_ned
-from flightctl.logfile import read_flight_log
+from flightctl.logfile import FLIGHT_COLUMNS, MAG_COLUMNS, read_flight_log
 from flightctl.params import Airframe, Gains, from_dict
+from flightctl.sim.logs.own import HOMES, NAME, OWN_TOPIC, SPARSE, own_columns
 
 MAGIC = b"ULog\x01\x12\x35"
 FILE_VERSION = 1
@@ -136,7 +139,7 @@ TOPICS = {t.name: t for t in (
                                         ("float", "yaw_body", 0), ("float", "q_d", 4)]),
     Topic("vehicle_local_position", [("float", "z", 0), ("float", "dist_bottom", 0)]),
     Topic("vehicle_local_position_setpoint", [("float", "z", 0)]),
-    Topic("actuator_outputs", [("uint32_t", "noutputs", 0), ("float", "output", 4), ("float", "command", 4)]),
+    Topic("actuator_outputs", [("uint32_t", "noutputs", 0), ("float", "output", 4)]),
     Topic("actuator_motors", [("uint64_t", "timestamp_sample", 0), ("float", "control", 4)]),
     Topic("vehicle_angular_velocity", [("uint64_t", "timestamp_sample", 0), ("float", "xyz", 3)]),
     Topic("vehicle_rates_setpoint", [("float", "roll", 0), ("float", "pitch", 0), ("float", "yaw", 0),
@@ -152,6 +155,7 @@ TOPICS = {t.name: t for t in (
     Topic("vehicle_gps_position", [("uint64_t", "time_utc_usec", 0), ("uint8_t", "fix_type", 0)]),
     Topic("vehicle_attitude_groundtruth", [("float", "q", 4)]),
     Topic("vehicle_local_position_groundtruth", [("float", "x", 0), ("float", "y", 0), ("float", "z", 0)]),
+    Topic("vehicle_magnetometer", [("uint64_t", "timestamp_sample", 0), ("float", "magnetometer_ga", 3)]),
 )}
 
 
@@ -184,6 +188,25 @@ def _release(version: str) -> int:
     return (nums[0] << 24) | (nums[1] << 16) | (nums[2] << 8) | 255
 
 
+def _columns(log) -> tuple[str, ...]:
+    """The log's columns that the ULog carries: the contract's, the magnetometer's, the simulator's truth
+    and the imported logs' extra columns (docs/log-import.md), those the CSV has; others are ignored,
+    as formats.md has extra columns."""
+    from flightctl.sim.logs.common import EXTRA
+    return tuple(dict.fromkeys(c for c in FLIGHT_COLUMNS + MAG_COLUMNS + TRUTH + EXTRA if c in log))
+
+
+def _fill(data: dict, topic: str, field: str, x: np.ndarray) -> None:
+    """Put column values x into a topic's field (`name[i]`: element i of an array field, the others NaN)."""
+    name, _, index = field.partition("[")
+    values = data.setdefault(topic, {})
+    if not index:
+        values[name] = x
+        return
+    size = next(n for _, f, n in TOPICS[topic].fields if f == name)
+    values.setdefault(name, np.full((x.size, size), np.nan))[:, int(index[:-1])] = x
+
+
 def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
     """Write the ULog file; returns the number of samples per topic."""
     from flightctl.sim.logs.common import EXTRA
@@ -195,27 +218,44 @@ def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
         t0 = float(meta.get("calibrate_s", 0.0))
     except ValueError:
         t0 = 0.0
-    ts = np.round((log["t"] + t0) * 1e6).astype(np.uint64)
+    t0 = max(t0, -float(log["t"][0]))                  # (a log whose time starts before 0: timestamps are unsigned)
+    t0_us = int(round(t0 * 1e6))
+    ts = (np.round(log["t"] * 1e6).astype(np.int64) + t0_us).astype(np.uint64)     # t in whole us, as the CSV has it
     col = log.columns
+    columns = _columns(log)
     n = len(ts)
     P = np.column_stack([col[f"P{i}"] for i in range(1, 5)])
-    gx, gy, gz = vector_ned(col["gyro_x"], col["gyro_y"], col["gyro_z"])
-    ax, ay, az = vector_ned(col["acc_x"], col["acc_y"], col["acc_z"])
+    rows = {name: np.ones(n, bool) for name in TOPICS}
+    for name in SPARSE:                                # a sample where one of the topic's columns has a value
+        mine = [c for c in columns if c in HOMES and HOMES[c][0] == name]
+        rows[name] = np.any([np.isfinite(col[c]) for c in mine], axis=0) if mine else np.zeros(n, bool)
+    data: dict[str, dict] = {}
+    for c in columns:                                  # each column in its home (own.py): PX4's field, or ours
+        topic, field, scale = HOMES.get(c, (OWN_TOPIC, c, 1.0))
+        if topic != OWN_TOPIC:
+            _fill(data, topic, field, col[c][rows[topic]] / scale)
     rsp, psp, ysp = euler_ned(col["roll_sp"], col["pitch_sp"], col["yaw_sp"])
-    data = {
-        "sensor_combined": dict(gyro_rad=np.column_stack([gx, gy, gz]),
-                                accelerometer_m_s2=np.column_stack([ax, ay, az])),
-        "vehicle_attitude": dict(q=_q(col["roll"], col["pitch"], col["yaw"])),
-        "vehicle_attitude_setpoint": dict(roll_body=rsp, pitch_body=psp, yaw_body=ysp,
-                                          q_d=_q(col["roll_sp"], col["pitch_sp"], col["yaw_sp"])),
-        "vehicle_local_position": dict(z=-col["alt"], dist_bottom=col["alt"]),
-        "vehicle_local_position_setpoint": dict(z=-col["alt_sp"]),
-        "actuator_outputs": dict(noutputs=4, output=pulse_us(P, esc_hz), command=P),
-    }
-    data["actuator_motors"] = dict(timestamp_sample=ts, control=P / 255.0)
-    data["vehicle_angular_velocity"] = dict(timestamp_sample=ts, xyz=np.column_stack([gx, gy, gz]))
-    data["vehicle_rates_setpoint"] = _rates_setpoint(log, params, P)
-    stamps = {name: ts for name in data}
+    data["vehicle_attitude"] = dict(q=_q(col["roll"], col["pitch"], col["yaw"]))
+    data["vehicle_attitude_setpoint"] = dict(roll_body=rsp, pitch_body=psp, yaw_body=ysp,
+                                             q_d=_q(col["roll_sp"], col["pitch_sp"], col["yaw_sp"]))
+    data["vehicle_local_position"]["dist_bottom"] = col["alt"]
+    data["actuator_outputs"] = dict(noutputs=4, output=pulse_us(P, esc_hz))
+    data["actuator_motors"]["timestamp_sample"] = ts
+    data["vehicle_angular_velocity"] = dict(timestamp_sample=ts, xyz=data["sensor_combined"]["gyro_rad"])
+    data["vehicle_rates_setpoint"] = _rates_setpoint(log, params, P) | data.get("vehicle_rates_setpoint", {})
+    data["battery_status"]["voltage_filtered_v"] = data["battery_status"]["voltage_v"]
+    if "current" not in log:
+        data["battery_status"]["current_a"] = -1.0                                   # PX4: -1 unknown
+    data["distance_sensor"] |= dict(min_distance=SONAR_RANGE_M[0], max_distance=SONAR_RANGE_M[1],
+                                    type=ULTRASOUND, orientation=DOWNWARD)
+    if "vehicle_magnetometer" in data:
+        data["vehicle_magnetometer"]["timestamp_sample"] = ts[rows["vehicle_magnetometer"]]
+    if all(c in log for c in TRUTH):
+        data["vehicle_attitude_groundtruth"] = dict(q=_q(col["true_roll"], col["true_pitch"], col["true_yaw"]))
+    ours = own_columns(columns)
+    data[OWN_TOPIC] = {c: col[c] for c in ours}
+    defined = TOPICS | {OWN_TOPIC: Topic(OWN_TOPIC, [("float", c, 0) for c in ours])}   # ours: this log's columns
+    stamps = {name: ts[rows[name]] if name in rows else ts for name in data}
     second = np.unique(np.clip(np.searchsorted(log["t"], np.arange(log["t"][0], log["t"][-1], 1.0)), 0, n - 1))
     data["vehicle_status"] = dict(arming_state=ARMED, nav_state=AUTO_MISSION, vehicle_type=ROTARY_WING, is_vtol=0)
     stamps["vehicle_status"] = ts[second]
@@ -227,33 +267,26 @@ def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
         values[:, :4] = np.clip(rc[ok], 0, 65535)
         data["input_rc"] = dict(timestamp_last_signal=ts[ok], rssi=100, channel_count=4, values=values)
         stamps["input_rc"] = ts[ok]
-    volts = col["battery_v"]
-    has_v = np.isfinite(volts)
-    amps = col["current"][has_v] if "current" in log else np.full(int(has_v.sum()), -1.0)   # PX4: -1 unknown
-    data["battery_status"] = dict(voltage_v=volts[has_v], voltage_filtered_v=volts[has_v], current_a=amps)
-    stamps["battery_status"] = ts[has_v]
     if meta.get("start_utc"):     # UTC (us) at each second of the log: PX4's vehicle_gps_position.time_utc_usec
         zero = datetime.datetime.fromisoformat(meta["start_utc"].replace("Z", "+00:00")).timestamp()
         data["vehicle_gps_position"] = dict(time_utc_usec=np.round(zero * 1e6 + ts[second].astype(float)).astype(np.uint64),
                                             fix_type=3)
         stamps["vehicle_gps_position"] = ts[second]
-    rng = col["range"]
-    echo = np.isfinite(rng)
-    data["distance_sensor"] = dict(min_distance=SONAR_RANGE_M[0], max_distance=SONAR_RANGE_M[1],
-                                   current_distance=rng[echo], type=ULTRASOUND, orientation=DOWNWARD)
-    stamps["distance_sensor"] = ts[echo]
-    if all(c in log for c in TRUTH):
-        data["vehicle_attitude_groundtruth"] = dict(q=_q(col["true_roll"], col["true_pitch"], col["true_yaw"]))
-        data["vehicle_local_position_groundtruth"] = dict(zip("xyz", vector_ned(col["true_x"], col["true_y"], col["true_z"])))
-        stamps.update({k: ts for k in data if k.endswith("groundtruth")})
 
     head = bytearray(MAGIC + bytes([FILE_VERSION]) + struct.pack("<Q", 0))
     head += _message("B", bytes(16) + bytes(24))     # flag bits: no compatible, incompatible or appended data
-    topics = [TOPICS[name] for name in data]
+    topics = [defined[name] for name in data]
     for topic in topics:
         head += topic.format()
     software = meta.get("software", f"flightctl {__version__}")
-    head += _info("sys_name", "flightctl")
+    head += _info("sys_name", NAME)                  # the project's own log (own.py reads it back whole)
+    head += _info("flightctl_columns", ",".join(("t",) + columns[1:]))
+    head += _info("flightctl_t0_us", str(t0_us))
+    try:
+        head += _info("flightctl_meta", json.dumps(meta))
+    except ValueError:
+        raise InputError(f"{log.path}: its '# key: value' lines are too long for a ULog information message "
+                         f"({len(json.dumps(meta))} bytes; 65,000 at most)") from None
     head += _info("ver_sw", software)
     head += _info("ver_sw_release", _release(software.split()[-1]))
     head += _info("ver_hw", meta.get("board", "unknown"))
@@ -341,7 +374,9 @@ def _import(args) -> int:
     if image is not None:
         Path(args.plot).write_bytes(image)
     rows = text.count("\n") - sum(1 for line in text.splitlines() if line.startswith("#")) - 1
-    print(f"{args.foreign}: {rows} rows -> {out}" + (f", figure -> {args.plot}" if args.plot else ""))
+    damaged = re.search(r"^# damaged: (.*)$", text, re.M)       # a damaged log is said, not only in its header
+    print(f"{args.foreign}: {rows} rows -> {out}" + (f", figure -> {args.plot}" if args.plot else "")
+          + (f" (damaged: {damaged[1]})" if damaged else ""))
     return 0
 
 
