@@ -131,23 +131,19 @@ def test_flight_review_topics(exported):
     assert np.allclose(motors["control[3]"], csv["P4"] / 255.0, atol=1e-6)
 
 
-def _as_px4s(src: Path, dst: Path) -> Path:
-    """The exported ULog as PX4's tools see it: the information message that marks it as flightctl's
-    own renamed (same length: the file stays valid), so the PX4 reader takes it."""
-    raw = src.read_bytes()
-    assert raw.count(b"flightctl_columns") == 1
-    dst.write_bytes(raw.replace(b"flightctl_columns", b"flightctl_columnz"))
-    return dst
-
-
 def test_an_exported_log_read_as_px4s_has_the_same_samples(exported, tmp_path):
-    """sim -> export -> PX4's reading of it: every sample within the ULog's float32 quantisation, the
-    range on its own rows, the vehicle the paper's + layout."""
+    """sim -> export of PX4's topics alone (`px4_only`: as another vehicle's PX4 log, without what makes
+    it flightctl's own) -> PX4's reading of it: every sample within the ULog's float32 quantisation,
+    the range on its own rows, the vehicle the paper's + layout."""
     from flightctl.sim.logs import read_foreign
-    csv, ulog = exported
+    from flightctl.sim.logs.export import export
+    csv, _ = exported
+    export(csv.path, tmp_path / "px4.ulg", px4_only=True)
+    ulog = pyulog.ULog(str(tmp_path / "px4.ulg"))
+    assert "flightctl_columns" not in ulog.msg_info_dict and "flightctl_log" not in {d.name for d in ulog.data_list}
     path = tmp_path / "f.ulg"
     ulog.write_ulog(str(path))                     # (pyulog writes back what it read: the same file)
-    (back,) = read_foreign(str(_as_px4s(path, tmp_path / "px4.ulg")))
+    (back,) = read_foreign(str(path))
     assert back.meta["vehicle"] == "foreign"
     assert len(back) == len(csv)
     for c in ("P1", "P2", "P3", "P4", "gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z", "battery_v", "roll",

@@ -207,8 +207,11 @@ def _fill(data: dict, topic: str, field: str, x: np.ndarray) -> None:
     values.setdefault(name, np.full((x.size, size), np.nan))[:, int(index[:-1])] = x
 
 
-def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
-    """Write the ULog file; returns the number of samples per topic."""
+def export(csv_path: str | Path, ulg_path: str | Path, px4_only: bool = False) -> dict[str, int]:
+    """Write the ULog file; returns the number of samples per topic. `px4_only`: PX4's topics alone,
+    without what makes the file flightctl's own (the flightctl_log topic, the flightctl_columns,
+    flightctl_meta and flightctl_t0_us information messages), so that it reads as another vehicle's
+    PX4 log (sim/flights/fleet.py's simulated PX4 vehicles)."""
     from flightctl.sim.logs.common import EXTRA
     log = read_flight_log(csv_path, extra=TRUTH + EXTRA)
     meta = log.meta
@@ -253,7 +256,8 @@ def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
     if all(c in log for c in TRUTH):
         data["vehicle_attitude_groundtruth"] = dict(q=_q(col["true_roll"], col["true_pitch"], col["true_yaw"]))
     ours = own_columns(columns)
-    data[OWN_TOPIC] = {c: col[c] for c in ours}
+    if not px4_only:
+        data[OWN_TOPIC] = {c: col[c] for c in ours}
     defined = TOPICS | {OWN_TOPIC: Topic(OWN_TOPIC, [("float", c, 0) for c in ours])}   # ours: this log's columns
     stamps = {name: ts[rows[name]] if name in rows else ts for name in data}
     second = np.unique(np.clip(np.searchsorted(log["t"], np.arange(log["t"][0], log["t"][-1], 1.0)), 0, n - 1))
@@ -279,14 +283,15 @@ def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
     for topic in topics:
         head += topic.format()
     software = meta.get("software", f"flightctl {__version__}")
-    head += _info("sys_name", NAME)                  # the project's own log (own.py reads it back whole)
-    head += _info("flightctl_columns", ",".join(("t",) + columns[1:]))
-    head += _info("flightctl_t0_us", str(t0_us))
-    try:
-        head += _info("flightctl_meta", json.dumps(meta))
-    except ValueError:
-        raise InputError(f"{log.path}: its '# key: value' lines are too long for a ULog information message "
-                         f"({len(json.dumps(meta))} bytes; 65,000 at most)") from None
+    head += _info("sys_name", NAME)
+    if not px4_only:                                 # the project's own log (own.py reads it back whole)
+        head += _info("flightctl_columns", ",".join(("t",) + columns[1:]))
+        head += _info("flightctl_t0_us", str(t0_us))
+        try:
+            head += _info("flightctl_meta", json.dumps(meta))
+        except ValueError:
+            raise InputError(f"{log.path}: its '# key: value' lines are too long for a ULog information message "
+                             f"({len(json.dumps(meta))} bytes; 65,000 at most)") from None
     head += _info("ver_sw", software)
     head += _info("ver_sw_release", _release(software.split()[-1]))
     head += _info("ver_hw", meta.get("board", "unknown"))
