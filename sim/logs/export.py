@@ -1,38 +1,42 @@
 """`flightctl log export FLIGHT.csv FLIGHT.ulg`: a flight log as PX4's ULog, for PlotJuggler and
-Flight Review (the format: https://docs.px4.io/main/en/dev_log/ulog_file_format.html).
+Flight Review (the format: https://docs.px4.io/main/en/dev_log/ulog_file_format.html), which `flightctl
+log import` and `flightctl diagnose` read back as the flight log it was written from (own.py).
 
 The file: the 16-byte header, the flag bits, then the definitions (formats, information messages
 with the software version, every parameter, subscriptions) and the data messages in time order.
-Topics take PX4's names and fields, so the tools that know PX4 plot them, and PX4's frames:
-body FRD, inertial NED, converted once here (flightctl/comms/frames.py). Timestamps are microseconds since
-the loop started (the log's time plus its calibration time).
+Topics take PX4's names and fields (PX4-Autopilot's msg/*.msg), so the tools that know PX4 plot them,
+and PX4's frames: body FRD, inertial NED, converted once here (flightctl/comms/frames.py). Timestamps
+are microseconds since the loop started (the log's time plus its calibration time).
 
 | topic | fields | from the CSV |
 |---|---|---|
 | sensor_combined | gyro_rad[3] (rad/s), accelerometer_m_s2[3] (m/s^2) | gyro_*, acc_* |
 | vehicle_attitude | q[4] (FRD to NED) | roll, pitch, yaw (the estimate) |
-| vehicle_attitude_setpoint | roll_body, pitch_body, yaw_body (rad), q_d[4] | *_sp |
+| vehicle_attitude_setpoint | roll_body, pitch_body, yaw_body (rad; PX4 before 1.14), q_d[4] | *_sp |
 | vehicle_local_position | z (m, down), dist_bottom (m) | alt (the estimate) |
 | vehicle_local_position_setpoint | z (m, down) | alt_sp |
-| actuator_outputs | noutputs, output[4] (ESC pulse, us), command[4] (P, 0-255) | P1..P4 |
+| actuator_outputs | noutputs, output[4] (ESC pulse, us) | P1..P4 |
 | actuator_motors | control[4] (P / 255: PX4's normalised motor commands) | P1..P4 |
 | vehicle_angular_velocity | xyz[3] (rad/s, FRD) | gyro_* |
 | vehicle_rates_setpoint | roll, pitch, yaw (rad/s, FRD), thrust_body[3] | setpoint_* where logged, else the rate the PD commands: kp/kd times the angle error (eq. 24 as an angle loop feeding a rate loop, the integral left out); thrust: -mean P / 255 on z |
 | vehicle_status | arming_state (2 armed: the log starts at arming), nav_state (3, a mission: a plan), vehicle_type (1, rotary wing), is_vtol | one sample a second |
 | input_rc | channel_count, rssi, values[18] (us) | rc_* where logged (an imported log): 1500 + 500 stick, throttle 1000 + 1000 |
-| battery_status | voltage_v, voltage_filtered_v (V), current_a (A, -1 unknown) | battery_v (rows with a reading), current |
+| battery_status | voltage_v, voltage_filtered_v (V), current_a (A, -1 unknown) | battery_v, current (rows with a reading) |
 | distance_sensor | current_distance, min_distance, max_distance (m), orientation, type | range (rows with an echo) |
+| vehicle_magnetometer | magnetometer_ga[3] (Gauss, FRD) | mag_* (T; rows with a reading) |
 | vehicle_attitude_groundtruth, vehicle_local_position_groundtruth | q[4]; x, y, z (m) | true_* (simulator only) |
+| flightctl_log | one float a column, as the CSV has it | roll, pitch, yaw, roll_sp, pitch_sp, yaw_sp, true_roll, true_pitch, true_yaw and every other column without a PX4 field that holds it (the sticks: input_rc holds whole us; own.py) |
 
-The vehicle is described the PX4 way, so that PX4 tools and `flightctl log import` read it: MAV_TYPE 2,
-CA_ROTOR_COUNT 4 and CA_ROTOR{0..3}_PX/PY/KM (the paper's + layout, eq. 25, FRD, KM > 0
-counter-clockwise), PWM_MAIN_FUNC1..4 = 101..104 with PWM_MAIN_MIN/MAX the pulse of P = 0 and 255.
-The log's `# params:` file is flattened (`kp_z` is `gains.kp_z`) into float parameters named as PX4
-allows (at most 16 characters: `FC_` and the section's letter, `FC_G_KP_Z`; a longer name keeps its
-first 12 characters and a 3-character hash), and the `flightctl_params` information message lists
-`SHORT=full.name` for each. A log whose header has `# vehicle_id:` and `# start_utc:` (sim/flights/fleet.py)
-gets them as PX4 has them: the `sys_uuid` information message, and vehicle_gps_position's `time_utc_usec`
-once a second.
+The vehicle is described the PX4 way, so that PX4 tools read it: MAV_TYPE 2, CA_ROTOR_COUNT 4 and
+CA_ROTOR{0..3}_PX/PY/KM (the paper's + layout, eq. 25, FRD, KM > 0 counter-clockwise),
+PWM_MAIN_FUNC1..4 = 101..104 with PWM_MAIN_MIN/MAX the pulse of P = 0 and 255. The log's `# params:`
+file is flattened (`kp_z` is `gains.kp_z`) into float parameters named as PX4 allows (at most 16
+characters: `FC_` and the section's letter, `FC_G_KP_Z`; a longer name keeps its first 12 characters
+and a 3-character hash), and the `flightctl_params` information message lists `SHORT=full.name` for
+each. A log whose header has `# vehicle_id:` and `# start_utc:` (sim/flights/fleet.py) gets them as
+PX4 has them: the `sys_uuid` information message, and vehicle_gps_position's `time_utc_usec` once a
+second. The information messages `sys_name` flightctl, `flightctl_columns` (the CSV's columns),
+`flightctl_meta` (its `# key: value` lines, JSON) and `flightctl_t0_us` make it flightctl's own.
 """
 from __future__ import annotations
 
