@@ -136,3 +136,25 @@ def test_a_garbled_blackbox_header_is_one_line_without_a_class_name(tmp_path, ca
         assert not CLASS_NAME.search(err.split("error: ", 1)[1]), err
         assert not out.exists()
     assert refused >= 4, refused
+
+
+def test_a_damaged_own_ulog_keeps_its_other_rows_exact(tmp_path, capsys):
+    """flightctl's own ULog (roboto-test.ulg imported, then exported) with a flipped size: read back as
+    its CSV less the rows lost, each row kept the CSV's own (the same time, each value the CSV's or, where
+    the topic holding it lost that sample, empty: never another row's), the loss said in `# damaged:`."""
+    csv, ulg = tmp_path / "a.csv", tmp_path / "a.ulg"
+    assert main(["log", "import", str(need(ROBOTO)), str(csv), "--quiet"]) == 0
+    assert main(["log", "export", str(csv), str(ulg)]) == 0
+    bad = tmp_path / "bad.ulg"
+    bad.write_bytes(_flipped(5, (0, 1), ulg))
+    capsys.readouterr()
+    assert main(["log", "import", str(bad), str(tmp_path / "b.csv"), "--quiet"]) == 0
+    assert "damaged:" in capsys.readouterr().out
+    a, b = read_flight_log(csv, min_rows=10), read_flight_log(tmp_path / "b.csv", min_rows=10)
+    said = int(re.search(r"(\d+) rows lost", b.meta["damaged"])[1])
+    assert 0 < len(a) - len(b) and abs(said - (len(a) - len(b))) <= 3, (said, len(a) - len(b))
+    rows = np.searchsorted(a["t"], b["t"])
+    assert np.array_equal(a["t"][rows], b["t"])
+    for c in a.columns:
+        x, y = a[c][rows], b[c]
+        assert np.array_equal(x[np.isfinite(y)], y[np.isfinite(y)]) and not np.isfinite(y[np.isnan(x)]).any(), c
