@@ -60,17 +60,13 @@ def is_own(u) -> bool:
     return str(info.get("sys_name", "")) == NAME and "flightctl_columns" in info
 
 
-def _topic(u, name: str):
-    sets = [d for d in u.data_list if d.name == name]
-    return min(sets, key=lambda d: d.multi_id).data if sets else None
-
-
 def read(u, path: str, damaged: str | None, said: list[str]) -> tuple[dict[str, str], dict[str, np.ndarray], tuple[str, ...]]:
     """(the metadata, the columns, the extra columns in the CSV's order) of the project's own ULog.
     The rows are sensor_combined's samples; each column is taken from its home's samples at the rows'
     timestamps (a sparse topic's at its own rows). Rows that lost a sample a column needs (a damaged
     file whose data messages pyulog skipped: `damaged`, the damage already counted) are dropped and
     counted in `# damaged:` too."""
+    from flightctl.sim.logs.ulog import topic
     info = u.msg_info_dict
     try:
         columns = str(info["flightctl_columns"]).split(",")
@@ -79,7 +75,7 @@ def read(u, path: str, damaged: str | None, said: list[str]) -> tuple[dict[str, 
     except (ValueError, AttributeError):
         raise InputError(f"{path}: its flightctl_columns, flightctl_meta or flightctl_t0_us information "
                          "message is damaged") from None
-    base = _topic(u, "sensor_combined")
+    base = topic(u, "sensor_combined")
     if base is None or columns[:1] != ["t"]:
         raise InputError(f"{path}: flightctl's ULog without sensor_combined or a 't' column: damaged")
     ts = base["timestamp"].astype(np.int64)
@@ -88,10 +84,11 @@ def read(u, path: str, damaged: str | None, said: list[str]) -> tuple[dict[str, 
     for c in columns[1:]:
         name, field, scale = HOMES.get(c, (OWN_TOPIC, c, 1.0))
         out = np.full(n, np.nan)
-        d = _topic(u, name)
+        d = topic(u, name)
         if d is not None and field in d and n:
-            i = np.clip(np.searchsorted(ts, d["timestamp"].astype(np.int64)), 0, n - 1)
-            ok = ts[i] == d["timestamp"]
+            at = d["timestamp"].astype(np.int64)
+            i = np.clip(np.searchsorted(ts, at), 0, n - 1)
+            ok = ts[i] == at
             out[i[ok]] = d[field][ok].astype(float) * scale
         cols[c] = out
     needed = [c for c in ("P1", "P2", "P3", "P4") + (() if "imu" in meta else IMU_COLUMNS) if c in cols]

@@ -35,7 +35,7 @@ def _ulog(path: str):
     """(pyulog's ULog of `path`, the lines pyulog printed while reading it). pyulog prints its warnings
     on stdout (pyulog/core.py: `print('Warning: no subscription found for message id ...')`, "File
     corruption detected while reading file data!"): they are taken here, never left on our stdout, and
-    said in the import's notes (`damage`)."""
+    said in the import's notes (`pyulog: ...` in `# import_notes`)."""
     try:
         from pyulog import ULog
     except ImportError:
