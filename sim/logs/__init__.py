@@ -113,6 +113,8 @@ def _entry(index: int, name: str, read, progress) -> LogEntry:
         imp: Imported | str = _guarded(name, read)        # (a str: the project's own log's text, read whole)
         text = imp if isinstance(imp, str) else _guarded(name, lambda: flight_text(imp, progress))
         table = to_table(text, name)
+        if isinstance(imp, str) and progress:
+            progress(f"{name}: flightctl's own ULog, read back whole: {len(table)} rows")
     except InputError as e:
         return LogEntry(index, None, reason(str(e), name), 0.0)
     t = table["t"]
