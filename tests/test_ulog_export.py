@@ -2,6 +2,7 @@
 and compared with the CSV, signs of the frame change included."""
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -220,3 +221,15 @@ def test_diagnose_reads_its_own_ulog_as_the_csv(exported, tmp_path):
     (b,) = read_logs([str(tmp_path / "f.ulg")], None, lambda *m: None)
     assert "vehicle" not in b.meta and b.meta == a.meta
     _same_columns(a, b, "diagnose")
+
+
+def test_diagnose_of_its_own_ulog_is_the_csvs(exported, tmp_path, capsys):
+    """The whole command: `diagnose F.ulg` names what `diagnose F.csv` names, with the same figures."""
+    csv_path = Path(exported[0].path)
+    assert cli(["log", "export", str(csv_path), str(tmp_path / "f.ulg")]) == 0
+    reports = []
+    for log in (csv_path, tmp_path / "f.ulg"):
+        assert cli(["diagnose", str(log), "--json", str(tmp_path / "r.json"), "--quiet"]) == 0
+        reports.append(json.loads((tmp_path / "r.json").read_text()))
+    a, b = ({k: v for k, v in r.items() if k not in ("runtime_s", "data", "notes")} for r in reports)
+    assert a == b and a["rmse_base"] > 0
