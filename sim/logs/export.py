@@ -347,22 +347,22 @@ def _vehicle_parameters(log, params: dict[str, float]) -> dict[str, float | int]
 
 
 def _rates_setpoint(log, params: dict[str, float], P: np.ndarray) -> dict:
-    """vehicle_rates_setpoint (FRD): the log's rate setpoint where it has one, else the rate this
-    controller's PD commands, kp/kd times the angle error (eq. 24 written as an angle loop feeding a
-    rate loop; the integral left out); the thrust: minus the mean command on z."""
+    """vehicle_rates_setpoint (FRD) of a log without a rate setpoint (with one, its setpoint_* columns
+    are the fields: their home, own.HOMES): the rate this controller's PD commands, kp/kd times the angle
+    error (eq. 24 written as an angle loop feeding a rate loop; the integral left out); the thrust, in
+    every log: minus the mean command on z."""
     col = log.columns
-    if all(f"setpoint_{a}" in log for a in "xyz"):
-        ours = [col[f"setpoint_{a}"] for a in "xyz"]
-    else:
-        g = {k: params.get(f"gains.{k}", getattr(Gains, k)) for k in
-             ("kp_phi", "kd_phi", "kp_theta", "kd_theta", "kp_psi", "kd_psi")}
-        err = [col["roll_sp"] - col["roll"], col["pitch_sp"] - col["pitch"],
-               (col["yaw_sp"] - col["yaw"] + np.pi) % (2 * np.pi) - np.pi]
-        ours = [g[f"kp_{a}"] / g[f"kd_{a}"] * e if g[f"kd_{a}"] > 0 else np.zeros_like(e)
-                for a, e in zip(("phi", "theta", "psi"), err)]
-    roll, pitch, yaw = vector_ned(*ours)
     thrust = np.zeros((len(P), 3))
     thrust[:, 2] = -P.mean(axis=1) / 255.0
+    if all(f"setpoint_{a}" in log for a in "xyz"):
+        return dict(thrust_body=thrust)
+    g = {k: params.get(f"gains.{k}", getattr(Gains, k)) for k in
+         ("kp_phi", "kd_phi", "kp_theta", "kd_theta", "kp_psi", "kd_psi")}
+    err = [col["roll_sp"] - col["roll"], col["pitch_sp"] - col["pitch"],
+           (col["yaw_sp"] - col["yaw"] + np.pi) % (2 * np.pi) - np.pi]
+    ours = [g[f"kp_{a}"] / g[f"kd_{a}"] * e if g[f"kd_{a}"] > 0 else np.zeros_like(e)
+            for a, e in zip(("phi", "theta", "psi"), err)]
+    roll, pitch, yaw = vector_ned(*ours)
     return dict(roll=roll, pitch=pitch, yaw=yaw, thrust_body=thrust)
 
 
