@@ -2,18 +2,21 @@
 and compared with the CSV, signs of the frame change included."""
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from flightctl import __version__
 from flightctl.cli import main as cli
-from flightctl.logfile import read_flight_log
+from flightctl.logfile import FLIGHT_COLUMNS, MAG_COLUMNS, read_flight_log
 from flightctl.params import load
 from flightctl.plans.plan import Move, Plan
 from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import scenario
+from real import FLIGHTS, need
 
 pyulog = pytest.importorskip("pyulog")
 
@@ -129,14 +132,20 @@ def test_flight_review_topics(exported):
     assert np.allclose(motors["control[3]"], csv["P4"] / 255.0, atol=1e-6)
 
 
-def test_an_exported_log_reads_back_with_the_same_samples(exported, tmp_path):
-    """sim -> export -> import: every sample within the ULog's float32 quantisation, the range on its
-    own rows, the vehicle the paper's + layout, and diagnose reads it."""
+def test_an_exported_log_read_as_px4s_has_the_same_samples(exported, tmp_path):
+    """sim -> export of PX4's topics alone (`px4_only`: as another vehicle's PX4 log, without what makes
+    it flightctl's own) -> PX4's reading of it: every sample within the ULog's float32 quantisation,
+    the range on its own rows, the vehicle the paper's + layout."""
     from flightctl.sim.logs import read_foreign
-    csv, ulog = exported
+    from flightctl.sim.logs.export import export
+    csv, _ = exported
+    export(csv.path, tmp_path / "px4.ulg", px4_only=True)
+    ulog = pyulog.ULog(str(tmp_path / "px4.ulg"))
+    assert "flightctl_columns" not in ulog.msg_info_dict and "flightctl_log" not in {d.name for d in ulog.data_list}
     path = tmp_path / "f.ulg"
     ulog.write_ulog(str(path))                     # (pyulog writes back what it read: the same file)
     (back,) = read_foreign(str(path))
+    assert back.meta["vehicle"] == "foreign"
     assert len(back) == len(csv)
     for c in ("P1", "P2", "P3", "P4", "gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z", "battery_v", "roll",
               "pitch", "alt"):
@@ -145,3 +154,82 @@ def test_an_exported_log_reads_back_with_the_same_samples(exported, tmp_path):
     rotors = [[float(v) for v in r.split()] for r in back.meta["rotors"].split(";")]
     assert rotors == [[1, 0, -1], [0, 1, 1], [-1, 0, -1], [0, -1, 1]]          # motor 1 North, clockwise
     assert back.meta["command"].startswith("P = 255 actuator_motors")
+
+
+def _same_columns(a, b, what: str) -> None:
+    """Log b has log a's columns, in order, and each column's values: t to the microsecond (the CSV's
+    %.6f), every other value to float32's precision (half its last place: 2^-24 of the value, ULog's
+    float fields), empty cells where a has them."""
+    assert list(b.columns) == list(a.columns), what
+    assert len(b) == len(a) > 100, what
+    for c in a.columns:
+        x, y = a[c], b[c]
+        assert np.array_equal(np.isnan(x), np.isnan(y)), (what, c)
+        ok = np.isfinite(x)
+        tol = 0.5e-6 if c == "t" else 2.0 ** -24 * np.abs(x[ok])
+        assert np.all(np.abs(y[ok] - x[ok]) <= tol), (what, c, float(np.max(np.abs(y[ok] - x[ok]))))
+
+
+def test_export_and_import_are_inverses_on_every_column(exported, tmp_path, capsys):
+    """CSV -> ULog -> CSV (`log export`, `log import`): every column of the contract (formats.md's table,
+    the setpoints and the magnetometer included) and the simulator's truth come back row for row, and
+    the header lines as they were; the file says it is flightctl's own, and the PX4 topics that hold
+    the setpoints and the magnetometer hold them in PX4's frames and units."""
+    from flightctl.sim.logs.export import TRUTH
+    csv_path = Path(exported[0].path)
+    assert cli(["log", "export", str(csv_path), str(tmp_path / "f.ulg")]) == 0
+    assert cli(["log", "import", str(tmp_path / "f.ulg"), str(tmp_path / "back.csv")]) == 0
+    a = read_flight_log(csv_path, extra=TRUTH)
+    b = read_flight_log(tmp_path / "back.csv", extra=TRUTH)
+    assert set(FLIGHT_COLUMNS + MAG_COLUMNS + TRUTH) == set(a.columns)         # the flight logs every column
+    for c in ("roll_sp", "pitch_sp", "yaw_sp", "alt_sp", "mag_x", "mag_y", "mag_z"):
+        assert np.nanmax(np.abs(a[c])) > 0, c                                    # (something to lose)
+    _same_columns(a, b, "sim")
+    assert b.meta == a.meta
+    ulog = pyulog.ULog(str(tmp_path / "f.ulg"))
+    assert ulog.msg_info_dict["sys_name"] == "flightctl"
+    mag = topic(ulog, "vehicle_magnetometer")
+    assert np.allclose(mag["magnetometer_ga[1]"], -a["mag_y"] * 1e4, rtol=1e-6)     # Gauss, FRD
+    sp = topic(ulog, "vehicle_local_position_setpoint")
+    assert np.allclose(sp["z"], -a["alt_sp"], atol=1e-6)
+
+
+@pytest.mark.parametrize("log", ["px4/roboto-test.ulg", "betaflight/LOG00037.BFL"])
+def test_an_imported_log_comes_back_whole_through_the_ulog(tmp_path, log):
+    """A real flight imported (its extra columns: the current, the rate setpoint, the sticks, the PID
+    terms, the filtered gyro; the estimates and setpoints empty on every row), exported and imported
+    again: the same columns, the same header lines."""
+    from flightctl.sim.logs.common import EXTRA
+    src = need(FLIGHTS / log)
+    assert cli(["log", "import", str(src), str(tmp_path / "a.csv"), "--quiet"]) == 0
+    assert cli(["log", "export", str(tmp_path / "a.csv"), str(tmp_path / "a.ulg")]) == 0
+    assert cli(["log", "import", str(tmp_path / "a.ulg"), str(tmp_path / "b.csv"), "--quiet"]) == 0
+    a = read_flight_log(tmp_path / "a.csv", extra=EXTRA, min_rows=10)
+    b = read_flight_log(tmp_path / "b.csv", extra=EXTRA, min_rows=10)
+    assert {"current", "setpoint_x"} <= set(a.columns) and np.isnan(a["roll_sp"]).all()
+    _same_columns(a, b, log)
+    assert b.meta == a.meta
+
+
+def test_diagnose_reads_its_own_ulog_as_the_csv(exported, tmp_path):
+    """diagnose's reading of the exported ULog is the CSV's table (the project's vehicle, not another
+    one's: no `# vehicle: foreign`), so both give one diagnosis."""
+    from flightctl.sim.identify.diagnose.cli import read_logs
+    csv_path = Path(exported[0].path)
+    assert cli(["log", "export", str(csv_path), str(tmp_path / "f.ulg")]) == 0
+    (a,) = read_logs([str(csv_path)], None, lambda *m: None)
+    (b,) = read_logs([str(tmp_path / "f.ulg")], None, lambda *m: None)
+    assert "vehicle" not in b.meta and b.meta == a.meta
+    _same_columns(a, b, "diagnose")
+
+
+def test_diagnose_of_its_own_ulog_is_the_csvs(exported, tmp_path, capsys):
+    """The whole command: `diagnose F.ulg` names what `diagnose F.csv` names, with the same figures."""
+    csv_path = Path(exported[0].path)
+    assert cli(["log", "export", str(csv_path), str(tmp_path / "f.ulg")]) == 0
+    reports = []
+    for log in (csv_path, tmp_path / "f.ulg"):
+        assert cli(["diagnose", str(log), "--json", str(tmp_path / "r.json"), "--quiet"]) == 0
+        reports.append(json.loads((tmp_path / "r.json").read_text()))
+    a, b = ({k: v for k, v in r.items() if k not in ("runtime_s", "data", "notes")} for r in reports)
+    assert a == b and a["rmse_base"] > 0

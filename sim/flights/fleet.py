@@ -186,7 +186,7 @@ def write_ulog(path: Path, cols: dict, a, uuid: str, start: dt.datetime, rng: np
     csv = path.with_suffix(".csv")
     csv.write_text("\n".join(head) + "\n" + body + "\n")
     try:
-        export(csv, path)
+        export(csv, path, px4_only=True)          # another vehicle's PX4 log, not flightctl's own
     finally:
         csv.unlink()
 

@@ -21,7 +21,7 @@ from flightctl.errors import InputError, read_bytes
 from flightctl.logfile import Table
 from flightctl.sim.identify.diagnose.data import all_running
 from flightctl.sim.logs.common import EXTRA as EXTRA_COLUMNS
-from flightctl.sim.logs.common import Imported, flight_text, to_table
+from flightctl.sim.logs.common import Imported, flight_text, parser_said, to_table
 
 FOREIGN_SUFFIXES = (".ulg", ".bbl", ".bfl", ".txt", ".bin", ".log")     # compared in lower case
 DATAFLASH_MAGIC = b"\xa3\x95\x80"        # a DataFlash file opens with its FMT message's definition
@@ -95,7 +95,7 @@ def _guarded(name: str, fn):
     except InputError:
         raise
     except Exception as e:        # pyulog, pymavlink and orangebox raise what the bytes give them
-        raise InputError(f"{name}: damaged or unreadable log ({type(e).__name__}: {e})") from None
+        raise InputError(f"{name}: damaged or unreadable log ({parser_said(e)})") from None
 
 
 def reason(error: str, path: str) -> str:
@@ -107,11 +107,14 @@ def reason(error: str, path: str) -> str:
 
 
 def _entry(index: int, name: str, read, progress) -> LogEntry:
-    """Read one log (`read` gives its Imported) into an entry, or the reason it was skipped."""
+    """Read one log (`read` gives its Imported, or the text of a log of this project's own: its ULog)
+    into an entry, or the reason it was skipped."""
     try:
-        imp: Imported = _guarded(name, read)
-        text = _guarded(name, lambda: flight_text(imp, progress))
+        imp: Imported | str = _guarded(name, read)        # (a str: the project's own log's text, read whole)
+        text = imp if isinstance(imp, str) else _guarded(name, lambda: flight_text(imp, progress))
         table = to_table(text, name)
+        if isinstance(imp, str) and progress:
+            progress(f"{name}: flightctl's own ULog, read back whole: {len(table)} rows")
     except InputError as e:
         return LogEntry(index, None, reason(str(e), name), 0.0)
     t = table["t"]

@@ -19,6 +19,7 @@ import tempfile
 import numpy as np
 
 from flightctl.errors import InputError
+from flightctl.sim.logs.common import parser_said
 
 MAGIC = b"H Product:Blackbox flight data recorder"
 LOG_END = b"E\x0f"                 # the end-of-log event: all a header-only log holds after its header
@@ -65,12 +66,13 @@ def _quiet():
     return stack
 
 
-def _parser(path: str, chunk: bytes):
-    """orangebox's parser of one log, given alone (its own file: orangebox reads paths)."""
+def _parser(name: str, chunk: bytes):
+    """orangebox's parser of one log, given alone (its own file: orangebox reads paths); a header it
+    cannot read is one line naming the log (`name`) and what orangebox said of it."""
     try:
         from orangebox import Parser
     except ImportError:
-        raise InputError(f"{path}: reading a blackbox log needs the logs extra: pip install '.[logs]' "
+        raise InputError(f"{name}: reading a blackbox log needs the logs extra: pip install '.[logs]' "
                          "(from the checkout)") from None
     fd, tmp = tempfile.mkstemp(suffix=".bbl")
     try:
@@ -78,6 +80,8 @@ def _parser(path: str, chunk: bytes):
             f.write(chunk)
         with _quiet():
             return Parser.load(tmp, 1)          # reads the header and every frame's bytes
+    except Exception as e:                      # orangebox raises what a garbled header gives it
+        raise InputError(f"{name}: its header is garbled ({parser_said(e)})") from None
     finally:
         os.unlink(tmp)
 
@@ -103,7 +107,7 @@ def frames(parser, offset: int, size: int) -> tuple[list[str], np.ndarray, list[
                 notes.append(f"the file ends inside a frame at byte {pos} (cut short: a crash or a power loss): "
                              f"read up to there")
             else:
-                notes.append(f"damaged from byte {pos} of {size} ({type(e).__name__}: {e}): read up to there")
+                notes.append(f"damaged from byte {pos} of {size} ({parser_said(e)}): read up to there")
     ctx = getattr(parser, "_ctx", None)
     bad = getattr(ctx, "invalid_frame_count", 0) if ctx is not None else 0
     if bad > max(BAD_FRAMES_QUIET, BAD_FRAMES_SHARE * len(rows)):      # (a few at events and the end are usual)
@@ -118,7 +122,7 @@ def read(path: str, chunk: bytes, offset: int, size: int, name: str):
     why = frameless(chunk)
     if why:
         raise InputError(f"{name}: {why}")
-    parser = _parser(path, chunk)
+    parser = _parser(name, chunk)
     names, a, notes = frames(parser, offset + header_end(chunk), size)
     if a.shape[0] < MIN_FRAMES:
         raise InputError(f"{name}: {a.shape[0]} main frames: " + ("; ".join(notes) or "no flight in it"))

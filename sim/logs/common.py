@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import io
 import math
+import re
+import struct
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -83,6 +85,26 @@ class Imported:
 
     def fail(self, what: str):
         raise InputError(f"{self.path}: {what}")
+
+
+# the packages whose exceptions describe the bytes they read (orangebox's "Invalid header at 0x47A: ...",
+# pyulog's, pymavlink's), and the standard library's for bytes that do not unpack or decode
+_DESCRIBED = ("orangebox", "pyulog", "pymavlink")
+_DECODING = (struct.error, UnicodeDecodeError, EOFError, OSError)
+
+
+def parser_said(e: Exception) -> str:
+    """What a third-party parser's exception says of the bytes, in words, never its class name (a user
+    reads "Invalid header at 0x47A: b'H P interva'", not `InvalidHeaderException:`): the text of an
+    exception of the parser's own package or of a decoding error; a Python error inside the parser (a
+    `TypeError`, `ZeroDivisionError`, `KeyError` ... on bytes it did not expect) says nothing to the user
+    and becomes "bytes the parser could not decode"."""
+    text = " ".join(str(e).split())
+    own = type(e).__module__.split(".")[0] in _DESCRIBED or isinstance(e, _DECODING)
+    if not own or not text:
+        return "bytes the parser could not decode"
+    text = re.sub(r"\b[A-Za-z_.]*(Error|Exception)\b:?\s*", "", text).strip() or "bytes the parser could not decode"
+    return text[:160]
 
 
 def rate_notes(imp: Imported, motors: str, how: str) -> None:
@@ -252,7 +274,16 @@ def flight_text(imp: Imported, progress=None) -> str:
     meta["stream"] = "\n".join(lines)
     if imp.notes:
         meta["import_notes"] = "\n".join(imp.notes)
-    extra = tuple(c for c in EXTRA if c in cols)
+    text = log_text(meta, cols, tuple(c for c in EXTRA if c in cols))
+    if progress:
+        progress(f"{imp.path}: {cols['t'].size} rows, {cols['t'][-1]:.1f} s at {meta['rate_hz']} Hz, motors at "
+                 f"{meta['motor_rate_hz']} Hz")
+    return text
+
+
+def log_text(meta: dict[str, str], cols: dict[str, np.ndarray], extra: tuple[str, ...]) -> str:
+    """The flight log's text of columns (FLIGHT_COLUMNS, empty where `cols` lacks one, then `extra`) as
+    FlightLogWriter writes it: `t` in whole microseconds, the rest to 6 significant digits."""
     n = cols["t"].size
     empty = [""] * n
     cells = [_format(cols["t"], "%.6f")]
@@ -261,9 +292,6 @@ def flight_text(imp: Imported, progress=None) -> str:
     out = io.StringIO()
     FlightLogWriter(out, meta, extra=extra).close()          # the `# key: value` lines and the header row
     out.write("".join(",".join(row) + "\n" for row in zip(*cells)))
-    if progress:
-        progress(f"{imp.path}: {n} rows, {cols['t'][-1]:.1f} s at {meta['rate_hz']} Hz, motors at "
-                 f"{meta['motor_rate_hz']} Hz")
     return out.getvalue()
 
 

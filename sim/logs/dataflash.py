@@ -27,7 +27,8 @@ import numpy as np
 
 from flightctl.errors import InputError, read_bytes
 from flightctl.sim.logs import arducopter3, identity
-from flightctl.sim.logs.common import CELL_FULL_V, DEG, FRD, MIN_ROWS, Imported, Stream, command_p, rate_notes
+from flightctl.sim.logs.common import (CELL_FULL_V, DEG, FRD, MIN_ROWS, Imported, Stream, command_p, parser_said,
+                                      rate_notes)
 
 MOTOR_FUNCTION = 33                    # SERVOn_FUNCTION of motor 1 (33-44: motors 1-12)
 FRAME_CLASSES = {0: "an undefined frame", 2: "a hexacopter", 3: "an octocopter", 4: "an octo-quad (coaxial)",
@@ -180,7 +181,7 @@ def _read(path: str, text: bool):
         else:
             r, damage = _binary(path)
     except Exception as e:
-        raise InputError(f"{path}: not a readable DataFlash log ({type(e).__name__}: {e})") from None
+        raise InputError(f"{path}: not a readable DataFlash log ({parser_said(e)})") from None
     msgs: dict[str, list] = {k: [] for k in WANTED}
     if damage:
         msgs["_skipped"] = [damage]
@@ -190,7 +191,7 @@ def _read(path: str, text: bool):
             try:
                 m = r.recv_match(type=WANTED)
             except Exception as e:          # DFReader raises what the bytes give it: read up to there
-                msgs.setdefault("_damage", []).append(f"{type(e).__name__}: {e}")
+                msgs.setdefault("_damage", []).append(parser_said(e))
                 break
             if m is None:
                 break
@@ -435,7 +436,7 @@ def read(path: str, text: bool = False) -> Imported:
     imp = Imported(path, {}, {}, [])
     imp.notes += msgs.get("_skipped", [])
     if "_damage" in msgs:
-        imp.notes.append(f"damaged: read up to {msgs['_damage'][0]}")
+        imp.notes.append(f"damaged: read up to where the parser stopped ({msgs['_damage'][0]})")
     if _armed(msgs) is False:          # before the vehicle: what a bench log's frame says does not matter
         imp.fail("never armed: the motors did not run in this log (" + ("ARM" if msgs["ARM"] else "EV") + " messages)")
     firmware = _firmware(msgs, texts)

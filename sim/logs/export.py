@@ -1,43 +1,49 @@
 """`flightctl log export FLIGHT.csv FLIGHT.ulg`: a flight log as PX4's ULog, for PlotJuggler and
-Flight Review (the format: https://docs.px4.io/main/en/dev_log/ulog_file_format.html).
+Flight Review (the format: https://docs.px4.io/main/en/dev_log/ulog_file_format.html), which `flightctl
+log import` and `flightctl diagnose` read back as the flight log it was written from (own.py).
 
 The file: the 16-byte header, the flag bits, then the definitions (formats, information messages
 with the software version, every parameter, subscriptions) and the data messages in time order.
-Topics take PX4's names and fields, so the tools that know PX4 plot them, and PX4's frames:
-body FRD, inertial NED, converted once here (flightctl/comms/frames.py). Timestamps are microseconds since
-the loop started (the log's time plus its calibration time).
+Topics take PX4's names and fields (PX4-Autopilot's msg/*.msg), so the tools that know PX4 plot them,
+and PX4's frames: body FRD, inertial NED, converted once here (flightctl/comms/frames.py). Timestamps
+are microseconds since the loop started (the log's time plus its calibration time).
 
 | topic | fields | from the CSV |
 |---|---|---|
 | sensor_combined | gyro_rad[3] (rad/s), accelerometer_m_s2[3] (m/s^2) | gyro_*, acc_* |
 | vehicle_attitude | q[4] (FRD to NED) | roll, pitch, yaw (the estimate) |
-| vehicle_attitude_setpoint | roll_body, pitch_body, yaw_body (rad), q_d[4] | *_sp |
+| vehicle_attitude_setpoint | roll_body, pitch_body, yaw_body (rad; PX4 before 1.14), q_d[4] | *_sp |
 | vehicle_local_position | z (m, down), dist_bottom (m) | alt (the estimate) |
 | vehicle_local_position_setpoint | z (m, down) | alt_sp |
-| actuator_outputs | noutputs, output[4] (ESC pulse, us), command[4] (P, 0-255) | P1..P4 |
+| actuator_outputs | noutputs, output[4] (ESC pulse, us) | P1..P4 |
 | actuator_motors | control[4] (P / 255: PX4's normalised motor commands) | P1..P4 |
 | vehicle_angular_velocity | xyz[3] (rad/s, FRD) | gyro_* |
 | vehicle_rates_setpoint | roll, pitch, yaw (rad/s, FRD), thrust_body[3] | setpoint_* where logged, else the rate the PD commands: kp/kd times the angle error (eq. 24 as an angle loop feeding a rate loop, the integral left out); thrust: -mean P / 255 on z |
 | vehicle_status | arming_state (2 armed: the log starts at arming), nav_state (3, a mission: a plan), vehicle_type (1, rotary wing), is_vtol | one sample a second |
 | input_rc | channel_count, rssi, values[18] (us) | rc_* where logged (an imported log): 1500 + 500 stick, throttle 1000 + 1000 |
-| battery_status | voltage_v, voltage_filtered_v (V), current_a (A, -1 unknown) | battery_v (rows with a reading), current |
+| battery_status | voltage_v, voltage_filtered_v (V), current_a (A, -1 unknown) | battery_v, current (rows with a reading) |
 | distance_sensor | current_distance, min_distance, max_distance (m), orientation, type | range (rows with an echo) |
+| vehicle_magnetometer | magnetometer_ga[3] (Gauss, FRD) | mag_* (T; rows with a reading) |
 | vehicle_attitude_groundtruth, vehicle_local_position_groundtruth | q[4]; x, y, z (m) | true_* (simulator only) |
+| flightctl_log | one float a column, as the CSV has it | roll, pitch, yaw, roll_sp, pitch_sp, yaw_sp, true_roll, true_pitch, true_yaw and every other column without a PX4 field that holds it (the sticks: input_rc holds whole us; own.py) |
 
-The vehicle is described the PX4 way, so that PX4 tools and `flightctl log import` read it: MAV_TYPE 2,
-CA_ROTOR_COUNT 4 and CA_ROTOR{0..3}_PX/PY/KM (the paper's + layout, eq. 25, FRD, KM > 0
-counter-clockwise), PWM_MAIN_FUNC1..4 = 101..104 with PWM_MAIN_MIN/MAX the pulse of P = 0 and 255.
-The log's `# params:` file is flattened (`kp_z` is `gains.kp_z`) into float parameters named as PX4
-allows (at most 16 characters: `FC_` and the section's letter, `FC_G_KP_Z`; a longer name keeps its
-first 12 characters and a 3-character hash), and the `flightctl_params` information message lists
-`SHORT=full.name` for each. A log whose header has `# vehicle_id:` and `# start_utc:` (sim/flights/fleet.py)
-gets them as PX4 has them: the `sys_uuid` information message, and vehicle_gps_position's `time_utc_usec`
-once a second.
+The vehicle is described the PX4 way, so that PX4 tools read it: MAV_TYPE 2, CA_ROTOR_COUNT 4 and
+CA_ROTOR{0..3}_PX/PY/KM (the paper's + layout, eq. 25, FRD, KM > 0 counter-clockwise),
+PWM_MAIN_FUNC1..4 = 101..104 with PWM_MAIN_MIN/MAX the pulse of P = 0 and 255. The log's `# params:`
+file is flattened (`kp_z` is `gains.kp_z`) into float parameters named as PX4 allows (at most 16
+characters: `FC_` and the section's letter, `FC_G_KP_Z`; a longer name keeps its first 12 characters
+and a 3-character hash), and the `flightctl_params` information message lists `SHORT=full.name` for
+each. A log whose header has `# vehicle_id:` and `# start_utc:` (sim/flights/fleet.py) gets them as
+PX4 has them: the `sys_uuid` information message, and vehicle_gps_position's `time_utc_usec` once a
+second. The information messages `sys_name` flightctl, `flightctl_columns` (the CSV's columns),
+`flightctl_meta` (its `# key: value` lines, JSON) and `flightctl_t0_us` make it flightctl's own.
 """
 from __future__ import annotations
 
 import datetime
 import hashlib
+import json
+import re
 import struct
 import sys
 import tomllib
@@ -48,8 +54,9 @@ import numpy as np
 from flightctl import __version__
 from flightctl.errors import InputError, Parser, output_file
 from flightctl.comms.frames import euler_ned, pulse_us, quaternion, vector_ned
-from flightctl.logfile import read_flight_log
+from flightctl.logfile import FLIGHT_COLUMNS, MAG_COLUMNS, read_flight_log
 from flightctl.params import Airframe, Gains, from_dict
+from flightctl.sim.logs.own import HOMES, NAME, OWN_TOPIC, SPARSE, own_columns
 
 MAGIC = b"ULog\x01\x12\x35"
 FILE_VERSION = 1
@@ -136,7 +143,7 @@ TOPICS = {t.name: t for t in (
                                         ("float", "yaw_body", 0), ("float", "q_d", 4)]),
     Topic("vehicle_local_position", [("float", "z", 0), ("float", "dist_bottom", 0)]),
     Topic("vehicle_local_position_setpoint", [("float", "z", 0)]),
-    Topic("actuator_outputs", [("uint32_t", "noutputs", 0), ("float", "output", 4), ("float", "command", 4)]),
+    Topic("actuator_outputs", [("uint32_t", "noutputs", 0), ("float", "output", 4)]),
     Topic("actuator_motors", [("uint64_t", "timestamp_sample", 0), ("float", "control", 4)]),
     Topic("vehicle_angular_velocity", [("uint64_t", "timestamp_sample", 0), ("float", "xyz", 3)]),
     Topic("vehicle_rates_setpoint", [("float", "roll", 0), ("float", "pitch", 0), ("float", "yaw", 0),
@@ -152,6 +159,7 @@ TOPICS = {t.name: t for t in (
     Topic("vehicle_gps_position", [("uint64_t", "time_utc_usec", 0), ("uint8_t", "fix_type", 0)]),
     Topic("vehicle_attitude_groundtruth", [("float", "q", 4)]),
     Topic("vehicle_local_position_groundtruth", [("float", "x", 0), ("float", "y", 0), ("float", "z", 0)]),
+    Topic("vehicle_magnetometer", [("uint64_t", "timestamp_sample", 0), ("float", "magnetometer_ga", 3)]),
 )}
 
 
@@ -184,8 +192,30 @@ def _release(version: str) -> int:
     return (nums[0] << 24) | (nums[1] << 16) | (nums[2] << 8) | 255
 
 
-def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
-    """Write the ULog file; returns the number of samples per topic."""
+def _columns(log) -> tuple[str, ...]:
+    """The log's columns that the ULog carries: the contract's, the magnetometer's, the simulator's truth
+    and the imported logs' extra columns (docs/log-import.md), those the CSV has; others are ignored,
+    as formats.md has extra columns."""
+    from flightctl.sim.logs.common import EXTRA
+    return tuple(dict.fromkeys(c for c in FLIGHT_COLUMNS + MAG_COLUMNS + TRUTH + EXTRA if c in log))
+
+
+def _fill(data: dict, topic: str, field: str, x: np.ndarray) -> None:
+    """Put column values x into a topic's field (`name[i]`: element i of an array field, the others NaN)."""
+    name, _, index = field.partition("[")
+    values = data.setdefault(topic, {})
+    if not index:
+        values[name] = x
+        return
+    size = next(n for _, f, n in TOPICS[topic].fields if f == name)
+    values.setdefault(name, np.full((x.size, size), np.nan))[:, int(index[:-1])] = x
+
+
+def export(csv_path: str | Path, ulg_path: str | Path, px4_only: bool = False) -> dict[str, int]:
+    """Write the ULog file; returns the number of samples per topic. `px4_only`: PX4's topics alone,
+    without what makes the file flightctl's own (the flightctl_log topic, the flightctl_columns,
+    flightctl_meta and flightctl_t0_us information messages), so that it reads as another vehicle's
+    PX4 log (sim/flights/fleet.py's simulated PX4 vehicles)."""
     from flightctl.sim.logs.common import EXTRA
     log = read_flight_log(csv_path, extra=TRUTH + EXTRA)
     meta = log.meta
@@ -195,27 +225,45 @@ def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
         t0 = float(meta.get("calibrate_s", 0.0))
     except ValueError:
         t0 = 0.0
-    ts = np.round((log["t"] + t0) * 1e6).astype(np.uint64)
+    t0 = max(t0, -float(log["t"][0]))                  # (a log whose time starts before 0: timestamps are unsigned)
+    t0_us = int(round(t0 * 1e6))
+    ts = (np.round(log["t"] * 1e6).astype(np.int64) + t0_us).astype(np.uint64)     # t in whole us, as the CSV has it
     col = log.columns
+    columns = _columns(log)
     n = len(ts)
     P = np.column_stack([col[f"P{i}"] for i in range(1, 5)])
-    gx, gy, gz = vector_ned(col["gyro_x"], col["gyro_y"], col["gyro_z"])
-    ax, ay, az = vector_ned(col["acc_x"], col["acc_y"], col["acc_z"])
+    rows = {name: np.ones(n, bool) for name in TOPICS}
+    for name in SPARSE:                                # a sample where one of the topic's columns has a value
+        mine = [c for c in columns if c in HOMES and HOMES[c][0] == name]
+        rows[name] = np.any([np.isfinite(col[c]) for c in mine], axis=0) if mine else np.zeros(n, bool)
+    data: dict[str, dict] = {}
+    for c in columns:                                  # each column in its home (own.py): PX4's field, or ours
+        topic, field, scale = HOMES.get(c, (OWN_TOPIC, c, 1.0))
+        if topic != OWN_TOPIC:
+            _fill(data, topic, field, col[c][rows[topic]] / scale)
     rsp, psp, ysp = euler_ned(col["roll_sp"], col["pitch_sp"], col["yaw_sp"])
-    data = {
-        "sensor_combined": dict(gyro_rad=np.column_stack([gx, gy, gz]),
-                                accelerometer_m_s2=np.column_stack([ax, ay, az])),
-        "vehicle_attitude": dict(q=_q(col["roll"], col["pitch"], col["yaw"])),
-        "vehicle_attitude_setpoint": dict(roll_body=rsp, pitch_body=psp, yaw_body=ysp,
-                                          q_d=_q(col["roll_sp"], col["pitch_sp"], col["yaw_sp"])),
-        "vehicle_local_position": dict(z=-col["alt"], dist_bottom=col["alt"]),
-        "vehicle_local_position_setpoint": dict(z=-col["alt_sp"]),
-        "actuator_outputs": dict(noutputs=4, output=pulse_us(P, esc_hz), command=P),
-    }
-    data["actuator_motors"] = dict(timestamp_sample=ts, control=P / 255.0)
-    data["vehicle_angular_velocity"] = dict(timestamp_sample=ts, xyz=np.column_stack([gx, gy, gz]))
-    data["vehicle_rates_setpoint"] = _rates_setpoint(log, params, P)
-    stamps = {name: ts for name in data}
+    data["vehicle_attitude"] = dict(q=_q(col["roll"], col["pitch"], col["yaw"]))
+    data["vehicle_attitude_setpoint"] = dict(roll_body=rsp, pitch_body=psp, yaw_body=ysp,
+                                             q_d=_q(col["roll_sp"], col["pitch_sp"], col["yaw_sp"]))
+    data["vehicle_local_position"]["dist_bottom"] = col["alt"]
+    data["actuator_outputs"] = dict(noutputs=4, output=pulse_us(P, esc_hz))
+    data["actuator_motors"]["timestamp_sample"] = ts
+    data["vehicle_angular_velocity"] = dict(timestamp_sample=ts, xyz=data["sensor_combined"]["gyro_rad"])
+    data["vehicle_rates_setpoint"] = _rates_setpoint(log, params, P) | data.get("vehicle_rates_setpoint", {})
+    data["battery_status"]["voltage_filtered_v"] = data["battery_status"]["voltage_v"]
+    if "current" not in log:
+        data["battery_status"]["current_a"] = -1.0                                   # PX4: -1 unknown
+    data["distance_sensor"] |= dict(min_distance=SONAR_RANGE_M[0], max_distance=SONAR_RANGE_M[1],
+                                    type=ULTRASOUND, orientation=DOWNWARD)
+    if "vehicle_magnetometer" in data:
+        data["vehicle_magnetometer"]["timestamp_sample"] = ts[rows["vehicle_magnetometer"]]
+    if all(c in log for c in TRUTH):
+        data["vehicle_attitude_groundtruth"] = dict(q=_q(col["true_roll"], col["true_pitch"], col["true_yaw"]))
+    ours = own_columns(columns)
+    if not px4_only:
+        data[OWN_TOPIC] = {c: col[c] for c in ours}
+    defined = TOPICS | {OWN_TOPIC: Topic(OWN_TOPIC, [("float", c, 0) for c in ours])}   # ours: this log's columns
+    stamps = {name: ts[rows[name]] if name in rows else ts for name in data}
     second = np.unique(np.clip(np.searchsorted(log["t"], np.arange(log["t"][0], log["t"][-1], 1.0)), 0, n - 1))
     data["vehicle_status"] = dict(arming_state=ARMED, nav_state=AUTO_MISSION, vehicle_type=ROTARY_WING, is_vtol=0)
     stamps["vehicle_status"] = ts[second]
@@ -227,33 +275,27 @@ def export(csv_path: str | Path, ulg_path: str | Path) -> dict[str, int]:
         values[:, :4] = np.clip(rc[ok], 0, 65535)
         data["input_rc"] = dict(timestamp_last_signal=ts[ok], rssi=100, channel_count=4, values=values)
         stamps["input_rc"] = ts[ok]
-    volts = col["battery_v"]
-    has_v = np.isfinite(volts)
-    amps = col["current"][has_v] if "current" in log else np.full(int(has_v.sum()), -1.0)   # PX4: -1 unknown
-    data["battery_status"] = dict(voltage_v=volts[has_v], voltage_filtered_v=volts[has_v], current_a=amps)
-    stamps["battery_status"] = ts[has_v]
     if meta.get("start_utc"):     # UTC (us) at each second of the log: PX4's vehicle_gps_position.time_utc_usec
         zero = datetime.datetime.fromisoformat(meta["start_utc"].replace("Z", "+00:00")).timestamp()
         data["vehicle_gps_position"] = dict(time_utc_usec=np.round(zero * 1e6 + ts[second].astype(float)).astype(np.uint64),
                                             fix_type=3)
         stamps["vehicle_gps_position"] = ts[second]
-    rng = col["range"]
-    echo = np.isfinite(rng)
-    data["distance_sensor"] = dict(min_distance=SONAR_RANGE_M[0], max_distance=SONAR_RANGE_M[1],
-                                   current_distance=rng[echo], type=ULTRASOUND, orientation=DOWNWARD)
-    stamps["distance_sensor"] = ts[echo]
-    if all(c in log for c in TRUTH):
-        data["vehicle_attitude_groundtruth"] = dict(q=_q(col["true_roll"], col["true_pitch"], col["true_yaw"]))
-        data["vehicle_local_position_groundtruth"] = dict(zip("xyz", vector_ned(col["true_x"], col["true_y"], col["true_z"])))
-        stamps.update({k: ts for k in data if k.endswith("groundtruth")})
 
     head = bytearray(MAGIC + bytes([FILE_VERSION]) + struct.pack("<Q", 0))
     head += _message("B", bytes(16) + bytes(24))     # flag bits: no compatible, incompatible or appended data
-    topics = [TOPICS[name] for name in data]
+    topics = [defined[name] for name in data]
     for topic in topics:
         head += topic.format()
     software = meta.get("software", f"flightctl {__version__}")
-    head += _info("sys_name", "flightctl")
+    head += _info("sys_name", NAME)
+    if not px4_only:                                 # the project's own log (own.py reads it back whole)
+        head += _info("flightctl_columns", ",".join(("t",) + columns[1:]))
+        head += _info("flightctl_t0_us", str(t0_us))
+        try:
+            head += _info("flightctl_meta", json.dumps(meta))
+        except ValueError:
+            raise InputError(f"{log.path}: its '# key: value' lines are too long for a ULog information message "
+                             f"({len(json.dumps(meta))} bytes; 65,000 at most)") from None
     head += _info("ver_sw", software)
     head += _info("ver_sw_release", _release(software.split()[-1]))
     head += _info("ver_hw", meta.get("board", "unknown"))
@@ -305,22 +347,22 @@ def _vehicle_parameters(log, params: dict[str, float]) -> dict[str, float | int]
 
 
 def _rates_setpoint(log, params: dict[str, float], P: np.ndarray) -> dict:
-    """vehicle_rates_setpoint (FRD): the log's rate setpoint where it has one, else the rate this
-    controller's PD commands, kp/kd times the angle error (eq. 24 written as an angle loop feeding a
-    rate loop; the integral left out); the thrust: minus the mean command on z."""
+    """vehicle_rates_setpoint (FRD) of a log without a rate setpoint (with one, its setpoint_* columns
+    are the fields: their home, own.HOMES): the rate this controller's PD commands, kp/kd times the angle
+    error (eq. 24 written as an angle loop feeding a rate loop; the integral left out); the thrust, in
+    every log: minus the mean command on z."""
     col = log.columns
-    if all(f"setpoint_{a}" in log for a in "xyz"):
-        ours = [col[f"setpoint_{a}"] for a in "xyz"]
-    else:
-        g = {k: params.get(f"gains.{k}", getattr(Gains, k)) for k in
-             ("kp_phi", "kd_phi", "kp_theta", "kd_theta", "kp_psi", "kd_psi")}
-        err = [col["roll_sp"] - col["roll"], col["pitch_sp"] - col["pitch"],
-               (col["yaw_sp"] - col["yaw"] + np.pi) % (2 * np.pi) - np.pi]
-        ours = [g[f"kp_{a}"] / g[f"kd_{a}"] * e if g[f"kd_{a}"] > 0 else np.zeros_like(e)
-                for a, e in zip(("phi", "theta", "psi"), err)]
-    roll, pitch, yaw = vector_ned(*ours)
     thrust = np.zeros((len(P), 3))
     thrust[:, 2] = -P.mean(axis=1) / 255.0
+    if all(f"setpoint_{a}" in log for a in "xyz"):
+        return dict(thrust_body=thrust)
+    g = {k: params.get(f"gains.{k}", getattr(Gains, k)) for k in
+         ("kp_phi", "kd_phi", "kp_theta", "kd_theta", "kp_psi", "kd_psi")}
+    err = [col["roll_sp"] - col["roll"], col["pitch_sp"] - col["pitch"],
+           (col["yaw_sp"] - col["yaw"] + np.pi) % (2 * np.pi) - np.pi]
+    ours = [g[f"kp_{a}"] / g[f"kd_{a}"] * e if g[f"kd_{a}"] > 0 else np.zeros_like(e)
+            for a, e in zip(("phi", "theta", "psi"), err)]
+    roll, pitch, yaw = vector_ned(*ours)
     return dict(roll=roll, pitch=pitch, yaw=yaw, thrust_body=thrust)
 
 
@@ -341,7 +383,9 @@ def _import(args) -> int:
     if image is not None:
         Path(args.plot).write_bytes(image)
     rows = text.count("\n") - sum(1 for line in text.splitlines() if line.startswith("#")) - 1
-    print(f"{args.foreign}: {rows} rows -> {out}" + (f", figure -> {args.plot}" if args.plot else ""))
+    damaged = re.search(r"^# damaged: (.*)$", text, re.M)       # a damaged log is said, not only in its header
+    print(f"{args.foreign}: {rows} rows -> {out}" + (f", figure -> {args.plot}" if args.plot else "")
+          + (f" (damaged: {damaged[1]})" if damaged else ""))
     return 0
 
 

@@ -10,13 +10,19 @@ which outputs move while armed.
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import math
+import re
+import struct
+from collections import Counter
 
 import numpy as np
 
-from flightctl.errors import InputError
+from flightctl.errors import InputError, read_bytes
 from flightctl.sim.logs import identity
-from flightctl.sim.logs.common import FRD, Imported, Stream, euler_from_frd_ned, rate_notes
+from flightctl.sim.logs.common import (FRD, Imported, Stream, euler_from_frd_ned, log_text, parser_said,
+                                      rate_notes)
 
 ARMED = 2                                    # vehicle_status.arming_state ARMED (every PX4 version)
 RANGE_MAX_M = 10.0                           # the contract's rangefinder range
@@ -26,14 +32,21 @@ PROFILE_NOTE = ("set SDLOG_PROFILE bit 4 (High rate: add 16, e.g. 17) or bit 3 "
 
 
 def _ulog(path: str):
+    """(pyulog's ULog of `path`, the lines pyulog printed while reading it). pyulog prints its warnings
+    on stdout (pyulog/core.py: `print('Warning: no subscription found for message id ...')`, "File
+    corruption detected while reading file data!"): they are taken here, never left on our stdout, and
+    said in the import's notes (`pyulog: ...` in `# import_notes`)."""
     try:
         from pyulog import ULog
     except ImportError:
         raise InputError(f"{path}: reading a ULog needs the logs extra: pip install '.[logs]' (from the checkout)") from None
+    said = io.StringIO()
     try:
-        return ULog(path)
+        with contextlib.redirect_stdout(said):
+            u = ULog(path)
     except Exception as e:             # pyulog raises what the bytes give it: a truncated or foreign file
-        raise InputError(f"{path}: not a readable ULog ({type(e).__name__}: {e})") from None
+        raise InputError(f"{path}: not a readable ULog ({parser_said(e)})") from None
+    return u, [line.strip() for line in said.getvalue().splitlines() if line.strip()]
 
 
 def topic(u, name: str, instance: int | None = None):
@@ -53,9 +66,13 @@ def armed_times(u) -> tuple[np.ndarray, np.ndarray] | None:
     return None
 
 
-def read(path: str) -> Imported:
-    from flightctl.sim.logs import px4motors
-    u = _ulog(path)
+def read(path: str) -> Imported | str:
+    """A PX4 ULog as an `Imported`; the project's own ULog (`flightctl log export`) as the flight-log
+    text it was written from, column for column (sim/logs/own.py)."""
+    from flightctl.sim.logs import own, px4motors
+    u, said = _ulog(path)
+    if own.is_own(u):
+        return log_text(*own.read(u, path, damaged(u, path), said))
     imp = Imported(path, {}, {}, [])
     p = u.initial_parameters
     # never armed is said first: a log of a board on the bench says nothing of its vehicle's flight, and
@@ -71,6 +88,10 @@ def read(path: str) -> Imported:
     g = np.vstack([sc[f"gyro_rad[{i}]"] for i in range(3)]).astype(float)
     a = np.vstack([sc[f"accelerometer_m_s2[{i}]"] for i in range(3)]).astype(float)
     imp.streams["gyro"] = Stream("sensor_combined gyro", t, g * FRD)
+    imp.notes += [f"pyulog: {line}" for line in dict.fromkeys(said)]
+    if (damage := damaged(u, path)) is not None:
+        imp.meta["damaged"] = damage
+        imp.notes.append(f"damaged: {damage}")
     ta = t + sc.get("accelerometer_timestamp_relative", np.zeros(t.size)) * 1e-6
     imp.streams["acc"] = Stream("sensor_combined accelerometer", ta, a * FRD)
     imp.streams["motors"] = px4motors.motors(u, p, imp, armed)
@@ -90,6 +111,32 @@ def read(path: str) -> Imported:
     gps = topic(u, "vehicle_gps_position")
     imp.meta.update(identity.px4(info, gps if gps is not None else topic(u, "sensor_gps")))
     return imp
+
+
+def _in_file(raw: bytes, msg_id: int) -> int:
+    """How many data messages of subscription `msg_id` the file holds: the 5 bytes that open each one
+    (its size, 'D', the id: ULog's message header and data message, docs.px4.io's ulog_file_format),
+    counted over the whole file, so that the messages after a damaged one are found where pyulog's
+    reading lost its place. The size is the one most of the id's headers have."""
+    key = b"D" + struct.pack("<H", msg_id)
+    sizes = Counter(raw[m.start() - 2:m.start()] for m in re.finditer(re.escape(key), raw) if m.start() >= 2)
+    return raw.count(sizes.most_common(1)[0][0] + key) if sizes else 0
+
+
+def damaged(u, path: str) -> str | None:
+    """What pyulog found damaged (None when nothing), for `# damaged:` (diagnose's report says it too).
+    pyulog skips a data message it cannot place (an unknown message id, a size that does not fit its
+    format) and, having lost its place, what follows until a message fits again, raising only
+    `file_corruption` (pyulog/core.py: `_file_corrupt`, set in `_read_file_data`,
+    `_MessageData.initialize` and `_check_packet_corruption`), without a count: the messages it skipped
+    are counted here, each topic's in the file (`_in_file`) less those pyulog read."""
+    if not u.file_corruption:
+        return None
+    raw = read_bytes(path)
+    skipped = {d.name: max(0, _in_file(raw, d.msg_id) - len(d.data["timestamp"])) for d in u.data_list}
+    rows = skipped.get("sensor_combined", 0)
+    return (f"pyulog found corrupt data and skipped {sum(skipped.values())} whole data messages after it, "
+            f"{rows} of them sensor_combined's: {rows} rows lost (its file_corruption flag)")
 
 
 def _measurements(u, p: dict, imp: Imported) -> None:

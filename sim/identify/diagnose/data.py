@@ -398,7 +398,7 @@ def load_file(table: Table, a: Airframe) -> FileData:
     P = np.vstack([table[f"P{i}"] for i in range(1, 5)])
     gyro = np.vstack([table[c] for c in ("gyro_x", "gyro_y", "gyro_z")])
     acc = np.vstack([table[c] for c in ("acc_x", "acc_y", "acc_z")])
-    notes = []
+    notes = [f"damaged: {table.meta['damaged']}"] if table.meta.get("damaged") else []   # (a reader's `# damaged:`)
     foreign = table.meta.get("vehicle") == "foreign"
     gyro_filter, acc_filter = (parse_filters(table.meta.get(k, "none"), lambda w, k=k: table.fail(f"# {k}: {w}"))
                                for k in ("gyro_filter", "acc_filter"))
