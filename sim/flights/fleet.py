@@ -55,7 +55,7 @@ SOC = (0.85, 1.0)              # the pack's charge at take-off
 MOTOR_SPREAD = 0.02            # each vehicle's motors differ by this much thrust (one motor_weak each)
 CHUNK = 40                     # flights flown at once by the batched simulator
 ONSET_MARGIN = 6               # an effect starts no earlier than this flight and this many before the last
-#                                (a third of the flights on a fleet of fewer than 18: the middle of a short series)
+#                                (a third of the flights, at least 2, on a fleet of fewer than 18: the middle of a short series)
 EPOCH_UTC = dt.datetime(2026, 3, 2, 8, 0, tzinfo=dt.timezone.utc)
 GPS_EPOCH = dt.datetime(1980, 1, 6, tzinfo=dt.timezone.utc)
 GPS_LEAP_S = 18                # GPS time ahead of UTC (since 2017-01-01)
@@ -199,7 +199,7 @@ def _uid(rng: np.random.Generator) -> str:
 
 def onset_margin(flights: int) -> int:
     """The fewest flights before an effect's onset and from it to the last (ONSET_MARGIN)."""
-    return min(ONSET_MARGIN, max(1, flights // 3))
+    return min(ONSET_MARGIN, max(2, flights // 3))
 
 
 def _draw_effects(rng, vehicles: int, flights: int, weak: bool, aging: bool, fmt: str,

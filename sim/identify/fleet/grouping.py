@@ -4,7 +4,8 @@
 Which vehicle, first that applies: the user's mapping (`--vehicles MAP.csv`, rows `log,vehicle`: the
 log as the corpus names it, its path, or its file name); the vehicle's identity in the log's header
 (sim/logs/identity.py: ArduPilot's board UID or BRD_SERIAL_NUM, PX4's sys_uuid, Betaflight's and INAV's
-board and craft name); else the log's folder (one folder per vehicle). The order of a vehicle's flights:
+craft name with its board; never a board's name alone, a model many vehicles share); else the log's folder
+(one folder per vehicle). The order of a vehicle's flights:
 the logs' own start times (GPS time, the blackbox's RTC, PX4's time_ref_utc) when every log of the
 vehicle has one, else the logs' names in natural order (`00000009.BIN` before `00000010.BIN`); the
 report says which for each vehicle.
@@ -77,7 +78,9 @@ def _vehicle_of(row: dict, mapping: dict[str, str]) -> tuple[str, str]:
     if meta.get("vehicle_id"):
         return meta["vehicle_id"], meta.get("vehicle_id_source") or "the log's header"
     folder = Path(row["log"]).parent.as_posix()
-    return (folder if folder != "." else "(the corpus' folder)"), "the log's folder"
+    why = (f" (its header names only its board, {meta['board']}: a board model, not a vehicle)" if meta.get("board")
+           else "")
+    return (folder if folder != "." else "(the corpus' folder)"), "the log's folder" + why
 
 
 def group(rows: list[dict], mapping: dict[str, str] | None = None) -> list[Vehicle]:
