@@ -162,3 +162,39 @@ def test_the_bootstraps_p_value_goes_below_what_ten_flights_orderings_can_give()
     c = change_test(stepped, se)
     assert c.p < 1 / 60 and c.onset == onset, c
     assert change_test(y, se).p > 0.01
+
+
+def test_a_real_craft_over_several_logs_is_one_vehicle_in_the_order_of_its_start_times(tmp_path):
+    """INAV's "NAZGUL 10" (../shared/data/real/flights/inav: three logs in one file, each with its craft name
+    and its RTC's start): one vehicle by its craft name, in its logs' start order; none of the three flew long
+    enough to judge, and the report says so rather than that nothing changed."""
+    from real import FLIGHTS, need
+    src = need(FLIGHTS / "inav" / "blackbox_log_2026-02-21_145057.TXT")
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / "nazgul.TXT").symlink_to(src)
+    done = diagnose(tmp_path / "logs", tmp_path / "report")
+    assert done.returncode == 0, done.stderr
+    rep = json.loads((tmp_path / "report" / "fleet.json").read_text())
+    md = (tmp_path / "report" / "fleet.md").read_text()
+    (v,) = rep["vehicles"]
+    assert v["vehicle"] == "NAZGUL 10" and "Craft name" in v["identity"]
+    assert [f["log"] for f in v["flights"]] == [f"nazgul.TXT #{k}" for k in (1, 2, 3)]
+    starts = [f["start_utc"] for f in v["flights"]]
+    assert v["order"].startswith("the logs' start times") and starts == sorted(starts)
+    assert all(f["status"] == "refused" for f in v["flights"])
+    assert rep["changes"] == [] and rep["per_log"] == [] and "Nothing changed" not in md
+    assert "3 logs, 0 diagnosed (not: too short to judge, 3)" in md and contradictions(md) == []
+
+
+def test_a_header_only_log_goes_with_its_files_other_logs():
+    """A file of many blackbox logs is one flight controller's flash: a log refused before its header was
+    read (header only, as in betaflight/btfl_all.bbl) is the vehicle its file's other logs name, not its
+    folder's; a log alone in its file without an identity stays its folder's."""
+    from flightctl.sim.identify.fleet.grouping import group
+    named = {"vehicle_id": "AIKO AIKONF7 / Gecko", "vehicle_id_source": "the blackbox header's Craft name"}
+    rows = [{"log": "bf/all.bbl #1", "path": "/d/bf/all.bbl", "index": 1, "status": "diagnosed", "meta": named},
+            {"log": "bf/all.bbl #2", "path": "/d/bf/all.bbl", "index": 2, "status": "refused", "meta": {},
+             "reason": "header only: armed and disarmed at once, no frames"},
+            {"log": "bf/other.bbl", "path": "/d/bf/other.bbl", "index": None, "status": "refused", "meta": {}}]
+    vs = {v.name: [r["log"] for r in v.flights] for v in group(rows)}
+    assert vs == {"AIKO AIKONF7 / Gecko": ["bf/all.bbl #1", "bf/all.bbl #2"], "bf": ["bf/other.bbl"]}

@@ -1,11 +1,13 @@
 """The fleet report (`flightctl diagnose --corpus DIR --fleet REPORT`): from the results table's rows,
-the vehicles (`grouping`), each one's series tested for a change (`trends`, Holm-corrected over every
-series of the fleet), and what changed written as a table (REPORT/fleet.md), as JSON (REPORT/fleet.json)
-and a figure per vehicle (REPORT/vehicle-N.png, `figure`).
+the vehicles (`grouping`), each one's series tested for a change as findings (`trends`, Holm-corrected
+over every finding of the fleet), what each vehicle's logs name on their own (`carried`, beside the trend
+test), written as tables (REPORT/fleet.md), as JSON (REPORT/fleet.json) and a figure per vehicle
+(REPORT/vehicle-N.png, `figure`).
 
 A vehicle's motor shares sum to four: a motor that weakens takes a larger share (through its command)
-and the three others a smaller one each, so the four series of a vehicle are one finding: the motor
-whose share changed most significantly is named, and the others' changes are said beside it. A change is
+and the three others a smaller one each, so the four series of a vehicle are one finding (FINDINGS): the
+motor whose share changed most (the largest LR) is named, and the others that moved with it (an LR past
+the onset set's bound, their onset in its set) are said beside it. A change is
 named only when Holm's correction keeps it (trends.ALPHA family-wise) and its size passes a physical
 check: for a motor, the thrust it gives for its command after the change against before (from its
 share's ratio, `share_scale`) within motor_weak.SCALE_RANGE (a motor still able to hold its share of
@@ -122,7 +124,7 @@ def build(rows: list[dict], mapping: dict[str, str] | None = None, draws: int = 
                       if (r.get("figures") or {}).get("timing_needs")), None)
         per_log = carried(v)
         out["vehicles"].append({"vehicle": v.name, "identity": v.source, "order": v.order,
-                                "flights": [{"index": i, "log": r["log"], "status": r["status"],
+                                "flights": [{"index": i, "log": r["log"], "status": r["status"], "reason": r.get("reason"),
                                              "start_utc": (r.get("meta") or {}).get("start_utc")}
                                             for i, r in enumerate(v.flights)],
                                 "series": series, "findings": tests, "per_log": per_log,
@@ -131,12 +133,21 @@ def build(rows: list[dict], mapping: dict[str, str] | None = None, draws: int = 
         out["changes"] += changes
         for p in per_log:
             trend = next((c for c in changes if c["finding"] == p["finding"]), None)
-            p["trend"] = (f"the trend test names {trend['what']} from flight {trend['onset_flight'] + 1}" if trend else
-                          "the trend test does not name it" + (
-                              f" (its finding's Holm-adjusted p = {tests[p['finding']]['p_adjusted']:.2g})"
-                              if tests.get(p["finding"]) else " (too few flights to test)"))
+            p["trend"] = _beside(p["finding"], trend, tests, series)
             out["per_log"].append({"vehicle": v.name, **p})
     return out
+
+
+def _beside(finding: str, trend: dict | None, tests: dict, series: dict) -> str:
+    """What the trend test says of the finding a per-log cause sits beside."""
+    if trend:
+        return f"the trend test names {trend['what']} from flight {trend['onset_flight'] + 1}"
+    if tests.get(finding):
+        return f"the trend test does not name it (its finding's Holm-adjusted p = {tests[finding]['p_adjusted']:.2g})"
+    names = dict(FINDINGS).get(finding, ())
+    if any(n in series for n in names):
+        return f"the trend test does not name it (too few flights to test: fewer than {MIN_FLIGHTS})"
+    return "no trend series follows it in these logs"
 
 
 class Finding:
@@ -164,7 +175,8 @@ def carried(v: Vehicle) -> list[dict]:
                 e["parameters"].append({k: x for k, x in par.items() if k != "motor"})
     out = list(by.values())
     for e in out:
-        e["first_flight"], e["first_log"], e["of"] = e["flights"][0], e["logs"][0], len(v.flights)
+        e["first_flight"], e["first_log"] = e["flights"][0], e["logs"][0]
+        e["of"] = sum(r["status"] == "diagnosed" for r in v.flights)       # of the flights diagnosed
     return sorted(out, key=lambda e: (e["first_flight"], e["what"]))
 
 
@@ -216,6 +228,18 @@ def _per_log_row(p: dict) -> str:
             f"{p['first_flight'] + 1}) | {size} | {p['trend']} |")
 
 
+def _logs(v: dict) -> str:
+    """How many logs a vehicle has, how many were diagnosed, and why the others were not."""
+    n, done = len(v["flights"]), sum(f["status"] == "diagnosed" for f in v["flights"])
+    out = f"{n} log{'s' if n != 1 else ''}, {done} diagnosed"
+    why: dict[str, int] = {}
+    for f in v["flights"]:
+        if f["status"] != "diagnosed":
+            key = (f.get("reason") or f["status"]).split(":")[0]
+            why[key] = why.get(key, 0) + 1
+    return out + (" (not: " + "; ".join(f"{k}, {c}" for k, c in why.items()) + ")" if why else "")
+
+
 def _span(xs: list[float]) -> str:
     lo, hi = min(xs), max(xs)
     return f"{lo:.3g}" if f"{lo:.3g}" == f"{hi:.3g}" else f"{lo:.3g}-{hi:.3g}"
@@ -246,18 +270,20 @@ def markdown(rep: dict) -> str:
     elif rep["per_log"]:
         L.append("No trend test names a change beyond what the flights' own scatter explains; the logs name causes "
                  "on their own (below).")
+    elif not rep["findings_tested"]:
+        L.append(f"No finding could be tested: no vehicle has {MIN_FLIGHTS} diagnosed flights or more; no log names a cause.")
     else:
         L.append("Nothing changed on any vehicle beyond what the flights' own scatter explains, and no log names a cause.")
     L += ["", "## What the logs name on their own", ""]
     if rep["per_log"]:
-        L += ["| vehicle | what | flights that name it | first (log, flight) | its figures there | beside the trend test |",
+        L += ["| vehicle | what | flights that name it (of those diagnosed) | first (log, flight) | its figures there | beside the trend test |",
               "|---|---|---|---|---|---|"]
         L += [_per_log_row(p) for p in rep["per_log"]]
     else:
         L.append("No log's own diagnosis names a cause.")
     for k, v in enumerate(rep["vehicles"], start=1):
         L += ["", f"## Vehicle {k}: {v['vehicle']}", "",
-              f"{len(v['flights'])} flights; which logs are its: {v['identity']}; their order: {v['order']}; figure: "
+              f"{_logs(v)}; which logs are its: {v['identity']}; their order: {v['order']}; figure: "
               f"vehicle-{k}.png.", ""]
         for name, s in v["series"].items():
             t = s["test"]
@@ -269,7 +295,7 @@ def markdown(rep: dict) -> str:
                 L.append(f"- finding {what} ({', '.join(t['series'])}): p = {t['p']:.2g} ({t['draws']} bootstrap series), "
                          f"Holm {t['p_adjusted']:.2g}{': named' if t['named'] else ''}")
         for p in v["per_log"]:
-            L.append(f"- the logs name {p['what']} in {len(p['flights'])} of {p['of']} flights, from flight "
+            L.append(f"- the logs name {p['what']} in {len(p['flights'])} of {p['of']} diagnosed flights, from flight "
                      f"{p['first_flight'] + 1}; {p['trend']}")
         if v["timing"]:
             L.append(f"- timing: not followed: {v['timing']}")
