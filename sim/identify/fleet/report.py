@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from flightctl.sim.identify.fleet.figures import SERIES
 from flightctl.sim.identify.fleet.grouping import Vehicle, group
 from flightctl.sim.identify.fleet.trends import ALPHA, DRAWS, LR_SET, MIN_FLIGHTS, Change, Fit, calibrate, correct
 
