@@ -103,6 +103,8 @@ BLOCKS = (
           SCRIPT + ("scripts/diagnose_sweep.py", "--doc", "{doc}"), minutes=6),
     Block("fleet-scale", "docs/fleet.md", "<!-- fleet-scale:begin -->", "<!-- fleet-scale:end -->",
           SCRIPT + ("scripts/fleet_scale.py", "--doc", "{doc}"), minutes=8, measured=True),
+    Block("fleet-detection", "docs/fleet.md", *marked("fleet-detection"),
+          SCRIPT + ("scripts/fleet_detection.py", "--doc", "{doc}"), minutes=6),
     Block("static-tier", "docs/diagnose.md", *marked("static tier"), SCRIPT + ("scripts/static_tier.py", "--doc", "{doc}"),
           minutes=1.5),
     Block("tune-table", "docs/tune.md", *marked("tune procedure"), FLIGHTCTL + ("tune", "--out", "{tmp}/t.toml", "--doc", "{doc}"),

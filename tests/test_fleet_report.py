@@ -1,7 +1,8 @@
-"""The fleet report (`flightctl diagnose --corpus DIR --fleet REPORT`, sim/identify/fleet/) on real logs of
-one vehicle: three of indiflight's blackbox logs (../shared/data/real/flights/indiflight, one MATEK H743
-board, flown on one day), under names whose order is not their flights': they are one vehicle by their
-header's board, in the order of their `Log start datetime`; with a `--vehicles` map, the vehicles the map
+"""The fleet report (`flightctl diagnose --corpus DIR --fleet REPORT`, sim/identify/fleet/) on real logs:
+three of indiflight's blackbox logs (../shared/data/real/flights/indiflight, one board model, MATEK H743,
+no craft name), under names whose order is not their flights': a board's name alone is no vehicle (issue
+45), so they are the vehicle of their folder, the report saying the board, in the order of their `Log
+start datetime`; with a `--vehicles` map, the vehicles the map
 says, the report rebuilt from the results table without reading a log again. Bad `--fleet` and
 `--vehicles` input is one line on stderr, exit 2, nothing written. And the change test itself on series
 drawn at random (a step of a drawn size at a drawn flight, and none)."""
@@ -45,11 +46,12 @@ def indiflight(tmp_path_factory):
     return tmp, json.loads((tmp / "report" / "fleet.json").read_text())
 
 
-def test_real_logs_of_one_board_are_one_vehicle_in_the_order_of_their_start_times(indiflight):
+def test_real_logs_that_name_only_their_board_are_their_folders_vehicle_in_the_order_of_their_start_times(indiflight):
     _, rep = indiflight
-    assert [v["vehicle"] for v in rep["vehicles"]] == ["MTKS MATEKH743"]
+    assert [v["vehicle"] for v in rep["vehicles"]] == ["(the corpus' folder)"]
     v = rep["vehicles"][0]
-    assert "Board information" in v["identity"] and v["order"].startswith("the logs' start times")
+    assert v["identity"].startswith("the log's folder") and "MTKS MATEKH743" in v["identity"]
+    assert v["order"].startswith("the logs' start times")
     assert [f["log"] for f in v["flights"]] == ["c.BFL", "b.BFL", "a.BFL"]
     starts = [f["start_utc"] for f in v["flights"]]
     assert starts == sorted(starts) and len(set(starts)) == 3
@@ -57,6 +59,7 @@ def test_real_logs_of_one_board_are_one_vehicle_in_the_order_of_their_start_time
     assert v["series"]["share_1"]["flight"] == [0, 1, 2] and v["series"]["timing_s"]["flight"] == [0, 1, 2]
     assert all(s["test"] is None for s in v["series"].values())      # three flights: too few to test
     assert rep["changes"] == []
+    assert v["timing"] is None                                        # the dynamic tier gave a timing: followed
 
 
 def test_a_vehicles_map_regroups_the_logs_from_the_results_table(indiflight):

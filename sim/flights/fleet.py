@@ -55,6 +55,7 @@ SOC = (0.85, 1.0)              # the pack's charge at take-off
 MOTOR_SPREAD = 0.02            # each vehicle's motors differ by this much thrust (one motor_weak each)
 CHUNK = 40                     # flights flown at once by the batched simulator
 ONSET_MARGIN = 6               # an effect starts no earlier than this flight and this many before the last
+#                                (a third of the flights, at least 2, on a fleet of fewer than 18: the middle of a short series)
 EPOCH_UTC = dt.datetime(2026, 3, 2, 8, 0, tzinfo=dt.timezone.utc)
 GPS_EPOCH = dt.datetime(1980, 1, 6, tzinfo=dt.timezone.utc)
 GPS_LEAP_S = 18                # GPS time ahead of UTC (since 2017-01-01)
@@ -196,10 +197,17 @@ def _uid(rng: np.random.Generator) -> str:
     return f"{BOARDS[int(rng.integers(len(BOARDS)))]} " + " ".join(f"{int(w):08X}" for w in words)
 
 
-def _draw_effects(rng, vehicles: int, flights: int, weak: bool, aging: bool, fmt: str) -> dict:
-    lo, hi = ONSET_MARGIN, flights - ONSET_MARGIN
+def onset_margin(flights: int) -> int:
+    """The fewest flights before an effect's onset and from it to the last (ONSET_MARGIN)."""
+    return min(ONSET_MARGIN, max(2, flights // 3))
+
+
+def _draw_effects(rng, vehicles: int, flights: int, weak: bool, aging: bool, fmt: str,
+                  weak_scale: tuple[float, float] = WEAK_SCALE) -> dict:
+    margin = onset_margin(flights)
+    lo, hi = margin, flights - margin
     if hi <= lo and (weak or aging):
-        raise ValueError(f"{flights} flights: at least {2 * ONSET_MARGIN + 1} for an effect's onset")
+        raise ValueError(f"{flights} flights: at least 3 for an effect's onset")
     if vehicles < (2 if weak and aging else 1):
         raise ValueError(f"{vehicles} vehicles: the weak motor and the aging pack are on two")
     who = rng.permutation(vehicles)
@@ -208,7 +216,7 @@ def _draw_effects(rng, vehicles: int, flights: int, weak: bool, aging: bool, fmt
         sim_motor = int(rng.integers(1, 5))
         motor = AP_FROM_SIM.index(sim_motor) + 1 if fmt == "dataflash" else sim_motor    # as the log numbers it
         out["weak"] = {"vehicle": int(who[0]), "motor": motor, "sim_motor": sim_motor,
-                       "scale": round(float(rng.uniform(*WEAK_SCALE)), 4), "onset": int(rng.integers(lo, hi))}
+                       "scale": round(float(rng.uniform(*weak_scale)), 4), "onset": int(rng.integers(lo, hi))}
     if aging:
         out["battery"] = {"vehicle": int(who[1 if weak and vehicles > 1 else 0]), "onset": int(rng.integers(lo, hi)),
                           "factor": round(float(rng.uniform(*AGED_FACTOR)), 3)}
@@ -217,7 +225,8 @@ def _draw_effects(rng, vehicles: int, flights: int, weak: bool, aging: bool, fmt
 
 def simulate_fleet(folder: str | Path, rng: np.random.Generator, vehicles: int = 4, flights: int = 40,
                    seconds: float = 30.0, weak: bool = True, aging: bool = True, layout: str = "flat",
-                   fmt: str = "dataflash", params: Params | None = None, progress=None) -> dict:
+                   fmt: str = "dataflash", params: Params | None = None, progress=None,
+                   weak_scale: tuple[float, float] = WEAK_SCALE) -> dict:
     """Fly `vehicles` x `flights` and write each flight into `folder` as an ArduCopter DataFlash log (`fmt`
     "dataflash") or a PX4 ULog ("ulog"; the module's docstring); returns the truth, which the code under test is never told:
     {"vehicles": [{"uid", "logs": [file names in flight order], "start_utc": [...], "ohm": [...],
@@ -236,7 +245,7 @@ def simulate_fleet(folder: str | Path, rng: np.random.Generator, vehicles: int =
     folder.mkdir(parents=True, exist_ok=True)
     params = params or load(None)
     a = params.airframe
-    truth = _draw_effects(rng, vehicles, flights, weak, aging, fmt)
+    truth = _draw_effects(rng, vehicles, flights, weak, aging, fmt, weak_scale)
     total = vehicles * flights
     names = rng.permutation(total) + 1
     out = []

@@ -11,8 +11,11 @@ report (sim/identify/fleet/) groups and orders the logs by them.
   topic's `time_utc_usec` (vehicle_gps_position, or sensor_gps: UTC in microseconds) of its first fix,
   less its timestamp (PX4's `time_ref_utc` information message is the UTC offset of the local time, not
   a time: 0 in ../shared/data/real/flights/px4's logs).
-- Betaflight and INAV (blackbox): `Board information` and `Craft name` from the header (which craft the
-  pilot named, on which board); the start from `Log start datetime` (its RTC's: 0000-01-01 when unset).
+- Betaflight and INAV (blackbox): `Craft name` with `Board information` from the header (which craft the
+  pilot named, on which board); a board's name alone is its model (`MTKS MATEKH743`: every Matek H743 says
+  so), not a vehicle: it is kept as `board` and the log is grouped by its folder (issue 45: three
+  INDIflight logs of different vehicles, one board model, no craft name); the start from `Log start
+  datetime` (its RTC's: 0000-01-01 when unset).
 """
 from __future__ import annotations
 
@@ -75,9 +78,11 @@ def px4(info: dict, gps: dict | None) -> dict[str, str]:
 def blackbox(header: dict) -> dict[str, str]:
     out = {}
     board, craft = str(header.get("Board information", "")).strip(), str(header.get("Craft name", "")).strip()
-    if board or craft:
+    if board:
+        out["board"] = board
+    if craft:
         out["vehicle_id"] = " / ".join(x for x in (board, craft) if x)
-        out["vehicle_id_source"] = "the blackbox header's Board information and Craft name"
+        out["vehicle_id_source"] = "the blackbox header's Craft name" + (" and Board information" if board else "")
     when = str(header.get("Log start datetime", "")).strip()
     if when and not when.startswith("0000"):
         try:

@@ -24,7 +24,7 @@ from pathlib import Path
 from flightctl.sim.identify.fleet.figures import figures
 
 META = ("craft", "firmware", "format", "rate_hz", "motor_rate_hz", "omega_source", "battery_cells", "vehicle_id",
-        "vehicle_id_source", "start_utc", "start_source")
+        "vehicle_id_source", "board", "start_utc", "start_source")
 
 
 def sha256(path: str | Path) -> str:

@@ -57,9 +57,11 @@ def report(rows, results: Path, folder: Path, mapping: dict | None, quiet: bool)
     write(rep, folder)
     if not quiet:
         named = "; ".join(f"{c['vehicle']}: {c['what']} from flight {c['onset_flight'] + 1} ({c['onset_log']})"
-                          for c in rep["changes"]) or "nothing changed"
-        print(f"diagnose --fleet: {len(rep['vehicles'])} vehicles, {rep['series_tested']} series tested; {named}; "
-              f"report in {folder}/fleet.md", file=sys.stderr)
+                          for c in rep["changes"]) or "no trend named"
+        logs = "; ".join(f"{p['vehicle']}: the logs name {p['what']} in {len(p['flights'])} of {p['of']} diagnosed flights from "
+                         f"flight {p['first_flight'] + 1}" for p in rep["per_log"]) or "no log names a cause"
+        print(f"diagnose --fleet: {len(rep['vehicles'])} vehicles, {rep['findings_tested']} findings tested; {named}; "
+              f"{logs}; report in {folder}/fleet.md", file=sys.stderr)
     return rep
 
 

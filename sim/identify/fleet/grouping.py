@@ -4,7 +4,9 @@
 Which vehicle, first that applies: the user's mapping (`--vehicles MAP.csv`, rows `log,vehicle`: the
 log as the corpus names it, its path, or its file name); the vehicle's identity in the log's header
 (sim/logs/identity.py: ArduPilot's board UID or BRD_SERIAL_NUM, PX4's sys_uuid, Betaflight's and INAV's
-board and craft name); else the log's folder (one folder per vehicle). The order of a vehicle's flights:
+craft name with its board; never a board's name alone, a model many vehicles share); a log without one in a
+file of many logs whose others all name one vehicle (a header-only log refused before its header was read),
+that vehicle; else the log's folder (one folder per vehicle). The order of a vehicle's flights:
 the logs' own start times (GPS time, the blackbox's RTC, PX4's time_ref_utc) when every log of the
 vehicle has one, else the logs' names in natural order (`00000009.BIN` before `00000010.BIN`); the
 report says which for each vehicle.
@@ -77,7 +79,9 @@ def _vehicle_of(row: dict, mapping: dict[str, str]) -> tuple[str, str]:
     if meta.get("vehicle_id"):
         return meta["vehicle_id"], meta.get("vehicle_id_source") or "the log's header"
     folder = Path(row["log"]).parent.as_posix()
-    return (folder if folder != "." else "(the corpus' folder)"), "the log's folder"
+    why = (f" (its header names only its board, {meta['board']}: a board model, not a vehicle)" if meta.get("board")
+           else "")
+    return (folder if folder != "." else "(the corpus' folder)"), "the log's folder" + why
 
 
 def group(rows: list[dict], mapping: dict[str, str] | None = None) -> list[Vehicle]:
@@ -85,8 +89,17 @@ def group(rows: list[dict], mapping: dict[str, str] | None = None) -> list[Vehic
     each with its flights in order; vehicles by name."""
     mapping = mapping or {}
     by: dict[str, Vehicle] = {}
+    ids: dict[str, set] = {}                 # a file's logs' identities (a blackbox file of many logs)
+    for row in rows:
+        if (row.get("meta") or {}).get("vehicle_id"):
+            ids.setdefault(row["path"], set()).add((row["meta"]["vehicle_id"], row["meta"].get("vehicle_id_source")))
     for row in rows:
         name, source = _vehicle_of(row, mapping)
+        same = ids.get(row["path"], set())
+        if source.startswith("the log's folder") and len(same) == 1:
+            # a log refused before its header was read (a header-only log), in a file whose other logs all
+            # name one vehicle: one flight controller's flash, so that vehicle's
+            name, source = next(iter(same))[0], "its file's other logs (one flight controller's flash)"
         v = by.setdefault(name, Vehicle(name, source))
         if source not in v.source.split("; "):
             v.source += f"; {source}"

@@ -14,17 +14,26 @@ variance, log-spaced). The models:
   and then a linear rise or fall from k (k = 0: a trend over every flight).
 
 The statistic is the largest likelihood ratio over the split points (and the two shapes), LR = 2 (l_1 -
-l_0): the split point is searched, so its distribution is not chi-square; its p-value is a permutation
-test's: under no change the flights are exchangeable, so the same statistic of the series with its
-flights (each value with its own standard error) in random orders (PERMUTATIONS of them, each searched
-the same way) is its null distribution whatever the values' distribution (a vibration level is not
-normal from flight to flight), with the add-one estimate (1 + #{LR* >= LR}) / (B + 1) (Phipson and
-Smyth, "Permutation p-values should never be zero", Stat. Appl. Genet. Mol. Biol. 9, 2010). Over every series of the fleet, Holm's step-down correction (Holm,
-"A simple sequentially rejective multiple test procedure", Scand. J. Statist. 6, 1979) holds the chance
-of naming anything on a fleet where nothing changed at ALPHA. The onset's interval is the split points
-whose likelihood is within the chi-square(1) 95 % quantile of the best (a likelihood-ratio confidence
-set for the change point: Siegmund, "Confidence sets in change-point problems", Int. Statist. Rev. 56,
-1988); the size is the step mu_2 - mu_1 (or the hinge's slope) at the best split with its standard error.
+l_0): the split point is searched, so its distribution is not chi-square. Its p-value is a parametric
+bootstrap's from the no-change fit (Efron and Tibshirani, "An Introduction to the Bootstrap", 1993,
+ch. 16.4): series drawn as y*_i ~ N(mu_0, s_i^2 + tau_0^2), each flight with its own standard error and
+the spread between flights of the fitted no-change model, each searched over the split points the same
+way. So the null keeps what each flight knows (a permutation of ten flights cannot give a p-value below
+one over the orderings that move the split, about 1/60, whatever the flights' errors), and the p-value's
+resolution is 1 / (DRAWS + 1), its add-one estimate (1 + #{LR* >= LR}) / (B + 1) (Phipson and Smyth,
+"Permutation p-values should never be zero", Stat. Appl. Genet. Mol. Biol. 9, 2010); the draws stop early
+once STOP of them reach the statistic, p = STOP / draws (Besag and Clifford, "Sequential Monte Carlo
+p-values", Biometrika 78, 1991): a series far from any change costs a batch, not DRAWS.
+
+A finding is tested as one (`calibrate` of several series): a vehicle's four motor shares average one, so
+a motor that weakens moves all four; the finding's statistic is the largest of its series' LRs, its null
+the largest of theirs drawn together. Over every finding of the fleet (not every series), Holm's
+step-down correction (Holm, "A simple sequentially rejective multiple test procedure", Scand. J.
+Statist. 6, 1979) holds the chance of naming anything on a fleet where nothing changed at ALPHA. The
+onset's interval is the split points whose likelihood is within the chi-square(1) 95 % quantile of the
+best (a likelihood-ratio confidence set for the change point: Siegmund, "Confidence sets in change-point
+problems", Int. Statist. Rev. 56, 1988); the size is the step mu_2 - mu_1 (or the hinge's slope) at the
+best split with its standard error.
 """
 from __future__ import annotations
 
@@ -34,23 +43,25 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-ALPHA = 0.05                 # the family-wise error rate over the fleet's series
-PERMUTATIONS = 1999          # random orders of the flights (p-values from 1/2000)
-MIN_SIDE = 3                 # flights on each side of a step
-MIN_FLIGHTS = 2 * MIN_SIDE + 2   # a series shorter than this is not tested
+ALPHA = 0.05                 # the family-wise error rate over the fleet's findings
+DRAWS = 1999                 # the bootstrap's series under no change (p-values from 1/2000)
+STOP = 20                    # the draws stop once this many reach the statistic (Besag and Clifford)
+BATCH = 100                  # series drawn at once
+MIN_SIDE = 2                 # flights on each side of a step (the flights' own errors carry a short side)
+MIN_FLIGHTS = 2 * MIN_SIDE + 1   # a series shorter than this is not tested
 TAU_GRID = 24
 LR_SET = float(stats.chi2.ppf(0.95, 1))   # the onset's 95 % likelihood set
 
 
 @dataclass
 class Change:
-    """A series' test: `lr` and `p` (the permutation test's), `shape` ("step" or "hinge"), `onset` (the position
-    in the series of the first flight changed: the new level's first, or the first after the hinge),
-    `onset_set` (lo, hi), `size`
-    and `size_se` (the step, or the hinge's slope per flight), `before` and `after` (the levels either
-    side, fitted), `tau` (the spread between flights), `p_adjusted` (Holm's, set by `correct`)."""
+    """A series' fit at its best split: `lr`, `shape` ("step" or "hinge"), `onset` (the position in the
+    series of the first flight changed: the new level's first, or the first after the hinge), `onset_set`
+    (lo, hi), `size` and `size_se` (the step, or the hinge's slope per flight), `before` and `after` (the
+    levels either side, fitted), `tau` (the spread between flights), `level` and `tau_null` (the
+    no-change fit the bootstrap draws from); `p` and `p_adjusted` are its finding's (`calibrate`,
+    `correct`), `draws` how many bootstrap series it took."""
     lr: float
-    p: float
     shape: str
     onset: int
     onset_set: tuple[int, int]
@@ -60,7 +71,11 @@ class Change:
     after: float
     tau: float
     n: int
+    level: float
+    tau_null: float
+    p: float = 1.0
     p_adjusted: float = 1.0
+    draws: int = 0
 
 
 def _grid(y: np.ndarray, s2: np.ndarray) -> np.ndarray:
@@ -145,32 +160,38 @@ def _seed(y: np.ndarray) -> int:
     return int.from_bytes(hashlib.sha256(np.ascontiguousarray(y, dtype=float).tobytes()).digest()[:8], "little")
 
 
-def test(y, se, hinge: bool = False, permutations: int = PERMUTATIONS) -> Change | None:
-    """The change test of one series (the module's docstring); None when it has fewer than MIN_FLIGHTS
-    values. `se` None or NaN: no standard error (tau then holds all the scatter). The permutations'
-    generator is seeded from the data: the same series gives the same p-value."""
-    y = np.asarray(y, dtype=float)
-    s2 = np.nan_to_num(np.asarray(se, dtype=float), nan=0.0) ** 2
+class Fit:
+    """One series fitted (`change`: its best split) and able to draw its null (`null`)."""
+
+    def __init__(self, y, se, hinge: bool = False):
+        self.y = np.asarray(y, dtype=float)
+        self.s2 = np.nan_to_num(np.asarray(se, dtype=float), nan=0.0) ** 2
+        self.hinge = hinge
+        self.change = _fit(self.y, self.s2, hinge, self) if self.y.size >= MIN_FLIGHTS else None
+
+    def null(self, rng: np.random.Generator, b: int) -> np.ndarray:
+        """(b,) the statistic of b series drawn from the no-change fit (the module's docstring)."""
+        c = self.change
+        Y = c.level + np.sqrt(self.s2 + c.tau_null ** 2) * rng.standard_normal((b, self.y.size))
+        return _search(Y, self.w, self.hinge)[0]
+
+
+def _fit(y: np.ndarray, s2: np.ndarray, hinge: bool, into: Fit) -> Change:
     n = y.size
-    if n < MIN_FLIGHTS:
-        return None
     tau2 = _grid(y, s2)
-    w = _weights(s2, tau2)                                         # (G, n)
+    w = into.w = _weights(s2, tau2)                                # (G, n)
     best, st, hi = _search(y[None, :], w, hinge)
     lr = float(best[0])
-    rng = np.random.default_rng(_seed(y))
-    exceed = 0
-    for start in range(0, permutations, 200):      # the flights' values with their errors, in random orders
-        order = np.argsort(rng.random((min(200, permutations - start), n)), axis=1)
-        exceed += int((_search(y[order], _weights(s2[order], tau2), hinge)[0] >= lr - 1e-9).sum())
-    p = (1 + exceed) / (permutations + 1)
+    ll = 0.5 * np.log(w).sum(axis=1)
+    sw = w.sum(axis=1)
+    m0 = (w * y).sum(axis=1) / sw
+    g0 = int(np.argmax(ll - 0.5 * (w * (y - m0[:, None]) ** 2).sum(axis=1)))
     use_hinge = hi is not None and hi.max() > st.max()
     prof = (hi if use_hinge else st)[0]
     ks = np.arange(0, n - MIN_SIDE) if use_hinge else np.arange(MIN_SIDE, n - MIN_SIDE + 1)
     j = int(np.argmax(prof))
     k = int(ks[j])
     inside = ks[prof >= prof[j] - LR_SET]
-    ll = 0.5 * np.log(w).sum(axis=1)
     if use_hinge:
         x = np.maximum(0.0, np.arange(n) - k).astype(float)
         sse, a, b, var_b = _hinge_fit(y[None, :], w, x)
@@ -186,13 +207,41 @@ def test(y, se, hinge: bool = False, permutations: int = PERMUTATIONS) -> Change
         before, after = float(ml[g]), float(mr[g])
         size, size_se = after - before, float(np.sqrt(1.0 / wl[g].sum() + 1.0 / wr[g].sum()))
     shift = 1 if use_hinge else 0        # a hinge at k leaves flight k flat: the first flight changed is k + 1
-    return Change(lr, p, "hinge" if use_hinge else "step", k + shift, (int(inside.min()) + shift, int(inside.max()) + shift),
-                  size, size_se, before, after, float(np.sqrt(tau2[g])), n)
+    return Change(lr, "hinge" if use_hinge else "step", k + shift, (int(inside.min()) + shift, int(inside.max()) + shift),
+                  size, size_se, before, after, float(np.sqrt(tau2[g])), n, float(m0[g0]), float(np.sqrt(tau2[g0])))
 
 
-def correct(changes: list[Change | None], alpha: float = ALPHA) -> list[bool]:
-    """Holm's step-down over the tested series: each series' adjusted p-value set, and whether it is
-    named (adjusted p below alpha)."""
+def calibrate(fits: list[Fit], draws: int = DRAWS) -> tuple[float, int]:
+    """(p-value, draws) of a finding made of `fits` (each with a change): its statistic the largest of their
+    LRs, its null the largest of theirs drawn together from their no-change fits, drawn in batches until
+    STOP reach the statistic or `draws` are done (the module's docstring). The generator is seeded from
+    the data: the same series give the same p-value."""
+    fits = [f for f in fits if f.change is not None]
+    lr = max(f.change.lr for f in fits)
+    rng = np.random.default_rng(_seed(np.concatenate([f.y for f in fits])))
+    exceed = done = 0
+    while done < draws:
+        b = min(BATCH, draws - done)
+        top = np.max([f.null(rng, b) for f in fits], axis=0)
+        exceed += int((top >= lr - 1e-9).sum())
+        done += b
+        if exceed >= STOP:
+            return exceed / done, done
+    return (1 + exceed) / (draws + 1), done
+
+
+def test(y, se, hinge: bool = False, draws: int = DRAWS) -> Change | None:
+    """The change test of one series, a finding of its own (the module's docstring); None when it has
+    fewer than MIN_FLIGHTS values. `se` None or NaN: no standard error (tau then holds all the scatter)."""
+    f = Fit(y, se, hinge)
+    if f.change is not None:
+        f.change.p, f.change.draws = calibrate([f], draws)
+    return f.change
+
+
+def correct(changes: list, alpha: float = ALPHA) -> list[bool]:
+    """Holm's step-down over the tested findings (anything with a `p`; None: not tested): each one's
+    adjusted p-value set, and whether it is named (adjusted p below alpha)."""
     idx = [i for i, c in enumerate(changes) if c is not None]
     order = sorted(idx, key=lambda i: changes[i].p)
     m = len(order)
