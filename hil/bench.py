@@ -70,6 +70,16 @@ APC_MR_RPM_INCH = 105000.0      # APC's speed limit for its multirotor propeller
 EXIT_STOPPED, EXIT_UNAVAILABLE, EXIT_INTERRUPTED = 1, 3, 130
 RAW_COLUMNS = ("t", "motor", "P", "phase", "thrust", "omega", "voltage", "current")
 PROFILES = ("staircase", "step", "both")
+# The largest value of each time and rate the bench takes, so that no mistyped value keeps a motor
+# spinning: the step timeout bounds every phase of a step (ramp, settle, hold, the holds again, the
+# step profile's record) and must take the longest ramp, the settle and one hold (parse_args).
+MAX_SETTLE_S = 60.0             # a minute at one command: the motor's speed settles in 5 tau (under 1 s,
+#                                 motor_dynamics' 20-192 ms) and its temperature in tens of seconds
+MAX_HOLD_S = 60.0               # a minute of averaging: the load cell's 80 Hz gives thousands of samples
+MAX_RECORD_S = 10.0             # 50 time constants of the slowest motor (192 ms, motor_dynamics)
+MAX_STEP_TIMEOUT_S = 300.0      # 5 minutes of one motor at one step, its ramps, holds and record
+MAX_SILENT_S = 10.0             # instruments silent longer: the motor spins unwatched
+RAMP_RANGE = (1.0, 500.0)       # P/s: from 0 to 255 in 255 s at the slowest; 500 P/s: half a second
 
 
 class BenchStop(Exception):
@@ -150,6 +160,7 @@ class Bench:
     def __init__(self, hal, instruments: ins.Instruments, limits: Limits, ramp: float = RAMP_P_PER_S, raw=None):
         self.hal, self.inst, self.limits, self.ramp_rate, self.raw = hal, instruments, limits, ramp, raw
         self.motor, self.P = 1, 0.0
+        self.deadline = math.inf    # bench time by which the step under way must be done (begin_step)
         self.counts = [0, 0, 0, 0]
         self.volts = self.amps = math.nan
         self.next_power = -math.inf
@@ -167,6 +178,9 @@ class Bench:
         if self.since is None:
             self.since = now
         last = self.inst.last_at if self.inst.last_at is not None else self.since
+        if now > self.deadline:
+            raise BenchStop(f"motor {self.motor} at P {self.P:g}: the step took longer than --step-timeout "
+                            f"{self.limits.step_timeout:g} s (in its {phase})")
         if now - max(last, self.since) > self.limits.silent:
             raise BenchStop(f"the instruments ({self.inst.name}) went silent: nothing for {now - last:.2f} s"
                             + (f"; last bad line: {self.inst.last_bad}" if self.inst.last_bad else ""))
@@ -222,9 +236,13 @@ class Bench:
         self.run_for(0.1, "tare")
         self.command("Z")
 
+    def begin_step(self) -> None:
+        """A step starts: it must be done, every phase of it, within --step-timeout (`tick` stops it)."""
+        self.deadline = self.hal.clock.now() + self.limits.step_timeout
+
     def steady(self, P: float, settle: float, hold: float) -> tuple:
         """Ramp to P, settle, and average over `hold` until the speed is steady: one bench.csv row."""
-        start = self.hal.clock.now()
+        self.begin_step()
         self.ramp_to(P)
         self.run_for(settle, "settle")
         while True:
@@ -236,7 +254,7 @@ class Bench:
             a, b = sum(w[:half]) / half, sum(w[half:]) / (len(w) - half)
             if abs(b - a) <= STEADY_REL * abs(b) + STEADY_ABS:
                 break
-            if self.hal.clock.now() - start > self.limits.step_timeout:
+            if self.hal.clock.now() + hold > self.deadline:
                 raise BenchStop(f"motor {self.motor} at P {P:g}: the speed did not settle within --step-timeout "
                                 f"{self.limits.step_timeout:g} s ({a:.1f} -> {b:.1f} rad/s)")
 
@@ -246,6 +264,7 @@ class Bench:
 
     def step_response(self, P0: float, P1: float, record: float) -> tuple[float, list[tuple[float, float]]]:
         """Jump from P0 (steady) to P1 at once: (t0, [(t, omega)]) for `record` seconds after it."""
+        self.begin_step()
         self.set(P1)
         self.tick("step")
         t0 = self.hal.clock.now()      # the new counts went out with that tick
@@ -253,6 +272,7 @@ class Bench:
         return t0, [(t, s.omega) for t, s in samples]
 
     def finish(self) -> None:
+        self.begin_step()
         self.ramp_to(0.0)
         self.counts = [0, 0, 0, 0]
         self.hal.motors.stop()
@@ -373,10 +393,20 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     if args.board == "hil":
         p.error("--board hil: the bench spins motors on a thrust stand (pi) or a simulated one (sim); "
                 "the hil board's motors drive a model on a PC")
-    if not 0 < args.ramp <= 500:
-        p.error("--ramp: 0 < P/s <= 500")
-    if args.settle < 0 or args.hold <= 0 or args.record <= 0 or args.step_timeout <= 0 or args.silent <= 0:
-        p.error("--settle must be >= 0; --hold, --record, --step-timeout and --silent > 0")
+    # every time and rate bounded (a nan compares false: refused too), so no value keeps a motor spinning
+    for flag, value, lo, hi, unit in (("--ramp", args.ramp, *RAMP_RANGE, "P/s"),
+                                      ("--settle", args.settle, 0.0, MAX_SETTLE_S, "s"),
+                                      ("--hold", args.hold, 0.0, MAX_HOLD_S, "s"),
+                                      ("--record", args.record, 0.0, MAX_RECORD_S, "s"),
+                                      ("--step-timeout", args.step_timeout, 0.0, MAX_STEP_TIMEOUT_S, "s"),
+                                      ("--silent", args.silent, 0.0, MAX_SILENT_S, "s")):
+        closed = flag in ("--ramp", "--settle")      # the others must be above 0
+        if not (lo <= value <= hi if closed else lo < value <= hi):
+            p.error(f"{flag} {value:g}: {'from' if closed else 'above'} {lo:g} to {hi:g} {unit}")
+    if not 0.0 < args.max <= 255.0:
+        p.error(f"--max {args.max:g}: above 0 to 255 (the command range)")
+    if args.max_rpm is not None and not 0.0 < args.max_rpm < math.inf:
+        p.error(f"--max-rpm {args.max_rpm:g}: a speed above 0 is needed")
     if args.instruments is None:
         args.instruments = "pty" if args.board == "sim" else "serial:/dev/ttyACM0,115200"
     if args.write_params and args.profile == "staircase":
@@ -431,10 +461,21 @@ def main(argv: list[str] | None = None) -> int:
     if len(step) != 2 or step[1] == step[0]:
         raise InputError(f"--step {args.step!r}: two different command values P0,P1 expected")
     motors = parse_motors(args.motors)
+    # a step's ramp (from the stop pulse: each motor starts at P = 0), settle and first hold, and the
+    # step profile's record, each within --step-timeout: a timeout shorter stops every step, a wasted run
+    longest = max(steps + step) / args.ramp + args.settle + args.hold
+    if max(longest, args.record) > args.step_timeout:
+        raise InputError(f"--step-timeout {args.step_timeout:g}: shorter than one step ({max(steps + step):g} / "
+                         f"--ramp {args.ramp:g} + --settle {args.settle:g} + --hold {args.hold:g} = {longest:.3g} s"
+                         + (f"; --record {args.record:g} s" if args.record > longest else "") + ")")
     kind = ins.parse_spec(args.instruments)[0]
     if kind == "rcbenchmark" and len(motors) > 1:
         raise InputError("--instruments rcbenchmark: the stand holds one motor; run one motor at a time (--motors N)")
     params = load(args.params)
+    if args.max_rpm is not None and args.max_rpm * ins.RPM > prop_limit(params):
+        raise InputError(f"--max-rpm {args.max_rpm:g}: above the propeller's own limit, "
+                         f"{prop_limit(params) / ins.RPM:.0f} RPM (APC's {APC_MR_RPM_INCH:.0f} RPM-inch over its "
+                         "diameter, from the parameter file's rotor_radius): --max-rpm lowers it, never raises it")
     limits = Limits(args.max, prop_limit(params) if args.max_rpm is None else args.max_rpm * ins.RPM,
                     args.step_timeout, args.silent)
     # every output checked before a motor turns: a run's measurements are never lost at the end
