@@ -45,7 +45,7 @@ from pathlib import Path
 from flightctl import __version__
 from flightctl.cli import interrupted
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, open_board
-from flightctl.errors import InputError, Parser, output_file, seed
+from flightctl.errors import InputError, Parser, output_file, seed, write_atomic
 from flightctl.hal import PWM_RANGE
 from flightctl.hil import instruments as ins
 from flightctl.logfile import BENCH_COLUMNS
@@ -321,7 +321,7 @@ def write_tau(path: str | Path, base: Params, tau: float, source: str) -> None:
             tables = ("gains", "filters")
     effects = tuple(e for e in params.effects if e.cause != "motor_dynamics")
     effects += (EffectSpec("motor_dynamics", (("tau", round(tau, 5)),), source),)
-    path.write_text(dumps(replace(params, effects=effects), tables=tables))
+    write_atomic(path, dumps(replace(params, effects=effects), tables=tables))
 
 
 @dataclass
