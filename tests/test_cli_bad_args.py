@@ -193,3 +193,42 @@ def test_a_closed_stdout_is_silent(argv):
     finally:
         os.close(write)
     assert r.returncode == 0 and r.stderr == "", r.stderr
+
+
+# --- a disk without room for the flight's log ---------------------------------------------------------
+def _disk_with(monkeypatch, folder: Path, free: int) -> None:
+    """The OS's answer for `folder`'s disk: `free` bytes left (statvfs, what a full card answers)."""
+    real = os.statvfs
+
+    def statvfs(path):
+        st = real(path)
+        if Path(path).resolve() != folder.resolve():
+            return st
+        return os.statvfs_result((4096, 4096, st.f_blocks, free // 4096, free // 4096, *tuple(st)[5:]))
+    monkeypatch.setattr(os, "statvfs", statvfs)
+
+
+def test_a_disk_too_full_for_the_flight_log_is_found_before_flying(tmp_path, monkeypatch, capsys):
+    """A hover's log takes about 4 MB (20 s hold, 450 rows a second); the free space is drawn below that."""
+    import random
+    free = random.Random(491).randrange(100_000, 3_000_000)
+    _disk_with(monkeypatch, tmp_path, free)
+    assert main(["sim", "hover", "--log", str(tmp_path / "h.csv"), "--no-plot"]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert f"{free / 1e6:.1f} MB free on its disk" in line and "--log" in line, line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_run_refuses_a_plan_whose_log_has_no_room_before_ready(tmp_path, monkeypatch, caplog):
+    """run's contract: a pre-arm refusal, exit 3, one line in the journal (its logger)."""
+    import random
+    free = random.Random(492).randrange(100_000, 3_000_000)
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    _disk_with(monkeypatch, logs, free)
+    monkeypatch.delenv("NOTIFY_SOCKET", raising=False)
+    assert main(["run", "--board", "sim", "--plan", "hover", "--log", str(logs), "--calibrate", "0.2"]) == 3
+    refused = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+    assert len(refused) == 1 and "not flying" in refused[0], refused
+    assert f"{free / 1e6:.1f} MB free on its disk" in refused[0]
+    assert list(logs.iterdir()) == []
