@@ -25,7 +25,9 @@ stand holds one), or on `--board sim` the simulated load cell and tachometer beh
 from the line if it carries them, else from the onboard INA219.
 
 Safety: on hardware the vehicle must be confirmed clamped (`--clamped`, or typed at the prompt); P
-never exceeds --max; a step that does not settle within --step-timeout, an instrument silent for
+never exceeds --max; every time and rate is bounded (MAX_SETTLE_S and its siblings, with their reasons:
+nan, inf and negatives refused); a step, every phase of it (ramp, settle, holds, the step profile's
+record), that takes longer than --step-timeout, an instrument silent for
 --silent s, a speed above the propeller's limit (--max-rpm, default APC's for its diameter) or a
 thrust that falls while P rises stops the bench (exit 1); Ctrl-C and SIGTERM stop it (exit 130).
 Whatever happens the motor returns to the stop pulse, and the rows measured so far are kept.
@@ -370,15 +372,19 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--profile", choices=PROFILES, default="staircase",
                    help="staircase: steady points for eq. 26; step: the motor's time constant; both (default staircase)")
     p.add_argument("--steps", default=STEPS, help=f"staircase command values P (0..255), default {STEPS}")
-    p.add_argument("--settle", type=float, default=SETTLE_S, help="seconds at each P before averaging")
-    p.add_argument("--hold", type=float, default=HOLD_S, help="seconds of averaging at each P")
+    p.add_argument("--settle", type=float, default=SETTLE_S, help=f"seconds at each P before averaging (0 to {MAX_SETTLE_S:g})")
+    p.add_argument("--hold", type=float, default=HOLD_S, help=f"seconds of averaging at each P (at most {MAX_HOLD_S:g})")
     p.add_argument("--step", default=STEP, help=f"step profile: P0,P1 (default {STEP})")
-    p.add_argument("--record", type=float, default=RECORD_S, help="step profile: seconds recorded after the jump")
+    p.add_argument("--record", type=float, default=RECORD_S, help=f"step profile: seconds recorded after the jump (at most {MAX_RECORD_S:g})")
     p.add_argument("--max", type=float, default=MAX_P, help=f"largest P allowed (default {MAX_P:g})")
-    p.add_argument("--max-rpm", type=float, help="speed limit of the propeller (default: APC's, from its diameter)")
-    p.add_argument("--step-timeout", type=float, default=STEP_TIMEOUT_S, help="seconds a step may take to settle")
-    p.add_argument("--silent", type=float, default=SILENT_S, help="stop if the instruments say nothing this long")
-    p.add_argument("--ramp", type=float, default=RAMP_P_PER_S, help="ramp rate, P units per second")
+    p.add_argument("--max-rpm", type=float, help="speed limit of the propeller (default and most: APC's, from its diameter)")
+    p.add_argument("--step-timeout", type=float, default=STEP_TIMEOUT_S,
+                   help=f"seconds a step may take, every phase of it: ramp, settle, holds, record (at most "
+                        f"{MAX_STEP_TIMEOUT_S:g}; at least the longest ramp, --settle and --hold)")
+    p.add_argument("--silent", type=float, default=SILENT_S,
+                   help=f"stop if the instruments say nothing this long (at most {MAX_SILENT_S:g} s)")
+    p.add_argument("--ramp", type=float, default=RAMP_P_PER_S,
+                   help=f"ramp rate, P units per second ({RAMP_RANGE[0]:g} to {RAMP_RANGE[1]:g})")
     p.add_argument("--clamped", action="store_true", help="confirm that the vehicle is clamped (no prompt)")
     p.add_argument("--out", default="bench.csv", help="bench log to write (default bench.csv)")
     p.add_argument("--raw", help="raw samples (default: OUT's name with -raw)")
