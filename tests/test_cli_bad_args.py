@@ -232,3 +232,20 @@ def test_run_refuses_a_plan_whose_log_has_no_room_before_ready(tmp_path, monkeyp
     assert len(refused) == 1 and "not flying" in refused[0], refused
     assert f"{free / 1e6:.1f} MB free on its disk" in refused[0]
     assert list(logs.iterdir()) == []
+
+
+def test_a_corpus_whose_reports_have_no_room_is_refused_before_the_first_log(tmp_path, monkeypatch, capsys):
+    import random
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    n = random.Random(493).randrange(2, 6)
+    for k in range(n):
+        flight_log(logs / f"f{k}.csv")
+    out = tmp_path / "out"
+    out.mkdir()
+    free = random.Random(494).randrange(0, n * 60_000)          # below n reports of 64 kB
+    _disk_with(monkeypatch, out, free)
+    assert main(["diagnose", "--corpus", str(logs), "--json", str(out / "c.json"), "--quiet"]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert f"{free / 1e6:.1f} MB free on its disk" in line and f"{n} logs' reports" in line, line
+    assert list(out.iterdir()) == []
