@@ -278,8 +278,10 @@ def faults_main(argv: list[str]) -> int:
         raise InputError(f"--doc {args.doc}: no such file")
     if args.doc:
         output_file(args.doc, "--doc")
+    params = causes.load_vehicle(args.params, GAIN_SETS["table6"])
+    faultmatrix.log_room(logs, params)
     logs.mkdir(parents=True, exist_ok=True)
-    rows = faultmatrix.run_matrix(causes.load_vehicle(args.params, GAIN_SETS["table6"]), logs, seed=args.seed)
+    rows = faultmatrix.run_matrix(params, logs, seed=args.seed)
     write_atomic(out, json.dumps(rows, indent=1) + "\n")
     table = faultmatrix.markdown(rows)
     print(table, end="")

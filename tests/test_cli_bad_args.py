@@ -249,3 +249,13 @@ def test_a_corpus_whose_reports_have_no_room_is_refused_before_the_first_log(tmp
     line = one_line(capsys.readouterr().err)
     assert f"{free / 1e6:.1f} MB free on its disk" in line and f"{n} logs' reports" in line, line
     assert list(out.iterdir()) == []
+
+
+def test_a_fault_matrix_whose_logs_have_no_room_is_refused_before_the_first_flight(tmp_path, monkeypatch, capsys):
+    import random
+    free = random.Random(495).randrange(100_000, 10_000_000)     # the matrix's logs take tens of MB
+    _disk_with(monkeypatch, tmp_path, free)
+    assert main(["sim", "faults", "--json", str(tmp_path / "m.json")]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert line.startswith("flightctl sim: error: --logs") and f"{free / 1e6:.1f} MB free on its disk" in line, line
+    assert list(tmp_path.iterdir()) == []
