@@ -231,7 +231,9 @@ class Bench:
             self.tick("command")
 
     def start_motor(self, motor: int) -> None:
-        """Aim the tachometer at `motor` and tare the load cell, every motor stopped."""
+        """Aim the tachometer at `motor` and tare the load cell, every motor stopped (no step under way:
+        the commands have their own timeout)."""
+        self.deadline = math.inf
         self.counts = [0, 0, 0, 0]
         self.P, self.motor = 0.0, motor
         self.command(f"M{motor}")
@@ -276,6 +278,7 @@ class Bench:
     def finish(self) -> None:
         self.begin_step()
         self.ramp_to(0.0)
+        self.deadline = math.inf
         self.counts = [0, 0, 0, 0]
         self.hal.motors.stop()
 
