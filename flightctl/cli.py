@@ -2,8 +2,9 @@
 
 Every command ends the same way: bad input is one line on stderr and exit 2 (`InputError`); Ctrl-C
 is one line and exit 130 (worker processes are ended at once, a flight log is closed with a
-`# partial:` line); output piped into a reader that stops early (`| head`) is dropped quietly and the
-command finishes its work and exits with its own status."""
+`# partial:` line); output piped into a reader that stops early (`| head`, the help and the version
+too) is dropped quietly and the command finishes its work and exits with its own status; a home that
+cannot be written adds no line (`matplotlib_home`)."""
 from __future__ import annotations
 
 import atexit
