@@ -2,14 +2,18 @@
 
 Every command ends the same way: bad input is one line on stderr and exit 2 (`InputError`); Ctrl-C
 is one line and exit 130 (worker processes are ended at once, a flight log is closed with a
-`# partial:` line); output piped into a reader that stops early (`| head`) is dropped quietly and the
-command finishes its work and exits with its own status."""
+`# partial:` line); output piped into a reader that stops early (`| head`, the help and the version
+too) is dropped quietly and the command finishes its work and exits with its own status; a home that
+cannot be written adds no line (`matplotlib_home`)."""
 from __future__ import annotations
 
+import atexit
 import importlib
 import os
+import shutil
 import signal
 import sys
+import tempfile
 import threading
 from contextlib import contextmanager
 
@@ -138,8 +142,46 @@ class PipeSafe:
         return getattr(self._stream, name)
 
 
+def _writable_or_makeable(folder: str) -> bool:
+    """Whether `folder` is a directory this user may write, or could be made (its nearest existing parent is)."""
+    path = os.path.abspath(folder)
+    while not os.path.exists(path) and os.path.dirname(path) != path:
+        path = os.path.dirname(path)
+    return os.path.isdir(path) and os.access(path, os.W_OK | os.X_OK)
+
+
+def matplotlib_home() -> None:
+    """matplotlib's config and cache folders (MPLCONFIGDIR, else ~/.config/matplotlib and ~/.cache/matplotlib,
+    XDG's variables first) where this user's home cannot hold them (a service user, HOME=/nonexistent): a
+    private temporary folder, removed at exit, set before matplotlib's import, which otherwise writes
+    two warning lines on every command (a third-party import such as python-control's pulls it in too:
+    `main` sets it before the command's import). Its font cache is then rebuilt in each such process."""
+    if os.environ.get("MPLCONFIGDIR"):
+        return
+    home = os.path.expanduser("~")
+    folders = [os.path.join(os.environ.get(var) or os.path.join(home, sub), "matplotlib")
+               for var, sub in (("XDG_CONFIG_HOME", ".config"), ("XDG_CACHE_HOME", ".cache"))]
+    if all(_writable_or_makeable(f) for f in folders):
+        return
+    folder = tempfile.mkdtemp(prefix="flightctl-matplotlib-")
+    os.environ["MPLCONFIGDIR"] = folder
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    saved = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = PipeSafe(sys.stdout), PipeSafe(sys.stderr)   # the help and the version too
+    try:
+        return _command(argv)
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            if isinstance(stream, PipeSafe):
+                stream.flush()
+        sys.stdout, sys.stderr = saved
+
+
+def _command(argv: list[str]) -> int:
     if not argv or argv[0] in ("-h", "--help"):
         print(usage())
         return 0
@@ -149,8 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     if argv[0] not in COMMANDS:
         print(f"flightctl: unknown command {argv[0]!r}\n{usage()}", file=sys.stderr)
         return 2
-    saved = sys.stdout, sys.stderr
-    sys.stdout, sys.stderr = PipeSafe(sys.stdout), PipeSafe(sys.stderr)
+    matplotlib_home()
     module = None
     try:
         module = importlib.import_module(COMMANDS[argv[0]][0])
@@ -163,11 +204,6 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"{command_name(argv, module)}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    finally:
-        for stream in (sys.stdout, sys.stderr):
-            if isinstance(stream, PipeSafe):
-                stream.flush()
-        sys.stdout, sys.stderr = saved
 
 
 if __name__ == "__main__":

@@ -28,17 +28,44 @@ class Parser(argparse.ArgumentParser):
 
 
 def output_file(path, what: str = "", suffix: str | None = None) -> Path:
-    """A file a command will write, checked before any work: its directory exists, it is not a
-    directory, and (if given) it ends in `suffix`. `what`: the flag it came from, for the message."""
+    """A file a command will write, checked before any work: its directory exists and this process
+    may create files in it (`write_atomic` writes a temporary name there, then renames), it is not a
+    directory, an existing file there is one this user may write, and (if given) it ends in `suffix`.
+    `what`: the flag it came from, for the message."""
     p = Path(path)
     name = f"{what} {p}" if what else str(p)
     if suffix is not None and p.suffix.lower() != suffix:
         raise InputError(f"{name}: the output should end in {suffix}")
     if p.is_dir():
         raise InputError(f"{name}: is a directory, a file name is needed")
-    if not p.resolve().parent.is_dir():
-        raise InputError(f"{name}: the directory {p.resolve().parent} does not exist")
+    folder = p.resolve().parent
+    if not folder.is_dir():
+        raise InputError(f"{name}: the directory {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"{name}: the directory {folder} is not writable by this user")
+    if p.exists() and not os.access(p, os.W_OK):
+        raise InputError(f"{name}: the file exists and is not writable by this user")
     return p
+
+
+def output_room(path, need: float, what: str = "", why: str = "") -> Path:
+    """A folder (or a file's folder) checked for `need` bytes free on its disk before a run that
+    writes them (a flight's log, found full only after the flight otherwise). `why`: how `need` was
+    estimated, for the message."""
+    p = Path(path).resolve()
+    first = p
+    while not first.is_dir() and first != first.parent:
+        first = first.parent
+    try:
+        st = os.statvfs(first)
+    except (OSError, AttributeError):      # no statvfs (Windows) or it cannot be asked: not checked
+        return Path(path)
+    free = st.f_bavail * st.f_frsize
+    if free < need:
+        name = f"{what} {path}" if what else str(path)
+        raise InputError(f"{name}: {free / 1e6:.1f} MB free on its disk, {need / 1e6:.1f} MB needed"
+                         + (f" ({why})" if why else ""))
+    return Path(path)
 
 
 def output_dir(path, what: str = "") -> Path:

@@ -20,7 +20,7 @@ from typing import IO
 
 import numpy as np
 
-from flightctl.errors import NUMBER_CHARS, InputError, parse_number, read_text, temporary_beside
+from flightctl.errors import NUMBER_CHARS, InputError, output_room, parse_number, read_text, temporary_beside
 
 FLIGHT_COLUMNS = ("t", "P1", "P2", "P3", "P4", "gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z",
                   "range", "battery_v", "roll", "pitch", "yaw", "alt",
@@ -221,6 +221,25 @@ _FLIGHT_RANGES = ([(f"P{i}", (0.0, 255.0), "the command range 0-255") for i in r
                   + [("t", (-1e7, 1e7), "a time since arming (+-1e7 s)"),
                      ("battery_v", (1e-3, 100.0), "a battery voltage (above 0, at most 100 V)"),
                      ("range", (0.0, 10.0), "the rangefinder's range (0 to 10 m)")])
+
+
+# A flight log's size at most, to check its disk for room before a flight (flightctl.errors.output_room):
+# a cell is at most 13 bytes with its comma (FlightLogWriter's formats: '%.6g' gives at most 12
+# characters, "-1.23457e-05"; '%.6f' of a time under 1000 s 10), a row one cell per column, one row a
+# loop period; the `# key: value` head (the parameter file, the board's lines) is under 64 kB.
+CELL_BYTES = 13
+HEAD_BYTES = 65536
+
+
+def log_bytes(seconds: float, loop_hz: float, columns: int) -> float:
+    """The most bytes a flight log of `seconds` at `loop_hz` rows a second with `columns` columns takes."""
+    return HEAD_BYTES + seconds * loop_hz * columns * CELL_BYTES
+
+
+def log_room(path, seconds: float, loop_hz: float, columns: int, what: str = "--log") -> None:
+    """Refuse a flight whose log would not fit on the disk of `path` (a file or a folder), before it flies."""
+    output_room(path, log_bytes(seconds, loop_hz, columns), what,
+                f"a log of {seconds:g} s at {loop_hz:g} rows/s, {columns} columns of at most {CELL_BYTES} bytes")
 
 
 class FlightLogWriter:

@@ -23,7 +23,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from flightctl.errors import InputError, number, read_text, read_toml
+from flightctl.errors import InputError, number, read_text, read_toml, write_atomic
 
 
 INERTIA_TOLERANCE = 0.10  # accepted excess of one principal inertia over the sum of the others
@@ -425,5 +425,5 @@ def update_file(path: str | Path, values: dict[str, float], source: str) -> Para
     data = read_toml(path) if path.exists() else {}
     data.update(values)
     params = from_dict(data)
-    path.write_text(dumps(params, {k: source for k in values}))
+    write_atomic(path, dumps(params, {k: source for k in values}))
     return params

@@ -25,7 +25,9 @@ stand holds one), or on `--board sim` the simulated load cell and tachometer beh
 from the line if it carries them, else from the onboard INA219.
 
 Safety: on hardware the vehicle must be confirmed clamped (`--clamped`, or typed at the prompt); P
-never exceeds --max; a step that does not settle within --step-timeout, an instrument silent for
+never exceeds --max; every time and rate is bounded (MAX_SETTLE_S and its siblings, with their reasons:
+nan, inf and negatives refused); a step, every phase of it (ramp, settle, holds, the step profile's
+record), that takes longer than --step-timeout, an instrument silent for
 --silent s, a speed above the propeller's limit (--max-rpm, default APC's for its diameter) or a
 thrust that falls while P rises stops the bench (exit 1); Ctrl-C and SIGTERM stop it (exit 130).
 Whatever happens the motor returns to the stop pulse, and the rows measured so far are kept.
@@ -45,7 +47,7 @@ from pathlib import Path
 from flightctl import __version__
 from flightctl.cli import interrupted
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, open_board
-from flightctl.errors import InputError, Parser, output_file, seed
+from flightctl.errors import InputError, Parser, output_file, seed, write_atomic
 from flightctl.hal import PWM_RANGE
 from flightctl.hil import instruments as ins
 from flightctl.logfile import BENCH_COLUMNS
@@ -70,6 +72,16 @@ APC_MR_RPM_INCH = 105000.0      # APC's speed limit for its multirotor propeller
 EXIT_STOPPED, EXIT_UNAVAILABLE, EXIT_INTERRUPTED = 1, 3, 130
 RAW_COLUMNS = ("t", "motor", "P", "phase", "thrust", "omega", "voltage", "current")
 PROFILES = ("staircase", "step", "both")
+# The largest value of each time and rate the bench takes, so that no mistyped value keeps a motor
+# spinning: the step timeout bounds every phase of a step (ramp, settle, hold, the holds again, the
+# step profile's record) and must take the longest ramp, the settle and one hold (parse_args).
+MAX_SETTLE_S = 60.0             # a minute at one command: the motor's speed settles in 5 tau (under 1 s,
+#                                 motor_dynamics' 20-192 ms) and its temperature in tens of seconds
+MAX_HOLD_S = 60.0               # a minute of averaging: the load cell's 80 Hz gives thousands of samples
+MAX_RECORD_S = 10.0             # 50 time constants of the slowest motor (192 ms, motor_dynamics)
+MAX_STEP_TIMEOUT_S = 300.0      # 5 minutes of one motor at one step, its ramps, holds and record
+MAX_SILENT_S = 10.0             # instruments silent longer: the motor spins unwatched
+RAMP_RANGE = (1.0, 500.0)       # P/s: from 0 to 255 in 255 s at the slowest; 500 P/s: half a second
 
 
 class BenchStop(Exception):
@@ -150,6 +162,7 @@ class Bench:
     def __init__(self, hal, instruments: ins.Instruments, limits: Limits, ramp: float = RAMP_P_PER_S, raw=None):
         self.hal, self.inst, self.limits, self.ramp_rate, self.raw = hal, instruments, limits, ramp, raw
         self.motor, self.P = 1, 0.0
+        self.deadline = math.inf    # bench time by which the step under way must be done (begin_step)
         self.counts = [0, 0, 0, 0]
         self.volts = self.amps = math.nan
         self.next_power = -math.inf
@@ -167,6 +180,9 @@ class Bench:
         if self.since is None:
             self.since = now
         last = self.inst.last_at if self.inst.last_at is not None else self.since
+        if now > self.deadline:
+            raise BenchStop(f"motor {self.motor} at P {self.P:g}: the step took longer than --step-timeout "
+                            f"{self.limits.step_timeout:g} s (in its {phase})")
         if now - max(last, self.since) > self.limits.silent:
             raise BenchStop(f"the instruments ({self.inst.name}) went silent: nothing for {now - last:.2f} s"
                             + (f"; last bad line: {self.inst.last_bad}" if self.inst.last_bad else ""))
@@ -215,16 +231,22 @@ class Bench:
             self.tick("command")
 
     def start_motor(self, motor: int) -> None:
-        """Aim the tachometer at `motor` and tare the load cell, every motor stopped."""
+        """Aim the tachometer at `motor` and tare the load cell, every motor stopped (no step under way:
+        the commands have their own timeout)."""
+        self.deadline = math.inf
         self.counts = [0, 0, 0, 0]
         self.P, self.motor = 0.0, motor
         self.command(f"M{motor}")
         self.run_for(0.1, "tare")
         self.command("Z")
 
+    def begin_step(self) -> None:
+        """A step starts: it must be done, every phase of it, within --step-timeout (`tick` stops it)."""
+        self.deadline = self.hal.clock.now() + self.limits.step_timeout
+
     def steady(self, P: float, settle: float, hold: float) -> tuple:
         """Ramp to P, settle, and average over `hold` until the speed is steady: one bench.csv row."""
-        start = self.hal.clock.now()
+        self.begin_step()
         self.ramp_to(P)
         self.run_for(settle, "settle")
         while True:
@@ -236,7 +258,7 @@ class Bench:
             a, b = sum(w[:half]) / half, sum(w[half:]) / (len(w) - half)
             if abs(b - a) <= STEADY_REL * abs(b) + STEADY_ABS:
                 break
-            if self.hal.clock.now() - start > self.limits.step_timeout:
+            if self.hal.clock.now() + hold > self.deadline:
                 raise BenchStop(f"motor {self.motor} at P {P:g}: the speed did not settle within --step-timeout "
                                 f"{self.limits.step_timeout:g} s ({a:.1f} -> {b:.1f} rad/s)")
 
@@ -246,6 +268,7 @@ class Bench:
 
     def step_response(self, P0: float, P1: float, record: float) -> tuple[float, list[tuple[float, float]]]:
         """Jump from P0 (steady) to P1 at once: (t0, [(t, omega)]) for `record` seconds after it."""
+        self.begin_step()
         self.set(P1)
         self.tick("step")
         t0 = self.hal.clock.now()      # the new counts went out with that tick
@@ -253,7 +276,9 @@ class Bench:
         return t0, [(t, s.omega) for t, s in samples]
 
     def finish(self) -> None:
+        self.begin_step()
         self.ramp_to(0.0)
+        self.deadline = math.inf
         self.counts = [0, 0, 0, 0]
         self.hal.motors.stop()
 
@@ -301,7 +326,7 @@ def write_tau(path: str | Path, base: Params, tau: float, source: str) -> None:
             tables = ("gains", "filters")
     effects = tuple(e for e in params.effects if e.cause != "motor_dynamics")
     effects += (EffectSpec("motor_dynamics", (("tau", round(tau, 5)),), source),)
-    path.write_text(dumps(replace(params, effects=effects), tables=tables))
+    write_atomic(path, dumps(replace(params, effects=effects), tables=tables))
 
 
 @dataclass
@@ -350,15 +375,19 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--profile", choices=PROFILES, default="staircase",
                    help="staircase: steady points for eq. 26; step: the motor's time constant; both (default staircase)")
     p.add_argument("--steps", default=STEPS, help=f"staircase command values P (0..255), default {STEPS}")
-    p.add_argument("--settle", type=float, default=SETTLE_S, help="seconds at each P before averaging")
-    p.add_argument("--hold", type=float, default=HOLD_S, help="seconds of averaging at each P")
+    p.add_argument("--settle", type=float, default=SETTLE_S, help=f"seconds at each P before averaging (0 to {MAX_SETTLE_S:g})")
+    p.add_argument("--hold", type=float, default=HOLD_S, help=f"seconds of averaging at each P (at most {MAX_HOLD_S:g})")
     p.add_argument("--step", default=STEP, help=f"step profile: P0,P1 (default {STEP})")
-    p.add_argument("--record", type=float, default=RECORD_S, help="step profile: seconds recorded after the jump")
+    p.add_argument("--record", type=float, default=RECORD_S, help=f"step profile: seconds recorded after the jump (at most {MAX_RECORD_S:g})")
     p.add_argument("--max", type=float, default=MAX_P, help=f"largest P allowed (default {MAX_P:g})")
-    p.add_argument("--max-rpm", type=float, help="speed limit of the propeller (default: APC's, from its diameter)")
-    p.add_argument("--step-timeout", type=float, default=STEP_TIMEOUT_S, help="seconds a step may take to settle")
-    p.add_argument("--silent", type=float, default=SILENT_S, help="stop if the instruments say nothing this long")
-    p.add_argument("--ramp", type=float, default=RAMP_P_PER_S, help="ramp rate, P units per second")
+    p.add_argument("--max-rpm", type=float, help="speed limit of the propeller (default and most: APC's, from its diameter)")
+    p.add_argument("--step-timeout", type=float, default=STEP_TIMEOUT_S,
+                   help=f"seconds a step may take, every phase of it: ramp, settle, holds, record (at most "
+                        f"{MAX_STEP_TIMEOUT_S:g}; at least the longest ramp, --settle and --hold)")
+    p.add_argument("--silent", type=float, default=SILENT_S,
+                   help=f"stop if the instruments say nothing this long (at most {MAX_SILENT_S:g} s)")
+    p.add_argument("--ramp", type=float, default=RAMP_P_PER_S,
+                   help=f"ramp rate, P units per second ({RAMP_RANGE[0]:g} to {RAMP_RANGE[1]:g})")
     p.add_argument("--clamped", action="store_true", help="confirm that the vehicle is clamped (no prompt)")
     p.add_argument("--out", default="bench.csv", help="bench log to write (default bench.csv)")
     p.add_argument("--raw", help="raw samples (default: OUT's name with -raw)")
@@ -373,10 +402,20 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     if args.board == "hil":
         p.error("--board hil: the bench spins motors on a thrust stand (pi) or a simulated one (sim); "
                 "the hil board's motors drive a model on a PC")
-    if not 0 < args.ramp <= 500:
-        p.error("--ramp: 0 < P/s <= 500")
-    if args.settle < 0 or args.hold <= 0 or args.record <= 0 or args.step_timeout <= 0 or args.silent <= 0:
-        p.error("--settle must be >= 0; --hold, --record, --step-timeout and --silent > 0")
+    # every time and rate bounded (a nan compares false: refused too), so no value keeps a motor spinning
+    for flag, value, lo, hi, unit in (("--ramp", args.ramp, *RAMP_RANGE, "P/s"),
+                                      ("--settle", args.settle, 0.0, MAX_SETTLE_S, "s"),
+                                      ("--hold", args.hold, 0.0, MAX_HOLD_S, "s"),
+                                      ("--record", args.record, 0.0, MAX_RECORD_S, "s"),
+                                      ("--step-timeout", args.step_timeout, 0.0, MAX_STEP_TIMEOUT_S, "s"),
+                                      ("--silent", args.silent, 0.0, MAX_SILENT_S, "s")):
+        closed = flag in ("--ramp", "--settle")      # the others must be above 0
+        if not (lo <= value <= hi if closed else lo < value <= hi):
+            p.error(f"{flag} {value:g}: {'from' if closed else 'above'} {lo:g} to {hi:g} {unit}")
+    if not 0.0 < args.max <= 255.0:
+        p.error(f"--max {args.max:g}: above 0 to 255 (the command range)")
+    if args.max_rpm is not None and not 0.0 < args.max_rpm < math.inf:
+        p.error(f"--max-rpm {args.max_rpm:g}: a speed above 0 is needed")
     if args.instruments is None:
         args.instruments = "pty" if args.board == "sim" else "serial:/dev/ttyACM0,115200"
     if args.write_params and args.profile == "staircase":
@@ -431,10 +470,21 @@ def main(argv: list[str] | None = None) -> int:
     if len(step) != 2 or step[1] == step[0]:
         raise InputError(f"--step {args.step!r}: two different command values P0,P1 expected")
     motors = parse_motors(args.motors)
+    # a step's ramp (from the stop pulse: each motor starts at P = 0), settle and first hold, and the
+    # step profile's record, each within --step-timeout: a timeout shorter stops every step, a wasted run
+    longest = max(steps + step) / args.ramp + args.settle + args.hold
+    if max(longest, args.record) > args.step_timeout:
+        raise InputError(f"--step-timeout {args.step_timeout:g}: shorter than one step ({max(steps + step):g} / "
+                         f"--ramp {args.ramp:g} + --settle {args.settle:g} + --hold {args.hold:g} = {longest:.3g} s"
+                         + (f"; --record {args.record:g} s" if args.record > longest else "") + ")")
     kind = ins.parse_spec(args.instruments)[0]
     if kind == "rcbenchmark" and len(motors) > 1:
         raise InputError("--instruments rcbenchmark: the stand holds one motor; run one motor at a time (--motors N)")
     params = load(args.params)
+    if args.max_rpm is not None and args.max_rpm * ins.RPM > prop_limit(params):
+        raise InputError(f"--max-rpm {args.max_rpm:g}: above the propeller's own limit, "
+                         f"{prop_limit(params) / ins.RPM:.0f} RPM (APC's {APC_MR_RPM_INCH:.0f} RPM-inch over its "
+                         "diameter, from the parameter file's rotor_radius): --max-rpm lowers it, never raises it")
     limits = Limits(args.max, prop_limit(params) if args.max_rpm is None else args.max_rpm * ins.RPM,
                     args.step_timeout, args.silent)
     # every output checked before a motor turns: a run's measurements are never lost at the end

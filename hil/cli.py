@@ -40,13 +40,14 @@ from flightctl.params import load
 from flightctl.plans.plan import Move, Plan
 from flightctl.plans import TAKEOFF
 from flightctl.safety import LEFT_GROUND_ALT
-from flightctl.service import prearm
+from flightctl.service import CALIBRATE_RANGE_S, prearm
 from flightctl.hil.serve import Cut, HilPlant, serve
 
 MODES = ("lockstep", "free")
 SUBCOMMANDS = ("serve", "demo")         # an error names `flightctl hil demo` (flightctl/cli.py)
 READY = "hil serve: ready"              # on stdout once the PC side answers (tcp: "listening on port N")
 LAND_S = 4.0            # the demo's descent ramp
+MAX_DEMO_S = 3600.0     # s: an hour of flight, --seconds and --cut (a pack lasts a quarter of it)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -88,6 +89,7 @@ def _listen(host: str, port: int) -> socket.socket:
 
 
 def serve_main(args) -> int:
+    check_times(args)
     try:
         kind, where, n = lk.parse_link(args.link)
     except ValueError as e:
@@ -201,9 +203,20 @@ def _load_figures(before: tuple, after: tuple, ticks: int) -> dict:
     return out
 
 
+def check_times(args) -> None:
+    """--seconds (demo: 0 < S <= MAX_DEMO_S; serve: also none, until the flight side ends), --cut AT FOR
+    (each 0 to MAX_DEMO_S) and demo's --calibrate (run's range): nan, inf and negatives refused."""
+    if args.seconds is not None and not 0 < args.seconds <= MAX_DEMO_S:
+        raise InputError(f"--seconds {args.seconds:g}: above 0 to {MAX_DEMO_S:g} s")
+    if args.cut and not all(0 <= v <= MAX_DEMO_S for v in args.cut):
+        raise InputError(f"--cut {args.cut[0]:g} {args.cut[1]:g}: AT and FOR each 0 to {MAX_DEMO_S:g} s")
+    lo, hi = CALIBRATE_RANGE_S
+    if getattr(args, "calibrate", None) is not None and not lo <= args.calibrate <= hi:
+        raise InputError(f"--calibrate {args.calibrate:g}: {lo:g} to {hi:g} s (as flightctl run's)")
+
+
 def demo_main(args) -> int:
-    if not 0 < args.seconds <= 3600:
-        raise InputError("--seconds: 0 < S <= 3600")
+    check_times(args)
     if args.json:
         output_file(args.json, "--json")
     params = load(args.params)

@@ -23,9 +23,11 @@ from pathlib import Path
 from flightctl.cli import EXIT_INTERRUPTED, ctrl_c_sets
 from flightctl.control.estimator import ESTIMATORS
 from flightctl.errors import InputError, Parser, output_dir, output_file, seed, write_atomic
+from flightctl.logfile import FLIGHT_COLUMNS, MAG_COLUMNS, log_room
 from flightctl.params import GAIN_SETS, shipped
 from flightctl.sim import causes, engine
 from flightctl.sim.world import faults
+from flightctl.sim.world.board import SIM_CALIBRATE_S, TRUTH_COLUMNS
 from flightctl.sim.flights.metrics import LEGEND, SETTLE_AFTER_S, SETTLED_DEG, hold_metrics, settled_errors, step_metrics
 from flightctl.plans import load_plan
 from flightctl.sim.flights.scenarios import SCENARIOS, scenario
@@ -156,6 +158,8 @@ def main(argv: list[str]) -> int:
             raise InputError(f"--fault {f.name}: at = {f.at:g} s, but {flown.name}'s plan ends "
                              f"{flown.plan.duration:g} s after arming: the fault would never be injected")
     log_path = output_file(args.log, "--log")
+    log_room(log_path, SIM_CALIBRATE_S + flown.plan.duration, params.airframe.loop_hz,
+             len(FLIGHT_COLUMNS + MAG_COLUMNS + TRUTH_COLUMNS))
     if args.json:
         output_file(args.json, "--json")
     if not args.no_plot:
@@ -272,8 +276,12 @@ def faults_main(argv: list[str]) -> int:
     logs = output_dir(args.logs, "--logs") if args.logs else output_dir(out.resolve().parent, "--json")
     if args.doc and not Path(args.doc).is_file():
         raise InputError(f"--doc {args.doc}: no such file")
+    if args.doc:
+        output_file(args.doc, "--doc")
+    params = causes.load_vehicle(args.params, GAIN_SETS["table6"])
+    faultmatrix.log_room(logs, params)
     logs.mkdir(parents=True, exist_ok=True)
-    rows = faultmatrix.run_matrix(causes.load_vehicle(args.params, GAIN_SETS["table6"]), logs, seed=args.seed)
+    rows = faultmatrix.run_matrix(params, logs, seed=args.seed)
     write_atomic(out, json.dumps(rows, indent=1) + "\n")
     table = faultmatrix.markdown(rows)
     print(table, end="")

@@ -17,7 +17,12 @@ import math
 from pathlib import Path
 
 import numpy as np
-from matplotlib.figure import Figure
+
+from flightctl.cli import matplotlib_home
+
+
+matplotlib_home()
+from matplotlib.figure import Figure  # noqa: E402  (after its folders are set)
 
 from flightctl.logfile import Table
 from flightctl.safety import CRASH_TILT, CRASH_TOUCHDOWN_SPEED

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import random
 import signal
 import tomllib
 
@@ -105,7 +106,8 @@ def test_steps_above_the_maximum_or_a_bad_motor_are_refused(tmp_path, capsys):
 
 
 def _run_with(monkeypatch, tmp_path, argv, on_write):
-    """bench.main on the simulated stand; `on_write(counts, rig)` sees every motor write."""
+    """bench.main on the simulated stand; `on_write(counts, rig)` sees every motor write (and may
+    return the counts the ESCs get instead: a faulty ESC)."""
     state = {}
     real_open = bench.open_bench
 
@@ -115,8 +117,7 @@ def _run_with(monkeypatch, tmp_path, argv, on_write):
         real_write = motors.write
 
         def write(c):
-            on_write(c, rig)
-            real_write(c)
+            real_write(on_write(c, rig) or c)         # what on_write returns goes out instead
         motors.write = write
         return rig
 
@@ -169,10 +170,62 @@ def test_ctrl_c_or_sigterm_stops_the_motor_and_keeps_the_rows_so_far(monkeypatch
 
 
 def test_a_step_that_does_not_settle_in_time_stops(monkeypatch, tmp_path, capsys):
-    status, table = _run_with(monkeypatch, tmp_path, ["--params", "paper-as-flown", "--ramp", "500", "--settle", "0",
-                                                      "--hold", "0.04", "--step-timeout", "0.01"], lambda c, rig: None)
+    """An ESC whose output creeps (its speed never steady): the holds go on until --step-timeout, no
+    longer. The creep's rate is drawn, the bench is not told it."""
+    rate = random.Random(49).uniform(15.0, 25.0)       # P/s of creep: halves of a hold differ beyond 1 %
+    start = {}
+
+    def creep(c, rig):
+        t = rig.board.hal.clock.now()
+        start.setdefault("t", t)
+        return [c[0] + counts_for(rate * (t - start["t"])), *c[1:]] if c[0] else None   # stopped: stopped
+    status, table = _run_with(monkeypatch, tmp_path, ["--step-timeout", "1.5"], creep)
     assert status == 1 and len(table) == 0
-    assert "did not settle within --step-timeout" in capsys.readouterr().err
+    assert "did not settle within --step-timeout 1.5 s" in capsys.readouterr().err
+    raw = read_table(tmp_path / "b-raw.csv", ("t",), text_columns=("phase",), min_rows=1)
+    assert raw["t"][-1] - start["t"] <= 1.5
+
+
+def test_the_step_timeout_covers_the_ramp_of_a_late_loop(monkeypatch, tmp_path, capsys):
+    """A loaded board's late loop periods (each a drawn number of periods long) stretch the ramp:
+    the step timeout stops the motor in its ramp, not only after the settle and a hold."""
+    rng = random.Random(7)
+
+    def late(c, rig):
+        clock = rig.board.hal.clock
+        if not hasattr(clock, "late"):
+            on_time = clock.wait_next
+
+            def wait_next():
+                for _ in range(rng.randint(1, 3)):          # 1 to 3 periods for each one the bench asks for
+                    t = on_time()
+                return t
+            clock.late = clock.wait_next = wait_next
+    status, table = _run_with(monkeypatch, tmp_path, ["--steps", "190", "--ramp", "50", "--settle", "0.2",
+                                                      "--hold", "0.2", "--step-timeout", "4.5"], late)
+    assert status == 1 and len(table) == 0                # 3.8 s of ramp on time, about 7.6 s late
+    assert "the step took longer than --step-timeout 4.5 s (in its ramp)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("flag, value, says", [
+    ("--settle", "1e300", "--settle 1e+300: from 0 to 60 s"),
+    ("--hold", "1e300", "--hold 1e+300: above 0 to 60 s"),
+    ("--hold", "nan", "--hold nan: above 0 to 60 s"),
+    ("--record", "inf", "--record inf: above 0 to 10 s"),
+    ("--step-timeout", "-1", "--step-timeout -1: above 0 to 300 s"),
+    ("--silent", "nan", "--silent nan: above 0 to 10 s"),
+    ("--ramp", "0.001", "--ramp 0.001: from 1 to 500 P/s"),
+    ("--max", "nan", "--max nan: above 0 to 255"),
+    ("--max-rpm", "nan", "--max-rpm nan: a speed above 0 is needed"),
+    ("--max-rpm", "1e9", "--max-rpm 1e+09: above the propeller's own limit"),
+    ("--settle", "40", "--step-timeout 30: shorter than one step (190 / --ramp 50 + --settle 40 + --hold 2"),
+])
+def test_every_time_and_rate_is_bounded_before_a_motor_turns(tmp_path, capsys, flag, value, says):
+    out = tmp_path / "b.csv"
+    assert cli(["bench", "--board", "sim", "--motors", "1", "--steps", "130,190", "--out", str(out), flag, value]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err, err
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_an_unknown_board_or_a_pi_board_that_is_not_there_is_one_line(tmp_path, capsys):

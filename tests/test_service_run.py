@@ -136,11 +136,12 @@ def test_a_queued_plan_is_flown_once_and_a_restart_does_not_re_arm(tmp_path):
 
 
 def test_prearm_refusal_exits_3_naming_the_reason(tmp_path):
-    svc = Service(tmp_path, "--board", "sim", "--plan", "hover", "--log", "logs", "--min-battery-v", "30")
+    """The highest threshold run takes (a full 4S pack, 16.8 V) is above the simulated pack's 16.3 V."""
+    svc = Service(tmp_path, "--board", "sim", "--plan", "hover", "--log", "logs", "--min-battery-v", "16.8")
     svc.proc.wait(timeout=30)
     rc, err = svc.stop()
     assert rc == 3
-    assert "not flying: battery" in err and "below 30.00 V" in err
+    assert "not flying: battery" in err and "below 16.80 V" in err
     assert not any("READY=1" in m for m in svc.messages)
     assert not (tmp_path / "logs").exists()
 

@@ -13,7 +13,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from importlib import resources
 
-from flightctl.boards import MIN_BATTERY_V, BoardUnavailable
+from flightctl.boards import MIN_BATTERY_V, MIN_BATTERY_V_RANGE, BoardUnavailable
 from flightctl.drivers import pulses
 from flightctl.drivers.hcsr04 import HcSr04
 from flightctl.drivers.ina219 import Ina219
@@ -57,7 +57,7 @@ class PowerConfig:
 
 @dataclass(frozen=True)
 class ChecksConfig:
-    min_battery_v: float = key("V", 0.0, 60.0, "refuse to arm below this battery voltage", MIN_BATTERY_V)
+    min_battery_v: float = key("V", *MIN_BATTERY_V_RANGE, "refuse to arm below this battery voltage", MIN_BATTERY_V)
 
 
 def _value(where: str, f: dataclasses.Field, value):

@@ -50,17 +50,18 @@ from pathlib import Path
 
 from flightctl import __version__
 from flightctl.battery import implausible
-from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, opener, stop_motors
+from flightctl.boards import (FULL_CELL_V, MIN_BATTERY_V_RANGE, Board, BoardOptions, BoardUnavailable, described,
+                              opener, stop_motors)
 from flightctl.clock import freeze_gc
 from flightctl.control.controller import FlightController
 from flightctl.control.spin import SpinController
-from flightctl.errors import InputError, output_dir, seed, write_atomic
+from flightctl.errors import InputError, Parser, output_dir, seed, write_atomic
 from flightctl.hal import ArmingRefused, Hal, ImuSample
-from flightctl.logfile import MAG_COLUMNS, FlightLogWriter
-from flightctl.loop import CELLS, FlightLoop, FlightResult
+from flightctl.logfile import FLIGHT_COLUMNS, MAG_COLUMNS, FlightLogWriter, log_room
+from flightctl.loop import CELLS, LOW_CELL_V, FlightLoop, FlightResult
 from flightctl.params import Params, dumps, load
 from flightctl.plans.plan import Plan
-from flightctl.service.queue import PLAN_MAX_AGE_S, PlanQueue, check_name, new_path
+from flightctl.service.queue import PLAN_MAX_AGE_RANGE_S, PLAN_MAX_AGE_S, PlanQueue, check_name, new_path
 from flightctl.plans import load_plan
 from flightctl.service.sdnotify import Notifier
 
@@ -69,6 +70,9 @@ PLAN_POLL_S = 0.5
 OUTPUT_CHECK_S = 2.0           # while disarmed, the ESC output is read back this often (drivers/esc.py)
 REST_ACCEL = (0.8, 1.2)        # |a| / g at rest, for the pre-arm IMU check
 DEAD_ACCEL = 0.05              # |a| / g at rest below which the accelerometer is dead, not the vehicle moving
+# --calibrate: at least 90 loop periods at 450 Hz, whose mean of the gyro's white noise (0.17 deg/s a read,
+# docs/estimator.md) leaves a bias within 0.02 deg/s (1 sigma), to 10 minutes sitting still
+CALIBRATE_RANGE_S = (0.2, 600.0)
 
 log = logging.getLogger("flightctl.run")
 
@@ -156,15 +160,22 @@ class Service:
                 log.error("%s", self.tampered)
                 self.notifier.status(f"disarmed: {self.tampered}")
 
-    def check(self) -> None:
+    def check(self, plan: Plan | None = None) -> None:
+        """The pre-arm checks, and with a plan, its flight log's room on the log directory's disk."""
         if self.tampered is not None:
             raise ArmingRefused(self.tampered)
         reasons = prearm(self.board.hal, self.params, self.min_battery_v)
+        if plan is not None:
+            try:
+                log_room(self.log_dir, self.calibrate_s + plan.duration, self.params.airframe.loop_hz,
+                         len(FLIGHT_COLUMNS + MAG_COLUMNS + self.board.extra_columns))
+            except InputError as e:
+                reasons.append(str(e))
         if reasons:
             raise ArmingRefused("; ".join(reasons))
 
     def run(self, plan: Plan | None) -> None:
-        self.check()
+        self.check(plan)
         self.notifier.ready(f"disarmed, {self.board.name} board, pre-arm checks passed")
         log.info("ready: disarmed, ESCs at the stop pulse")
         if plan is not None:
@@ -193,7 +204,7 @@ class Service:
                 continue
             plan, claimed = taken
             try:
-                self.check()
+                self.check(plan)
             except ArmingRefused as e:      # this plan is not flown; the service stays up, disarmed
                 log.error("plan %s not flown: %s", plan.name, e)
                 self.notifier.status(f"disarmed: plan {plan.name} refused: {e}")
@@ -287,7 +298,7 @@ def _options(args, devices: dict | None = None) -> BoardOptions:
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="flightctl run", description=__doc__.split("\n\n")[0])
+    p = Parser(prog="flightctl run", description=__doc__.split("\n\n")[0])
     p.add_argument("--board", default="auto", help=f"the board to fly (default auto): {described()}")
     p.add_argument("--params", help="parameter file (TOML); default: the reference airframe")
     p.add_argument("--board-file", help="pi or pi5 board wiring (TOML); default: the shipped "
@@ -296,10 +307,14 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--plan-queue", metavar="DIR", help="fly each plan file put into DIR, once, in turn")
     p.add_argument("--log", default=".", metavar="DIR", help="directory for flight logs (default: .)")
     p.add_argument("--plan-max-age", type=float, default=PLAN_MAX_AGE_S, metavar="S",
-                   help=f"refuse a queued plan written more than S seconds ago (default {PLAN_MAX_AGE_S:g})")
+                   help=f"refuse a queued plan written more than S seconds ago (default {PLAN_MAX_AGE_S:g}; "
+                        f"{PLAN_MAX_AGE_RANGE_S[0]:g} to {PLAN_MAX_AGE_RANGE_S[1]:g})")
     p.add_argument("--calibrate", type=float, metavar="S",
-                   help="seconds sitting still before arming (default: the board's, 60 s on the quadcopter)")
-    p.add_argument("--min-battery-v", type=float, metavar="V", help="refuse to arm below this battery voltage")
+                   help="seconds sitting still before arming (default: the board's, 60 s on the quadcopter; "
+                        f"{CALIBRATE_RANGE_S[0]:g} to {CALIBRATE_RANGE_S[1]:g})")
+    p.add_argument("--min-battery-v", type=float, metavar="V",
+                   help="refuse to arm below this battery voltage (default: the board's; "
+                        f"{MIN_BATTERY_V_RANGE[0]:g} to {MIN_BATTERY_V_RANGE[1]:g} V on the {CELLS}S pack)")
     p.add_argument("--seed", type=seed, default=0, help="simulator seed (--board sim; a whole number from 0)")
     p.add_argument("--link", help="--board hil: serial:/dev/serial0,921600 or tcp:HOST:PORT (docs/hil.md)")
     p.add_argument("--stop-motors", action="store_true", help="only put the stop pulse on the ESCs and exit")
@@ -309,10 +324,15 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     args = p.parse_args(argv)
     if args.plan and args.plan_queue:
         p.error("--plan and --plan-queue exclude each other")
-    if not 1 <= args.plan_max_age <= 86400:
-        p.error("--plan-max-age: 1..86400 s")
-    if args.calibrate is not None and not 0 <= args.calibrate <= 600:
-        p.error("--calibrate: 0..600 s")
+    # a safety threshold outside its range is refused, never a check turned off (a nan compares false)
+    for flag, value, (lo, hi), unit, why in (
+            ("--plan-max-age", args.plan_max_age, PLAN_MAX_AGE_RANGE_S, "s", "a plan older is stale"),
+            ("--calibrate", args.calibrate, CALIBRATE_RANGE_S, "s", "the gyro bias is averaged over it"),
+            ("--min-battery-v", args.min_battery_v, MIN_BATTERY_V_RANGE, "V",
+             f"from the {LOW_CELL_V:g} V a cell lands at to the {FULL_CELL_V:g} V of a full one, {CELLS} cells")):
+        if value is not None and not lo <= value <= hi:
+            p.error(f"{flag} {value:g}: {lo:g} to {hi:g} {unit} ({why})")
+    return args
     return args
 
 

@@ -27,6 +27,7 @@ from flightctl.errors import InputError
 from flightctl.plans.plan import Plan, read_plan_file
 
 PLAN_SETTLE_S = 0.5          # a plan file must be this old before it is looked at (a copy in progress)
+PLAN_MAX_AGE_RANGE_S = (1.0, 86400.0)   # --plan-max-age: from a second to a day
 PLAN_MAX_AGE_S = 60.0        # default: a plan not claimed within this time of being written is refused
 PLAN_FUTURE_S = 5.0          # a plan written further in the future than this: the clock is wrong
 MAX_PLAN_BYTES = 1 << 20     # a plan file is a few hundred bytes

@@ -12,15 +12,18 @@ from pathlib import Path
 import numpy as np
 
 from flightctl.errors import InputError
-from flightctl.logfile import read_flight_log
+from flightctl.logfile import FLIGHT_COLUMNS, MAG_COLUMNS, read_flight_log
+from flightctl.logfile import log_room as flight_log_room
 from flightctl.params import Params
 from flightctl.plans.plan import Move, Plan
 from flightctl.sim.progress import Progress
 from flightctl.sim.world import faults
+from flightctl.sim.world.board import SIM_CALIBRATE_S, TRUTH_COLUMNS
 from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import scenario
 
 FAULT_AFTER_S = 6.0   # s after arming: in a steady hover at 1 m
+HOLD_S = 4.0          # s of hover after the fault
 
 # The loop's event that names each fault (flightctl/loop.py, the drivers' reasons)
 NAMED_BY = {"imu_frozen": "IMU frame refused (frozen", "imu_garbage": "IMU frame refused",
@@ -32,7 +35,7 @@ NAMED_BY = {"imu_frozen": "IMU frame refused (frozen", "imu_garbage": "IMU frame
 OPTIONS = {"cpu_stall": "ms=50", "battery_critical": "cell=3.3", "motor_partial": "share=0.3"}   # the matrix's figures
 
 
-def hover_plan(fault_after: float = FAULT_AFTER_S, hold: float = 4.0) -> Plan:
+def hover_plan(fault_after: float = FAULT_AFTER_S, hold: float = HOLD_S) -> Plan:
     """Take off to 1 m (2 s ramp), hold; the fault comes at `fault_after`; land `hold` s later."""
     land = fault_after + hold
     return Plan([Move(0.0, "alt", 1.0, 2.0), Move(land, "alt", 0.0, 3.0)], land + 4.0, "faults",
@@ -65,7 +68,7 @@ def log_intact(path: Path, written: int) -> bool:
 
 
 def fly_fault(spec: str, params: Params, log_dir: Path, fault_after: float = FAULT_AFTER_S,
-              hold: float = 4.0, seed: int = 0) -> dict:
+              hold: float = HOLD_S, seed: int = 0) -> dict:
     """One row of the matrix: `spec` is NAME[:k=v] without `at` (set to `fault_after` after arming)."""
     name = spec.partition(":")[0]
     fault = faults.parse(f"{spec}{',' if ':' in spec else ':'}at={fault_after}")   # after arming
@@ -85,6 +88,13 @@ def fly_fault(spec: str, params: Params, log_dir: Path, fault_after: float = FAU
             "log_intact": log_intact(log, len(flight.log) - flight.log_dropped),
             "log_dropped_rows": flight.log_dropped,
             "cut_alt": round(float(L["true_z"][cut]), 3)}   # true altitude (m) when the motors stopped
+
+
+def log_room(log_dir: Path, params: Params, names=faults.FAULTS) -> None:
+    """Refuse a matrix whose flights' logs would not fit on `log_dir`'s disk, before the first flight."""
+    seconds = len(list(names)) * (SIM_CALIBRATE_S + hover_plan().duration)
+    flight_log_room(log_dir, seconds, params.airframe.loop_hz, len(FLIGHT_COLUMNS + MAG_COLUMNS + TRUTH_COLUMNS),
+                    "--logs")
 
 
 def run_matrix(params: Params, log_dir: Path, names=faults.FAULTS, progress: bool = True, **kw) -> list[dict]:

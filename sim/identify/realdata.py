@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flightctl.errors import InputError, write_atomic
+from flightctl.errors import InputError, output_dir, write_atomic
 from flightctl.logfile import BENCH_COLUMNS, read_table
 from flightctl.params import Airframe
 from flightctl.physics import G
@@ -93,7 +93,7 @@ def convert(paths: list[str], out: str) -> list[str]:
     for m, r in enumerate(runs, 1):
         lines += [f"{m},{P:.6g},{f:.6g},{w:.6g},{V:.6g},{I:.6g}"
                   for P, f, w, V, I in zip(r.P, r.thrust, r.omega, r.voltage, r.current)]
-    Path(out).write_text("\n".join(lines) + "\n")
+    write_atomic(out, "\n".join(lines) + "\n")
     return [f"motor {m}: {p}: {r.steps} steady steps from {r.rows} rows" for m, (p, r) in enumerate(zip(paths, runs), 1)]
 
 
@@ -235,7 +235,8 @@ def report_dirs(data: str | None, out: str) -> tuple[Path, Path]:
         raise InputError(f"{data_dir}: no rcbenchmark/ and uiuc-static/ here; give the real data with --data DIR")
     out_dir = Path(out)
     if not out_dir.is_dir():
-        raise InputError(f"{out}: not a directory")
+        raise InputError(f"--out {out}: not a directory")
+    output_dir(out_dir, "--out")             # one this user may write in, before the analysis
     return data_dir, out_dir
 
 
@@ -244,7 +245,7 @@ def write_report(res: dict, images: dict[str, bytes], data: str | None, out_dir:
     OUT/identification.md."""
     block = markdown(res, data)
     for name, image in images.items():
-        (out_dir / name).write_bytes(image)
+        write_atomic(out_dir / name, image)
     doc = out_dir / "identification.md"
     from flightctl.sim.docs import replace
     text = doc.read_text() if doc.exists() else ""

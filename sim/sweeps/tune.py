@@ -362,6 +362,7 @@ def main(argv: list[str] | None = None) -> int:
         begin, end = marked("tune robust" if args.robust else "tune strict" if args.strict else "tune procedure")
         if not Path(args.doc).is_file() or block(Path(args.doc).read_text(), begin, end) is None:
             raise InputError(f"--doc {args.doc}: no block {begin} ... {end} in it")
+        output_file(args.doc, "--doc")
     params = causes.load_vehicle(args.params)
     if params.effects:
         print("flightctl tune: the plant carries " + ", ".join(e.cause for e in params.effects)

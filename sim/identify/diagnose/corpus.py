@@ -22,13 +22,15 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from flightctl.errors import InputError, output_file, write_atomic
+from flightctl.errors import InputError, output_file, output_room, write_atomic
 from flightctl.sim.identify.static import summary
 from flightctl.sim.identify.diagnose.results import default_path
 
 TABLE_BEGIN = "<!-- diagnose --corpus table: begin -->"
 TABLE_END = "<!-- diagnose --corpus table: end -->"
 CSV_SUFFIXES = (".csv",)
+REPORT_BYTES = 65536      # a log's whole report and its line in the results table, at most: a 30 s hover's
+#                           report is 21 kB, a line under 2 kB (checked against the disk before the run)
 CRASH_ENV = "FLIGHTCTL_TEST_CRASH_ON"   # tests only: the worker diagnosing the log of this file name exits at once
 COLUMNS = ("log", "vehicle", "what was read", "airborne", "tier", "static tier", "causes (each on top of the ones before)",
            "fits, but not physical", "base model: effectiveness (t = value / its jackknife error)", "refused")
@@ -316,6 +318,10 @@ def main(args) -> int:
         default_path(out_json) if out_json else fleet_dir / "results.jsonl" if fleet_dir else None)
     if results is not None and results.parent != fleet_dir:
         output_file(results, "--results")
+    if results is not None:       # each log's report goes beside the table: the disk's room first
+        n = sum(len(find_logs(Path(c))) for c in args.corpus if Path(c).is_dir())
+        output_room(results, n * REPORT_BYTES, "--results" if args.results else "the results table",
+                    f"{n} logs' reports of at most {REPORT_BYTES // 1024} kB each")
     if fleet_dir is not None:
         fleet_dir.mkdir(parents=True, exist_ok=True)
     rows = corpus([Path(c) for c in args.corpus], args.jobs, progress=not args.quiet, results=results)
