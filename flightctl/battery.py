@@ -9,6 +9,11 @@ vehicle in flight, named (docs/safety.md).
 """
 from __future__ import annotations
 
+CELLS = 4                # the vehicle's pack: 4S (the DJI E600 system's, sec. 3.1; the simulated pack's too)
+LOW_CELL_V = 3.5         # V per cell: the loop lands below this (14.0 V on the 4S pack)
+MIN_CELL_V = 3.6         # V per cell: refuse to arm below this (the default pre-arm threshold of every board)
+FULL_CELL_V = 4.2        # V per cell: a LiPo cell charged full (its charger's end voltage)
+
 # A lithium-polymer cell between fully discharged and fully charged at rest (a high-voltage cell, LiHV,
 # to 4.35 V): the manufacturers' cut-off and charge voltages (Betaflight's vbat_min_cell_voltage 3.3 V
 # default and vbat_max_cell_voltage 4.3 V bracket a pack's flying range inside it).

@@ -22,7 +22,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Callable
 
-from flightctl.battery import implausible
+from flightctl.battery import CELLS, LOW_CELL_V, implausible
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import Calibration
 from flightctl.control.motor_loss import MotorLossDetector, flown_on_four
@@ -35,7 +35,6 @@ from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
 
 MAX_BAD_IMU_FRAMES = 10         # consecutive refused IMU frames flown on the last good sample (22 ms),
 #                                 then the motors stop (drivers/mpu9250.py's checks; docs/safety.md)
-LOW_CELL_V, CELLS = 3.5, 4      # land below 14.0 V on a 4S pack
 LAND_SPEED = 0.3                # m/s, a landing commanded by the checks
 LOST_ALT_S = 1.0                # no valid echo for this long in the air: descend blind
 TOUCHDOWN_ALT, TOUCHDOWN_S = 0.05, 0.5

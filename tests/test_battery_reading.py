@@ -13,7 +13,7 @@ import pytest
 
 from flightctl.battery import READING_CELL_V, implausible
 from flightctl.cli import main
-from flightctl.loop import CELLS
+from flightctl.battery import CELLS
 from flightctl.params import load
 from flightctl.service import prearm
 from flightctl.sim.flights.run import fly

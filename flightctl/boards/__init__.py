@@ -19,12 +19,10 @@ from typing import Callable, NamedTuple
 
 from flightctl.errors import InputError
 from flightctl.hal import Hal
-from flightctl.loop import CELLS, LOW_CELL_V
+from flightctl.battery import CELLS, FULL_CELL_V, LOW_CELL_V, MIN_CELL_V
 from flightctl.params import Params
 
-MIN_CELL_V = 3.6                        # V per cell: refuse to arm below this (the loop lands below 3.5 V)
 MIN_BATTERY_V = MIN_CELL_V * CELLS      # the default pre-arm threshold of every board
-FULL_CELL_V = 4.2                       # V per cell: a LiPo cell charged full (its charger's end voltage)
 # The pre-arm threshold a board file or `run --min-battery-v` may set: from the voltage the loop lands at
 # (below it, a vehicle would arm into a landing: a lower threshold turns the check off) to a full pack's
 # (above it, nothing could ever arm).

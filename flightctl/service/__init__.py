@@ -49,8 +49,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from flightctl import __version__
-from flightctl.battery import implausible
-from flightctl.boards import (FULL_CELL_V, MIN_BATTERY_V_RANGE, Board, BoardOptions, BoardUnavailable, described,
+from flightctl.battery import CELLS, FULL_CELL_V, LOW_CELL_V, implausible
+from flightctl.boards import (MIN_BATTERY_V_RANGE, Board, BoardOptions, BoardUnavailable, described,
                               opener, stop_motors)
 from flightctl.clock import freeze_gc
 from flightctl.control.controller import FlightController
@@ -58,7 +58,7 @@ from flightctl.control.spin import SpinController
 from flightctl.errors import InputError, Parser, output_dir, seed, write_atomic
 from flightctl.hal import ArmingRefused, Hal, ImuSample
 from flightctl.logfile import FLIGHT_COLUMNS, MAG_COLUMNS, FlightLogWriter, log_room
-from flightctl.loop import CELLS, LOW_CELL_V, FlightLoop, FlightResult
+from flightctl.loop import FlightLoop, FlightResult
 from flightctl.params import Params, dumps, load
 from flightctl.plans.plan import Plan
 from flightctl.service.queue import PLAN_MAX_AGE_RANGE_S, PLAN_MAX_AGE_S, PlanQueue, check_name, new_path

@@ -28,11 +28,11 @@ import errno
 import random
 from dataclasses import dataclass, field
 
+from flightctl.battery import CELLS   # the simulated pack is the vehicle's 4S (sim/world/power.py)
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.errors import InputError
 
 _GYRO_X = 1 + 8   # byte offset of GYRO_XOUT_H in the burst's reply (after the address byte)
-CELLS = 4         # the simulated 4S pack (sim/world/power.py)
 
 
 @dataclass
