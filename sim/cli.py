@@ -41,7 +41,7 @@ def parser() -> argparse.ArgumentParser:
                    help=f"add an extension to the simulated plant ({', '.join(causes.CAUSES)}); repeatable")
     p.add_argument("--fault", action="append", default=[], metavar="NAME[:at=S,k=v]",
                    help="inject a fault at the simulated devices (at: s after arming, the log's time, before the "
-                        "plan's end; faults: " + ", ".join(faults.FAULTS) + "; their keys: docs/formats.md); repeatable")
+                        "plan's end; faults: " + ", ".join(faults.FAULTS + faults.LOADS) + "; their keys: docs/formats.md); repeatable")
     p.add_argument("--params", metavar="P.toml|NAME",
                    help=f"parameter file (TOML) or a shipped vehicle ({', '.join(shipped())}); default: the reference airframe")
     p.add_argument("--gains", choices=sorted(GAIN_SETS),
