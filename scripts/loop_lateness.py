@@ -3,7 +3,7 @@
 
     python scripts/loop_lateness.py measure NAME [--hogs N] [--seconds S]   # sim/world/loop_lateness/NAME.json
     python scripts/loop_lateness.py paper                                   # sim/world/loop_lateness/paper.json
-    python scripts/loop_lateness.py flights [--seeds 3] [--n 40] [--json R.json] [--from R.json] [--doc D.md]
+    python scripts/loop_lateness.py flights [--seeds 3] [--n 30] [--json R.json] [--from R.json] [--doc D.md]
 
 `measure` flies the onboard loop on the simulated board in real time, as `flightctl run --board sim`
 does (the world paced by the wall clock, flightctl/clock.py: `PacedClock` over a `WallClock`), beside
@@ -250,7 +250,7 @@ def main(argv=None) -> int:
     sub.add_parser("paper", help="the distribution the paper's 450-470 Hz implies")
     f = sub.add_parser("flights", help="fly the conditions; print or write docs/safety.md's block")
     f.add_argument("--seeds", type=int, default=3, help="paper flights per condition and gain set (default 3)")
-    f.add_argument("--n", type=int, default=40, help="Monte Carlo draws per condition (default 40)")
+    f.add_argument("--n", type=int, default=30, help="Monte Carlo draws per condition (default 30)")
     f.add_argument("--seed", type=int, default=1, help="the Monte Carlo's seed (default 1)")
     f.add_argument("--json", help="write the flights' figures here")
     f.add_argument("--from", dest="source", help="render these figures (a --json of an earlier run), flying nothing")

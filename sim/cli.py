@@ -65,7 +65,8 @@ def parser() -> argparse.ArgumentParser:
                    help="write the outcome and the metrics as JSON (SI units: s, m, rad)")
     p.add_argument("--monte-carlo", type=int, metavar="N",
                    help="fly N draws of the parameter file's plausible ranges with both gain sets, in parallel; "
-                        "report the shares that fly, land and settle (--json, --plot: a map); sim/sweeps/montecarlo.py")
+                        "report the shares that fly, land and settle (--json, --plot: a map); with --fault, each draw flown "
+                        "with it (the full path only: e.g. the loop's lateness, loop_late); sim/sweeps/montecarlo.py")
     p.add_argument("--batch", action="store_true",
                    help="with --monte-carlo: fly the draws on the batched simulator (sim/sweeps/batch.py: compiled, "
                         "each draw flown as the full onboard path flies it, take-off to landing)")
@@ -238,13 +239,21 @@ def monte_carlo_main(args) -> int:
     most = 100000 if args.batch else 10000
     if not 1 <= args.monte_carlo <= most:
         raise InputError(f"--monte-carlo {args.monte_carlo}: between 1 and {most} draws")
+    if args.fault and args.batch:
+        raise InputError("--fault goes with the full onboard path: the batched simulator (--batch) has no "
+                         "devices to inject it at")
+    for f in args.fault:
+        faults.parse(f)
     if args.json:
         output_file(args.json, "--json")
     if args.plot:
         output_file(args.plot, "--plot", ".png")
     bar = Progress(2 if args.batch else 2 * args.monte_carlo, "monte carlo ") if not args.quiet else None
-    run = montecarlo.run_batch if args.batch else montecarlo.run
-    result = run(args.params, args.scenario, args.monte_carlo, args.seed, progress=bar)
+    if args.batch:
+        result = montecarlo.run_batch(args.params, args.scenario, args.monte_carlo, args.seed, progress=bar)
+    else:
+        result = montecarlo.run(args.params, args.scenario, args.monte_carlo, args.seed, progress=bar,
+                                faults=tuple(args.fault))
     print(montecarlo.summary(result))
     if args.json:
         montecarlo.write_json(result, args.json)

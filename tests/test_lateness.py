@@ -94,3 +94,35 @@ def test_the_fault_takes_a_shipped_distribution_and_refuses_others():
     for bad in ("loop_late:dist=nowhere", "loop_late:rate=-1", "loop_late:speed=2"):
         with pytest.raises(InputError, match="--fault loop_late"):
             faults.parse(bad)
+
+
+@pytest.mark.parametrize("delay_periods", [0.0, 0.4, 1.47])
+def test_a_late_command_acts_its_lateness_after_an_on_time_one_would(delay_periods):
+    """The plant's input over each period is the time-weighted mix of the commands active in it: a
+    command issued a fraction `lam` into its period acts from `lam` plus the delay on (held before)."""
+    from flightctl.sim.world.model import Model
+    from flightctl.sim.world.plant import Plant
+    a = PARAMS.airframe
+    rng = np.random.default_rng(int(100 * delay_periods) + 1)
+    model = Model(a, (causes.make("actuation_delay", delay=delay_periods * a.dt),) if delay_periods else ())
+    plant = Plant(model, a.dt)
+    plant.issue_times()
+    old, new = tuple(rng.uniform(0, 1, 4)) + (16.0,), tuple(rng.uniform(0, 1, 4)) + (16.0,)
+    for _ in range(3):
+        plant.command(*old)
+        plant.advance(a.dt)
+    lam = float(rng.uniform(0.1, 0.9))
+    plant.advance_part(lam)
+    assert plant.u == pytest.approx(old)                 # the motors hold the last command up to the late tick
+    plant.command(*new)
+    starts = lam + delay_periods                         # where the new command acts, in periods from here
+    seen = []
+    while plant.periods < 10:
+        a0 = plant.into
+        plant.advance(a.dt)
+        lo, hi = a0 + len(seen), 1.0 + len(seen)         # this segment, in periods from the late period's start
+        share_new = min(max(hi - max(starts, lo), 0.0), hi - lo) / (hi - lo)
+        seen.append((1.0 - share_new) * (hi - lo))     # the time the old command still held
+        assert plant.u == pytest.approx(tuple(o + share_new * (n - o) for o, n in zip(old, new)), abs=1e-12)
+        plant.command(*new)
+    assert sum(seen) == pytest.approx(delay_periods)    # after the late tick, the old command held for the delay
