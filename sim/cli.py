@@ -116,7 +116,8 @@ def metrics_json(flown, flight, wall_s: float) -> dict:
            "wall_s": wall_s, "rows": len(log), "events": [{"t": t, "what": w} for t, w in flight.result.events],
            "touchdowns": [{"t": t, "speed": abs(vz)} for t, vz in flight.touchdowns],
            "outcome": flight.outcome, "crashed": flight.crashed, "flew": flight.flew,
-           "log_dropped_rows": flight.log_dropped, "steps": []}
+           "log_dropped_rows": flight.log_dropped, "overruns": flight.result.overruns, "stalls": flight.result.stalls,
+           "steps": []}
     if flown.name == "hover" and flight.flew:
         out["hold_last_10s"] = hold_metrics(log, until=flown.plan.duration)   # null: the hover was cut short
     for step in flown.steps:

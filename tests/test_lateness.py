@@ -126,3 +126,18 @@ def test_a_late_command_acts_its_lateness_after_an_on_time_one_would(delay_perio
         assert plant.u == pytest.approx(tuple(o + share_new * (n - o) for o, n in zip(old, new)), abs=1e-12)
         plant.command(*new)
     assert sum(seen) == pytest.approx(delay_periods)    # after the late tick, the old command held for the delay
+
+
+def test_the_command_flies_the_late_loop_and_reports_its_overruns(tmp_path, capsys):
+    import json
+
+    from flightctl.cli import main
+    out = tmp_path / "m.json"
+    assert main(["sim", "hover", "--log", str(tmp_path / "f.csv"), "--fault", "loop_late:dist=busy,at=1",
+                 "--json", str(out), "--quiet"]) == 0
+    m = json.loads(out.read_text())
+    assert m["overruns"] > 0 and m["stalls"] > 0 and m["outcome"] == "landed upright"
+    assert main(["sim", "paper", "--params", "paper-as-flown", "--monte-carlo", "2", "--batch",
+                 "--fault", "loop_late:dist=busy"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--fault" in err[0] and "--batch" in err[0]
