@@ -196,19 +196,20 @@ def markdown(res: dict) -> str:
         d = load(name)
         s = d.source
         where = (f"measured {s['date'][:10]}: {s['load']}; {s['machine']}; {s['late_ticks']} of {s['ticks']} ticks"
-                 if "measured" in s else f"the paper's 450-470 Hz (sec. 4.2, eq. 29): {s['derived'].split(': ', 1)[1]}; "
-                 f"{100 * s['share_range'][0]:.1f}-{100 * s['share_range'][1]:.1f} % over 450-470 Hz")
+                 if "measured" in s else f"derived from the paper's observed {PAPER_HZ[0]:.0f}-{PAPER_HZ[1]:.0f} Hz: {s['derived'].split(': ', 1)[1]}; "
+                 f"{100 * s['share_range'][0]:.1f}-{100 * s['share_range'][1]:.1f} % over that range, its middle here")
         q = d.quantiles_s
         lines.append(f"| {name} | {where} | {100 * d.share:.2f} % | {1e3 * statistics.median(q):.2f} / "
                      f"{1e3 * q[99]:.2f} / {1e3 * q[-1]:.2f} ms |")
     lines += ["", "The paper flight (`paper-as-flown`), each condition over "
               f"{max(r['seed'] for r in res['paper']) + 1} seeds (`flightctl sim paper --params paper-as-flown "
-              "[--gains table4] --fault loop_late:dist=NAME[,rate=R],at=0`): landed, overruns the loop counted "
+              "[--gains table4] --fault loop_late:dist=NAME[,rate=R],at=0`): landed, crashed (tilted past the crash "
+              "tilt, or hit the floor too fast: flightctl/safety.py), overruns the loop counted "
               "(of its iterations), the stalls it saw (ticks after missed ones; the first ten named in its events), and of the flights that landed "
               "the median of the worst held error of a bank and of a turn as the vehicle's estimate saw it (the paper's "
               "real flights: within 1 and 3 degrees) and of the banks' worst ringing (sim/sweeps/judge.py):", "",
-              "| condition | gains | landed | overruns | stalls | bank held error | turn held error | bank ringing |",
-              "|---|---|---|---|---|---|---|---|"]
+              "| condition | gains | landed | crashed | overruns | stalls | bank held error | turn held error | bank ringing |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for label, _ in CONDITIONS:
         for gains in ("table4", "table6"):
             rs = [r for r in res["paper"] if r["condition"] == label and r["gains"] == gains]
@@ -217,7 +218,10 @@ def markdown(res: dict) -> str:
             def med(key, fmt):
                 v = [r[key] for r in landed if r.get(key) is not None]
                 return fmt.format(statistics.median(v)) if v else "-"
-            lines.append(f"| {label} | {gains} | {len(landed)} of {len(rs)} | "
+            down = [r["outcome"] for r in rs if not r["lands"]]
+            how = ", ".join(f"{k} {w}" for w, k in ((w, sum(w in o for o in down)) for w in ("tilted", "hit the floor"))
+                            if k) or "-"
+            lines.append(f"| {label} | {gains} | {len(landed)} of {len(rs)} | {how} | "
                          f"{statistics.median(r['overruns'] for r in rs):.0f} of {statistics.median(r['iterations'] for r in rs):.0f} | "
                          f"{statistics.median(r['stalls'] for r in rs):.0f} | {med('bank_held_deg', '{:.2f} deg')} | "
                          f"{med('turn_held_deg', '{:.2f} deg')} | {med('bank_ringing_deg', '{:.2f} deg')} |")
