@@ -36,6 +36,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from flightctl.errors import InputError, output_file, write_atomic
+
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN, END = "<!-- late loops: begin (written by `python scripts/loop_lateness.py flights`) -->", "<!-- late loops: end -->"
 QUANTILES = 101                     # 0, 1, ..., 100 %
@@ -105,7 +107,7 @@ def measure(name: str, hogs: int, seconds: float) -> Path:
                                       round(1e3 * quantiles(over)[99], 3), round(1e3 * max(over), 3)]}
     d = Lateness(name, len(over) / len(ticks), tuple(quantiles(over)), source)
     out = FOLDER / f"{name}.json"
-    out.write_text(d.to_json())
+    write_atomic(out, d.to_json())
     print(f"{name}: {len(over)} of {len(ticks)} ticks late ({100 * d.share:.2f} %), "
           f"p50 {source['late_ms_p50_p99_max'][0]} ms, worst {source['late_ms_p50_p99_max'][2]} ms -> {out}")
     return out
@@ -130,7 +132,7 @@ def paper() -> Path:
               "share_at_hz": statistics.mean(PAPER_HZ), "late_us": [round(1e6 * s, 1) for s in slow]}
     d = Lateness("paper", share, tuple(q), source)
     out = FOLDER / "paper.json"
-    out.write_text(d.to_json())
+    write_atomic(out, d.to_json())
     print(f"paper: {100 * share:.2f} % of ticks late (range {100 * min(shares):.1f}-{100 * max(shares):.1f} %), "
           f"by {1e6 * slow[0]:.0f}-{1e6 * slow[1]:.0f} us -> {out}")
     return out
@@ -260,11 +262,12 @@ def main(argv=None) -> int:
     f.add_argument("--from", dest="source", help="render these figures (a --json of an earlier run), flying nothing")
     f.add_argument("--doc", help="write the block into this file between its markers (else print it)")
     args = ap.parse_args(argv)
-    from flightctl.errors import InputError, output_file, write_atomic
     try:
         if args.what == "measure":
             if not 0 <= args.hogs <= 8 or not 6.0 <= args.seconds <= 120.0:
                 raise InputError("--hogs: 0..8; --seconds: 6..120")
+            if not args.name.replace("_", "").replace("-", "").isalnum():
+                raise InputError(f"measure {args.name}: a name of letters, digits, - and _ (the file's, in the folder)")
             measure(args.name, args.hogs, args.seconds)
         elif args.what == "paper":
             paper()
@@ -272,7 +275,11 @@ def main(argv=None) -> int:
             if args.json:
                 output_file(args.json, "--json")
             if args.source:
-                res = json.loads(Path(args.source).read_text())
+                try:
+                    res = json.loads(Path(args.source).read_text())
+                    res["paper"], res["mc"]
+                except (OSError, ValueError, KeyError, TypeError) as e:
+                    raise InputError(f"--from {args.source}: not the figures of a `flights --json` run ({e})") from None
             else:
                 if not 1 <= args.seeds <= 20 or not 1 <= args.n <= 1000:
                     raise InputError("--seeds: 1..20; --n: 1..1000")
