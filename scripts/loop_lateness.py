@@ -38,7 +38,6 @@ from pathlib import Path
 
 from flightctl.errors import InputError, output_file, write_atomic
 
-ROOT = Path(__file__).resolve().parents[1]
 BEGIN, END = "<!-- late loops: begin (written by `python scripts/loop_lateness.py flights`) -->", "<!-- late loops: end -->"
 QUANTILES = 101                     # 0, 1, ..., 100 %
 # the paper's loop (sec. 4.2, eq. 29), s
