@@ -42,6 +42,7 @@ class WallClock:
         self.overruns = 0           # deadlines the loop body ran past
         self.skipped = 0            # whole periods dropped after long overruns
         self.max_late_s = 0.0       # worst lateness at the return of wait_next (spin error or overrun)
+        self.late_s = 0.0           # how late the loop reached the last deadline (0: in time; scripts/loop_lateness.py)
 
     def now(self) -> float:
         return self._now() - self._t0
@@ -53,9 +54,10 @@ class WallClock:
         if self._t1 is None:
             self._t1 = t + period
         deadline = self._t1 + self._k * period
+        self.late_s = t - deadline if t > deadline else 0.0
         if t > deadline:
             self.overruns += 1
-            behind = int((t - deadline) / period)
+            behind = missed_periods(t - deadline, period)
             if behind:
                 self.skipped += behind
                 self._k += behind
@@ -72,6 +74,13 @@ class WallClock:
         self._k += 1
         self.ticks += 1
         return deadline - self._t0
+
+
+def missed_periods(late: float, period: float) -> int:
+    """The whole periods a loop that reaches its deadline `late` s after it has missed: `WallClock`
+    skips them (and serves the last one passed at once), never catching up in a burst; the simulated
+    board's late clock (sim/world/lateness.py) follows the same rule."""
+    return int(late / period)
 
 
 class PacedClock:

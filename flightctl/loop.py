@@ -51,7 +51,9 @@ class FlightResult:
     reason: str = "plan complete"   # why the loop ended
     events: list[tuple[float, str]] = field(default_factory=list)
     iterations: int = 0
-    overruns: int = 0               # deadlines missed by the wall clock (always 0 in simulation)
+    overruns: int = 0               # deadlines the loop reached late (the clock's count: the wall clock's on the
+    #                                 Pi, the late clock's in simulation, sim/world/lateness.py; else 0)
+    stalls: int = 0                 # ticks that came after missed ones (STALL_PERIODS; the first MAX_STALL_EVENTS named)
     t_arm: float | None = None      # clock time of arming (log time 0)
     max_alt: float = 0.0            # highest altitude estimate in flight (m)
 
@@ -333,6 +335,8 @@ class FlightLoop:
             if finished:
                 break
         res.iterations = i
+        res.overruns = getattr(clock, "overruns", 0)
+        res.stalls = stalls
         res.max_alt = max_alt
         if self.stop.is_set():
             res.reason = f"stopped: {self.stop_reason}"

@@ -43,7 +43,7 @@ def parser() -> argparse.ArgumentParser:
                    help=f"add an extension to the simulated plant ({', '.join(causes.CAUSES)}); repeatable")
     p.add_argument("--fault", action="append", default=[], metavar="NAME[:at=S,k=v]",
                    help="inject a fault at the simulated devices (at: s after arming, the log's time, before the "
-                        "plan's end; faults: " + ", ".join(faults.FAULTS) + "; their keys: docs/formats.md); repeatable")
+                        "plan's end; faults: " + ", ".join(faults.FAULTS + faults.LOADS) + "; their keys: docs/formats.md); repeatable")
     p.add_argument("--params", metavar="P.toml|NAME",
                    help=f"parameter file (TOML) or a shipped vehicle ({', '.join(shipped())}); default: the reference airframe")
     p.add_argument("--gains", choices=sorted(GAIN_SETS),
@@ -67,7 +67,8 @@ def parser() -> argparse.ArgumentParser:
                    help="write the outcome and the metrics as JSON (SI units: s, m, rad)")
     p.add_argument("--monte-carlo", type=int, metavar="N",
                    help="fly N draws of the parameter file's plausible ranges with both gain sets, in parallel; "
-                        "report the shares that fly, land and settle (--json, --plot: a map); sim/sweeps/montecarlo.py")
+                        "report the shares that fly, land and settle (--json, --plot: a map); with --fault, each draw flown "
+                        "with it (the full path only: e.g. the loop's lateness, loop_late); sim/sweeps/montecarlo.py")
     p.add_argument("--batch", action="store_true",
                    help="with --monte-carlo: fly the draws on the batched simulator (sim/sweeps/batch.py: compiled, "
                         "each draw flown as the full onboard path flies it, take-off to landing)")
@@ -117,7 +118,8 @@ def metrics_json(flown, flight, wall_s: float) -> dict:
            "wall_s": wall_s, "rows": len(log), "events": [{"t": t, "what": w} for t, w in flight.result.events],
            "touchdowns": [{"t": t, "speed": abs(vz)} for t, vz in flight.touchdowns],
            "outcome": flight.outcome, "crashed": flight.crashed, "flew": flight.flew,
-           "log_dropped_rows": flight.log_dropped, "steps": []}
+           "log_dropped_rows": flight.log_dropped, "overruns": flight.result.overruns, "stalls": flight.result.stalls,
+           "steps": []}
     if flown.name == "hover" and flight.flew:
         out["hold_last_10s"] = hold_metrics(log, until=flown.plan.duration)   # null: the hover was cut short
     for step in flown.steps:
@@ -242,13 +244,21 @@ def monte_carlo_main(args) -> int:
     most = 100000 if args.batch else 10000
     if not 1 <= args.monte_carlo <= most:
         raise InputError(f"--monte-carlo {args.monte_carlo}: between 1 and {most} draws")
+    if args.fault and args.batch:
+        raise InputError("--fault goes with the full onboard path: the batched simulator (--batch) has no "
+                         "devices to inject it at")
+    for f in args.fault:
+        faults.parse(f)
     if args.json:
         output_file(args.json, "--json")
     if args.plot:
         output_file(args.plot, "--plot", ".png")
     bar = Progress(2 if args.batch else 2 * args.monte_carlo, "monte carlo ") if not args.quiet else None
-    run = montecarlo.run_batch if args.batch else montecarlo.run
-    result = run(args.params, args.scenario, args.monte_carlo, args.seed, progress=bar)
+    if args.batch:
+        result = montecarlo.run_batch(args.params, args.scenario, args.monte_carlo, args.seed, progress=bar)
+    else:
+        result = montecarlo.run(args.params, args.scenario, args.monte_carlo, args.seed, progress=bar,
+                                faults=tuple(args.fault))
     print(montecarlo.summary(result))
     if args.json:
         montecarlo.write_json(result, args.json)

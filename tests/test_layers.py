@@ -110,7 +110,7 @@ def test_the_wheel_installs_only_the_flightctl_name(wheel):
     top = {n.split("/")[0] for n in names}
     assert {t for t in top if not t.endswith(".dist-info")} == {"flightctl"}     # no top-level sim/ or hil/
     for module in ("flightctl/sim/flights/run.py", "flightctl/sim/world/board.py", "flightctl/hil/bench.py",
-                   "flightctl/boards/pi.toml", "flightctl/plans/__init__.py"):
+                   "flightctl/boards/pi.toml", "flightctl/plans/__init__.py", "flightctl/sim/world/loop_lateness/busy.json"):
         assert module in names
     (info,) = [n for n in names if n.endswith(".dist-info/top_level.txt")] or [None]
     if info:

@@ -234,7 +234,6 @@ class Service:
         log.info("flight %s: calibrating %g s, log %s", plan.name, self.calibrate_s, path)
         freeze_gc()
         result = loop.run()
-        result.overruns = getattr(hal.clock, "overruns", 0)
         for t, what in result.events:
             log.info("  %8.3f s  %s", t, what)
         log.info("flight %s ended: %s (%d iterations, %d overruns)", plan.name, result.reason,

@@ -116,10 +116,11 @@ def _fly(job: tuple) -> dict:
     from flightctl.sim.flights.run import fly
     from flightctl.sim.flights.scenarios import SCENARIOS
     from flightctl.sim.sweeps import judge
-    spec, scenario, gains, drawn, seed = job
+    from flightctl.sim.world import faults
+    spec, scenario, gains, drawn, seed, injected = job
     params = drawn_params(causes.load_vehicle(spec, GAIN_SETS[gains]), drawn)
     sc = SCENARIOS[scenario]()
-    flight = fly(sc, params, os.devnull, seed=seed)
+    flight = fly(sc, params, os.devnull, seed=seed, faults=[faults.parse(f) for f in injected])
     flies = bool(flight.flew and not flight.crashed and flight.outcome == "landed upright")
     settled = flies and settles(flight.log, sc.steps, flight.t_arm)
     figures = judge.summary(judge.step_figures(flight.log, sc.steps, flight.t_arm)) if flies else {"score": None}
@@ -127,8 +128,10 @@ def _fly(job: tuple) -> dict:
             "outcome": flight.outcome, **figures}
 
 
-def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, jobs: int | None = None) -> dict:
-    """The module docstring's Monte Carlo; `progress`: a sim/progress.py Progress, one step a flight."""
+def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, jobs: int | None = None,
+        faults: tuple[str, ...] = ()) -> dict:
+    """The module docstring's Monte Carlo; `progress`: a sim/progress.py Progress, one step a flight;
+    `faults`: `--fault` texts flown on every draw (sim/world/faults.py; the loop's lateness)."""
     from flightctl.sim import causes
     params = causes.load_vehicle(spec)
     spans = ranged(params)
@@ -137,7 +140,7 @@ def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, j
                          "(range.NAME = [lo, hi] in its [[effect]] tables; --params paper-as-flown has them)")
     drawn = draw(params, n, seed)
     draws = [one_draw(drawn, i) for i in range(n)]
-    jobs_list = [(spec, scenario, g, d, seed + k) for k, d in enumerate(draws) for g in GAINS]
+    jobs_list = [(spec, scenario, g, d, seed + k, tuple(faults)) for k, d in enumerate(draws) for g in GAINS]
 
     def done(k: int, r: dict) -> None:          # as each flight finishes (sim/engine.py)
         job = jobs_list[k]
@@ -147,7 +150,7 @@ def run(spec: str | None, scenario: str, n: int, seed: int = 0, progress=None, j
     results = engine.run(_fly, jobs_list, jobs, done if progress is not None else None)
     rows = [{"draw": {f"{c}.{name}": v for (c, name), v in d.items()},
              **{g: results[2 * k + j] for j, g in enumerate(GAINS)}} for k, d in enumerate(draws)]
-    return _result(spec, scenario, n, seed, spans, rows)
+    return _result(spec, scenario, n, seed, spans, rows, **({"faults": list(faults)} if faults else {}))
 
 
 def _result(spec, scenario, n, seed, spans, rows, **extra) -> dict:

@@ -138,6 +138,7 @@ class World:
                  seed: int = 0, substeps: int | None = None, battery_soc: float = 0.9):
         self.a = airframe
         self.dt = airframe.dt
+        self.seed = seed
         self.rng = random.Random(seed)
         self.normal = NoisePool(seed)
         self.noise = noise
@@ -150,8 +151,17 @@ class World:
         return self.plant.t
 
     def advance(self, dt: float) -> None:
+        """To the end of this loop period (of `dt`; the rest of it after `advance_part`)."""
+        rest = 1.0 - self.plant.into
         self.plant.advance(dt)
-        self.battery.advance(dt)
+        self.battery.advance(dt if rest == 1.0 else rest * dt)
+        self.gpio.advance_to(self.plant.t)
+
+    def advance_part(self, frac: float) -> None:
+        """To `frac` of this loop period: where a late loop tick reads its sensors (sim/world/lateness.py)."""
+        before = self.plant.into
+        self.plant.advance_part(frac)
+        self.battery.advance((frac - before) * self.dt)
         self.gpio.advance_to(self.plant.t)
 
     def range_along_body_z(self) -> float:

@@ -20,7 +20,11 @@ meet them exactly as on the quadcopter. `parse("imu_frozen:at=5")` -> a Fault;
   (P - h2)), so that its speed and torque (eq. 27-28) follow; motor_stop is share 0;
 - cpu_stall: once, at `at`, the loop misses `ms` (50) of ticks: the sim clock jumps while the motors
   hold their last command (an ESC keeps its last pulse width);
-- log_full: every write of the flight log from `at` raises OSError ENOSPC (a full card).
+- log_full: every write of the flight log from `at` raises OSError ENOSPC (a full card);
+- loop_late: from `at`, the loop's ticks come late as a loaded Pi's do, drawn from the distribution
+  `dist` (`busy`, `quiet`, `paper`: sim/world/loop_lateness/, scripts/loop_lateness.py) with `rate`
+  times its share of late ticks (1), seeded by `seed` (the flight's seed): the board's clock becomes a
+  `sim.world.lateness.LateClock`, and a late tick acts late on the plant.
 """
 from __future__ import annotations
 
@@ -31,6 +35,7 @@ from dataclasses import dataclass, field
 from flightctl.battery import CELLS   # the simulated pack is the vehicle's 4S (sim/world/power.py)
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.errors import InputError
+from flightctl.sim.world.lateness import LateClock, load, names
 
 _GYRO_X = 1 + 8   # byte offset of GYRO_XOUT_H in the burst's reply (after the address byte)
 
@@ -76,6 +81,10 @@ class Fault:
                         t = inner()
                 return t
             clock.wait_next = wait_next
+        elif name == "loop_late":
+            o = self.options
+            hal.clock = LateClock(world, load(o.get("dist", "busy")), o.get("rate", 1.0), int(o.get("seed", world.seed)),
+                                  self.at)
         elif name == "log_full":
             if log is None:
                 raise InputError("log_full: the flight has no log")
@@ -160,18 +169,25 @@ class _FullDisk:
 
 FAULTS = _IMU + ("sonar_silent", "sonar_stuck", "battery_critical", "motor_stop", "motor_partial", "cpu_stall",
                    "log_full")
-_LIMITS = {"cell": (2.5, 4.2), "motor": (1, 4), "ms": (20.0, 100.0), "every": (2, 1e6), "share": (0.0, 1.0)}   # the brief's 20-100 ms
+# a load rather than a fault: the loop names none of it (a tick late by whole periods is a stall it names),
+# so it is flown in docs/safety.md's late-loop section, not in the fault matrix (`flightctl sim faults`)
+LOADS = ("loop_late",)
+_LIMITS = {"cell": (2.5, 4.2), "motor": (1, 4), "ms": (20.0, 100.0), "every": (2, 1e6), "share": (0.0, 1.0),
+           "rate": (0.0, 1000.0)}   # the brief's 20-100 ms
 # the keys each fault takes besides `at` (an unknown key is refused, never ignored)
 _KEYS = {"imu_garbage": ("seed",), "imu_intermittent": ("every", "seed"), "battery_critical": ("cell",),
-         "motor_stop": ("motor",), "motor_partial": ("motor", "share"), "cpu_stall": ("ms",)}
+         "motor_stop": ("motor",), "motor_partial": ("motor", "share"), "cpu_stall": ("ms",),
+         "loop_late": ("dist", "rate", "seed")}
+_NAMED = {"dist": names}   # keys whose value is a name, not a number: the names they take
 
 
 def parse(text: str) -> Fault:
     """NAME[:k=v,...]: `at` (s) for all; `every`, `seed` (IMU), `cell` (V, battery_critical), `motor`
-    (1..4, motor_stop, motor_partial), `share` (0..1, motor_partial: default 0.5), `ms` (20..100, cpu_stall)."""
+    (1..4, motor_stop, motor_partial), `share` (0..1, motor_partial: default 0.5), `ms` (20..100, cpu_stall),
+    `dist` (a name), `rate` (0..1000) and `seed` (loop_late)."""
     name, _, rest = text.partition(":")
-    if name not in FAULTS:
-        raise InputError(f"--fault {text}: unknown fault {name!r} (known: {', '.join(FAULTS)})")
+    if name not in FAULTS + LOADS:
+        raise InputError(f"--fault {text}: unknown fault {name!r} (known: {', '.join(FAULTS + LOADS)})")
     opts = {}
     allowed = ("at",) + _KEYS.get(name, ())
     for kv in filter(None, rest.split(",")):
@@ -181,6 +197,11 @@ def parse(text: str) -> Fault:
             raise InputError(f"--fault {text}: unknown key {k!r} for {name} (known: {', '.join(allowed)})")
         if k in opts:
             raise InputError(f"--fault {text}: {k} given twice")
+        if k in _NAMED:
+            if v not in _NAMED[k]():
+                raise InputError(f"--fault {text}: {k} must be one of {', '.join(_NAMED[k]())}")
+            opts[k] = v
+            continue
         try:
             opts[k] = float(v) if sep else None
         except ValueError:
@@ -189,6 +210,8 @@ def parse(text: str) -> Fault:
     if at is None or not 0.0 <= at < 1e6:
         raise InputError(f"--fault {text}: at must be a time in s")
     for k, v in opts.items():
+        if k in _NAMED:
+            continue
         lo, hi = _LIMITS.get(k, (0, 2**31))
         if v is None or not lo <= v <= hi:
             raise InputError(f"--fault {text}: {k} must be a number in {lo:g}..{hi:g}")

@@ -9,7 +9,8 @@ plant applies, over the period, the two commands' average weighted by the time e
 would take two. Time is counted
 in integers, loop periods, and computed from them (`t = n dt` plus the offset within one), never
 summed: after n periods it is `n dt` whatever the substep count, so that the loop sees the same clock
-at 1 and at 20 substeps. The floor: the vehicle rests on z = 0 until its thrust lifts it, and
+at 1 and at 20 substeps. A loop tick that comes late (sim/world/lateness.py) splits its period in two
+(`advance_part`, then `advance`), each command acting from the moment it was issued (`issue_times`). The floor: the vehicle rests on z = 0 until its thrust lifts it, and
 a touchdown stops it (level, at rest), recording the touchdown speed; a yaw spin it lands with (a
 two-rotor landing's 25 rad/s, flightctl/control/spin.py) is braked by its feet's friction on the
 floor (`floor_spin`), not stopped at once. The floor's stopping force is
@@ -102,26 +103,85 @@ class Plant:
         self._fast_forces = compiled.model_forces() if laid_out is not None else None
         self._codes, self._q = laid_out if laid_out is not None else (None, None)
         self._out = np.empty(compiled.N_OUT)
+        self._into = 0.0                                  # the fraction of this period integrated (`advance_part`)
+        self._issued: deque | None = None                 # the commands at their issue times (`issue_times`)
 
     def command(self, P1: float, P2: float, P3: float, P4: float, battery_v: float) -> None:
         """The input from now on (after the actuation delay, if any)."""
-        self._next = (P1, P2, P3, P4, battery_v)
+        self._next = u = (P1, P2, P3, P4, battery_v)
+        issued = self._issued
+        if issued is not None:
+            if issued[-1][0] == self.periods and issued[-1][1] == self._frac + self._into:
+                issued.pop()                              # issued again at the same moment: the last counts
+            issued.append((self.periods, self._frac + self._into, u))
+
+    @property
+    def into(self) -> float:
+        """How far into this loop period the plant is (0 but after `advance_part`)."""
+        return self._into
 
     def advance(self, dt: float) -> None:
-        """Integrate over one loop period (the `dt` of the plant) with the last command held."""
-        t0 = self.periods * self.dt
+        """Integrate to the end of this loop period (the `dt` of the plant) with the last command held."""
+        if self._issued is not None:                      # commands at their issue times (`issue_times`)
+            self._integrate(self._into, 1.0, self._held(self._into, 1.0))
+            return
         if self.model.delay:
             q = self._queue
             q.append(self._next)
-            self.u = u = delayed(q[0], q[1], self._frac) if self._frac else q[1]
+            u = delayed(q[0], q[1], self._frac) if self._frac else q[1]
         else:
-            self.u = u = self._next
+            u = self._next
+        self._integrate(0.0, 1.0, u)
+
+    def advance_part(self, frac: float) -> None:
+        """Integrate to `frac` (0..1) of this loop period with the commands held: a loop tick that comes
+        late (sim/world/lateness.py) reads its sensors there and issues its command there. Only after
+        `issue_times`."""
+        self._integrate(self._into, frac, self._held(self._into, frac))
+
+    def issue_times(self) -> None:
+        """From now on each command acts from the moment it is issued (plus the actuation delay) rather
+        than from its period's start: a late tick's command then acts late (`advance_part`). With every
+        command issued on its period's start the flight is the same, bit for bit (the inputs are the
+        same sums: tests/test_lateness.py)."""
+        # (issue period, the delay's fraction plus the issue's within its period, the command): the
+        # queue's commands, issued one a period before this one, and the last command, issued now
+        p, q = self.periods, self._queue
+        self._issued = deque([(p - len(q) + i, self._frac, c) for i, c in enumerate(q)] + [(p, self._frac, self._next)])
+
+    def _held(self, a: float, b: float):
+        """The input over [a, b] of this period (fractions of it): each command issued at `issue +
+        into` acts from `issue + into + delay` until the next one does, and the input is their average
+        weighted by the time each holds (`delayed`'s rule; the same sums where every `into` is 0)."""
+        issued, p, whole = self._issued, self.periods, self._whole
+        while len(issued) > 1 and (issued[1][0] - p + whole) + issued[1][1] <= a:
+            issued.popleft()                              # a later one acts from before a
+        span = b - a
+        u = None
+        for k, (n, lag, cmd) in enumerate(issued):
+            start = (n - p + whole) + lag
+            if start >= b:
+                break
+            end = (issued[k + 1][0] - p + whole) + issued[k + 1][1] if k + 1 < len(issued) else b
+            w = (end if end < b else b) - (start if start > a else a)
+            if w <= 0.0:
+                continue
+            share = w / span if span != 1.0 else w
+            u = [c * share for c in cmd] if u is None else [s + c * share for s, c in zip(u, cmd)]
+        return tuple(u)
+
+    def _integrate(self, a: float, b: float, u) -> None:
+        """The plant from `a` to `b` (fractions of this loop period) under input `u`, in `substeps`
+        RK4 steps; at b = 1 the period is done and the time is its count times dt."""
+        t0 = self.periods * self.dt
+        self.u = u
         n = self.substeps
-        h = self.dt / n
+        h = (b - a) * self.dt / n
+        ta = a * self.dt
         fresh = False                                     # `_out` holds the forces at the state now
         for j in range(1, n + 1):
             x, t = self.x, self.t
-            t_end = t0 + j * h
+            t_end = t0 + (ta + j * h)
             ground = self.on_ground and not self._lifts(x, u)
             if ground and len(x) == N_RIGID:              # nothing moves
                 self.t = t_end
@@ -141,12 +201,17 @@ class Plant:
                 self._touch_down()
             fresh = ground or not self.on_ground          # (a touchdown changes the state in place)
         if self.on_ground and self.x[R] != 0.0:           # a spin it landed with, braked by its feet
-            a = self.model.a
-            self.x[R], turned = floor_spin(self.x[R], self.dt, floor_brake(a.M * a.g, a.l, a.Jzz))
+            a_ = self.model.a
+            self.x[R], turned = floor_spin(self.x[R], (b - a) * self.dt, floor_brake(a_.M * a_.g, a_.l, a_.Jzz))
             self.x[PSI] += turned
             fresh = False
-        self.periods += 1
-        self.t = self.periods * self.dt
+        if b == 1.0:
+            self.periods += 1
+            self._into = 0.0
+            self.t = self.periods * self.dt
+        else:
+            self._into = b
+            self.t = t0 + b * self.dt
         if fresh and self._period is not None:            # the compiled step's forces prime `forces()`
             o = self._out.tolist()
             self._forces_at = (self.t, tuple(self.x), tuple(u))
