@@ -189,8 +189,8 @@ class SimMpu9250:
 
 # `chip_frame`'s state s, by index: the DLPF stage's outputs fx, fy, fz, p, q, r (0-5), the gyro's
 # random walk (_S_WALK, 3), each rotor's angle (_S_PHASE, 4), the broadband noise's high-pass (_S_BB, 3:
-# its low-pass part, which the high-pass takes away)
-_S_WALK, _S_PHASE, _S_BB, N_CHIP_STATE = 6, 9, 13, 16
+# its low-pass part, which the high-pass takes away, in the units of the read's rms gain, _S_BBG)
+_S_WALK, _S_PHASE, _S_BB, _S_BBG, N_CHIP_STATE = 6, 9, 13, 16, 17
 # its constants c, by index: the DLPF stage's gains for the read interval, the LSBs per unit, the white
 # noise per sample, the bias walk K, the vibration per newton, the accelerometer DLPF's time constant
 # squared, the output sample period, the accelerometer's DLPF delay; then per axis the zero-g offset and
@@ -287,6 +287,14 @@ def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3
     a_lsb, g_lsb, sa, sg = c[_C_A_LSB], c[_C_G_LSB], c[_C_SA], c[_C_SG]
     if c[_C_BB] != 0.0 and dt > 0.0:          # the frame's broadband rate noise, rms per read, high-passed
         a = math.exp(-_TAU * BROADBAND_HP_HZ * dt)
+        gain = math.sqrt(0.5 * (1.0 + a)) / a
+        if gain != s[_S_BBG]:   # another read interval (a late or stalled loop): the low-pass part held
+            if s[_S_BBG] != 0.0:    # in the new gain's units, or a gap of many periods (gain ~ 1/a) would
+                k = gain / s[_S_BBG]   # leave it 1/a too large, and the next read's noise at full scale
+                s[_S_BB] *= k
+                s[_S_BB + 1] *= k
+                s[_S_BB + 2] *= k
+            s[_S_BBG] = gain
         bb = c[_C_BB] * (f1 + f2 + f3 + f4) * math.sqrt(0.5 * (1.0 + a)) / a
         b = 1.0 - a
         x = bb * e[i + 9]
