@@ -6,6 +6,7 @@ refused in one line with exit status 2, nothing written."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -140,3 +141,26 @@ def test_bad_arguments_are_refused_in_one_line(tmp_path, capsys):
     assert "does not exist" in _refused(capsys, ["diagnose", log, "--index", "3", "--json", str(tmp_path / "r.json")])
     assert "cannot read" in _refused(capsys, ["diagnose", str(tmp_path / "missing.ulg"), "--json",
                                               str(tmp_path / "r.json")])
+
+
+def test_a_log_is_known_by_its_content_not_its_name(tmp_path):
+    """A ULog named `.ulog`, a DataFlash log named `.dat` and a blackbox log named `.log` are read as
+    what their bytes are (their magic), the same tables as under their own names; a folder's other
+    files are named, with why they were not read, never skipped silently."""
+    from flightctl.sim.identify.diagnose.corpus import NOT_A_LOG, find_logs
+    dataflash = Path(__file__).parent / "data" / "ardupilot" / "backend_log_80k.bin"
+    cases = ((need(FLIGHTS / "px4" / "roboto-test.ulg"), "flight.ulog"), (dataflash, "flight.dat"),
+             (need(INDIFLIGHT / "LOG00259.BFL"), "flight.log"))
+    folder = tmp_path / "corpus"
+    folder.mkdir()
+    for source, name in cases:
+        (folder / name).write_bytes(source.read_bytes())
+        (a,), (b,) = read_foreign(str(source)), read_foreign(str(folder / name))
+        assert a.meta["format"] == b.meta["format"] and sorted(a.columns) == sorted(b.columns), name
+        for c in ("t", "P1", "gyro_x", "acc_z"):
+            assert np.array_equal(a[c], b[c], equal_nan=True), (name, c)
+    (folder / "README.md").write_text("# three logs\n")
+    (folder / "LICENSE.txt").write_text("MIT\n")
+    others = []
+    assert [p.name for p in find_logs(folder, others)] == ["flight.dat", "flight.log", "flight.ulog"]
+    assert sorted((p.name, why) for p, why in others) == [("LICENSE.txt", NOT_A_LOG), ("README.md", NOT_A_LOG)]

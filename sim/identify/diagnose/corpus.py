@@ -126,26 +126,28 @@ def _base(r: dict) -> str:
     return f"t: {', '.join(axes)}{extra}"
 
 
-def find_logs(folder: Path) -> list[Path]:
-    """Every file under `folder` that is a flight log, sorted: this project's CSV, and a file whose suffix
-    is another autopilot's (`flightctl.sim.logs.FOREIGN_SUFFIXES`) unless it is plain text of no log
-    format (a `.txt` licence beside the logs); a file that claims a format and is damaged stays, to be
-    refused with its reason."""
-    from flightctl.sim.logs import FOREIGN_SUFFIXES, kind
+NOT_A_LOG = "not a flight log: no log format's magic bytes (ULog, DataFlash, blackbox), no DataFlash text, not .csv"
+
+
+def find_logs(folder: Path, others: list | None = None) -> list[Path]:
+    """Every file under `folder` that is a flight log, sorted: this project's CSV, and a file another
+    autopilot's by its content (`flightctl.sim.logs.kind`: its magic bytes, whatever its name); a file
+    whose suffix claims a format and is damaged stays, to be refused with its reason. Each other file
+    (a licence, a README) is appended to `others` as (path, why), to be said, never skipped silently."""
+    from flightctl.sim.logs import kind
     out = []
     for p in sorted(folder.rglob("*")):
         if not p.is_file():
             continue
-        suffix = p.suffix.lower()
-        if suffix in CSV_SUFFIXES:
-            out.append(p)
-        elif suffix in FOREIGN_SUFFIXES:
+        if p.suffix.lower() not in CSV_SUFFIXES:
             try:
                 if kind(str(p)) is None:
+                    if others is not None:
+                        others.append((p, NOT_A_LOG))
                     continue
             except InputError:
                 pass
-            out.append(p)
+        out.append(p)
     return out
 
 
@@ -241,9 +243,14 @@ def corpus(folders: Path | list[Path], jobs: int | None = None, progress=None,
     for folder in folders:
         if not folder.is_dir():
             raise InputError(f"--corpus {folder}: not a folder")
-        files = find_logs(folder)
+        others: list = []
+        files = find_logs(folder, others)
         if not files:
-            raise InputError(f"--corpus {folder}: no flight logs in it (.csv, {', '.join(_suffixes())})")
+            raise InputError(f"--corpus {folder}: no flight logs in it (.csv, or a ULog, DataFlash or blackbox log "
+                             "by its content)")
+        if progress and others:
+            print(f"diagnose --corpus: {len(others)} files under {folder} not read: "
+                  + "; ".join(f"{p.relative_to(folder).as_posix()}: {why}" for p, why in others), file=sys.stderr)
         t, r = _jobs(folder, files, folder.resolve().name if len(folders) > 1 else "")
         todo += t
         rows += r
@@ -286,11 +293,6 @@ def corpus_json(folders: list[str], rows: list[Row]):
         entry = {"log": r.log, "status": r.status, "refused": r.reason or None, "report": r.full_report()}
         yield ("," if k else "") + "\n" + json.dumps(entry, indent=1, allow_nan=False)
     yield "\n]}\n"
-
-
-def _suffixes() -> tuple[str, ...]:
-    from flightctl.sim.logs import FOREIGN_SUFFIXES
-    return tuple(FOREIGN_SUFFIXES)
 
 
 def main(args) -> int:
