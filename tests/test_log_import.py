@@ -164,3 +164,35 @@ def test_a_log_is_known_by_its_content_not_its_name(tmp_path):
     others = []
     assert [p.name for p in find_logs(folder, others)] == ["flight.dat", "flight.log", "flight.ulog"]
     assert sorted((p.name, why) for p, why in others) == [("LICENSE.txt", NOT_A_LOG), ("README.md", NOT_A_LOG)]
+
+
+def test_a_clock_that_jumps_back_drops_its_repeated_rows_and_says_so():
+    """Betaflight 3.0's clock can jump back mid-flight while loopIteration runs on: a real Betaflight
+    3.1.5 log (tests/data/pid-analyzer/example_smooth_tune.BBL) with its frames' time moved back by a
+    jump drawn from a seeded generator, at a row so drawn, is read: the rows whose time repeats one
+    already logged are dropped and counted, the rest kept in order."""
+    from flightctl.sim.logs import blackbox, bbfields
+    from flightctl.sim.logs.common import flight_text, to_table
+    path = Path(__file__).parent / "data" / "pid-analyzer" / "example_smooth_tune.BBL"
+    data = path.read_bytes()
+    ((s, e),) = blackbox.split(data)
+    parser = blackbox._parser(str(path), data[s:e])
+    names, a, notes = blackbox.frames(parser, blackbox.header_end(data[s:e]), len(data))
+    t = a[:, names.index("time")] * 1e-6
+    rng = np.random.default_rng(45)
+    jump = float(rng.uniform(3.0, 8.0))
+    k = int(rng.integers(t.size // 4, t.size // 2))
+    edited = a.copy()
+    edited[k:, names.index("time")] -= jump * 1e6
+    lost = int(np.sum(t[k:] - jump <= t[:k].max()))             # the rows the jump repeats
+    own = int(np.sum(np.diff(t) <= 0))                            # the log's own few repeated times
+    assert lost > 0.9 * jump * 1900
+    imp = bbfields.imported("jumped.BBL", dict(parser.headers), names, edited, list(notes))
+    table = to_table(flight_text(imp), "jumped.BBL")
+    note = next(n for n in table.meta["import_notes"].splitlines() if "backward time" in n)
+    assert lost <= int(note.split(" frames")[0]) <= lost + own, (lost, own, note)
+    assert f"{jump:.3g} s" in note and "loopIteration continuous" in note, note
+    assert np.all(np.diff(table["t"]) > 0)
+    whole = to_table(flight_text(bbfields.imported("whole.BBL", dict(parser.headers), names, a, list(notes))), "w")
+    assert whole["t"].size - lost - own <= table["t"].size <= whole["t"].size - lost
+    assert table["t"][-1] == pytest.approx(whole["t"][-1] - jump, abs=0.01)
