@@ -370,10 +370,11 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc:
                      "in proportion): on the ground, not airborne")
     flown = running & ~rest
     hover = float(np.median(mean_p[flown])) if flown.any() else 0.0
-    up = flown & (mean_p >= THROTTLE_SHARE * hover)
+    high = running & (mean_p >= THROTTLE_SHARE * hover)
+    up = high & ~rest
     contact = (_smoothed(table["t"], acc_z) < CONTACT_ACC_Z) if imu else rest
-    if (up & contact).any():
-        notes.append(f"{(up & contact).sum() * dt:.1f} s with the motors running and the body-z specific force "
+    if (high & contact).any():         # (counted whether or not the IMU is also held still there)
+        notes.append(f"{(high & contact).sum() * dt:.1f} s with the motors running and the body-z specific force "
                      f"(acc_z, averaged over {SMOOTH_S:g} s) below {CONTACT_ACC_Z:g} m/s^2, which the rotors cannot "
                      f"give: on its side or its back (a contact force), not airborne")
         up &= ~contact
