@@ -196,3 +196,23 @@ def test_a_clock_that_jumps_back_drops_its_repeated_rows_and_says_so():
     whole = to_table(flight_text(bbfields.imported("whole.BBL", dict(parser.headers), names, a, list(notes))), "w")
     assert whole["t"].size - lost - own <= table["t"].size <= whole["t"].size - lost
     assert table["t"][-1] == pytest.approx(whole["t"][-1] - jump, abs=0.01)
+
+
+def test_a_byte_identical_copy_is_counted_once_and_named(tmp_path):
+    """The same real log under two names (a copy kept beside its original, as public log folders hold)
+    is one flight: the corpus diagnoses the first and lists the copy as a duplicate of it, and the
+    headline counts it once, saying so."""
+    from flightctl.sim.identify.diagnose.corpus import _jobs, find_logs, headline
+    folder = tmp_path / "corpus"
+    (folder / "b").mkdir(parents=True)
+    data = need(FLIGHTS / "px4" / "roboto-test.ulg").read_bytes()
+    (folder / "a.ulg").write_bytes(data)
+    (folder / "b" / "copy.ulg").write_bytes(data)
+    (folder / "b" / "other.ulg").write_bytes(need(FLIGHTS / "px4" / "esc_status_log.ulg").read_bytes())
+    todo, refused = _jobs(folder, find_logs(folder))
+    assert [r.log for r in todo] == ["a.ulg", "b/other.ulg"]
+    (dup,) = refused
+    assert dup.log == "b/copy.ulg" and dup.status == "duplicate" and "copy of a.ulg" in dup.reason
+    assert dup.cells()[4] == "duplicate"
+    line = headline(todo + refused)
+    assert "of 2 airborne flights" in line and "of the 2 logs" in line and "1 file a byte-identical copy" in line, line
