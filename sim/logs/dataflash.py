@@ -382,8 +382,8 @@ def _armed(p: dict, msgs) -> tuple[bool | None, str]:
     AUTO_ARMED or NOT_LANDED and no ARMED), and the motor outputs above their disarmed pulse (`_outputs_ran`);
     None when none says armed and the log has no ARM or EV (outputs at their lowest in a log cut before
     its arming: the idle checks judge it). Armed when any source says so: a disarmed ArduCopter holds its
-    motor outputs at their lowest pulse or 0 (AP_MotorsMulticopter::output_min), writes no such event,
-    and logs ArmState 0."""
+    motor outputs at their lowest pulse or 0 (AP_MotorsMulticopter's shut-down spool state: MOT_PWM_MIN,
+    or 0 with MOT_SAFE_DISARM), writes no such event, and logs ArmState 0."""
     said = []
     if any(getattr(m, "ArmState", 0) for m in msgs["ARM"]):
         said.append("ARM's ArmState")
@@ -488,7 +488,7 @@ def read(path: str, text: bool = False) -> Imported:
     armed, said = _armed(p, msgs)
     if armed is False:                 # before the vehicle: what a bench log's frame says does not matter
         imp.fail(f"never armed: the motors did not run in this log ({said})")
-    if armed and not any(getattr(m, "Id", -1) == 10 for m in msgs["EV"]) and not msgs["ARM"]:
+    if armed and msgs["EV"] and not msgs["ARM"] and not any(getattr(m, "Id", -1) == 10 for m in msgs["EV"]):
         imp.notes.append(f"no EV ARMED: the log opens armed (LOG_DISARMED 0 logs from the arming only); armed by {said}")
     firmware = _firmware(msgs, texts)
     _vehicle(p, firmware, formats, texts, imp)
