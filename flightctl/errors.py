@@ -158,9 +158,9 @@ def _kind(mode: int) -> str:
     return "not a regular file"
 
 
-def read_bytes(path) -> bytes:
-    """The bytes of a regular file. Opened non-blocking and checked with fstat before any read, so a
-    named pipe or a device is refused without waiting on it."""
+def read_bytes(path, limit: int | None = None) -> bytes:
+    """The bytes of a regular file (its first `limit` when given). Opened non-blocking and checked with
+    fstat before any read, so a named pipe or a device is refused without waiting on it."""
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as e:
@@ -170,7 +170,7 @@ def read_bytes(path) -> bytes:
         if not stat.S_ISREG(mode):
             raise InputError(f"{path}: cannot read: {_kind(mode)}, a regular file is needed")
         with os.fdopen(fd, "rb", closefd=False) as f:
-            return f.read()
+            return f.read() if limit is None else f.read(limit)
     except OSError as e:
         raise InputError(f"{path}: cannot read ({e.strerror})") from None
     finally:

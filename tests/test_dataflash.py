@@ -106,7 +106,8 @@ def write(flight, rng, frame_type: int, armed: bool = True, firmware: str = "Ard
         f.add("IMU", us, 0, *g, log["acc_x"][k], -log["acc_y"][k], -log["acc_z"][k])
         pwm = [0] * 14
         for m, c in enumerate(chans):
-            pwm[c - 1] = int(round(lo + log[f"P{m + 1}"][k] / 255.0 * (hi - lo)))
+            # disarmed, ArduCopter holds its motor outputs at their lowest pulse (output_min)
+            pwm[c - 1] = int(round(lo + (log[f"P{m + 1}"][k] if armed else 0.0) / 255.0 * (hi - lo)))
         f.add("RCOU", us - 5, *pwm)                  # (the command before the gyro sample of its row)
         f.add("RATE", us, *(math.degrees(v) for v in g))
         for m, c in enumerate(chans):
@@ -414,3 +415,55 @@ def test_a_damaged_arducopter_text_dump_is_read_up_to_its_damage_or_refused_in_o
         err = capsys.readouterr().err
         assert (rc == 0 and out.exists()) or (rc == 2 and err.count("\n") == 1 and str(path) in err
                                               and not out.exists()), err
+
+
+def _messages(data: bytes):
+    """(offset, length, name) of each message of a binary DataFlash log, by its FMT lengths (each message
+    is 0xA3 0x95, its type byte, then its fields; FMT, type 128, defines a type's length and name)."""
+    fmts = {128: (89, "FMT")}
+    k = 0
+    while k + 3 <= len(data) and data[k:k + 2] == b"\xa3\x95" and data[k + 2] in fmts:
+        length, name = fmts[data[k + 2]]
+        if name == "FMT":
+            fmts[data[k + 3]] = (data[k + 4], data[k + 5:k + 9].rstrip(b"\0").decode())
+        yield k, length, name
+        k += length
+
+
+def _edited(data: bytes, drop_ev=(), pin_rcou: bool = False) -> bytes:
+    """log171.bin with its EV messages of the ids `drop_ev` cut out and, with `pin_rcou`, RCOU's four
+    pulses (TimeMS, Ch1..Ch4: "Ihhhh") set to 1000 us, RC3_MIN: a disarmed ArduCopter's outputs."""
+    out = []
+    for k, n, name in _messages(data):
+        m = data[k:k + n]
+        if name == "EV" and m[3] in drop_ev:
+            continue
+        if name == "RCOU" and pin_rcou:
+            m = m[:7] + struct.pack("<4h", *[1000] * 4) + m[15:]
+        out.append(m)
+    return b"".join(out)
+
+
+def test_a_log_that_opens_armed_is_read_on_its_other_sources(tmp_path, capsys):
+    """ArduCopter with LOG_DISARMED 0 logs from the arming on, and a log may open armed: log171.bin
+    (EV 8, 25, 10 ARMED, 15 AUTO_ARMED, 28 NOT_LANDED) with its EV ARMED cut out, as such a log has it,
+    is read on AUTO_ARMED, NOT_LANDED and its motor outputs, said in a note; with every EV cut out, as
+    a log with neither ARM nor EV; only a log whose every source says disarmed is refused as never armed."""
+    data = CRASH.read_bytes()
+    walked = list(_messages(data))
+    assert sum(n for _, n, _ in walked) > 0.99 * len(data) and sum(name == "EV" for *_, name in walked) == 5
+    path = tmp_path / "opens_armed.bin"
+    path.write_bytes(_edited(data, drop_ev=(10,)))
+    (e,) = each_log(str(path))
+    assert e.reason is None, e.reason
+    note = next(n for n in e.table.meta["import_notes"].splitlines() if "opens armed" in n)
+    assert "EV 15 AUTO_ARMED, 28 NOT_LANDED" in note and "RCOU Ch1, Ch2, Ch3, Ch4 up to 1853" in note, note
+    assert e.running_s > 140.0                                   # the whole flight, as the unedited log's
+    path.write_bytes(_edited(data, drop_ev=(8, 10, 15, 25, 28)))
+    (e,) = each_log(str(path))
+    assert e.reason is None and e.running_s > 140.0
+    path.write_bytes(_edited(data, drop_ev=(10, 15, 28), pin_rcou=True))
+    assert main(["log", "import", str(path), str(tmp_path / "o.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "never armed" in err and "EV, motor outputs messages" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "o.csv").exists()

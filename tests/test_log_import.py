@@ -6,6 +6,7 @@ refused in one line with exit status 2, nothing written."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -140,3 +141,78 @@ def test_bad_arguments_are_refused_in_one_line(tmp_path, capsys):
     assert "does not exist" in _refused(capsys, ["diagnose", log, "--index", "3", "--json", str(tmp_path / "r.json")])
     assert "cannot read" in _refused(capsys, ["diagnose", str(tmp_path / "missing.ulg"), "--json",
                                               str(tmp_path / "r.json")])
+
+
+def test_a_log_is_known_by_its_content_not_its_name(tmp_path):
+    """A ULog named `.ulog`, a DataFlash log named `.dat` and a blackbox log named `.log` are read as
+    what their bytes are (their magic), the same tables as under their own names; a folder's other
+    files are named, with why they were not read, never skipped silently."""
+    from flightctl.sim.identify.diagnose.corpus import NOT_A_LOG, find_logs
+    dataflash = Path(__file__).parent / "data" / "ardupilot" / "backend_log_80k.bin"
+    cases = ((need(FLIGHTS / "px4" / "roboto-test.ulg"), "flight.ulog"), (dataflash, "flight.dat"),
+             (need(INDIFLIGHT / "LOG00259.BFL"), "flight.log"))
+    folder = tmp_path / "corpus"
+    folder.mkdir()
+    for source, name in cases:
+        (folder / name).write_bytes(source.read_bytes())
+        (a,), (b,) = read_foreign(str(source)), read_foreign(str(folder / name))
+        assert a.meta["format"] == b.meta["format"] and sorted(a.columns) == sorted(b.columns), name
+        for c in ("t", "P1", "gyro_x", "acc_z"):
+            assert np.array_equal(a[c], b[c], equal_nan=True), (name, c)
+    (folder / "README.md").write_text("# three logs\n")
+    (folder / "LICENSE.txt").write_text("MIT\n")
+    others = []
+    assert [p.name for p in find_logs(folder, others)] == ["flight.dat", "flight.log", "flight.ulog"]
+    assert sorted((p.name, why) for p, why in others) == [("LICENSE.txt", NOT_A_LOG), ("README.md", NOT_A_LOG)]
+
+
+def test_a_clock_that_jumps_back_drops_its_repeated_rows_and_says_so():
+    """Betaflight 3.0's clock can jump back mid-flight while loopIteration runs on: a real Betaflight
+    3.1.5 log (tests/data/pid-analyzer/example_smooth_tune.BBL) with its frames' time moved back by a
+    jump drawn from a seeded generator, at a row so drawn, is read: the rows whose time repeats one
+    already logged are dropped and counted, the rest kept in order."""
+    from flightctl.sim.logs import blackbox, bbfields
+    from flightctl.sim.logs.common import flight_text, to_table
+    path = Path(__file__).parent / "data" / "pid-analyzer" / "example_smooth_tune.BBL"
+    data = path.read_bytes()
+    ((s, e),) = blackbox.split(data)
+    parser = blackbox._parser(str(path), data[s:e])
+    names, a, notes = blackbox.frames(parser, blackbox.header_end(data[s:e]), len(data))
+    t = a[:, names.index("time")] * 1e-6
+    rng = np.random.default_rng(45)
+    jump = float(rng.uniform(3.0, 8.0))
+    k = int(rng.integers(t.size // 4, t.size // 2))
+    edited = a.copy()
+    edited[k:, names.index("time")] -= jump * 1e6
+    lost = int(np.sum(t[k:] - jump <= t[:k].max()))             # the rows the jump repeats
+    own = int(np.sum(np.diff(t) <= 0))                            # the log's own few repeated times
+    assert lost > 0.9 * jump * 1900
+    imp = bbfields.imported("jumped.BBL", dict(parser.headers), names, edited, list(notes))
+    table = to_table(flight_text(imp), "jumped.BBL")
+    note = next(n for n in table.meta["import_notes"].splitlines() if "backward time" in n)
+    assert lost <= int(note.split(" frames")[0]) <= lost + own, (lost, own, note)
+    assert f"{jump:.3g} s" in note and "loopIteration continuous" in note, note
+    assert np.all(np.diff(table["t"]) > 0)
+    whole = to_table(flight_text(bbfields.imported("whole.BBL", dict(parser.headers), names, a, list(notes))), "w")
+    assert whole["t"].size - lost - own <= table["t"].size <= whole["t"].size - lost
+    assert table["t"][-1] == pytest.approx(whole["t"][-1] - jump, abs=0.01)
+
+
+def test_a_byte_identical_copy_is_counted_once_and_named(tmp_path):
+    """The same real log under two names (a copy kept beside its original, as public log folders hold)
+    is one flight: the corpus diagnoses the first and lists the copy as a duplicate of it, and the
+    headline counts it once, saying so."""
+    from flightctl.sim.identify.diagnose.corpus import _jobs, find_logs, headline
+    folder = tmp_path / "corpus"
+    (folder / "b").mkdir(parents=True)
+    data = need(FLIGHTS / "px4" / "roboto-test.ulg").read_bytes()
+    (folder / "a.ulg").write_bytes(data)
+    (folder / "b" / "copy.ulg").write_bytes(data)
+    (folder / "b" / "other.ulg").write_bytes(need(FLIGHTS / "px4" / "esc_status_log.ulg").read_bytes())
+    todo, refused = _jobs(folder, find_logs(folder))
+    assert [r.log for r in todo] == ["a.ulg", "b/other.ulg"]
+    (dup,) = refused
+    assert dup.log == "b/copy.ulg" and dup.status == "duplicate" and "copy of a.ulg" in dup.reason
+    assert dup.cells()[4] == "duplicate"
+    line = headline(todo + refused)
+    assert "of 2 airborne flights" in line and "of the 2 logs" in line and "1 file a byte-identical copy" in line, line

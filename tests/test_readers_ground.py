@@ -10,7 +10,7 @@ import pytest
 from flightctl.cli import main
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe
-from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS, IMU_COLUMNS, REST_S, all_running, load_file
+from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS, IMU_COLUMNS, REST_S, SMOOTH_S, all_running, load_file
 from real import FLIGHTS, need, rows_and_header, write
 
 pytest.importorskip("pyulog")
@@ -69,3 +69,70 @@ def test_an_idle_snippet_is_called_too_short_not_a_dead_sensor(tmp_path, capsys)
     err = capsys.readouterr().err
     assert "too short" in err and "idle" in err and "dead" not in err, err
     assert len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+def _edited(table, **columns):
+    """The table with some columns replaced (a seeded edit of a real log's imported rows)."""
+    import dataclasses
+    return dataclasses.replace(table, columns={**table.columns, **columns}, meta=dict(table.meta))
+
+
+def test_an_accelerometer_logged_z_down_is_found_at_rest_and_turned():
+    """INDIflight logs can hold an accelerometer that reads -g on z at rest (an INDIflight hover was
+    refused as "0.0 s of airborne data": every row a contact force). The shipped INDIflight throw
+    (indiflight/LOG00230.BFL, 6 s still before its throw) with its accelerometer's z reversed is found
+    so from gravity's direction at rest, and read as the unedited log; one whose gravity lies along x
+    (its x and z swapped) is refused as not in the body frame, naming the column."""
+    from flightctl.errors import InputError
+    from flightctl.sim.logs import read_foreign
+    (table,) = read_foreign(str(need(FLIGHTS / "indiflight" / "LOG00230.BFL")))
+    whole = load_file(table, Airframe())
+    assert whole.airborne.sum() * 0.002 > 5.0 and not any("gravity" in n for n in whole.notes)
+    down = load_file(_edited(table, acc_z=-table["acc_z"]), Airframe())
+    note = next(n for n in down.notes if "gravity's -z" in n)
+    z = float(note.split("m/s^2")[0].split(", ")[-1])
+    assert z == pytest.approx(-9.69, abs=0.1), note                  # what the log's rest reads
+    assert np.array_equal(down.airborne, whole.airborne) and np.allclose(down.acc, whole.acc)
+    with pytest.raises(InputError, match="column 'acc_z': the accelerometer is not in the body frame"):
+        load_file(_edited(table, acc_x=table["acc_z"], acc_z=table["acc_x"]), Airframe())
+
+
+def test_motors_spinning_on_the_ground_that_shake_the_accelerometer_are_not_flight(tmp_path):
+    """A quad on the ground with its motors up shakes its accelerometer more than its gyro (a Betaflight
+    4.4 log: the gyro moving under 0.0015 rad/s, the specific force 0.06-0.11 m/s^2, taken for 8 s of
+    flight). quadrotor_local.ulg's first 4.9 s on the ground, its commands set to the hover's and its
+    specific force shaken along z by a slow swing whose size (0.06-0.11 m/s^2 in 1 s, averaged over
+    0.5 s) is drawn from a seeded generator: still on the ground; the flight still flight."""
+    csv = _imported(tmp_path, FLIGHTS / "px4" / "quadrotor_local.ulg", "ql.csv")
+    meta, names, rows = rows_and_header(csv.read_text())
+    t = np.array([float(r[0]) for r in rows])
+    cols = [names.index(f"P{i}") for i in range(1, 5)]
+    P = np.array([[float(r[j]) for j in cols] for r in rows]).T
+    ground = np.arange(int(np.argmax(all_running(P))))
+    hover = float(np.median(P.mean(axis=0)[t > t[0] + 20.0]))
+    rng = np.random.default_rng(44)
+    level = hover * rng.uniform(0.95, 1.05, size=4)
+    swing = float(rng.uniform(0.06, 0.11))            # m/s^2 moved in 1 s by the 0.5 s mean
+    period = 2.0                                      # s: a half period in the 1 s window
+    gain = np.sinc(SMOOTH_S / period)                 # the 0.5 s moving mean's gain at 1 / period
+    az = names.index("acc_z")
+    phase = rng.uniform(0, 2 * np.pi)
+    for k in ground:
+        for j, v in zip(cols, level):
+            rows[k][j] = f"{v:.3f}"
+        shake = 0.5 * swing / gain * np.sin(2 * np.pi * t[k] / period + phase)
+        rows[k][az] = f"{float(rows[k][az]) + shake:.6g}"
+    held = write(meta, names, rows, tmp_path / "shaken.csv")
+    table = read_flight_log(str(held), extra=FOREIGN_COLUMNS)
+    force = np.sqrt(sum(table[c] ** 2 for c in ("acc_x", "acc_y", "acc_z")))
+    n = int(round(SMOOTH_S / float(np.median(np.diff(t)))))
+    mean = np.convolve(force, np.ones(n) / n, mode="same")
+    inner = ground[(t[ground] > t[ground[0]] + REST_S) & (t[ground] < t[ground[-1]] - REST_S)]
+    window = int(round(REST_S / float(np.median(np.diff(t)))))
+    moved = [np.ptp(mean[k - window // 2:k + window // 2]) for k in inner]
+    assert np.median(moved) > 0.05                     # past the specific force's own limit of rest
+    f = load_file(table, Airframe())
+    assert not f.airborne[inner].any()
+    assert any("IMU held still" in n and "on the ground" in n for n in f.notes)
+    air = (f.t > t[0] + 20.0) & (f.t < t[0] + 85.0)
+    assert f.airborne[air].mean() > 0.95, f.airborne[air].mean()

@@ -25,6 +25,7 @@ from flightctl.sim.logs.common import Imported, flight_text, parser_said, to_tab
 
 FOREIGN_SUFFIXES = (".ulg", ".bbl", ".bfl", ".txt", ".bin", ".log")     # compared in lower case
 DATAFLASH_MAGIC = b"\xa3\x95\x80"        # a DataFlash file opens with its FMT message's definition
+ULOG_MAGIC = b"ULog\x01\x12\x35"        # ULog's file header (PX4's ULog file format), then its version byte
 MIN_FLIGHT_S = 2.0                       # s with all four motors running: a log that holds a flight
 
 
@@ -46,30 +47,27 @@ class LogEntry:
 
 
 def kind(path: str) -> str | None:
-    """'ulog', 'blackbox', 'dataflash' or 'dataflash-text' by suffix and content; None for a file that is
-    not another autopilot's log (this project's CSV). InputError for a known suffix with foreign bytes."""
+    """'ulog', 'blackbox', 'dataflash' or 'dataflash-text' by the file's content, whatever its name: its
+    magic bytes (ULOG_MAGIC, DATAFLASH_MAGIC, blackbox's 'H Product:Blackbox'; a text dump's FMT lines
+    after its few header lines); None for a file that is not another autopilot's log (this project's
+    CSV). InputError for a file whose suffix claims a binary log format its bytes do not have."""
     suffix = Path(path).suffix.lower()
-    if suffix not in FOREIGN_SUFFIXES:
-        return None
-    head = read_bytes(path)[:4096]        # a regular, readable file (errors.read_bytes), and its magic
+    head = read_bytes(path, 4096)         # a regular, readable file (errors.read_bytes), and its magic
+    if head.startswith(ULOG_MAGIC):
+        return "ulog"
+    if head.startswith(DATAFLASH_MAGIC):
+        return "dataflash"
     if head.startswith(b"H Product:Blackbox"):
         return "blackbox"
-    if suffix in (".txt", ".log"):
-        from flightctl.sim.logs.dataflash import preamble
-        if suffix == ".log" and preamble(head) is not None:     # FMT lines, after a dump's few header lines
-            return "dataflash-text"
-        return None                          # a text file of this project's kind (measured-data.md)
+    from flightctl.sim.logs.dataflash import preamble
+    if preamble(head) is not None:        # FMT lines, after a dump's few header lines
+        return "dataflash-text"
+    if suffix not in FOREIGN_SUFFIXES or suffix in (".txt", ".log"):
+        return None                       # a text file of this project's kind (measured-data.md)
     if not head:
         raise InputError(f"{path}: empty file")
-    if suffix == ".ulg":
-        if not head.startswith(b"ULog"):
-            raise InputError(f"{path}: not a ULog (no ULog header)")
-        return "ulog"
-    if suffix == ".bin":
-        if not head.startswith(DATAFLASH_MAGIC):
-            raise InputError(f"{path}: not an ArduPilot DataFlash log (no FMT message at its start)")
-        return "dataflash"
-    raise InputError(f"{path}: not a blackbox log (no 'H Product:Blackbox' header)")
+    what = {".ulg": "a ULog (no ULog header)", ".bin": "an ArduPilot DataFlash log (no FMT message at its start)"}
+    raise InputError(f"{path}: not " + what.get(suffix, "a blackbox log (no 'H Product:Blackbox' header)"))
 
 
 def _kind(path: str) -> str:

@@ -16,7 +16,7 @@ import numpy as np
 
 from flightctl.physics import G
 from flightctl.sim.logs import identity
-from flightctl.sim.logs.common import DEG, Imported, Stream, command_p, euler_from_frd_ned
+from flightctl.sim.logs.common import DEG, Imported, Stream, backward_note, command_p, euler_from_frd_ned, forward
 
 QUAD_X = ((-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0))   # motors 1-4: rear right, front right,
 QUAD_X_SPIN = (-1.0, 1.0, 1.0, -1.0)                               # rear left, front left; 1 and 4 clockwise
@@ -179,6 +179,13 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
         if need not in col:
             imp.fail(f"no {need.split('[')[0]} field: {'the time' if need == 'time' else 'that sensor'} was not logged")
     t = a[:, col["time"]] * 1e-6
+    keep = forward(t)
+    if not keep.all():      # a time that jumps back (Betaflight 3.0's clock): its rows dropped, counted
+        loop = a[:, col["loopIteration"]] if "loopIteration" in col else None
+        steady = "" if loop is None else ("; loopIteration continuous across it" if np.all(np.diff(loop) > 0)
+                                          else "; loopIteration restarts too")
+        imp.notes.append(backward_note(t, keep, "frames") + steady)
+        a, t = a[keep], t[keep]
     hires = 10.0 if int(h.get("blackbox_high_resolution", 0) or 0) else 1.0   # gyro logged in 0.1 deg/s
     per_count, scale_source = gyro_scale(h)
     counts = hires / per_count                                             # the gyro fields' counts per deg/s

@@ -180,6 +180,23 @@ def _new_samples(t: np.ndarray, s: Stream) -> np.ndarray:
     return out
 
 
+def forward(t: np.ndarray) -> np.ndarray:
+    """(n,) bool: the rows whose time is after every earlier row's. A clock that jumps back (a logger's
+    restart, a time stamp reset mid-log) would repeat times already logged: the rows up to the time it
+    had reached are dropped (counted by the caller), the ones after it kept."""
+    keep = np.ones(t.size, bool)
+    if t.size > 1:
+        keep[1:] = t[1:] > np.maximum.accumulate(t)[:-1]
+    return keep
+
+
+def backward_note(t: np.ndarray, keep: np.ndarray, what: str) -> str:
+    """The note of `forward`'s drop: how many rows, and the largest jump back (s)."""
+    jumps = -np.diff(t)
+    return (f"{int((~keep).sum())} {what} with a repeated or backward time dropped (the largest jump back "
+            f"{max(float(jumps.max()), 0.0):.3g} s)")
+
+
 def _islands(t: np.ndarray, notes: list[str]) -> np.ndarray:
     """The rows kept: a few rows cut off by a long gap at the start or the end of the log (a logger's
     first frames before it settles, a last frame written at power-off) are not flight data."""
@@ -227,9 +244,9 @@ def flight_text(imp: Imported, progress=None) -> str:
     imu = "gyro" in imp.streams
     what = "gyro" if imu else base.name
     t = base.t
-    keep = np.concatenate([[True], np.diff(t) > 0])      # a repeated or backward time is not a new sample
+    keep = forward(t)                                    # a repeated or backward time is not a new sample
     if not keep.all():
-        imp.notes.append(f"{int((~keep).sum())} {what} samples with a repeated or backward time dropped")
+        imp.notes.append(backward_note(t, keep, f"{what} samples"))
     t = t[keep]
     own = base.values[:, keep]                           # the time base's own samples, as they are
     if t.size < MIN_ROWS:

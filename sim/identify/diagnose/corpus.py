@@ -41,7 +41,8 @@ class Row:
     log: str                    # the path relative to the corpus, with #index for a file of many logs
     path: str
     index: int | None
-    status: str = "refused"     # "diagnosed", "refused", or "failed" (a fault of diagnose's, said as such)
+    status: str = "refused"     # "diagnosed", "refused", "duplicate" (a byte-identical copy of an earlier file),
+                                # or "failed" (a fault of diagnose's, said as such)
     reason: str = ""            # the refusal's one line
     meta: dict = field(default_factory=dict)
     report: dict | None = None
@@ -70,7 +71,8 @@ class Row:
         read = _read(self.meta, self.report) if self.meta else ""
         vehicle = _vehicle(self.meta) if self.meta else ""
         if self.status != "diagnosed":
-            return [self.log, vehicle, read, "", "refused", "", "", "", "", _clean(self.reason)]
+            return [self.log, vehicle, read, "", "duplicate" if self.status == "duplicate" else "refused", "", "", "",
+                    "", _clean(self.reason)]
         r = self.report
         causes = "; ".join(f"{c['cause']} {_params(c['parameters'])} (gain {c['gain']:.3f})" for c in r["causes"]) or "none"
         unphysical = "; ".join(f"{c['cause']} {_params(c['parameters'])}: {c['why']}" for c in r["not_physical"])
@@ -128,26 +130,28 @@ def _base(r: dict) -> str:
     return f"t: {', '.join(axes)}{extra}"
 
 
-def find_logs(folder: Path) -> list[Path]:
-    """Every file under `folder` that is a flight log, sorted: this project's CSV, and a file whose suffix
-    is another autopilot's (`flightctl.sim.logs.FOREIGN_SUFFIXES`) unless it is plain text of no log
-    format (a `.txt` licence beside the logs); a file that claims a format and is damaged stays, to be
-    refused with its reason."""
-    from flightctl.sim.logs import FOREIGN_SUFFIXES, kind
+NOT_A_LOG = "not a flight log: no log format's magic bytes (ULog, DataFlash, blackbox), no DataFlash text, not .csv"
+
+
+def find_logs(folder: Path, others: list | None = None) -> list[Path]:
+    """Every file under `folder` that is a flight log, sorted: this project's CSV, and a file another
+    autopilot's by its content (`flightctl.sim.logs.kind`: its magic bytes, whatever its name); a file
+    whose suffix claims a format and is damaged stays, to be refused with its reason. Each other file
+    (a licence, a README) is appended to `others` as (path, why), to be said, never skipped silently."""
+    from flightctl.sim.logs import kind
     out = []
     for p in sorted(folder.rglob("*")):
         if not p.is_file():
             continue
-        suffix = p.suffix.lower()
-        if suffix in CSV_SUFFIXES:
-            out.append(p)
-        elif suffix in FOREIGN_SUFFIXES:
+        if p.suffix.lower() not in CSV_SUFFIXES:
             try:
                 if kind(str(p)) is None:
+                    if others is not None:
+                        others.append((p, NOT_A_LOG))
                     continue
             except InputError:
                 pass
-            out.append(p)
+        out.append(p)
     return out
 
 
@@ -155,9 +159,18 @@ def _jobs(folder: Path, files: list[Path], name: str = "") -> tuple[list[Row], l
     """(rows to diagnose, one per log, and rows already refused: files that cannot be read); each log
     named by its path under `folder`, after `name/` when given."""
     from flightctl.sim.logs import count_logs, reason
-    todo, refused = [], []
+    from flightctl.sim.identify.diagnose.results import sha256
+    todo, refused, seen = [], [], {}
     for p in files:
         rel = (f"{name}/" if name else "") + p.relative_to(folder).as_posix()
+        try:
+            first = seen.setdefault(sha256(p), rel)
+        except OSError:               # (unreadable: refused below with its reason)
+            first = rel
+        if first != rel:              # a byte-identical copy: one flight, counted once
+            refused.append(Row(rel, str(p), None, status="duplicate",
+                               reason=f"a byte-identical copy of {first}: counted once, there"))
+            continue
         if p.suffix.lower() in CSV_SUFFIXES:
             todo.append(Row(rel, str(p), None))
             continue
@@ -204,19 +217,24 @@ NO_FLIGHT = ("header only", "never armed", "too short to judge", "may never have
 def flew(row: Row) -> bool:
     """The log holds a flight: it was diagnosed (a tier answered), or refused for a reason other than
     holding no flight (a failure of diagnose's counts as a flight not answered)."""
-    return row.status == "diagnosed" or not any(w in row.reason for w in NO_FLIGHT)
+    return row.status == "diagnosed" or (row.status != "duplicate" and not any(w in row.reason for w in NO_FLIGHT))
 
 
 def headline(rows: list[Row]) -> str:
-    """The share of the airborne flights that get a diagnosis, and of which tier."""
+    """The share of the airborne flights that get a diagnosis, and of which tier; a byte-identical copy
+    of another file is counted once (its own line)."""
+    copies = sum(r.status == "duplicate" for r in rows)
+    logs = len(rows) - copies
     flights = [r for r in rows if flew(r)]
     done = [r for r in flights if r.status == "diagnosed"]
     static_only = sum(r.tier() == "static" for r in done)
     share = f"{100 * len(done) / len(flights):.0f} %" if flights else "-"
     return (f"**{len(done)} of {len(flights)} airborne flights get a diagnosis ({share})**: "
             f"{len(done) - static_only} the dynamic tier, {static_only} the static tier only; "
-            f"{len(rows) - len(flights)} of the {len(rows)} logs hold no flight (header only, never armed, "
-            "too short or idle, or by its barometer never off the ground)")
+            f"{logs - len(flights)} of the {logs} logs hold no flight (header only, never armed, "
+            "too short or idle, or by its barometer never off the ground)"
+            + (f"; {copies} file{'s' if copies > 1 else ''} a byte-identical copy of another, counted once" if copies
+               else ""))
 
 
 def table(rows: list[Row]) -> str:
@@ -243,9 +261,14 @@ def corpus(folders: Path | list[Path], jobs: int | None = None, progress=None,
     for folder in folders:
         if not folder.is_dir():
             raise InputError(f"--corpus {folder}: not a folder")
-        files = find_logs(folder)
+        others: list = []
+        files = find_logs(folder, others)
         if not files:
-            raise InputError(f"--corpus {folder}: no flight logs in it (.csv, {', '.join(_suffixes())})")
+            raise InputError(f"--corpus {folder}: no flight logs in it (.csv, or a ULog, DataFlash or blackbox log "
+                             "by its content)")
+        if progress and others:
+            print(f"diagnose --corpus: {len(others)} files under {folder} not read: "
+                  + "; ".join(f"{p.relative_to(folder).as_posix()}: {why}" for p, why in others), file=sys.stderr)
         t, r = _jobs(folder, files, folder.resolve().name if len(folders) > 1 else "")
         todo += t
         rows += r
@@ -288,11 +311,6 @@ def corpus_json(folders: list[str], rows: list[Row]):
         entry = {"log": r.log, "status": r.status, "refused": r.reason or None, "report": r.full_report()}
         yield ("," if k else "") + "\n" + json.dumps(entry, indent=1, allow_nan=False)
     yield "\n]}\n"
-
-
-def _suffixes() -> tuple[str, ...]:
-    from flightctl.sim.logs import FOREIGN_SUFFIXES
-    return tuple(FOREIGN_SUFFIXES)
 
 
 def main(args) -> int:

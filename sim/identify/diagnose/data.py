@@ -49,9 +49,16 @@ CONTACT_ACC_Z = 0.0
 # motors ramp to 0.9 of the hover's command for 5 s moves 0.0012 rad/s and 0.022 m/s^2 at most; in the air
 # no row of the shared logs or tests/data/ardupilot/log171.bin stays within both for REST_S (the steadiest
 # hover's 5th percentile: 0.043 rad/s, 0.068 m/s^2).
+# The gyro is weighed with the specific force: motors spinning on the ground shake the accelerometer
+# more than the gyro (a Betaflight 4.4 quad on the ground with its motors up: the gyro moving under
+# 0.0015 rad/s, a seventh of REST_RATE, the specific force 0.06-0.11 m/s^2), so a specific force moving
+# past REST_ACC still says rest when the gyro moves less in proportion: gyro share (of REST_RATE) times
+# specific force share (of REST_ACC, at least 1) below 1, the specific force at most REST_ACC_MAX. The
+# air, whose gyro moves 0.043 rad/s or more, is never within it.
 REST_S = 1.0
 REST_RATE = 0.01         # rad/s
 REST_ACC = 0.05          # m/s^2
+REST_ACC_MAX = 0.25      # m/s^2: the gyro then under REST_RATE REST_ACC / REST_ACC_MAX = 0.002 rad/s
 REST_G = 0.1             # share of g
 # A barometer is too coarse to time a take-off (its noise and the rotors' wash move it by a few tenths
 # of a metre), but one that never rose this far above its level at rest while the motors ran says that
@@ -267,7 +274,9 @@ def at_rest(t: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> np.ndarray:
     """(n,) bool: the rows where the IMU says the vehicle is held still (on the ground, REST_S): the gyro
     (3, n) averaged over SMOOTH_S moves by less than REST_RATE on every axis within REST_S around the
     row, and the specific force's magnitude (acc, 3, n) so averaged stays within REST_G g of g and moves
-    by less than REST_ACC. A vehicle in the air is never so still: the loop moves it all the time."""
+    by less than REST_ACC, or up to REST_ACC_MAX where the gyro moves less in proportion (the gyro
+    weighed with the specific force: their shares' product below 1). A vehicle in the air is never so
+    still: the loop moves it all the time."""
     from scipy.ndimage import maximum_filter1d, minimum_filter1d
     if t.size < 2:
         return np.zeros(t.size, bool)
@@ -277,11 +286,58 @@ def at_rest(t: np.ndarray, gyro: np.ndarray, acc: np.ndarray) -> np.ndarray:
         m = _smoothed(t, x)
         return maximum_filter1d(m, width, mode="nearest") - minimum_filter1d(m, width, mode="nearest")
 
-    still = np.ones(t.size, bool)
-    for k in range(3):
-        still &= moved(gyro[k]) < REST_RATE
+    rate = np.max([moved(gyro[k]) for k in range(3)], axis=0) / REST_RATE
     force = np.sqrt((acc * acc).sum(axis=0))
-    return still & (moved(force) < REST_ACC) & (np.abs(_smoothed(t, force) - G) < REST_G * G)
+    shake = moved(force) / REST_ACC
+    return ((rate * np.maximum(shake, 1.0) < 1.0) & (shake < REST_ACC_MAX / REST_ACC)
+            & (np.abs(_smoothed(t, force) - G) < REST_G * G))
+
+
+def gravity_at_rest(t: np.ndarray, gyro: np.ndarray, acc: np.ndarray, first_on: int) -> tuple[np.ndarray | None, str]:
+    """(the mean specific force (3,) where the vehicle is still before it flies, which rows those are):
+    the rows `at_rest` (told by the magnitude of the specific force, whatever its sign or axis) before the
+    motors first run, else its first stretch at rest (not a rest after a crash, on its back), else the
+    rows before the motors first run whose magnitude is g within REST_G (a vehicle held in a hand); None
+    when none has 20 rows."""
+    rest = at_rest(t, gyro, acc)
+    before = rest.copy()
+    before[first_on:] = False
+    if before.sum() < 20 and rest.any():
+        i0, i1 = stretches(rest)[0]
+        before[i0:i1] = True
+    if before.sum() >= 20:
+        return acc[:, before].mean(axis=1), f"{before.sum() * float(np.median(np.diff(t))):.1f} s at rest"
+    before = np.zeros(t.size, bool)
+    before[:first_on] = np.abs(np.sqrt((acc[:, :first_on] ** 2).sum(axis=0)) - G) < REST_G * G
+    if before.sum() >= 20:
+        return acc[:, before].mean(axis=1), f"{before.sum()} rows before the motors start"
+    return None, ""
+
+
+def _accelerometer_frame(table: Table, t, gyro, acc, first_on: int, notes: list[str]) -> np.ndarray:
+    """The accelerometer of a foreign log checked against gravity's direction when still (eq. 30-31: at
+    rest the specific force is +g along the body's z, z up, on a level vehicle): within 45 degrees of +z
+    it is taken as logged; within 45 degrees of -z its z is reversed (an accelerometer logged z down:
+    the rest tells the sign of z alone, x and y are kept as logged), said in a note; along x or y the log
+    is refused, its accelerometer not in the body frame. Without a rest (none still, none before the
+    motors) it is taken as logged, said."""
+    g, where = gravity_at_rest(t, gyro, acc, first_on)
+    if g is None:
+        notes.append("the accelerometer's frame not checked: no rest in the log (no row still, none before the "
+                     "motors start)")
+        return acc
+    up = float(g[2] / np.linalg.norm(g))
+    if up >= math.sqrt(0.5):
+        return acc
+    found = f"the mean specific force {', '.join(f'{v:.2f}' for v in g)} m/s^2 (x, y, z) over {where}"
+    if up <= -math.sqrt(0.5):
+        notes.append(f"the accelerometer reads gravity's -z when still ({found}): its z taken as reversed "
+                     "(logged z down); x and y as logged")
+        out = acc.copy()
+        out[2] = -acc[2]
+        return out
+    table.fail(f"the accelerometer is not in the body frame: {found}, {math.degrees(math.acos(max(-1.0, min(1.0, up)))):.0f} "
+               "deg from +z, where a vehicle at rest reads g", column="acc_z")
 
 
 def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc: np.ndarray, notes: list[str],
@@ -310,13 +366,15 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc:
     if (running & rest).any():
         notes.append(f"{(running & rest).sum() * dt:.1f} s with the motors running and the IMU held still (the gyro, "
                      f"averaged over {SMOOTH_S:g} s, moving less than {REST_RATE:g} rad/s in {REST_S:g} s and the specific "
-                     f"force at g within {REST_ACC:g} m/s^2): on the ground, not airborne")
+                     f"force at g within {REST_ACC:g} m/s^2, or within {REST_ACC_MAX:g} m/s^2 with the gyro stiller "
+                     "in proportion): on the ground, not airborne")
     flown = running & ~rest
     hover = float(np.median(mean_p[flown])) if flown.any() else 0.0
-    up = flown & (mean_p >= THROTTLE_SHARE * hover)
+    high = running & (mean_p >= THROTTLE_SHARE * hover)
+    up = high & ~rest
     contact = (_smoothed(table["t"], acc_z) < CONTACT_ACC_Z) if imu else rest
-    if (up & contact).any():
-        notes.append(f"{(up & contact).sum() * dt:.1f} s with the motors running and the body-z specific force "
+    if (high & contact).any():         # (counted whether or not the IMU is also held still there)
+        notes.append(f"{(high & contact).sum() * dt:.1f} s with the motors running and the body-z specific force "
                      f"(acc_z, averaged over {SMOOTH_S:g} s) below {CONTACT_ACC_Z:g} m/s^2, which the rotors cannot "
                      f"give: on its side or its back (a contact force), not airborne")
         up &= ~contact
@@ -410,6 +468,8 @@ def load_file(table: Table, a: Airframe) -> FileData:
         on = motors_on(P, a)
     # at rest before the first take-off: the initial tilt
     first_on = int(np.argmax(on)) if on.any() else n
+    if foreign and not np.isnan(acc).all():
+        acc = _accelerometer_frame(table, t, gyro, acc, first_on, notes)
     still = slice(0, first_on)
     imu = not np.isnan(gyro).all()
     if not imu:        # no IMU (`# imu: none`): the attitude the autopilot logged, its rates for the gyro's
