@@ -278,3 +278,34 @@ def test_a_vibration_added_to_a_real_log_does_not_move_its_hover_figures(tmp, se
               + noise * rng.standard_normal(t.size) for k, a in enumerate(acc)]
     put(names, rows, ACC, shaken)
     _agree(before, static_full(meta, names, rows, tmp / f"vib{seed}.csv"))
+
+
+def split_pairs(meta, names, rows, a: float) -> None:
+    """The counter-clockwise pair gives a share `a` more thrust than the clockwise one for the same
+    torques (each motor's thrust times 1 + spin a / 2, through the declared curve)."""
+    c = curve_of(meta)
+    rotors = next(m for m in meta if m.startswith("# rotors:")).split(":", 1)[1]
+    spin = np.array([float(r.split()[2]) for r in rotors.split(";")])
+    P = columns(names, rows, MOTORS)
+    on = (P > 2.55).all(axis=0)
+    P2 = np.full(P.shape, np.nan)
+    P2[:, on] = np.minimum(255.0, c.command(c.thrust(P[:, on]) * (1.0 + 0.5 * a * spin[:, None])))
+    put(names, rows, MOTORS, P2)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_yaw_split_beyond_a_trim_is_not_physical_inside_a_mix_too(tmp, seed):
+    """The spin pairs driven apart by a drawn 40-80 % (more than a trim's 30 %) on top of a centre of mass
+    moved by a drawn 0.04-0.10 arm lengths in LOG00037 (its own centre of mass beside): whatever mix the
+    pattern is read as, the yaw figure is beyond its bound and the verdict is "not physical"."""
+    rng = np.random.default_rng(4600 + seed)
+    a = float(rng.uniform(0.4, 0.8)) * rng.choice([-1.0, 1.0])
+    r, ang = float(rng.uniform(0.04, 0.10)), float(rng.uniform(0.0, 2.0 * np.pi))
+
+    def hide(meta, names, rows):
+        move_com(meta, names, rows, r * np.cos(ang), r * np.sin(ang))
+        split_pairs(meta, names, rows, a)
+    before, after = hidden(tmp, "LOG00037", "full", rng, hide, f"split{seed}")
+    p = after["pattern"]
+    assert p["yaw_trim"]["ccw_minus_cw"] - before["pattern"]["yaw_trim"]["ccw_minus_cw"] == pytest.approx(a, abs=0.05)
+    assert p["verdict"] == "not physical" and "spin pairs" in p["why"], p
