@@ -309,3 +309,38 @@ def test_a_yaw_split_beyond_a_trim_is_not_physical_inside_a_mix_too(tmp, seed):
     p = after["pattern"]
     assert p["yaw_trim"]["ccw_minus_cw"] - before["pattern"]["yaw_trim"]["ccw_minus_cw"] == pytest.approx(a, abs=0.05)
     assert p["verdict"] == "not physical" and "spin pairs" in p["why"], p
+
+
+def _no_hover(names, rows) -> None:
+    """Every running motor's command squeezed into 250-255 (at full command: no hover rows, so no hover and no
+    accelerometer spread to judge), in the same order as flown (the throttle's rise and fall kept)."""
+    P = columns(names, rows, MOTORS)
+    put(names, rows, MOTORS, np.where(P > 0, 250.0 + 5.0 * P / 255.0, np.nan))
+
+
+def _static(meta, names, rows, path):
+    write(meta, names, rows, path)
+    table = read_flight_log(path, extra=FOREIGN_COLUMNS + STATIC_COLUMNS)
+    return static_tier([table], [load_file(table, Airframe())], Airframe())
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_current_that_is_no_sensor_gives_no_resistance_and_no_diagnosis(tmp, seed):
+    """LOG00037's current replaced by what a board without a sensor logs (a drawn constant of 0.2-0.5 A and a
+    drawn noise of 0.01-0.15 A, nothing of the throttle): the battery says "no current sensor" and fits no
+    resistance; with its hover and vibration taken away too, the log answers nothing (None), while the same
+    log with its real current still gets its resistance."""
+    rng = np.random.default_rng(4700 + seed)
+    meta, names, rows = imported("LOG00037", tmp, rng)
+    real = [list(r) for r in rows]
+    n = len(rows)
+    fake = rng.uniform(0.2, 0.5) + rng.uniform(0.01, 0.15) * rng.standard_normal(n)
+    put(names, rows, ["current"], [np.round(fake, 2)])
+    st = static_full(meta, names, rows, tmp / f"nocur{seed}.csv")
+    assert st["battery"]["resistance"] is None and st["battery"]["without_current"].startswith("no current sensor")
+    assert abs(st["battery"]["current_throttle"]["r"]) < 0.25 or st["battery"]["current_throttle"]["amps"] < 0.1
+    _no_hover(names, rows)
+    assert _static(meta, names, rows, tmp / f"nocur{seed}-nohover.csv") is None
+    _no_hover(names, real)
+    st = _static(meta, names, real, tmp / f"cur{seed}-nohover.csv")
+    assert "hover" not in st and "vibration" not in st and st["battery"]["resistance"] is not None, st["not_judged"]

@@ -38,7 +38,7 @@ def _rate(table, key: str, t: np.ndarray) -> float:
 def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
     """The static findings of the airborne logs `files` (diagnose's `_files`, read from `tables`), or
     None when they answer none of them (too slow, maybe never a flight by the barometer, no hover, no
-    battery, no vibration logged)."""
+    battery with a current sensor, no vibration logged)."""
     by_path = {t.path: t for t in tables}
     tabs = [by_path[f.path] for f in files]
     rates = {"sensors_hz": round(min(_rate(t, "rate_hz", f.t) for t, f in zip(tabs, files)), 1),
@@ -80,15 +80,15 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
         out["battery"] = bat
         r = bat.get("resistance")
         progress("static tier: battery " + (f"R = {1e3 * r['ohm']:.1f} +- {1e3 * r['stderr']:.2g} mOhm" if r else
-                                            f"{bat['v_range']} V, no current"))
+                                            f"{bat['v_range']} V, " + bat["without_current"].split(":")[0]))
     vib = vibration(tabs, files, air if air.enough else None, hv)
     if vib is None:
         out["not_judged"]["vibration"] = ("neither VIBE nor enough hover to measure the accelerometer's spread" if
                                           all(f.imu for f in files) else "neither VIBE nor an accelerometer in the log")
     else:
         out["vibration"] = vib
-    if not any(k in out for k in ("hover", "battery", "vibration")):
-        return None
+    if not ("hover" in out or "vibration" in out or (bat or {}).get("resistance")):
+        return None             # a pack's voltage alone, without a current sensor, diagnoses nothing
     return _finite(out)
 
 
@@ -194,7 +194,7 @@ def summary(st: dict) -> str:
     if b := st.get("battery"):
         r = b.get("resistance")
         out.append(f"R {1e3 * r['ohm']:.1f} +- {1e3 * r['stderr']:.2g} mOhm" + ("" if r["passed"] else " (check failed)")
-                   if r else f"battery {b['v_range'][0]:.1f}-{b['v_range'][1]:.1f} V, no current")
+                   if r else f"battery {b['v_range'][0]:.1f}-{b['v_range'][1]:.1f} V, " + b["without_current"].split(":")[0])
     if v := st.get("vibration"):
         out.append(("VIBE" if v["clips"] is not None else "acc spread") + " "
                    + "/".join(f"{v['mean'][a]:.3g}" for a in "xyz") + " m/s^2"
