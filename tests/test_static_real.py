@@ -83,9 +83,23 @@ def weaken(meta, names, rows, motor: int, scale: float) -> None:
     put(names, rows, [f"P{motor}"], [np.where(on, P, np.nan)])
 
 
+def speed_line(meta, names, rows):
+    """The log's own rotors' speed per command (`curve.speed_curve` on its airborne rows, as the static tier
+    finds it), or None without rotor speeds."""
+    if "omega1" not in names:
+        return None
+    import tempfile
+    from pathlib import Path
+    from flightctl.sim.identify.static.curve import speed_curve
+    with tempfile.TemporaryDirectory() as d:
+        table = read_flight_log(write(meta, names, rows, Path(d) / "line.csv"), extra=FOREIGN_COLUMNS)
+        return speed_curve([load_file(table, Airframe())])
+
+
 def move_com(meta, names, rows, dx: float, dy: float) -> None:
     """The centre of mass at (dx, dy) arm lengths: sum_i (y_i - dy) f'_i = sum_i y_i f_i and the same in x,
-    the yaw torque and the total thrust kept; the rotors' speeds follow their thrusts (eq. 27)."""
+    the yaw torque and the total thrust kept; the rotors' speeds follow their commands on the log's own
+    speed-per-command line (eq. 26 and 27, `speed_line`)."""
     c = curve_of(meta)
     rotors = next(m for m in meta if m.startswith("# rotors:")).split(":", 1)[1]
     x, y, s = (np.array(v, float) for v in zip(*[r.split() for r in rotors.split(";")]))
@@ -98,10 +112,10 @@ def move_com(meta, names, rows, dx: float, dy: float) -> None:
     P2 = np.full(P.shape, np.nan)
     P2[:, on] = np.minimum(255.0, c.command(f2))
     put(names, rows, MOTORS, P2)
-    if "omega1" in names:
+    if (line := speed_line(meta, names, rows)) is not None:
         w = columns(names, rows, ("omega1", "omega2", "omega3", "omega4"))
         ratio = np.full(P.shape, np.nan)
-        ratio[:, on] = np.sqrt(c.thrust(P2[:, on]) / np.maximum(f, 1e-12))
+        ratio[:, on] = line.speed(P2[:, on]) / line.speed(P[:, on])
         put(names, rows, ("omega1", "omega2", "omega3", "omega4"), w * ratio)
 
 
@@ -344,3 +358,46 @@ def test_a_current_that_is_no_sensor_gives_no_resistance_and_no_diagnosis(tmp, s
     _no_hover(names, real)
     st = _static(meta, names, real, tmp / f"cur{seed}-nohover.csv")
     assert "hover" not in st and "vibration" not in st and st["battery"]["resistance"] is not None, st["not_judged"]
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_weak_motor_masked_by_a_centre_of_mass_is_named_by_its_speed_per_command(tmp, seed):
+    """INDIflight's LOG00230 (ESC telemetry): a motor drawn at random made weaker by a drawn 0.75-0.90 (its
+    command raised for the same thrust through eq. 26 with the h2 the log's own speeds give: its speed, the
+    thrust's, unchanged), and the centre of mass moved away from it by what brings its hover share back to
+    the mean's (0.8-1.2 of it, drawn): its hover gain says nothing, its speed per command names it and its
+    size, against the untouched log's own."""
+    from flightctl.sim.identify.static.curve import Curve
+    rng = np.random.default_rng(4800 + seed)
+    motor, scale = int(rng.integers(1, 5)), float(rng.uniform(0.75, 0.90))
+    meta, names, rows = imported("LOG00230", tmp, rng)
+    plain = [list(r) for r in rows]
+    before = static_full(meta, names, plain, tmp / f"wm{seed}-plain.csv")
+    h2 = speed_line(meta, names, rows).h2
+    rotors = next(m for m in meta if m.startswith("# rotors:")).split(":", 1)[1]
+    x, y = (np.array(v, float) for v in list(zip(*[r.split() for r in rotors.split(";")]))[:2])
+    away = -np.array([x[motor - 1], y[motor - 1]]) / np.hypot(x[motor - 1], y[motor - 1])
+    speeds_curve = Curve(1.0, h2 / 255.0, 1.0, "the log's speeds", True)
+    raised = lambda P: np.minimum(255.0, speeds_curve.command(speeds_curve.thrust(P) / scale))
+    # what the raised command asks for through the curve the shares are read through (the declared one):
+    # its share rises by 3/4 of (that ratio - 1), which a centre of mass d away from it takes back (quad X:
+    # a share moves by 2 r . d)
+    c, P = curve_of(meta), columns(names, rows, [f"P{motor}"])[0]
+    busy = P > 0.1 * 255.0
+    ratio = float(np.median(c.thrust(raised(P[busy])) / c.thrust(P[busy])))
+    d = 0.375 * (ratio - 1.0) * rng.uniform(0.8, 1.2) * away
+    move_com(meta, names, rows, *d)
+    P = columns(names, rows, [f"P{motor}"])[0]
+    on = P > 0
+    P[on] = raised(P[on])
+    put(names, rows, [f"P{motor}"], [np.where(on, P, np.nan)])
+    after = static_full(meta, names, rows, tmp / f"wm{seed}.csv")
+    g0, g = before["pattern"]["gains"][motor - 1], after["pattern"]["gains"][motor - 1]
+    assert g - g0 > -0.03, (g0, g)       # its hover gain does not fall by the 3 % a weak motor's must
+    speeds = after["pattern"]["rotor_speeds"]
+    assert "weak motor" in speeds["verdict"] and f"motor {motor} " in speeds["why"], (motor, scale, speeds)
+    q0 = np.array(before["pattern"]["rotor_speeds"]["speed_thrust_gain"])
+    own = q0[motor - 1] / np.mean(np.delete(q0, motor - 1))
+    w = speeds["weak_motor"]
+    assert w["motor"] == motor
+    assert w["thrust_scale"] / own == pytest.approx(scale, abs=max(0.03, 3 * w["stderr"])), (scale, own, w)

@@ -28,10 +28,10 @@ import numpy as np
 from scipy import stats
 
 from flightctl.sim.identify.diagnose.data import FileData, Layout
-from flightctl.sim.identify.diagnose.rotorspeed import (GAIN_TOL, common_speed_gains, rotor_gain_check,
+from flightctl.sim.identify.diagnose.rotorspeed import (GAIN_TOL, rotor_gain_check,
                                                         trim_pattern, yaw_trim_of_gains)
 from flightctl.sim.identify.static.blocks import G, Blocks, drift
-from flightctl.sim.identify.static.curve import P_FULL, Curve
+from flightctl.sim.identify.static.curve import P_FULL, Curve, SpeedCurve
 
 P_FIT = 0.01            # a hypothesis fits when its chi-square's upper tail is at least this
 DRIFT_TOL = 0.02        # a share's change over the flight worth naming (and 3 standard errors)
@@ -211,9 +211,11 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
                 out["why"] += "; " + ", ".join(alike) + " fit" + ("s" if len(alike) == 1 else "") + " as well"
         _bounds(out, float(np.hypot(dx, dy)), split, unit)
     if speed_gain is not None:
-        check = rotor_gain_check(g, g_sd, layout, {"speed_gain": list(speed_gain)})
+        check = rotor_gain_check(g, g_sd, layout, {"speed_gain": speed_gain[0], "speed_gain_stderr": speed_gain[1]})
         out["rotor_speeds"] = {"verdict": check["verdict"], "why": check["why"],
-                               "speed_thrust_gain": check["speed_thrust_gain"]}
+                               "speed_thrust_gain": check["speed_thrust_gain"], "speed_gain": speed_gain[0],
+                               "speed_gain_stderr": [float(f"{e:.2g}") for e in speed_gain[1]],
+                               "weak_motor": check.get("weak_motor")}
     else:
         out["rotor_speeds"] = None
         out["without_speeds"] = ("no rotor speeds in the log (ESC telemetry, omega1-4): a weak motor is told from a "
@@ -238,19 +240,27 @@ def _bounds(out: dict, com: float, split: float, unit: str) -> None:
         out["verdict"] = "not physical"
 
 
-def speed_gains(files: list[FileData], masks: list[np.ndarray]) -> list[float] | None:
-    """Each rotor's measured speed in hover against the four's common speed-per-command curve
-    (rotorspeed's, on the hover rows, no timing: hover is steady), or None without speeds."""
-    have = [(f, m) for f, m in zip(files, masks) if f.omega is not None and m.any()
-            and np.isfinite(f.omega[:, m]).all() and np.abs(f.omega[:, m]).max() > 0]
-    if not have:
+def speed_gains(files: list[FileData], bl: Blocks, line: SpeedCurve | None) -> tuple[list[float], list[float]] | None:
+    """(each rotor's measured speed in hover against the rotors' common speed-per-command line `line`
+    (`curve.speed_curve`, the flight's), its block jackknife standard error), or None without speeds. Per
+    rotor, least squares through the line over the hover rows (no timing: hover is steady)."""
+    if line is None:
         return None
-    import copy
-    hov = []
-    for f, m in have:
-        h = copy.copy(f)
-        h.airborne = m
-        hov.append(h)
-    fs = 1.0 / float(np.median(np.diff(hov[0].t)))
-    gains, _ = common_speed_gains(hov, [h.P for h in hov], 0.0, fs)
-    return [float(v) for v in gains]
+    num, den = [], []
+    for f, m in zip(files, bl.masks):
+        if not m.any():
+            continue
+        if f.omega is None or not np.isfinite(f.omega[:, m]).all():
+            return None
+        c = line.speed(f.P[:, m])
+        num.append(f.omega[:, m] * c)
+        den.append(c * c)
+    num, den = np.concatenate(num, axis=1), np.concatenate(den, axis=1)
+    sums = np.vstack([bl.means(num) * np.bincount(bl.index, minlength=bl.n_blocks)[:, None],
+                      bl.means(den) * np.bincount(bl.index, minlength=bl.n_blocks)[:, None]])
+    B, n = bl.n_blocks, num.shape[0]
+    full = sums[:B].sum(axis=0) / sums[B:].sum(axis=0)
+    keep = ~np.eye(B, dtype=bool)
+    jack = np.array([sums[:B][k].sum(axis=0) / sums[B:][k].sum(axis=0) for k in keep])
+    sd = np.sqrt((B - 1) / B * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
+    return [float(v) for v in full[:n]], [float(v) for v in sd[:n]]
