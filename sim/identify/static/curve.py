@@ -82,16 +82,18 @@ class SpeedCurve:
 
 
 def speed_curve(files) -> SpeedCurve | None:
-    """The rotors' common speed-per-command line over the airborne rows of the files whose rotor speeds are
-    logged and finite there (no timing: the fit spans the flight's range of commands, a lag only spreads
+    """The rotors' common speed-per-command line over the airborne rows (those with the four speeds finite)
+    of the files whose rotor speeds are logged (no timing: the fit spans the flight's range of commands, a lag only spreads
     it): each rotor's own line Omega_i = k_i (P_i - h2_i) by least squares, h2 their median (a motor that
     gives less for its command has a lower k_i, not another h2; one line pooled over the four would mix
     the rotors' differences into its slope), the slope the rotors' mean k_i at that h2; or None (no
     speeds, or no positive slope, or an h2 at or above full command, which is no rotor's)."""
     xs, ys = [], []
     for f in files:
-        m = f.airborne
-        if f.omega is None or not m.any() or not np.isfinite(f.omega[:, m]).all() or np.abs(f.omega[:, m]).max() <= 0:
+        if f.omega is None:
+            continue
+        m = f.airborne & np.isfinite(f.omega).all(axis=0)
+        if not m.any() or np.abs(f.omega[:, m]).max() <= 0:
             continue
         xs.append(np.asarray(f.P, float)[:, m])
         ys.append(f.omega[:, m])

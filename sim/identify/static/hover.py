@@ -250,10 +250,11 @@ def speed_gains(files: list[FileData], bl: Blocks, line: SpeedCurve | None) -> t
     for f, m in zip(files, bl.masks):
         if not m.any():
             continue
-        if f.omega is None or not np.isfinite(f.omega[:, m]).all():
+        if f.omega is None:
             return None
-        c = line.speed(f.P[:, m])
-        num.append(f.omega[:, m] * c)
+        ok = np.isfinite(f.omega[:, m]).all(axis=0)      # rows without the four speeds add nothing
+        c = np.where(ok, line.speed(f.P[:, m]), 0.0)
+        num.append(np.where(ok, f.omega[:, m], 0.0) * c)
         den.append(c * c)
     num, den = np.concatenate(num, axis=1), np.concatenate(den, axis=1)
     sums = np.vstack([bl.means(num) * np.bincount(bl.index, minlength=bl.n_blocks)[:, None],
