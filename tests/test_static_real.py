@@ -15,7 +15,13 @@ each finding is judged against the untouched log's own finding plus what was hid
   within 2 mOhm;
 - the same rewriting with nothing hidden changes nothing (the null test);
 - where the log has rotor speeds (INDIflight's ESC telemetry) a hidden weak motor is called a weak motor
-  by them (it turns slower for its command than the others).
+  by them (it turns slower for its command than the others), with its size, also when a centre of mass
+  moved away from it takes its share in hover back to the mean's;
+- the hover figures on the shipped log that vibrates most (LOG00230) are those of its accelerometer
+  low-passed, and a vibration of drawn size added does not move them (ratios of means);
+- a yaw split beyond a trim is "not physical" inside a mix of causes too;
+- a logged current that does not follow the throttle is no current sensor (no resistance, no diagnosis
+  from the voltage alone).
 """
 from __future__ import annotations
 
