@@ -20,8 +20,7 @@ each finding is judged against the untouched log's own finding plus what was hid
 - the hover figures on the shipped log that vibrates most (LOG00230) are those of its accelerometer
   low-passed, and a vibration of drawn size added does not move them (ratios of means);
 - a yaw split beyond a trim is "not physical" inside a mix of causes too;
-- a logged current that does not follow the throttle is no current sensor (no resistance, no diagnosis
-  from the voltage alone).
+- a logged current that does not follow the throttle is no current sensor (no resistance fitted).
 """
 from __future__ import annotations
 
@@ -345,11 +344,11 @@ def _static(meta, names, rows, path):
 
 
 @pytest.mark.parametrize("seed", [1, 2])
-def test_a_current_that_is_no_sensor_gives_no_resistance_and_no_diagnosis(tmp, seed):
+def test_a_current_that_is_no_sensor_gives_no_resistance(tmp, seed):
     """LOG00037's current replaced by what a board without a sensor logs (a drawn constant of 0.2-0.5 A and a
     drawn noise of 0.01-0.15 A, nothing of the throttle): the battery says "no current sensor" and fits no
-    resistance; with its hover and vibration taken away too, the log answers nothing (None), while the same
-    log with its real current still gets its resistance."""
+    resistance, with its hover and vibration taken away too (its battery then its only finding, the
+    voltage's range), while the same log with its real current still gets its resistance."""
     rng = np.random.default_rng(4700 + seed)
     meta, names, rows = imported("LOG00037", tmp, rng)
     real = [list(r) for r in rows]
@@ -360,7 +359,8 @@ def test_a_current_that_is_no_sensor_gives_no_resistance_and_no_diagnosis(tmp, s
     assert st["battery"]["resistance"] is None and st["battery"]["without_current"].startswith("no current sensor")
     assert abs(st["battery"]["current_throttle"]["r"]) < 0.25 or st["battery"]["current_throttle"]["amps"] < 0.1
     _no_hover(names, rows)
-    assert _static(meta, names, rows, tmp / f"nocur{seed}-nohover.csv") is None
+    st = _static(meta, names, rows, tmp / f"nocur{seed}-nohover.csv")
+    assert "hover" not in st and "vibration" not in st and st["battery"]["resistance"] is None, st
     _no_hover(names, real)
     st = _static(meta, names, real, tmp / f"cur{seed}-nohover.csv")
     assert "hover" not in st and "vibration" not in st and st["battery"]["resistance"] is not None, st["not_judged"]

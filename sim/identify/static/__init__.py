@@ -38,7 +38,7 @@ def _rate(table, key: str, t: np.ndarray) -> float:
 def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
     """The static findings of the airborne logs `files` (diagnose's `_files`, read from `tables`), or
     None when they answer none of them (too slow, maybe never a flight by the barometer, no hover, no
-    battery with a current sensor, no vibration logged)."""
+    battery, no vibration logged)."""
     by_path = {t.path: t for t in tables}
     tabs = [by_path[f.path] for f in files]
     rates = {"sensors_hz": round(min(_rate(t, "rate_hz", f.t) for t, f in zip(tabs, files)), 1),
@@ -88,8 +88,8 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
                                           all(f.imu for f in files) else "neither VIBE nor an accelerometer in the log")
     else:
         out["vibration"] = vib
-    if not ("hover" in out or "vibration" in out or (bat or {}).get("resistance")):
-        return None             # a pack's voltage alone, without a current sensor, diagnoses nothing
+    if not any(k in out for k in ("hover", "battery", "vibration")):
+        return None
     return _finite(out)
 
 
