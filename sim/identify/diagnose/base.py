@@ -155,6 +155,7 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
         lo, up = grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]
         return float(optimize.minimize_scalar(obj, bounds=(lo, up), method="bounded", options={"xatol": 0.1}).x)
 
+    at_bound = False
     if speeds is not None and speeds["h2"] < hi:
         # the rotors' measured speeds give the curve's zero directly (rotorspeed.py): Omega = a (P - h2)
         h2, h2_sd, h2_source = speeds["h2"], speeds["h2_spread"], "the log's measured rotor speeds"
@@ -162,7 +163,8 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
         h2 = best_h2(allb)
         h2_sd = float(jackknife_sd(np.array([best_h2(np.arange(N_BLOCKS) != b) for b in range(N_BLOCKS)])))
         h2_source = "the flight's thrust and torques (one curve for the four rotors)"
-        if h2 <= H2_LOW + 1.0 or h2 >= hi - 0.5:
+        at_bound = h2 <= H2_LOW + 1.0 or h2 >= hi - 0.5
+        if at_bound:
             notes.append(f"h2 = {h2:.1f} is at the end of its range: this flight does not show the curve's shape "
                          "(every fit refines it: the speed part of the drive is a free column)")
     # each channel's effectiveness a_c and each rotor's gain g_i: channel c = a_c sum_i g_i X_ci
@@ -195,7 +197,11 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
                                                  "from the data")
     k_p, k_q, k_r, k_z = theta[:4]
     report = {"h2": {"value": float(f"{h2:.5g}"), "stderr": float(f"{sd[0]:.2g}"), "unit": "P units",
-                     "what": f"eq. 26: the thrust is zero at P = h2 (from {h2_source})"}}
+                     "at_bound": bool(at_bound),
+                     "what": f"eq. 26: the thrust is zero at P = h2 (from {h2_source})"
+                             + (f"; at_bound: h2 sits at the end of its range ({H2_LOW:g} to {hi:.1f}), the bound of "
+                                "the search and not a value the flight shows (its curve's shape is not in the data)"
+                                if at_bound else "")}}
     report.update({name: {"value": float(f"{v:.5g}"), "stderr": float(f"{e:.2g}"), "unit": u, "what": w}
                    for name, v, e, u, w in zip(NAMES, theta, sd[1:], UNITS, WHAT)})
     report["k_z"]["source"] = thrust_source

@@ -190,7 +190,8 @@ def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None) -> di
     thrust each rotor's speed gives (eq. 27) is its motor's part, the rest of the pattern is the centre
     of mass's (linear in the rotors' positions), a yaw trim's (a pattern of the spins,
     `yaw_trim_of_gains`) or a propeller's. verdict: "none"; "weak motor" (the slowest rotor for its
-    command, CURVE_TOL below the common curve, with its thrust in hover below the mean); "centre of
+    command, CURVE_TOL and two standard errors (`speeds["speed_gain_stderr"]` where given) below the
+    common curve, whatever its thrust in hover: a centre of mass may hide it there); "centre of
     mass" (what the speeds leave is a front/rear or left/right pattern); "yaw trim"; both; "rotor"
     (what the speeds leave is no centre of mass's pattern: a propeller that gives another thrust at its
     speed); "not told apart" (a pattern, and no rotor speeds in the log)."""
@@ -230,14 +231,26 @@ def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None) -> di
         return out
     s = np.asarray(speeds["speed_gain"], float)
     q = s * s / np.mean(s * s)                 # the thrust each rotor's speed gives (eq. 27), against the mean
+    # its standard error from the speed gains' (dq/ds = 2 s / mean(s^2), the mean's own share left out)
+    s_sd = speeds.get("speed_gain_stderr")
+    q_sd = np.zeros_like(q) if s_sd is None else 2.0 * s * np.asarray(s_sd, float) / np.mean(s * s)
     out["speed_thrust_gain"] = [round(float(v), 4) for v in q]
     found, why = [], []
     m = int(np.argmin(q))
-    if q[m] < 1.0 - CURVE_TOL and g[m] < 1.0 - GAIN_TOL:
+    # The rule is the speed per command alone, where speeds exist: a centre of mass that moves the weak motor's
+    # hover share back to the mean's (its hover gain at 1) leaves it turning slower for its command all the same
+    if q[m] < 1.0 - CURVE_TOL and 1.0 - q[m] > 2.0 * q_sd[m]:
+        others = float(np.mean(np.delete(q, m)))
+        scale, scale_sd = float(q[m] / others), float(q_sd[m] / others)
         found.append("weak motor")
-        why.append(f"motor {m + 1} turns slower for its command than the others (its speed gives "
-                   f"{100 * (1 - q[m]):.0f} % less thrust than the common curve) and gives {100 * (1 - g[m]):.0f} % "
-                   "less thrust in hover: a weak motor")
+        out["weak_motor"] = {"motor": m + 1, "thrust_scale": round(scale, 4), "stderr": float(f"{scale_sd:.2g}"),
+                             "speed_gain": round(float(s[m] / np.mean(np.delete(s, m))), 4),
+                             "what": "the thrust its speed gives for its command (eq. 27: the square of its speed "
+                                     "against the common speed-per-command curve) against the others'"}
+        why.append(f"motor {m + 1} turns slower for its command than the others (its speed per command "
+                   f"{out['weak_motor']['speed_gain']:.3f} of theirs: it gives {100 * scale:.1f} +- {100 * scale_sd:.2g} % "
+                   f"of their thrust for its command; in hover it gives {100 * (1 - g[m]):+.0f} % less than the mean): "
+                   "a weak motor")
     rest = g / q
     rest = rest / rest.mean()
     share, yaw, text = com(rest, "what the speeds leave is")

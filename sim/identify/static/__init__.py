@@ -16,7 +16,7 @@ import numpy as np
 from flightctl.sim.identify.diagnose.data import BARO_CLIMB_M
 from flightctl.sim.identify.static.battery import battery
 from flightctl.sim.identify.static.blocks import MIN_HOVER_S, Blocks, body_z_force, hover_mask
-from flightctl.sim.identify.static.curve import of_log
+from flightctl.sim.identify.static.curve import of_log, speed_curve
 from flightctl.sim.identify.static.hover import pattern, shares, speed_gains, throttle
 from flightctl.sim.identify.static.vibration import VIBE_COLUMNS, vibration
 
@@ -51,7 +51,8 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
                  "maybe never a flight)")
         return None
     layout = files[0].layout
-    curve = of_log(tabs[0], a, files[0].foreign)
+    line = speed_curve(files)
+    curve = of_log(tabs[0], a, files[0].foreign, line)
     masks = [hover_mask(f) for f in files]
     hv = Blocks(files, masks)
     air = Blocks(files, [f.airborne for f in files])
@@ -65,7 +66,7 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
         out["hover"] = throttle(hv, c, hv.rows([f.P for f in files]), hv.rows([z for z, _ in force])[0], curve)
         out["hover"]["acc_z_source"] = "; ".join(dict.fromkeys(w for _, w in force))
         out["motors"], m, _ = shares(hv, c)
-        out["pattern"] = pattern(hv, m, layout, speed_gains(files, masks))
+        out["pattern"] = pattern(hv, m, layout, speed_gains(files, hv, line))
         progress(f"static tier: hover {hv.seconds:.1f} s, thrust share {out['hover']['thrust_share']}, "
                  f"motor shares {out['motors']['share']}, pattern: {out['pattern']['verdict']}")
     else:
@@ -80,7 +81,7 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
         out["battery"] = bat
         r = bat.get("resistance")
         progress("static tier: battery " + (f"R = {1e3 * r['ohm']:.1f} +- {1e3 * r['stderr']:.2g} mOhm" if r else
-                                            f"{bat['v_range']} V, no current"))
+                                            f"{bat['v_range']} V, " + bat["without_current"].split(":")[0]))
     vib = vibration(tabs, files, air if air.enough else None, hv)
     if vib is None:
         out["not_judged"]["vibration"] = ("neither VIBE nor enough hover to measure the accelerometer's spread" if
@@ -194,7 +195,7 @@ def summary(st: dict) -> str:
     if b := st.get("battery"):
         r = b.get("resistance")
         out.append(f"R {1e3 * r['ohm']:.1f} +- {1e3 * r['stderr']:.2g} mOhm" + ("" if r["passed"] else " (check failed)")
-                   if r else f"battery {b['v_range'][0]:.1f}-{b['v_range'][1]:.1f} V, no current")
+                   if r else f"battery {b['v_range'][0]:.1f}-{b['v_range'][1]:.1f} V, " + b["without_current"].split(":")[0])
     if v := st.get("vibration"):
         out.append(("VIBE" if v["clips"] is not None else "acc spread") + " "
                    + "/".join(f"{v['mean'][a]:.3g}" for a in "xyz") + " m/s^2"

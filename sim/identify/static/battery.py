@@ -28,6 +28,10 @@ SMOOTH_S = 0.5              # s: V and I both averaged over this (a logger holds
 MAX_LAG_S, LAG_STEP_S = 0.5, 0.02
 N_BLOCKS = 10
 MIN_ROWS = 50
+# A logged current is no sensor when less than MIN_CURRENT_A of its spread follows the throttle or its
+# correlation with it is under MIN_CURRENT_R (a constant 0.27-0.40 A, or a noise: what boards without a sensor
+# log): the shipped logs' sensors 0.71-0.90 and 2.9-7.9 A, the simulator's hover-heavy test flight -0.38 and 0.29 A
+MIN_CURRENT_A, MIN_CURRENT_R = 0.1, 0.25
 
 
 def _lagged(t: np.ndarray, x: np.ndarray, lag: float) -> np.ndarray:
@@ -65,7 +69,35 @@ def battery(files: list[FileData], currents: list[np.ndarray | None]) -> dict | 
         out["without_current"] = ("no current in the log: the sag is the voltage's range; the internal resistance needs "
                                   "a current sensor logged (ArduPilot BAT.Curr, Betaflight amperage)")
         return out
+    r, amps = throttle_current(rows)
+    out["current_throttle"] = {"r": round(r, 3), "amps": round(amps, 3),
+                               "what": "the current's correlation with the mean motor command and its spread that "
+                                       "follows it (|r| times its standard deviation, A)"}
+    if not (amps >= MIN_CURRENT_A and abs(r) >= MIN_CURRENT_R):
+        out["resistance"] = None
+        out["without_current"] = (f"no current sensor: the logged current does not move with the throttle ({amps:.2f} A "
+                                  f"of it does, correlation {r:.2f} with the mean motor command; {MIN_CURRENT_A:g} A and "
+                                  f"{MIN_CURRENT_R:g} or more for a sensor: a constant or a noise is logged where none is fitted): the sag is "
+                                  "the voltage's range, no internal resistance")
+        return out
     return {**out, **_resistance(rows, cells, V, rest)}
+
+
+def throttle_current(rows) -> tuple[float, float]:
+    """(r, amps): the correlation of the logged current (averaged over SMOOTH_S) with the mean motor command
+    (the same, over the rows with the motors running only) on those rows, and the current's spread that
+    follows the throttle, |r| times its standard deviation. A current sensor's reading moves with the
+    throttle (the motors draw it); a constant or a noise logged where no sensor is fitted does not (0 when
+    either is constant)."""
+    x, y = [], []
+    for f, ok, _, cur, _ in rows:
+        x.append(moving_mean(f.t, np.where(ok, np.nanmean(f.P, axis=0), np.nan), SMOOTH_S)[0][ok])
+        y.append(cur[ok])
+    x, y = np.concatenate(x), np.concatenate(y)
+    if x.size < MIN_ROWS or x.std() == 0.0 or y.std() == 0.0:
+        return 0.0, 0.0
+    r = float(np.corrcoef(x, y)[0, 1])
+    return r, abs(r) * float(y.std())
 
 
 def _fit(rows, lag: float):

@@ -2,8 +2,10 @@
 the hover rows (`blocks`), each with its block-jackknife standard error:
 
 - **hover throttle and thrust margin**: the mean command in hover, and the thrust it asks for against
-  full thrust, scaled by g / acc_z (the body-z specific force: a vehicle climbing or tilted asks for
-  more than its weight); its inverse is the thrust-to-weight ratio at full command.
+  full thrust, scaled by g over the mean acc_z (the body-z specific force: a vehicle climbing or tilted
+  asks for more than its weight); its inverse is the thrust-to-weight ratio at full command. A ratio of
+  the blocks' means, never the mean of the rows' ratios: on a vibrating accelerometer that one is
+  biased high by var(acc_z) / acc_z^2 and more.
 - **each motor's share of the hover thrust** (the four's mean is 1) and its **drift** over the flight
   (the blocks' shares regressed on their times).
 - **what the pattern of the shares is**, worked out from eq. 25's structure on the log's rotor layout:
@@ -26,10 +28,10 @@ import numpy as np
 from scipy import stats
 
 from flightctl.sim.identify.diagnose.data import FileData, Layout
-from flightctl.sim.identify.diagnose.rotorspeed import (GAIN_TOL, common_speed_gains, rotor_gain_check,
+from flightctl.sim.identify.diagnose.rotorspeed import (GAIN_TOL, rotor_gain_check,
                                                         trim_pattern, yaw_trim_of_gains)
 from flightctl.sim.identify.static.blocks import G, Blocks, drift
-from flightctl.sim.identify.static.curve import P_FULL, Curve
+from flightctl.sim.identify.static.curve import P_FULL, Curve, SpeedCurve
 
 P_FIT = 0.01            # a hypothesis fits when its chi-square's upper tail is at least this
 DRIFT_TOL = 0.02        # a share's change over the flight worth naming (and 3 standard errors)
@@ -56,9 +58,11 @@ def _gains(share: np.ndarray) -> np.ndarray:
 
 def throttle(bl: Blocks, c: np.ndarray, P: np.ndarray, acc_z: np.ndarray, curve: Curve) -> dict:
     """Hover throttle and thrust margin (the module's docstring)."""
-    need = c.mean(axis=0) * G / np.maximum(acc_z, 0.1 * G)
-    m = bl.means(np.vstack([need, P.mean(axis=0) / P_FULL, acc_z]))
-    (frac, cmd, az), (frac_sd, cmd_sd, az_sd), _ = bl.jackknife(m, lambda v: v)
+    m = bl.means(np.vstack([c.mean(axis=0), P.mean(axis=0) / P_FULL, acc_z]))
+    # a ratio of means over the blocks, never a mean of the rows' ratios: E[g / acc_z] exceeds g / E[acc_z] by
+    # about var(acc_z) / E[acc_z]^2 (Jensen), a factor 1.25-1.9 on an accelerometer shaking by 5 m/s^2 in hover
+    ratio = lambda v: np.array([v[0] * G / max(v[2], 0.1 * G), v[1], v[2]])
+    (frac, cmd, az), (frac_sd, cmd_sd, az_sd), _ = bl.jackknife(m, ratio)
     ok = 0.0 < frac < 1.0 and abs(az / G - 1.0) < 0.1
     return {"command": _num(cmd), "command_stderr": float(f"{cmd_sd:.2g}"),
             "thrust_share": _num(frac), "thrust_share_stderr": float(f"{frac_sd:.2g}"),
@@ -68,8 +72,9 @@ def throttle(bl: Blocks, c: np.ndarray, P: np.ndarray, acc_z: np.ndarray, curve:
             "check": (f"hover needs {100 * frac:.0f} % of full thrust (0-100 %) with the specific force "
                       f"{az:.2f} m/s^2 within 10 % of g: " + ("passed" if ok else "failed")),
             "passed": bool(ok),
-            "what": "command: the mean motor command in hover (0-1 of the range); thrust_share: the thrust it asks "
-                    "for against full thrust through the curve, scaled by g / acc_z; thrust_to_weight: its inverse"}
+            "what": "command: the mean motor command in hover (0-1 of the range); thrust_share: the mean thrust it asks "
+                    "for against full thrust through the curve, times g over the mean acc_z (a ratio of means, free of "
+                    "the accelerometer's vibration); thrust_to_weight: its inverse"}
 
 
 def shares(bl: Blocks, c: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
@@ -81,7 +86,7 @@ def shares(bl: Blocks, c: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
     t = bl.times()
     slope, se = drift(t, per_block)
     span = float(t[-1] - t[0])
-    named = [i for i in range(4) if abs(slope[i] * span) >= DRIFT_TOL and abs(slope[i]) >= DRIFT_T * se[i]
+    named = [i for i in range(m.shape[1]) if abs(slope[i] * span) >= DRIFT_TOL and abs(slope[i]) >= DRIFT_T * se[i]
              and span >= MIN_DRIFT_SPAN_S]
     out = {"share": [_num(v) for v in share], "stderr": [float(f"{e:.2g}") for e in sd],
            "drift_per_min": [_num(60 * v, 5) for v in slope], "drift_stderr_per_min": [float(f"{60 * e:.2g}") for e in se],
@@ -96,15 +101,16 @@ def shares(bl: Blocks, c: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
 
 
 def _hypotheses(layout: Layout) -> dict[str, np.ndarray]:
-    """name -> (4, k) columns of the pattern of the thrust shares, s - 1, each hypothesis makes (k
+    """name -> (N, k) columns of the pattern of the thrust shares, s - 1, each hypothesis makes (k
     parameters). Exact in the shares: a centre of mass at d asks for sum_i s_i r_i = N d (the torque
     balance about it, eq. 25's roll and pitch rows), the opposite of `trim_pattern`'s gains; a yaw
     trim for a difference of the spins' pairs (eq. 25's yaw row); a weak motor for its own command's
     thrust alone raised (the direction exact, its size a scale)."""
     s = np.asarray(layout.spin, float)[:, None]
     out = {"yaw trim": s}
-    for j in range(4):
-        e = -np.full((4, 1), 0.25)
+    n = s.shape[0]
+    for j in range(n):
+        e = -np.full((n, 1), 1.0 / n)
         e[j] += 1.0
         out[f"weak motor {j + 1}"] = e
     out["centre of mass"] = -trim_pattern(layout)
@@ -146,8 +152,9 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
         p = float(stats.chi2.sf(chi2, dof)) if dof > 0 else 1.0
         size = None
         if name.startswith("weak motor"):
-            size = (1.0 - 0.25 * beta[0]) / (1.0 + 0.75 * beta[0])   # its thrust for its command against the others'
-            size_sd = beta_sd[0] / (1.0 + 0.75 * beta[0]) ** 2          # d size / d beta = -1 / (1 + 3 beta / 4)^2
+            n = A.shape[0]          # its thrust for its command against the others'; d size / d beta = -1 / den^2
+            size = (1.0 - beta[0] / n) / (1.0 + (n - 1) / n * beta[0])
+            size_sd = beta_sd[0] / (1.0 + (n - 1) / n * beta[0]) ** 2
             if not (MIN_WEAK <= size < 1.0):
                 p = 0.0                 # a stronger motor, or one too weak to hover: not physical
         fits.append({"hypothesis": name, "parameters": A.shape[1], "chi2": round(chi2, 2), "dof": dof,
@@ -181,23 +188,19 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
         else:
             out["verdict"] = best["hypothesis"]
             if best["hypothesis"] == "centre of mass":
-                size_ok = float(np.hypot(dx, dy)) <= MAX_COM
                 out["why"] = (f"a front/rear and left/right pattern with no yaw part: a centre of mass at ({dx:+.3f} +- "
                               f"{com_sd[0]:.2g}, {dy:+.3f} +- {com_sd[1]:.2g}) {unit} (chi-square {best['chi2']} on "
                               f"{best['dof']} dof)")
-                if not size_ok:
-                    out["verdict"], out["why"] = "not physical", out["why"] + f": further than {MAX_COM} arm lengths"
-            elif best["hypothesis"] == "yaw trim" and abs(split) > MAX_YAW_SPLIT:
-                out["verdict"] = "not physical"
-                out["why"] = (f"a pattern of the spins alone, but the pairs differ by {100 * abs(split):.0f} % of thrust, "
-                              f"more than a trim's {100 * MAX_YAW_SPLIT:g} %: not physical (a motor order or spin the log "
-                              "declares that is not the vehicle's?)")
             elif best["hypothesis"] == "yaw trim":
                 out["why"] = (f"a pattern of the spins alone: the counter-clockwise pair gives {100 * abs(split):.1f} +- "
                               f"{100 * split_sd:.2g} % {'more' if split > 0 else 'less'} thrust than the clockwise one "
                               f"(a yaw torque the loop holds: a motor mounted tilted, a propeller of another drag; "
                               f"chi-square {best['chi2']} on "
                               f"{best['dof']} dof)")
+            elif best["hypothesis"] == "centre of mass and yaw trim":
+                out["why"] = (f"a centre of mass at ({dx:+.3f} +- {com_sd[0]:.2g}, {dy:+.3f} +- {com_sd[1]:.2g}) {unit} "
+                              f"and a yaw trim of {100 * split:+.1f} +- {100 * split_sd:.2g} % (chi-square {best['chi2']} "
+                              f"on {best['dof']} dof)")
             else:
                 out["why"] = (f"one motor's command raised alone (its roll, pitch and yaw parts in its position's and "
                               f"spin's ratio): {best['hypothesis']} gives {100 * best['thrust_scale']:.1f} +- "
@@ -206,10 +209,13 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
             alike = [f["hypothesis"] for f in ok if f["parameters"] == best["parameters"] and f is not best]
             if alike:
                 out["why"] += "; " + ", ".join(alike) + " fit" + ("s" if len(alike) == 1 else "") + " as well"
+        _bounds(out, float(np.hypot(dx, dy)), split, unit)
     if speed_gain is not None:
-        check = rotor_gain_check(g, g_sd, layout, {"speed_gain": list(speed_gain)})
+        check = rotor_gain_check(g, g_sd, layout, {"speed_gain": speed_gain[0], "speed_gain_stderr": speed_gain[1]})
         out["rotor_speeds"] = {"verdict": check["verdict"], "why": check["why"],
-                               "speed_thrust_gain": check["speed_thrust_gain"]}
+                               "speed_thrust_gain": check["speed_thrust_gain"], "speed_gain": speed_gain[0],
+                               "speed_gain_stderr": [float(f"{e:.2g}") for e in speed_gain[1]],
+                               "weak_motor": check.get("weak_motor")}
     else:
         out["rotor_speeds"] = None
         out["without_speeds"] = ("no rotor speeds in the log (ESC telemetry, omega1-4): a weak motor is told from a "
@@ -218,19 +224,44 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
     return out
 
 
-def speed_gains(files: list[FileData], masks: list[np.ndarray]) -> list[float] | None:
-    """Each rotor's measured speed in hover against the four's common speed-per-command curve
-    (rotorspeed's, on the hover rows, no timing: hover is steady), or None without speeds."""
-    have = [(f, m) for f, m in zip(files, masks) if f.omega is not None and m.any()
-            and np.isfinite(f.omega[:, m]).all() and np.abs(f.omega[:, m]).max() > 0]
-    if not have:
+def _bounds(out: dict, com: float, split: float, unit: str) -> None:
+    """The verdict "not physical" when a figure it names is beyond its physical bound (MAX_COM, MAX_YAW_SPLIT),
+    whether it came from that cause alone or from a mix: each figure's bound is the vehicle's, not the
+    hypothesis's."""
+    bad = []
+    if "centre of mass" in out["verdict"] and com > MAX_COM:
+        bad.append(f"the centre of mass {com:.2f} {unit} off the thrust centre, further than {MAX_COM:g} arm lengths "
+                   "(too little roll and pitch authority left to fly)")
+    if "yaw trim" in out["verdict"] and abs(split) > MAX_YAW_SPLIT:
+        bad.append(f"the spin pairs {100 * abs(split):.0f} % of thrust apart, more than a trim's {100 * MAX_YAW_SPLIT:g} % "
+                   "(a motor order or spin the log declares that is not the vehicle's?)")
+    if bad:
+        out["why"] += ": not physical: " + "; ".join(bad)
+        out["verdict"] = "not physical"
+
+
+def speed_gains(files: list[FileData], bl: Blocks, line: SpeedCurve | None) -> tuple[list[float], list[float]] | None:
+    """(each rotor's measured speed in hover against the rotors' common speed-per-command line `line`
+    (`curve.speed_curve`, the flight's), its block jackknife standard error), or None without speeds. Per
+    rotor, least squares through the line over the hover rows (no timing: hover is steady)."""
+    if line is None:
         return None
-    import copy
-    hov = []
-    for f, m in have:
-        h = copy.copy(f)
-        h.airborne = m
-        hov.append(h)
-    fs = 1.0 / float(np.median(np.diff(hov[0].t)))
-    gains, _ = common_speed_gains(hov, [h.P for h in hov], 0.0, fs)
-    return [float(v) for v in gains]
+    num, den = [], []
+    for f, m in zip(files, bl.masks):
+        if not m.any():
+            continue
+        if f.omega is None:
+            return None
+        ok = np.isfinite(f.omega[:, m]).all(axis=0)      # rows without the four speeds add nothing
+        c = np.where(ok, line.speed(f.P[:, m]), 0.0)
+        num.append(np.where(ok, f.omega[:, m], 0.0) * c)
+        den.append(c * c)
+    num, den = np.concatenate(num, axis=1), np.concatenate(den, axis=1)
+    sums = np.vstack([bl.means(num) * np.bincount(bl.index, minlength=bl.n_blocks)[:, None],
+                      bl.means(den) * np.bincount(bl.index, minlength=bl.n_blocks)[:, None]])
+    B, n = bl.n_blocks, num.shape[0]
+    full = sums[:B].sum(axis=0) / sums[B:].sum(axis=0)
+    keep = ~np.eye(B, dtype=bool)
+    jack = np.array([sums[:B][k].sum(axis=0) / sums[B:][k].sum(axis=0) for k in keep])
+    sd = np.sqrt((B - 1) / B * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
+    return [float(v) for v in full[:n]], [float(v) for v in sd[:n]]
