@@ -502,6 +502,10 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
         e = np.vstack([_col(att, k) for k in ("Roll", "Pitch", "Yaw")]) * DEG
         e[2] = np.unwrap(e[2])
         imp.streams["attitude"] = Stream("ATT", _t(att), e * FRD)
+        if hasattr(att[0], "DesRoll"):
+            d = np.vstack([_col(att, k) for k in ("DesRoll", "DesPitch", "DesYaw")]) * DEG
+            d[2] = np.unwrap(d[2])
+            imp.streams["attitude_sp"] = Stream("ATT DesRoll/DesPitch/DesYaw", _t(att), d * FRD)
     rate = msgs["RATE"]
     if rate:
         sp = np.vstack([_col(rate, k) for k in ("RDes", "PDes", "YDes")]) * DEG

@@ -129,6 +129,12 @@ def _measurements(u, p: dict, imp: Imported) -> None:
     if att is not None:
         q = np.vstack([att[f"q[{i}]"] for i in range(4)]).astype(float)
         imp.streams["attitude"] = Stream("vehicle_attitude", att["timestamp"] * 1e-6, euler_from_frd_ned(q))
+    asp = topic(u, "vehicle_attitude_setpoint")
+    if asp is not None and all(f"q_d[{i}]" in asp for i in range(4)):
+        q = np.vstack([asp[f"q_d[{i}]"] for i in range(4)]).astype(float)
+        e = euler_from_frd_ned(q)
+        e[2] = np.unwrap(e[2])
+        imp.streams["attitude_sp"] = Stream("vehicle_attitude_setpoint q_d", asp["timestamp"] * 1e-6, e)
     rs = topic(u, "vehicle_rates_setpoint")
     if rs is not None and all(k in rs for k in ("roll", "pitch", "yaw")):
         sp = np.vstack([rs[k] for k in ("roll", "pitch", "yaw")]).astype(float)
