@@ -25,6 +25,7 @@ import tempfile
 
 import numpy as np
 
+from flightctl.sim.logs import controller
 from flightctl.errors import InputError, read_bytes
 from flightctl.sim.logs import arducopter3, identity
 from flightctl.sim.logs.common import CELL_FULL_V, DEG, FRD, MIN_ROWS, Imported, Stream, command_p, rate_notes
@@ -454,6 +455,7 @@ def read(path: str, text: bool = False) -> Imported:
         "gyro_notches": notches, "acc_source": asource, "acc_filter": acc_filter,
     })
     imp.meta.update(identity.ardupilot(texts, p, msgs["GPS"]))
+    imp.meta["controller"] = controller.encode(controller.ardupilot(p))
     return imp
 
 

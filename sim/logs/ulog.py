@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from flightctl.sim.logs import controller
 from flightctl.errors import InputError
 from flightctl.sim.logs import identity
 from flightctl.sim.logs.common import FRD, Imported, Stream, euler_from_frd_ned, rate_notes
@@ -87,6 +88,7 @@ def read(path: str) -> Imported:
                         f"{cutoff:g} Hz filters the controller's copy, not this one)"),
         "gyro_filter": "none", "acc_source": "sensor_combined.accelerometer_m_s2", "acc_filter": "none",
     })
+    imp.meta["controller"] = controller.encode(controller.px4(p))
     gps = topic(u, "vehicle_gps_position")
     imp.meta.update(identity.px4(info, gps if gps is not None else topic(u, "sensor_gps")))
     return imp

@@ -14,7 +14,8 @@ gets it and the static tier's findings beside it; a log the dynamic tier refuses
 alone (hover, motor shares, centre of mass against weak motor against yaw trim, battery, vibration),
 exit status 0, with the refusal as `tier_why`. REPORT.json's `tier` says which. Either way REPORT.json's
 `steps` holds each log's measured step responses, per loop and axis, or the reason it cannot show one
-(steps.py, docs/steps.md); `--steps STEPS.png` draws them.
+(steps.py, docs/steps.md); `--steps STEPS.png` draws them; `controller` the firmware's rate controller as
+the log's settings give it (sim/logs/controller.py).
 
 Several files are one vehicle, diagnosed jointly. One file of many logs (a blackbox file holds one
 per arming) is diagnosed log by log: each log that can be judged gets its own report, the others are
@@ -50,6 +51,7 @@ from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
 from flightctl.sim.identify.diagnose import report as diagnose_report, steps
 from flightctl.sim.identify.diagnose.verdict import diagnose, say, validate
 from flightctl.sim.identify.static import STATIC_COLUMNS, StaticOnly
+from flightctl.sim.logs import controller
 from flightctl.sim.identify.static.curve import declared as declared_curve
 
 MIN_LOG_S = 2.0   # a log shorter than this cannot hold a take-off and a flight: too short to judge
@@ -193,8 +195,9 @@ def _main(argv: list[str]) -> int:
     images = _images(d, tables, plots)
     report = d.report()
     report["steps"], curves = steps.of(tables)
+    report["controller"] = [controller.of_table(t) for t in tables]
     _steps_figure(args.steps, curves, plots, images)
-    text = diagnose_report.text(d, report) + steps.text(report["steps"])
+    text = diagnose_report.text(d, report) + steps.text(report["steps"]) + controller.text(report["controller"])
     report["runtime_s"] = round(time.perf_counter() - t0, 2)
     _write(out_json, report, plots, images)
     print(text, end="")
@@ -270,6 +273,7 @@ def _each(args, params, progress, t0) -> int:
     curves = []
     for e, d in judged:
         reports[e.index]["steps"], c = steps.of([e.table])
+        reports[e.index]["controller"] = [controller.of_table(e.table)]
         curves += c
     for e in entries:
         logs.append({"index": e.index, "judged": True, "report": reports[e.index]} if e.index in reports
@@ -288,7 +292,7 @@ def _each(args, params, progress, t0) -> int:
                            "was skipped is in `logs`")
     report["runtime_s"] = round(time.perf_counter() - t0, 2)
     texts = [f"== {path} log {e.index} of {len(entries)} ==\n" + diagnose_report.text(d, reports[e.index])
-             + steps.text(reports[e.index]["steps"]) for e, d in judged]
+             + steps.text(reports[e.index]["steps"]) + controller.text(reports[e.index]["controller"]) for e, d in judged]
     _write(Path(args.json), report, plots, images)
     print("".join(texts), end="")
     if any(e.table is None for e in entries):

@@ -22,6 +22,7 @@ Every number is SI (s, a share); the figure converts to ms at its edge.
 from __future__ import annotations
 
 import math
+import textwrap
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,8 +42,11 @@ MIN_WINDOWS = 3              # windows with input needed for a response and its 
 # its mass before zero is kept (the final value stays the low frequencies' gain) and the 50 % crossing, which
 # a symmetric spread does not move, stays the delay. The rise is widened by the same spread: the fastest
 # 10-90 % rise a band B can show is about RISE_BANDWIDTH / B (a first-order lag's 0.35 / f_3dB).
+# A rise within BAND_LIMITED times that fastest one is the band's, not the loop's: an upper bound, and the
+# delay beside it uncertain by about half of it (`limited_by_band`).
 PRE_SHARE = 0.2
 RISE_BANDWIDTH = 0.35
+BAND_LIMITED = 1.25
 FINAL_SHARE = 0.4            # the final value: the mean over the last 40 % of the response
 MIN_FINAL = 0.5              # a response reaching less of its setpoint in its length is no step of that loop
 SETTLE_BAND = 0.05           # settled: within 5 % of the final value from then on
@@ -226,6 +230,7 @@ def axis_report(r: Response) -> dict:
         v = v[np.isfinite(v)]
         lo, hi = np.percentile(v, SPREAD) if v.size else (math.nan, math.nan)
         out[k] = {"value": _num(m[k]), "spread": [_num(lo), _num(hi)], "windows": int(v.size)}
+    out["limited_by_band"] = bool(m["rise_s"] < BAND_LIMITED * RISE_BANDWIDTH / r.band_hz)
     return out
 
 
@@ -332,7 +337,9 @@ def text(steps: list[dict]) -> str:
                 o = e["overshoot"]["value"]
                 L.append(f"  step response, {loop.name} {NAMES[a]}: delay {ms('delay_s')}, rise {ms('rise_s')}, "
                          f"overshoot {'-' if o is None else f'{100 * o:.0f} %'}, settling {ms('settling_s')}, final "
-                         f"{e['final']}; {e['windows']} windows, coherent to {e['coherent_to_hz']} Hz")
+                         f"{e['final']}; {e['windows']} windows, coherent to {e['coherent_to_hz']} Hz"
+                         + (" (the rise is the band's: an upper bound, the delay uncertain by half of it)"
+                            if e["limited_by_band"] else ""))
     return "\n".join(L) + ("\n" if L else "")
 
 
@@ -349,10 +356,12 @@ def figure(curves: list[tuple[dict, dict]]):
             ax = axes[row, j]
             r = c.get((name, a))
             ax.set_title(f"{report['file'].rsplit('/', 1)[-1]}: {name} {NAMES[a]}", fontsize=9)
-            ax.axhline(1.0, color="k", lw=0.8, ls="--")
             if r is None:
-                ax.text(0.02, 0.5, report[name][a].get("why", ""), transform=ax.transAxes, fontsize=7, wrap=True)
+                ax.axis("off")
+                why = report[name].get(a, report[name]).get("why", "")
+                ax.text(0.02, 0.5, "\n".join(textwrap.wrap(why, 60)), transform=ax.transAxes, fontsize=7, va="center")
                 continue
+            ax.axhline(1.0, color="k", lw=0.8, ls="--")
             lo, hi = np.percentile(r.windows, SPREAD, axis=0)
             ax.fill_between(1e3 * r.t, lo, hi, color="tab:blue", alpha=0.25, label="windows 10-90 %")
             ax.plot(1e3 * r.t, r.step, color="tab:blue", lw=2, label=f"mean of {r.used} windows")
