@@ -3,9 +3,11 @@ whose delay, natural frequency and damping are drawn from a seeded generator, dr
 setpoint, is recovered within stated tolerances; a hover without stick input, a response the setpoint
 does not drive and a log without a setpoint get the gate's reason; real Betaflight and PX4 logs get
 plausible steps, ArduPilot's and INAV's shipped logs the precise reason they cannot show one; and the
-command writes the figure or refuses a bad path before any work."""
+command refuses a bad figure path before any work (tests/test_diagnose_errors.py draws one).
+The attitude loop of this project's own `excite` flight matches the direct step of `step_roll`."""
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -135,12 +137,12 @@ def test_motors_off_and_no_setpoint_are_named():
     assert report["rate"]["why"] == "no rate setpoint in the log: log " + steps.RATE_SETPOINT["px4 ulog"]
 
 
-pytest.importorskip("pyulog")
-
-
 def _read(rel: str, index: int = 0):
+    """A shipped real log's table (the `logs` extra: pyulog, pymavlink, orangebox)."""
+    for module in ("pyulog", "pymavlink", "orangebox"):
+        pytest.importorskip(module)
     from flightctl.sim.logs import read_foreign
-    return read_foreign(str(need(FLIGHTS / rel)))[index]
+    return read_foreign(str(need(FLIGHTS / rel)))[index]      # FLIGHTS / an absolute path is that path
 
 
 @pytest.mark.parametrize("rel, axes", [("betaflight/LOG00037.BFL", "xyz"), ("px4/quadrotor_local.ulg", "xy")])
@@ -160,8 +162,7 @@ def test_real_rate_loops_have_plausible_steps(rel, axes):
 def test_real_logs_that_cannot_show_a_step_say_why():
     """ArduCopter's log171.bin logs RATE at 10 Hz (a rate loop's step needs 40); INAV's 16 s log sits on the
     ground (no window in the air)."""
-    from flightctl.sim.logs import read_foreign
-    rate = steps.measure(read_foreign(str(DATA / "ardupilot" / "log171.bin"))[0])[0]["rate"]
+    rate = steps.measure(_read(str(DATA / "ardupilot" / "log171.bin")))[0]["rate"]
     for ax in "xyz":
         assert rate[ax]["why"].startswith("the setpoint logged at 9.9 Hz: a rate loop's step needs 40 Hz"), rate[ax]
     inav = steps.measure(_read("inav/blackbox_log_2026-02-21_145057.TXT", 1))[0]["rate"]
@@ -169,12 +170,29 @@ def test_real_logs_that_cannot_show_a_step_say_why():
         assert inav[ax]["why"].startswith("no 2.1 s window in the air"), inav[ax]
 
 
-def test_steps_figure_and_bad_path(tmp_path, capsys):
+def test_a_bad_steps_path_is_refused_before_any_work(tmp_path, capsys):
     out = tmp_path / "r.json"
     bad = tmp_path / "missing" / "s.png"
-    log = need(FLIGHTS / "betaflight" / "LOG00037.BFL")
+    log = DATA / "ardupilot" / "log171.bin"
     assert main(["diagnose", str(log), "--json", str(out), "--steps", str(bad), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--steps" in err and not out.exists(), err
     assert main(["diagnose", "--corpus", str(tmp_path), "--steps", str(tmp_path / "s.png"), "--quiet"]) == 2
     assert "--steps" in capsys.readouterr().err
+
+
+def test_this_projects_attitude_loop_from_an_excite_flight_matches_its_direct_step(tmp_path, capsys):
+    """The roll loop (eq. 24 on the angles) deconvolved from the logged setpoint and estimate of the `excite`
+    flight, whose roll steps are a few among its other moves, against the `step_roll` flight's own step of the
+    same vehicle and gains (sim/flights/metrics.py, the true state): the same rise (10-90 %) within 15 %, the
+    same overshoot within 0.08 and settling (5 %) within 20 %."""
+    from flightctl.logfile import read_flight_log
+    log, step = tmp_path / "excite.csv", tmp_path / "step.json"
+    assert main(["sim", "excite", "--log", str(log), "--no-plot", "--quiet"]) in (0, 1)   # 1: a fast touchdown
+    assert main(["sim", "step_roll", "--log", str(tmp_path / "s.csv"), "--no-plot", "--quiet", "--json", str(step)]) == 0
+    capsys.readouterr()
+    direct = json.loads(step.read_text())["steps"][0]
+    got = steps.measure(read_flight_log(log, min_rows=10))[0]["attitude"]["x"]
+    assert abs(got["rise_s"]["value"] / direct["rise_s"] - 1.0) < 0.15, (got, direct)
+    assert abs(got["overshoot"]["value"] - direct["overshoot"]) < 0.08, (got, direct)
+    assert abs(got["settling_s"]["value"] / direct["settling_s"] - 1.0) < 0.20, (got, direct)

@@ -90,7 +90,8 @@ RATE_SETPOINT = {"betaflight blackbox": "Betaflight's setpoint[] (blackbox field
                  "inav blackbox": "INAV's axisRate[] (blackbox fields)",
                  "px4 ulog": "PX4's vehicle_rates_setpoint (the logger's default topics; SDLOG_PROFILE)",
                  "ardupilot dataflash": "ArduPilot's RATE message (LOG_BITMASK's ATTITUDE_FAST bit)"}
-FLY = {"rate": "stick inputs on {axis}: sharp moves back and forth and snap {axis}s, held for a fraction of "
+SNAP = {"roll": "snap rolls", "pitch": "flips", "yaw": "quick yaw spins"}
+FLY = {"rate": "stick inputs on {axis}: sharp moves back and forth and {snap}, held for a fraction of "
                "a second each, for 20 s or more in the air",
        "attitude": "steps of the {axis} setpoint (angle mode, or a plan's steps) of several degrees, for 20 s "
                    "or more in the air"}
@@ -154,11 +155,12 @@ def _uniform(t: np.ndarray, cols: list[np.ndarray], ok: np.ndarray, air: np.ndar
     return 1.0 / dt, valid, air[j - 1] & air[j], filled
 
 
-def estimate(t: np.ndarray, u: np.ndarray, y: np.ndarray, ok: np.ndarray, air: np.ndarray, response_s: float,
-             min_std: float, min_band_hz: float, nyquist_hz: float = math.inf) -> Response | str:
-    """The step response from setpoint u to response y (rows t, s; `ok` the rows with both, `air` those
-    with all motors running; `nyquist_hz`: half the slower of their own sample rates, above which rows
-    interpolated between their samples show nothing), or why not."""
+def estimate(t: np.ndarray, u: np.ndarray, y: np.ndarray, ok: np.ndarray, air: np.ndarray, loop: Loop,
+             nyquist_hz: float = math.inf) -> Response | str:
+    """The step response of `loop` from setpoint u to response y (rows t, s; `ok` the rows with both, `air`
+    those with all motors running; `nyquist_hz`: half the slower of their own sample rates, above which
+    rows interpolated between their samples show nothing), or why not."""
+    response_s, min_std, min_band_hz = loop.response_s, loop.min_std, loop.min_band_hz
     if ok.sum() < 2:
         return "no row with both the setpoint and the response"
     fs, valid, up, (u, y) = _uniform(t, [u, y], ok, air)
@@ -179,7 +181,7 @@ def estimate(t: np.ndarray, u: np.ndarray, y: np.ndarray, ok: np.ndarray, air: n
     moving = us.std(axis=1) >= min_std
     if moving.sum() < MIN_WINDOWS:
         return (f"{int(moving.sum())} of {starts.size} {n_seg / fs:.1f} s windows in the air have the setpoint "
-                f"varying by {min_std:.3g} (std) or more; {MIN_WINDOWS} are needed")
+                f"varying by {min_std:.3g} {loop.unit} (std) or more; {MIN_WINDOWS} are needed")
     us, ys = us[moving], ys[moving]
     w = np.hanning(n_seg)
     U = np.fft.rfft((us - us.mean(axis=1, keepdims=True)) * w, axis=1)
@@ -274,7 +276,7 @@ def measure(table: Table) -> tuple[dict, dict]:
         part = {"unit": loop.unit, "response_s": loop.response_s, "min_setpoint_std": round(loop.min_std, 5),
                 "rows_hz": round(rows, 1), "setpoint_hz": round(sp_rate, 1)}
         for a, s, y in zip(AXES, sp, resp):
-            fly = FLY[loop.name].format(axis=NAMES[a])
+            fly = FLY[loop.name].format(axis=NAMES[a], snap=SNAP[NAMES[a]])
             if s is None or y is None:
                 part[a] = {"why": f"no {loop.setpoint[AXES.index(a)] if s is None else loop.response[AXES.index(a)]} "
                                   "in the log"}
@@ -286,8 +288,7 @@ def measure(table: Table) -> tuple[dict, dict]:
                 continue
             if loop.name == "attitude" and a == "z":
                 s, y = _unwrap(s), _unwrap(y)
-            r = estimate(t, s, y, np.isfinite(s) & np.isfinite(y), running, loop.response_s, loop.min_std,
-                         loop.min_band_hz, 0.5 * min(rows, sp_rate, resp_rate))
+            r = estimate(t, s, y, np.isfinite(s) & np.isfinite(y), running, loop, 0.5 * min(rows, sp_rate, resp_rate))
             if isinstance(r, str):
                 part[a] = {"why": r + "; fly next time: " + fly}
                 continue
