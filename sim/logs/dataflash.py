@@ -53,7 +53,7 @@ RATE_NOTE = ("set LOG_BITMASK's IMU_FAST (and RCOUT) bits, or INS_RAW_LOG_OPT fo
 OLD_RATE_NOTE = ("ArduCopter before 3.3 logs IMU in its 50 Hz loop and the motor outputs in its 10 Hz loop, "
                  "whatever LOG_BITMASK says: with a newer firmware, ")
 WANTED = ["PARM", "MSG", "VER", "GPS", "IMU", "GYR", "ACC", "RCOU", "RCO2", "RCO3", "BAT", "BARO", "RFND", "ATT", "RATE",
-          "ESC", "ARM", "EV", "MOT", "CURR", "CTUN", "VIBE"]
+          "PIDR", "PIDP", "PIDY", "ESC", "ARM", "EV", "MOT", "CURR", "CTUN", "VIBE"]
 ARMED_EVENTS = (10, 11)               # EV's ARMED and DISARMED (ArduCopter's LogEvent, the same since 3.0)
 HEADER = b"\xa3\x95"                   # every binary message starts so (then its type byte)
 TAIL_BYTES = 528                      # pymavlink's allowance for garbage at a log's end (a flash page and more)
@@ -512,6 +512,7 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
     if rate:
         sp = np.vstack([_col(rate, k) for k in ("RDes", "PDes", "YDes")]) * DEG
         imp.streams["setpoint"] = Stream("RATE RDes/PDes/YDes", _t(rate), sp * FRD)
+    _pid_targets(msgs, imp)
     _vibe(msgs, imp)
     _thrust_curve(p, imp)
     order = [int(k) for k in imp.meta.pop("esc_order").split()]
@@ -525,6 +526,20 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
                 imp.streams["omega"] = Stream("ESC RPM", t, np.abs(w) * 2.0 * math.pi / 60.0)
                 imp.meta["omega_source"] = (f"ESC telemetry RPM of instances {', '.join(map(str, order))} (the motors' "
                                             "output channels) for motors 1-4")
+
+
+def _pid_targets(msgs, imp: Imported) -> None:
+    """The rate setpoint from PIDR/PIDP/PIDY's Tar (rad/s, FRD: ArduCopter 4.x's rate PIDs' target, logged at the
+    loop's rate with LOG_BITMASK's PID bit; backend_log_80k.bin's PIDR Tar 0.306 beside RATE RDes 17.3 deg/s)
+    where it is logged faster than RATE (10 Hz by default)."""
+    pid = [msgs[k] for k in ("PIDR", "PIDP", "PIDY")]
+    if not all(len(m) >= 2 and hasattr(m[0], "Tar") for m in pid):
+        return
+    t = _t(pid[0])
+    sp = np.vstack([np.interp(t, _t(m), _col(m, "Tar")) for m in pid])
+    s = Stream("PIDR/PIDP/PIDY Tar", t, sp * FRD)
+    if "setpoint" not in imp.streams or s.rate_hz() > imp.streams["setpoint"].rate_hz():
+        imp.streams["setpoint"] = s
 
 
 def _vibe(msgs, imp: Imported) -> None:

@@ -14,7 +14,7 @@ What it follows, written anew (none of their code):
   masked out): the response length and the window length of the rate loops.
 
 Loops: the rate loop where the log has a rate setpoint (`setpoint_x/y/z`: Betaflight setpoint[], INAV
-axisRate[], PX4 vehicle_rates_setpoint, ArduPilot RATE; sim/logs) against the gyro; the attitude loop
+axisRate[], PX4 vehicle_rates_setpoint, ArduPilot RATE or PIDR/PIDP/PIDY's Tar; sim/logs) against the gyro; the attitude loop
 where it has an attitude setpoint (`roll_sp`, `pitch_sp`, `yaw_sp`: this project's own logs, ArduPilot
 ATT's DesRoll/DesPitch/DesYaw) against the logged attitude. Only rows where all four motors run are used.
 Every number is SI (s, a share); the figure converts to ms at its edge.
@@ -89,7 +89,8 @@ LOOPS = (Loop("rate", ("setpoint_x", "setpoint_y", "setpoint_z"), ("gyro_x", "gy
 RATE_SETPOINT = {"betaflight blackbox": "Betaflight's setpoint[] (blackbox fields, on by default)",
                  "inav blackbox": "INAV's axisRate[] (blackbox fields)",
                  "px4 ulog": "PX4's vehicle_rates_setpoint (the logger's default topics; SDLOG_PROFILE)",
-                 "ardupilot dataflash": "ArduPilot's RATE message (LOG_BITMASK's ATTITUDE_FAST bit)"}
+                 "ardupilot dataflash": "ArduPilot's RATE message (LOG_BITMASK's ATTITUDE_FAST bit), or PIDR/PIDP/PIDY "
+                                        "at the loop's rate (its PID bit)"}
 SNAP = {"roll": "snap rolls", "pitch": "flips", "yaw": "quick yaw spins"}
 FLY = {"rate": "stick inputs on {axis}: sharp moves back and forth and {snap}, held for a fraction of "
                "a second each, for 20 s or more in the air",
@@ -283,8 +284,9 @@ def measure(table: Table) -> tuple[dict, dict]:
                 continue
             if min(rows, sp_rate) < loop.min_rate_hz:
                 what = "rows" if rows < loop.min_rate_hz else "setpoint"
+                how = f" ({RATE_SETPOINT[fmt]})" if loop.name == "rate" and fmt in RATE_SETPOINT else ""
                 part[a] = {"why": f"the {what} logged at {min(rows, sp_rate):.1f} Hz: a {loop.name} loop's step needs "
-                                  f"{loop.min_rate_hz:g} Hz; log {'it' if what == 'setpoint' else 'the gyro and it'} faster"}
+                                  f"{loop.min_rate_hz:g} Hz; log {'it' if what == 'setpoint' else 'the gyro and it'} faster{how}"}
                 continue
             if loop.name == "attitude" and a == "z":
                 s, y = _unwrap(s), _unwrap(y)
