@@ -121,6 +121,7 @@ BLOCKS = (
           SCRIPT + ("scripts/open_question.py", "--from", "docs/open-question.json", "--table")),
     Block("open-question-as-flown-table", "docs/diagnose.md", *marked("open question as-flown"),
           SCRIPT + ("scripts/open_question.py", "--from", "docs/open-question-as-flown.json", "--table")),
+    Block("steps-table", "docs/steps.md", *marked("steps table"), SCRIPT + ("scripts/steps_table.py",), minutes=1),
     analyze("analyze-base-table4", "analyze base table4", "--gains", "table4", "--estimator", "truth",
             "--estimator", "flight", "--estimator", "paper"),
     analyze("analyze-base-table6", "analyze base table6", "--gains", "table6", "--estimator", "truth",
@@ -145,6 +146,7 @@ FIGURES = (
     # the same flights as the motor-loss block (motor_loss.measure), then the figure
     Figure("motor-loss-figure", ("docs/motor-loss.png",), SCRIPT + ("scripts/motor_loss.py", "--out", "{out}"),
            minutes=5),
+    Figure("steps", ("docs/steps.png",), SCRIPT + ("scripts/steps_table.py", "--out", "{out}"), minutes=1),
     Figure("tune", ("docs/tune.png",), FLIGHTCTL + ("tune", "--out", "{tmp}/t.toml", "--plot", "{out}"), minutes=1),
     Figure("tune-robust", ("docs/tune-robust.png", "docs/tune-robust-grid.png"),
            FLIGHTCTL + ("tune", "--params", "paper-as-flown", "--robust", "40", "--seed", "1", "--out",

@@ -86,9 +86,12 @@ def flight(tmp_path_factory):
     return read_flight_log(d / "f.csv"), d
 
 
-def write(flight, rng, frame_type: int, armed: bool = True, firmware: str = "ArduCopter V4.5.7 (1a2b3c4d)"):
+def write(flight, rng, frame_type: int, armed: bool = True, firmware: str = "ArduCopter V4.5.7 (1a2b3c4d)",
+          pid: bool = False):
     """The flight as an ArduCopter log; the motors on channels drawn from `rng`. Returns the path,
-    the channels (1-based) of motors 1-4, the PWM range."""
+    the channels (1-based) of motors 1-4, the PWM range. `pid`: RATE at a tenth of the rows (its default
+    10 Hz) and PIDR/PIDP/PIDY on every row (LOG_BITMASK's PID bit), their Tar the gyro plus a drawn offset
+    (rad/s, FRD), and ATT's DesRoll/DesPitch/DesYaw the attitude plus another."""
     log, d = flight
     chans = [int(c) + 1 for c in rng.choice(8, 4, replace=False)]
     lo, hi = 1100.0, 1900.0
@@ -109,16 +112,38 @@ def write(flight, rng, frame_type: int, armed: bool = True, firmware: str = "Ard
             # disarmed, ArduCopter holds its motor outputs at their lowest pulse (output_min)
             pwm[c - 1] = int(round(lo + (log[f"P{m + 1}"][k] if armed else 0.0) / 255.0 * (hi - lo)))
         f.add("RCOU", us - 5, *pwm)                  # (the command before the gyro sample of its row)
-        f.add("RATE", us, *(math.degrees(v) for v in g))
+        if not pid or k % 10 == 0:
+            f.add("RATE", us, *(math.degrees(v) for v in g))
+        if pid:
+            for name, v, off in zip(("PIDR", "PIDP", "PIDY"), g, PID_OFFSET):
+                f.add(name, us, v + off, v, off, 0.0, 0.0, 0.0, 0.0)
         for m, c in enumerate(chans):
             f.add("ESC", us, c - 1, 40.0 * log[f"P{m + 1}"][k])      # rpm: a stand-in the test knows
         if k % 10 == 0:
             f.add("BAT", us, 0, 11.9, 7.5)
-            f.add("ATT", us, 0.0, math.degrees(log["roll"][k]), 0.0, -math.degrees(log["pitch"][k]), 0.0,
-                  -math.degrees(log["yaw"][k]) % 360.0)
+            att = (math.degrees(log["roll"][k]), -math.degrees(log["pitch"][k]), -math.degrees(log["yaw"][k]) % 360.0)
+            des = [a + ATT_OFFSET for a in att] if pid else [0.0, 0.0, 0.0]
+            f.add("ATT", us, des[0], att[0], des[1], att[1], des[2], att[2])
     path = d / f"f{frame_type}.bin"
     path.write_bytes(f.bytes())
     return path, chans, (lo, hi)
+
+
+PID_OFFSET = (0.11, -0.07, 0.05)     # rad/s, FRD: what PIDR/PIDP/PIDY's Tar add to the gyro in `write(pid=True)`
+ATT_OFFSET = 2.0                     # deg: what ATT's Des* add to its attitude there
+
+
+def test_the_rate_pids_targets_are_the_setpoint_when_logged_faster_than_rate(flight):
+    """ArduCopter 4.x with the PID bit: PIDR/PIDP/PIDY's Tar (rad/s, FRD) on every row, RATE at a tenth of them:
+    the rate setpoint is the targets (in our frame), at their rate; ATT's Des* are roll_sp, pitch_sp, yaw_sp."""
+    log, _ = flight
+    (t,) = read_foreign(str(write(flight, np.random.default_rng(7), 1, pid=True)[0]))
+    for a, off, sign in zip("xyz", PID_OFFSET, (1.0, -1.0, -1.0)):
+        assert np.allclose(t[f"setpoint_{a}"], log[f"gyro_{a}"] + sign * off, rtol=1e-4, atol=1e-5), a
+    assert float(t.meta["setpoint_rate_hz"]) > 5 * float(t.meta["attitude_rate_hz"])
+    ok = np.isfinite(t["roll_sp"]) & np.isfinite(t["roll"])
+    assert np.allclose(t["roll_sp"][ok] - t["roll"][ok], math.radians(ATT_OFFSET), atol=1e-4)
+    assert np.allclose(t["pitch_sp"][ok] - t["pitch"][ok], -math.radians(ATT_OFFSET), atol=1e-4)
 
 
 @pytest.mark.parametrize("frame_type", sorted(FRAMES))

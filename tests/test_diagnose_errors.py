@@ -117,8 +117,16 @@ def test_two_logs_and_plots(tmp_path, capsys, flight):
         return header, rows[:len(rows) // 2]
     other = _rewrite(flight, tmp_path / "g.csv", first_half)
     out, prefix = tmp_path / "out.json", tmp_path / "diag"
-    assert main(["diagnose", str(flight), str(other), "--json", str(out), "--plot", str(prefix), "--quiet"]) == 0
+    steps_png = tmp_path / "steps.png"
+    assert main(["diagnose", str(flight), str(other), "--json", str(out), "--plot", str(prefix), "--steps", str(steps_png),
+                 "--quiet"]) == 0
     rep = json.loads(out.read_text())
+    # each file's measured steps (docs/steps.md): no rate setpoint logged; the attitude loop's from roll_sp, which
+    # the 21 s plan's two bank steps leave to too few windows (the excitation gate); and each file's gains
+    assert [s["file"] for s in rep["steps"]] == [str(flight), str(other)] and steps_png.read_bytes()[:4] == b"\x89PNG"
+    assert rep["steps"][0]["rate"]["why"].startswith("no rate setpoint in the log")
+    assert "windows in the air have the setpoint varying" in rep["steps"][1]["attitude"]["x"]["why"]
+    assert [c["firmware"] for c in rep["controller"]] == ["flightctl", "flightctl"]
     assert rep["cause"] == "com_offset" and abs(rep["parameters"]["dx"] - 0.01) < 0.002
     assert set(rep) >= {"cause", "parameters", "rmse_base", "rmse_extended", "gain", "metric", "candidates"}
     assert [c["gain"] for c in rep["candidates"]] == sorted((c["gain"] for c in rep["candidates"]), reverse=True)

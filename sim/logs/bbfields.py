@@ -14,6 +14,7 @@ import struct
 
 import numpy as np
 
+from flightctl.sim.logs import controller
 from flightctl.physics import G
 from flightctl.sim.logs import identity
 from flightctl.sim.logs.common import DEG, Imported, Stream, backward_note, command_p, euler_from_frd_ned, forward
@@ -258,6 +259,7 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
         "height_source": height_source,
     })
     imp.meta.update(identity.blackbox(h))
+    imp.meta["controller"] = controller.encode(controller.blackbox(h, kind, kind == "betaflight" and ver >= (3, 1, 0)))
     return imp
 
 

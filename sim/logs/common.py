@@ -32,6 +32,7 @@ EXTRA = (("current", "height", "omega1", "omega2", "omega3", "omega4", "gyro_f_x
 # stream name -> its columns (streams of one value write the stream's name)
 GROUPS = {"gyro": tuple(f"gyro_{a}" for a in AXES), "acc": tuple(f"acc_{a}" for a in AXES), "gyro_f": tuple(f"gyro_f_{a}" for a in AXES),
           "omega": tuple(f"omega{i}" for i in range(1, 5)), "attitude": ("roll", "pitch", "yaw"),
+          "attitude_sp": ("roll_sp", "pitch_sp", "yaw_sp"),
           "setpoint": tuple(f"setpoint_{a}" for a in AXES), "rc": ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle"),
           "pid": tuple(c for c in EXTRA if c.startswith("pid_")), "vibe": ("vibe_x", "vibe_y", "vibe_z")}
 GAP_PERIODS = 3.0        # a measured stream is empty across gaps longer than this many of its own periods
@@ -77,7 +78,8 @@ class Imported:
     """A foreign log read: streams by column group, metadata, notes. Required streams: `gyro` (3, n,
     rad/s), `acc` (3, n, m/s^2), `motors` (4, n, P on 0-255); optional: `battery_v`, `current`,
     `height`, `range`, `alt`, `omega` (4, rad/s), `attitude` (3: roll, pitch, yaw), `gyro_f` (3),
-    `setpoint` (3, rad/s), `rc` (4), `pid` (12: P, I, D, F terms on x, y, z)."""
+    `setpoint` (3, rad/s), `attitude_sp` (3: the attitude setpoint's roll, pitch, yaw), `rc` (4), `pid` (12:
+    P, I, D, F terms on x, y, z)."""
     path: str
     streams: dict[str, Stream]
     meta: dict[str, str]
@@ -284,6 +286,9 @@ def flight_text(imp: Imported, progress=None) -> str:
     meta = dict(imp.meta)
     meta["rate_hz"] = f"{1.0 / float(np.median(np.diff(cols['t']))):.1f}"
     meta["motor_rate_hz"] = f"{imp.streams['motors'].rate_hz():.1f}"
+    for name in ("setpoint", "attitude_sp", "attitude"):     # the step responses' inputs' own rates (diagnose/steps.py)
+        if name in imp.streams:
+            meta[f"{name}_rate_hz"] = f"{imp.streams[name].rate_hz():.1f}"
     lines = []
     for s in imp.streams.values():
         n_gaps, longest = s.gaps()

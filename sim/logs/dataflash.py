@@ -25,6 +25,7 @@ import tempfile
 
 import numpy as np
 
+from flightctl.sim.logs import controller
 from flightctl.errors import InputError, read_bytes
 from flightctl.sim.logs import arducopter3, identity
 from flightctl.sim.logs.common import (CELL_FULL_V, DEG, FRD, MIN_ROWS, Imported, Stream, command_p, parser_said,
@@ -53,7 +54,7 @@ RATE_NOTE = ("set LOG_BITMASK's IMU_FAST (and RCOUT) bits, or INS_RAW_LOG_OPT fo
 OLD_RATE_NOTE = ("ArduCopter before 3.3 logs IMU in its 50 Hz loop and the motor outputs in its 10 Hz loop, "
                  "whatever LOG_BITMASK says: with a newer firmware, ")
 WANTED = ["PARM", "MSG", "VER", "GPS", "IMU", "GYR", "ACC", "RCOU", "RCO2", "RCO3", "BAT", "BARO", "RFND", "ATT", "RATE",
-          "ESC", "ARM", "EV", "MOT", "CURR", "CTUN", "VIBE"]
+          "PIDR", "PIDP", "PIDY", "ESC", "ARM", "EV", "MOT", "CURR", "CTUN", "VIBE"]
 # EV's ids (ArduPilot's libraries/AP_Logger/AP_Logger.h, `enum class LogEvent`; DATA_* in
 # ArduCopter 3.x's defines.h, the same numbers since 3.0) that are only written while armed: ARMED 10,
 # DISARMED 11 (armed until then), AUTO_ARMED 15 (the throttle raised while armed), NOT_LANDED 28 (the
@@ -507,6 +508,7 @@ def read(path: str, text: bool = False) -> Imported:
         "gyro_notches": notches, "acc_source": asource, "acc_filter": acc_filter,
     })
     imp.meta.update(identity.ardupilot(texts, p, msgs["GPS"]))
+    imp.meta["controller"] = controller.encode(controller.ardupilot(p))
     return imp
 
 
@@ -555,10 +557,15 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
         e = np.vstack([_col(att, k) for k in ("Roll", "Pitch", "Yaw")]) * DEG
         e[2] = np.unwrap(e[2])
         imp.streams["attitude"] = Stream("ATT", _t(att), e * FRD)
+        if hasattr(att[0], "DesRoll"):
+            d = np.vstack([_col(att, k) for k in ("DesRoll", "DesPitch", "DesYaw")]) * DEG
+            d[2] = np.unwrap(d[2])
+            imp.streams["attitude_sp"] = Stream("ATT DesRoll/DesPitch/DesYaw", _t(att), d * FRD)
     rate = msgs["RATE"]
     if rate:
         sp = np.vstack([_col(rate, k) for k in ("RDes", "PDes", "YDes")]) * DEG
         imp.streams["setpoint"] = Stream("RATE RDes/PDes/YDes", _t(rate), sp * FRD)
+    _pid_targets(msgs, imp)
     _vibe(msgs, imp)
     _thrust_curve(p, imp)
     order = [int(k) for k in imp.meta.pop("esc_order").split()]
@@ -572,6 +579,20 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
                 imp.streams["omega"] = Stream("ESC RPM", t, np.abs(w) * 2.0 * math.pi / 60.0)
                 imp.meta["omega_source"] = (f"ESC telemetry RPM of instances {', '.join(map(str, order))} (the motors' "
                                             "output channels) for motors 1-4")
+
+
+def _pid_targets(msgs, imp: Imported) -> None:
+    """The rate setpoint from PIDR/PIDP/PIDY's Tar (rad/s, FRD: ArduCopter 4.x's rate PIDs' target, logged at the
+    loop's rate with LOG_BITMASK's PID bit; backend_log_80k.bin's PIDR Tar 0.306 beside RATE RDes 17.3 deg/s)
+    where it is logged faster than RATE (10 Hz by default)."""
+    pid = [msgs[k] for k in ("PIDR", "PIDP", "PIDY")]
+    if not all(len(m) >= 2 and hasattr(m[0], "Tar") for m in pid):
+        return
+    t = _t(pid[0])
+    sp = np.vstack([np.interp(t, _t(m), _col(m, "Tar")) for m in pid])
+    s = Stream("PIDR/PIDP/PIDY Tar", t, sp * FRD)
+    if "setpoint" not in imp.streams or s.rate_hz() > imp.streams["setpoint"].rate_hz():
+        imp.streams["setpoint"] = s
 
 
 def _vibe(msgs, imp: Imported) -> None:

@@ -22,6 +22,10 @@ FORMATS = {  # name: (type id, format, columns)
     "BARO": (138, "QBf", "TimeUS,I,Alt"),
     "VIBE": (139, "QfffIII", "TimeUS,VibeX,VibeY,VibeZ,Clip0,Clip1,Clip2"),   # ArduCopter 3.3-4.0's
     "GPS": (140, "QBBIHBfLLffff", "TimeUS,I,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ"),
+    # the rate PIDs' first fields as ArduCopter 4.x logs them (rad/s; the rest of its PID layout left out)
+    "PIDR": (141, "Qfffffff", "TimeUS,Tar,Act,Err,P,I,D,FF"),
+    "PIDP": (142, "Qfffffff", "TimeUS,Tar,Act,Err,P,I,D,FF"),
+    "PIDY": (143, "Qfffffff", "TimeUS,Tar,Act,Err,P,I,D,FF"),
 }
 
 

@@ -20,6 +20,7 @@ from collections import Counter
 import numpy as np
 
 from flightctl.errors import InputError, read_bytes
+from flightctl.sim.logs import controller
 from flightctl.sim.logs import identity
 from flightctl.sim.logs.common import (FRD, Imported, Stream, euler_from_frd_ned, log_text, parser_said,
                                       rate_notes)
@@ -108,6 +109,7 @@ def read(path: str) -> Imported | str:
                         f"{cutoff:g} Hz filters the controller's copy, not this one)"),
         "gyro_filter": "none", "acc_source": "sensor_combined.accelerometer_m_s2", "acc_filter": "none",
     })
+    imp.meta["controller"] = controller.encode(controller.px4(p))
     gps = topic(u, "vehicle_gps_position")
     imp.meta.update(identity.px4(info, gps if gps is not None else topic(u, "sensor_gps")))
     return imp
@@ -176,6 +178,12 @@ def _measurements(u, p: dict, imp: Imported) -> None:
     if att is not None:
         q = np.vstack([att[f"q[{i}]"] for i in range(4)]).astype(float)
         imp.streams["attitude"] = Stream("vehicle_attitude", att["timestamp"] * 1e-6, euler_from_frd_ned(q))
+    asp = topic(u, "vehicle_attitude_setpoint")
+    if asp is not None and all(f"q_d[{i}]" in asp for i in range(4)):
+        q = np.vstack([asp[f"q_d[{i}]"] for i in range(4)]).astype(float)
+        e = euler_from_frd_ned(q)
+        e[2] = np.unwrap(e[2])
+        imp.streams["attitude_sp"] = Stream("vehicle_attitude_setpoint q_d", asp["timestamp"] * 1e-6, e)
     rs = topic(u, "vehicle_rates_setpoint")
     if rs is not None and all(k in rs for k in ("roll", "pitch", "yaw")):
         sp = np.vstack([rs[k] for k in ("roll", "pitch", "yaw")]).astype(float)

@@ -1,7 +1,7 @@
 """`flightctl diagnose`: name what the model gets wrong in flight logs (measured-data.md).
 
     flightctl diagnose FLIGHT.csv|F.ulg|F.bin|F.bbl|F.bfl|F.txt [...] [--index N] [--params PARAMS.toml]
-                       --json REPORT.json [--validate OTHER ...] [--plot PREFIX] [--quiet]
+                       --json REPORT.json [--validate OTHER ...] [--plot PREFIX] [--steps STEPS.png] [--quiet]
     flightctl diagnose --corpus DIR [DIR ...] [--table OUT.md] [--json OUT.json] [--jobs N] [--quiet]
                        [--fleet REPORT [--vehicles MAP.csv]]
 
@@ -12,7 +12,10 @@ base model is identified from the flight (docs/real-flights.md).
 Two tiers (docs/diagnose.md, "Static tier"): a log fast enough for the dynamic tier (the causes chain)
 gets it and the static tier's findings beside it; a log the dynamic tier refuses gets the static tier
 alone (hover, motor shares, centre of mass against weak motor against yaw trim, battery, vibration),
-exit status 0, with the refusal as `tier_why`. REPORT.json's `tier` says which.
+exit status 0, with the refusal as `tier_why`. REPORT.json's `tier` says which. Either way REPORT.json's
+`steps` holds each log's measured step responses, per loop and axis, or the reason it cannot show one
+(steps.py, docs/steps.md); `--steps STEPS.png` draws them; `controller` the firmware's rate controller as
+the log's settings give it (sim/logs/controller.py).
 
 Several files are one vehicle, diagnosed jointly. One file of many logs (a blackbox file holds one
 per arming) is diagnosed log by log: each log that can be judged gets its own report, the others are
@@ -45,9 +48,10 @@ from flightctl.errors import InputError, Parser, output_file, write_atomic
 from flightctl.logfile import read_flight_log
 from flightctl.sim import engine
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
-from flightctl.sim.identify.diagnose import report as diagnose_report
+from flightctl.sim.identify.diagnose import report as diagnose_report, steps
 from flightctl.sim.identify.diagnose.verdict import diagnose, say, validate
 from flightctl.sim.identify.static import STATIC_COLUMNS, StaticOnly
+from flightctl.sim.logs import controller
 from flightctl.sim.identify.static.curve import declared as declared_curve
 
 MIN_LOG_S = 2.0   # a log shorter than this cannot hold a take-off and a flight: too short to judge
@@ -94,6 +98,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="write PREFIX-residuals.png (residual vs time, base and after each cause), "
                         "PREFIX-explained.png (residual vs the variable that explains it) and, per log, "
                         "PREFIX-read-K.png (what was read: rates, gaps, channels)")
+    p.add_argument("--steps", metavar="STEPS.png",
+                   help="the measured step responses of each log: per loop (rate, attitude) and axis, the mean over the "
+                        "windows with stick input and their band (docs/steps.md); the numbers are REPORT.json's `steps`")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return p
 
@@ -157,6 +164,8 @@ def main(argv: list[str]) -> int:
 
 def _main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
+    if args.corpus is not None and args.steps:
+        raise InputError("--steps: the figure is of the logs named; with --corpus each log's `steps` is in --json")
     if args.corpus is not None:
         from flightctl.sim.identify.diagnose.corpus import main as corpus
         engine.use(args.scheduler, args.quiet)
@@ -175,6 +184,8 @@ def _main(argv: list[str]) -> int:
     if args.index is not None and args.index < 1:
         raise InputError(f"--index {args.index}: logs are counted from 1")
     output_file(out_json, "--json")
+    if args.steps:
+        output_file(Path(args.steps), "--steps")
     if len(args.logs) == 1 and _per_log(args.logs[0], args.index):
         return _each(args, params, progress, t0)
     tables = read_logs(args.logs, args.index, progress)
@@ -183,7 +194,10 @@ def _main(argv: list[str]) -> int:
     d = _judge(tables, others, params, args.params is not None, progress)
     images = _images(d, tables, plots)
     report = d.report()
-    text = diagnose_report.text(d, report)
+    report["steps"], curves = steps.of(tables)
+    report["controller"] = [controller.of_table(t) for t in tables]
+    _steps_figure(args.steps, curves, plots, images)
+    text = diagnose_report.text(d, report) + steps.text(report["steps"]) + controller.text(report["controller"])
     report["runtime_s"] = round(time.perf_counter() - t0, 2)
     _write(out_json, report, plots, images)
     print(text, end="")
@@ -225,6 +239,13 @@ def _images(d, tables, plots) -> dict[str, bytes]:
     return images
 
 
+def _steps_figure(path: str | None, curves: list, plots: dict, images: dict) -> None:
+    """--steps: the step responses' figure, written with the others."""
+    if path:
+        from flightctl.sim.plots import png
+        plots["steps"], images["steps"] = Path(path), png(steps.figure(curves))
+
+
 def _write(out_json: Path, report: dict, plots: dict, images: dict) -> None:
     write_atomic(out_json, json.dumps(report, indent=2, allow_nan=False) + "\n")
     for k, path in plots.items():
@@ -249,6 +270,11 @@ def _each(args, params, progress, t0) -> int:
     if not judged:
         raise InputError(f"{path}: no log could be judged: {skipped(entries)}")
     reports = {e.index: d.report() for e, d in judged}
+    curves = []
+    for e, d in judged:
+        reports[e.index]["steps"], c = steps.of([e.table])
+        reports[e.index]["controller"] = [controller.of_table(e.table)]
+        curves += c
     for e in entries:
         logs.append({"index": e.index, "judged": True, "report": reports[e.index]} if e.index in reports
                     else {"index": e.index, "judged": False, "reason": e.reason})
@@ -258,13 +284,15 @@ def _each(args, params, progress, t0) -> int:
         p = _plot_paths(args.plot, 1, f"-log{e.index}")
         for k, image in _images(d, [e.table], p).items():
             plots[str(p[k])], images[str(p[k])] = p[k], image
+    _steps_figure(args.steps, curves, plots, images)
     report = dict(reports[first.index])
     report["logs"] = logs
     report["logs_note"] = (f"the file holds {len(entries)} logs, each diagnosed on its own: the top-level keys are "
                            f"the report of log {first.index}, the first judged; every log's report or the reason it "
                            "was skipped is in `logs`")
     report["runtime_s"] = round(time.perf_counter() - t0, 2)
-    texts = [f"== {path} log {e.index} of {len(entries)} ==\n" + diagnose_report.text(d, reports[e.index]) for e, d in judged]
+    texts = [f"== {path} log {e.index} of {len(entries)} ==\n" + diagnose_report.text(d, reports[e.index])
+             + steps.text(reports[e.index]["steps"]) + controller.text(reports[e.index]["controller"]) for e, d in judged]
     _write(Path(args.json), report, plots, images)
     print("".join(texts), end="")
     if any(e.table is None for e in entries):

@@ -191,6 +191,8 @@ def run_one(row: Row) -> Row:
     from flightctl.params import load
     from flightctl.sim.logs import reason
     from flightctl.sim.identify.diagnose.cli import read_logs
+    from flightctl.sim.identify.diagnose import steps
+    from flightctl.sim.logs import controller
     from flightctl.sim.identify.diagnose.verdict import diagnose
     quiet = lambda *a: None   # noqa: E731
     if os.environ.get(CRASH_ENV) == Path(row.path).name:    # tests/test_fleet.py: a log that kills its worker
@@ -200,6 +202,8 @@ def run_one(row: Row) -> Row:
         row.meta = dict(tables[0].meta) if tables else {}
         d = diagnose(tables, load(None).airframe, quiet)
         row.report = d.report()
+        row.report["steps"] = steps.of(tables)[0]
+        row.report["controller"] = [controller.of_table(t) for t in tables]
         row.status = "diagnosed"
     except InputError as e:
         row.reason = reason(str(e), row.path)
