@@ -29,6 +29,7 @@ import datetime
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -214,7 +215,7 @@ def _inner(n: int, seconds: float, out: str) -> None:
         _mark("warm " + name)
         call()
         _mark(name)
-        sections[name] = n * REPS
+        sections[name] = X.shape[0] * REPS    # (the last group's vehicles: GROUP at most)
     with open(out, "w") as f:
         json.dump({"sections": sections, "rate": rate}, f)
 
@@ -314,8 +315,11 @@ def main(argv=None) -> int:
     ap.add_argument("--markdown", action="store_true", help="print docs/batch.md's block: the date, the machine, a table")
     ap.add_argument("--inner", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
-    if a.vehicles < 1 or not 0.0 < a.seconds <= 60.0:
-        print("batch_profile: --vehicles at least 1, --seconds in (0, 60]", file=sys.stderr)
+    if a.vehicles < 1 or not 0.0 < a.seconds <= 60.0 or a.workers < 0:
+        print("batch_profile: --vehicles at least 1, --seconds in (0, 60], --workers 0 or more", file=sys.stderr)
+        return 2
+    if not (a.inner or a.workers) and not (shutil.which("valgrind") and shutil.which("callgrind_control")):
+        print("batch_profile: valgrind (its callgrind and callgrind_control) is not installed", file=sys.stderr)
         return 2
     if a.inner:
         _inner(a.vehicles, a.seconds, a.inner)
