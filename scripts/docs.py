@@ -12,7 +12,8 @@ reads and replaces them), never by hand. A block is one of:
 - printed: the command's standard output is the block (in a code fence where `fence`);
 - written: the command rewrites the block in the file itself (`{doc}`: the file, `{dir}`: its folder);
   checked on a copy of the file in a temporary folder;
-- measured on a machine: the speed figures of scripts/benchmark.py and the HIL link's latency of
+- measured on a machine: the speed figures of scripts/benchmark.py, the batch's instruction counts of
+  scripts/batch_profile.py (numba's code and valgrind's version) and the HIL link's latency of
   scripts/hil_latency.py vary with the machine and its load; the block says when and where they were
   measured, and the check holds only its form (the stamp line, the table's header and rows), never
   its numbers.
@@ -74,6 +75,8 @@ BLOCKS = (
           minutes=6),
     Block("benchmark", "README.md", *marked("benchmark"), SCRIPT + ("scripts/benchmark.py", "--markdown"),
           minutes=11, measured=True),
+    Block("batch-profile", "docs/batch.md", *marked("batch profile"), SCRIPT + ("scripts/batch_profile.py", "--markdown"),
+          minutes=10, measured=True),
     Block("hil-latency", "docs/hil.md", *marked("hil latency"), SCRIPT + ("scripts/hil_latency.py", "--markdown"),
           minutes=4, measured=True),
     Block("fault-matrix", "docs/safety.md", "<!-- fault matrix: begin (written by `flightctl sim faults`) -->",

@@ -106,6 +106,9 @@ def _client(workers: int):
         with _ctrl_c_deferred(), dask.config.set({"distributed.worker.multiprocessing-method": "forkserver",
                               "distributed.scheduler.allowed-failures": 0,
                               "distributed.scheduler.worker-saturation": 1.0,
+                              # the worker's statistical profiler samples each task's stack every 10 ms
+                              # (distributed.yaml `worker.profile`), CPU taken from the task itself
+                              "distributed.worker.profile.enabled": False,
                               **{f"distributed.nanny.pre-spawn-environ.{k}": 1 for k in ONE_THREAD},
                               # Dask's default MALLOC_TRIM_THRESHOLD_ = 65536 (distributed.yaml) fixes glibc's
                               # trim and mmap thresholds, so every array over 128 KiB is mapped and unmapped
