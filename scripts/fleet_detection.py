@@ -126,11 +126,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.trials < 1:
         ap.error("--trials: at least 1")
     text = markdown(measure(a.trials, a.seed))
-    if a.doc:
-        from flightctl.sim.docs import write_or_exit
-        write_or_exit(a.doc, BEGIN, END, text)
-    else:
-        print(text)
+    from flightctl.sim.docs import publish
+    publish(text, a.doc, BEGIN, END)
     return 0
 
 

@@ -198,11 +198,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.logs < 13 or not 1 <= a.sample <= a.logs:
         ap.error("--logs at least 13 and --sample between 1 and --logs")
     text = markdown(measure(a.logs, a.sample, a.seed))
-    if a.doc:
-        from flightctl.sim.docs import write_or_exit
-        write_or_exit(a.doc, BEGIN, END, text)
-    else:
-        print(text)
+    from flightctl.sim.docs import publish
+    publish(text, a.doc, BEGIN, END)
     return 0
 
 
