@@ -68,7 +68,7 @@ def validate(path: Path) -> Plan:
     except InputError:
         raise
     except (Exception, RecursionError) as e:       # the reader's own failure: still one line
-        raise InputError(f"{path.name}: unreadable plan ({type(e).__name__}: {str(e)[:120]})") from None
+        raise InputError(f"{path.name}: unreadable plan ({str(e)[:120] or 'its reader failed'})") from None
     return check_name(plan, path.name)
 
 

@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from flightctl import __version__
-from flightctl.errors import InputError, Parser, output_file
+from flightctl.errors import InputError, Parser, output_file, write_atomic
 from flightctl.comms.frames import euler_ned, pulse_us, quaternion, vector_ned
 from flightctl.logfile import FLIGHT_COLUMNS, MAG_COLUMNS, read_flight_log
 from flightctl.params import Airframe, Gains, from_dict
@@ -324,7 +324,7 @@ def export(csv_path: str | Path, ulg_path: str | Path, px4_only: bool = False) -
     order = np.argsort(np.concatenate(times), kind="stable")
     blobs = [bytes(row) for c in chunks for row in c]
     body = b"".join([blobs[i] for i in order])
-    Path(ulg_path).write_bytes(bytes(head) + body)
+    write_atomic(ulg_path, (bytes(head), body))       # whole or not at all
     return {topic.name: len(stamps[topic.name]) for topic in topics} | {"rows": n}
 
 
@@ -379,9 +379,9 @@ def _import(args) -> int:
     say = (lambda *a: None) if args.quiet else (lambda m: print(f"log import: {m}", file=sys.stderr, flush=True))
     text = import_text(args.foreign, args.index, say)
     image = png(read_figure(to_table(text, str(out)))) if args.plot else None     # everything before writing
-    out.write_text(text)
+    write_atomic(out, text)
     if image is not None:
-        Path(args.plot).write_bytes(image)
+        write_atomic(args.plot, image)
     rows = text.count("\n") - sum(1 for line in text.splitlines() if line.startswith("#")) - 1
     damaged = re.search(r"^# damaged: (.*)$", text, re.M)       # a damaged log is said, not only in its header
     print(f"{args.foreign}: {rows} rows -> {out}" + (f", figure -> {args.plot}" if args.plot else "")
