@@ -87,8 +87,8 @@ def gyro_drift(f) -> list[np.ndarray]:
     acceleration: not a nuisance here. What the calibration leaves on the gyro (the still average's
     noise, the warm-up and in-run drift of sim/world/devices.py's `SensorNoise`) is small and matters
     all the same: 0.02 deg/s, 0.35 mrad/s, tilts R by 0.9 degrees in 45 s, 0.15 m/s^2 by then, the
-    drag of 1.5 m/s at k / M = 0.1 1/s; taken for drag, that growing error lowered k by 40 % on the 48 s
-    `excite` plan (issue 49)."""
+    drag of 1.5 m/s at k / M = 0.1 1/s; taken for drag, that growing error lowered k by 40 % on a 48 s
+    `excite` plan that lands (issue 49)."""
     Rm, acc_z = f.Rm, f.acc[2]
     start = int(np.argmax(f.running)) if f.running.any() else f.t.size
     dt = np.diff(f.t, append=f.t[-1])
