@@ -75,6 +75,31 @@ MAX_K_OVER_M = 2.0
 MIN_K_OVER_M = 0.03
 
 
+N_NUISANCE = 4    # RotorDragFit's: the inertial biases along x and y, the gyro offsets on x_b and y_b
+
+
+def gyro_drift(f) -> list[np.ndarray]:
+    """The inertial horizontal acceleration (2, n) that a unit offset of the gyro on x_b, then on y_b,
+    leaks into R (0, 0, a_z) of file `f`. `data._rotations` integrates the gyro from the first motor
+    start, R_(k+1) = R_k exp([w_k dt_k]x); an offset b on w tilts it to (I + [e_k]x) R_k with
+    e_(k+1) = e_k + R_k b dt_k (first order), so that R (0, 0, a_z) is off by e_k x R_k e_z a_z.
+    A gyro offset on z_b turns R about (nearly) the vertical, which leaks no horizontal
+    acceleration: not a nuisance here. What the calibration leaves on the gyro (the still average's
+    noise, the warm-up and in-run drift of sim/world/devices.py's `SensorNoise`) is small and matters
+    all the same: 0.02 deg/s, 0.35 mrad/s, tilts R by 0.9 degrees in 45 s, 0.15 m/s^2 by then, the
+    drag of 1.5 m/s at k / M = 0.1 1/s; taken for drag, that growing error lowered k by 40 % on a 48 s
+    `excite` plan that lands (issue 49)."""
+    Rm, acc_z = f.Rm, f.acc[2]
+    start = int(np.argmax(f.running)) if f.running.any() else f.t.size
+    dt = np.diff(f.t, append=f.t[-1])
+    dt[:start] = 0.0
+    out = []
+    for j in (0, 1):                      # R's column j: the offset on x_b, on y_b, in the inertial frame
+        e = [np.concatenate([[0.0], np.cumsum(Rm[3 * r + j] * dt)[:-1]]) for r in range(3)]
+        out.append(np.vstack([acc_z * (e[1] * Rm[8] - e[2] * Rm[5]), acc_z * (e[2] * Rm[2] - e[0] * Rm[8])]))
+    return out
+
+
 class RotorDragFit(GridCandidate):
     """Horizontal drag -k (u, v) in the body frame. The body velocity is not logged; it is
     reconstructed by the model itself: the horizontal inertial acceleration is the horizontal part
@@ -83,8 +108,11 @@ class RotorDragFit(GridCandidate):
     k / M, started at rest at take-off (small-tilt approximation for the drag direction). Its
     body-frame (u, v) gives the predicted accelerometer x, y: -k (u, v) / M. The initial tilt is
     known only to the accelerometer's bias, which leaks g times the tilt error into the horizontal
-    acceleration as an unknown constant in the inertial frame: two nuisance parameters (b_x, b_y),
-    free columns fitted with the offsets for each k on the training blocks."""
+    acceleration as an unknown constant in the inertial frame: two nuisance parameters (b_x, b_y).
+    And the integrated gyro drifts: the offset the calibration left on the roll and pitch gyros
+    (`gyro_drift`) tilts R by a growing error, which leaks a growing horizontal acceleration: two
+    more (the two offsets). All four are free columns fitted with the offsets for each k on the
+    training blocks."""
     effect = RotorDrag
     explains = "reconstructed body velocity u (m/s)"
     physical_check = (f"k / M from {MIN_K_OVER_M:g} to {MAX_K_OVER_M:g} 1/s: measured quadrotors 0.3-0.6 1/s, momentum theory's ram "
@@ -110,27 +138,36 @@ class RotorDragFit(GridCandidate):
             out.append(d)
         return out
 
+    def _nuisance_inputs(self) -> list[list[np.ndarray]]:
+        """Per nuisance, per file, the (2, n) inertial horizontal acceleration it leaks at unit size:
+        the constant biases along x and y, then the gyro offsets on x_b and y_b (`gyro_drift`);
+        computed once, they do not depend on k."""
+        if getattr(self, "_nuisances", None) is None:
+            ones = [np.ones(f.t.size) for f in self.ds.files]
+            zero = [np.zeros(f.t.size) for f in self.ds.files]
+            drift = [gyro_drift(f) for f in self.ds.files]
+            self._nuisances = ([[np.vstack(v) for v in zip(*pair)] for pair in ((ones, zero), (zero, ones))]
+                               + [[d[j] for d in drift] for j in range(2)])
+        return self._nuisances
+
     def change(self, k) -> Change:
-        """The drag prediction at k, and as own free columns the responses to unit inertial biases
-        (zero at k = 0: no drag, no velocity to reconstruct)."""
+        """The drag prediction at k, and as own free columns the responses to the nuisances (unit
+        inertial biases, unit gyro offsets; zero at k = 0: no drag, no velocity to reconstruct)."""
         ds = self.ds
         if k <= 0:
-            return Change(np.zeros((C, ds.n)), np.concatenate([np.zeros((2, C, ds.n)), ds.base_free]))
+            return Change(np.zeros((C, ds.n)), np.concatenate([np.zeros((N_NUISANCE, C, ds.n)), ds.base_free]))
         ah = [np.vstack([f.Rm[2] * f.acc[2], f.Rm[5] * f.acc[2]]) for f in ds.files]
-        ones = [np.ones(f.t.size) for f in ds.files]
-        zero = [np.zeros(f.t.size) for f in ds.files]
         delta = ds.flat_filtered(self._filtered(k, ah))
-        bias = [ds.flat_filtered(self._filtered(k, [np.vstack(v) for v in zip(*pair)]))
-                for pair in ((ones, zero), (zero, ones))]
+        bias = [ds.flat_filtered(self._filtered(k, x)) for x in self._nuisance_inputs()]
         return Change(delta, np.concatenate([np.stack(bias), ds.base_free]))
 
     def predict(self, parameters):
-        """The drag prediction at k with its two nuisance biases fitted on all data (as the climb
-        speed of `rotor_inflow` fits its initial height and speed): a carried effect's term."""
+        """The drag prediction at k with its nuisances fitted on all data (as the climb speed of
+        `rotor_inflow` fits its initial height and speed): a carried effect's term."""
         k = float(parameters["k"])
         ch = self.change(k)
         e = self.r_base - ch.delta
-        A = np.stack(list(ch.free[:2]), axis=-1)
+        A = np.stack(list(ch.free[:N_NUISANCE]), axis=-1)
         b = solve(linear_stats(self.ds, e, A), np.ones(N_BLOCKS, bool), self.ds.block_counts)[1]
         return ch.delta + A @ b
 
