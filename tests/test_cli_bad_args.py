@@ -188,7 +188,7 @@ def test_a_closed_stdout_is_silent(argv):
     read, write = os.pipe()
     os.close(read)
     try:
-        r = subprocess.run([sys.executable, "-m", "flightctl.cli", *argv], stdout=write, stderr=subprocess.PIPE,
+        r = subprocess.run([sys.executable, "-P", "-m", "flightctl.cli", *argv], stdout=write, stderr=subprocess.PIPE,
                            text=True, timeout=120, env={**os.environ, "PYTHONUNBUFFERED": "1"})
     finally:
         os.close(write)

@@ -262,7 +262,9 @@ def test_the_corpus_of_ardupilot_logs_gives_one_row_per_log(tmp_path):
     blind = rows["mechanical_fail.log"].split("|")        # no IMU: the static tier on ATT's time base
     assert blind[5].strip() == "static" and "LOG_BITMASK 1854" in rows["mechanical_fail.log"], blind
     judged = rows["log171.bin"].split("|")
-    assert judged[7].strip() == "none" and judged[10].strip() == "" and "APM:Copter V3.3-dev" in judged[2]
+    # the one cause named is the rotors' drag in forward flight (acc_x), which the paper's model lacks: seen since
+    # rotor_drag's fit takes the gyro's offsets as nuisances (sim/causes/rotor_drag.py)
+    assert judged[7].strip().startswith("rotor_drag k") and judged[10].strip() == "" and "APM:Copter V3.3-dev" in judged[2]
     assert judged[9].strip().startswith("t: roll 5, pitch 6, yaw 7, thrust 8")   # docs/log-import.md
     assert judged[5].strip() == "dynamic (static too)" and "pattern: yaw trim" in judged[6]
 
@@ -353,12 +355,16 @@ def crash_csv(tmp_path_factory):
 
 
 def test_diagnose_judges_the_arducopter_3_3_flight_on_a_base_model_that_its_data_confirm(tmp_path, crash_csv):
-    """From the .bin as from its CSV: no cause named, on a base model whose roll, pitch, yaw and thrust
-    effectiveness are positive and significant (the X layout and the RCOU order confirmed by the data)."""
+    """From the .bin as from its CSV: the same finding, the rotors' drag alone (the one term of the flight the
+    paper's model lacks, in the forward-flight channel acc_x, with a drag per unit speed no rotor exceeds), on a
+    base model whose roll, pitch, yaw and thrust effectiveness are positive and significant (the X layout and
+    the RCOU order confirmed by the data)."""
     out = tmp_path / "r.json"
     assert main(["diagnose", str(CRASH), "--json", str(out), "--quiet"]) == 0
     report = json.loads(out.read_text())
-    assert report["causes"] == [] == crash_csv[1]["causes"]                                                # nothing named on top of the base model
+    assert report["causes"] == crash_csv[1]["causes"]                                 # the .bin reads as its CSV
+    assert [c["cause"] for c in report["causes"]] == ["rotor_drag"], report["causes"]
+    assert 0.0 < report["causes"][0]["parameters"]["k"] < 1.0 and report["causes"][0]["gain"] > 0.0
     base = report["base_model"]
     for k in ("k_p", "k_q", "k_r", "k_z"):                                     # roll, pitch, yaw, thrust: positive, t >= 2
         assert base[k]["value"] > 2.0 * base[k]["stderr"], (k, base[k])

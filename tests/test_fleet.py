@@ -142,6 +142,7 @@ def test_without_dask_the_work_runs_here_and_says_how_to_get_the_engine(monkeypa
     from flightctl.sim import engine
     monkeypatch.setitem(sys.modules, "distributed", None)      # as if the fleet extra were not installed
     monkeypatch.setattr(engine, "_hinted", [False])
+    monkeypatch.setattr(engine, "_said", {"quiet": False})   # an earlier --quiet command in this process unsays it
     seen = []
     assert engine.run(str.upper, ["a", "b", "c"], 2, lambda k, r: seen.append((k, r))) == ["A", "B", "C"]
     assert engine.run(str.lower, ["D"], 2) == ["d"]
