@@ -28,10 +28,10 @@ import numpy as np
 from flightctl.sim.logs import controller
 from flightctl.errors import InputError, read_bytes
 from flightctl.sim.logs import arducopter3, identity
+from flightctl.sim.logs.dfarming import MOTOR_FUNCTION, armed as _armed
 from flightctl.sim.logs.common import (CELL_FULL_V, DEG, FRD, MIN_ROWS, Imported, Stream, command_p, parser_said,
                                       rate_notes)
 
-MOTOR_FUNCTION = 33                    # SERVOn_FUNCTION of motor 1 (33-44: motors 1-12)
 FRAME_CLASSES = {0: "an undefined frame", 2: "a hexacopter", 3: "an octocopter", 4: "an octo-quad (coaxial)",
                  5: "a Y6", 6: "a helicopter", 7: "a tricopter", 8: "a single-rotor vehicle", 9: "a coaxial copter",
                  10: "a tailsitter", 11: "a dual helicopter", 12: "a dodeca-hexa", 13: "a quad helicopter",
@@ -55,14 +55,6 @@ OLD_RATE_NOTE = ("ArduCopter before 3.3 logs IMU in its 50 Hz loop and the motor
                  "whatever LOG_BITMASK says: with a newer firmware, ")
 WANTED = ["PARM", "MSG", "VER", "GPS", "IMU", "GYR", "ACC", "RCOU", "RCO2", "RCO3", "BAT", "BARO", "RFND", "ATT", "RATE",
           "PIDR", "PIDP", "PIDY", "ESC", "ARM", "EV", "MOT", "CURR", "CTUN", "VIBE"]
-# EV's ids (ArduPilot's libraries/AP_Logger/AP_Logger.h, `enum class LogEvent`; DATA_* in
-# ArduCopter 3.x's defines.h, the same numbers since 3.0) that are only written while armed: ARMED 10,
-# DISARMED 11 (armed until then), AUTO_ARMED 15 (the throttle raised while armed), NOT_LANDED 28 (the
-# landing detector's take-off). LAND_COMPLETE_MAYBE 17 and LAND_COMPLETE 18, the landing detector's
-# landing, say the vehicle was in the air just before.
-ARMED_EVENTS = {10: "ARMED", 11: "DISARMED", 15: "AUTO_ARMED", 28: "NOT_LANDED", 17: "LAND_COMPLETE_MAYBE",
-                18: "LAND_COMPLETE"}
-RAN_SHARE = 0.05                      # of the pulse range above its lowest: a motor output of an armed vehicle
 HEADER = b"\xa3\x95"                   # every binary message starts so (then its type byte)
 TAIL_BYTES = 528                      # pymavlink's allowance for garbage at a log's end (a flash page and more)
 MAX_RESUMES = 100                     # readings past an unknown message type (each one a pass over the file)
@@ -376,57 +368,6 @@ def _motors(p: dict, msgs, imp: Imported) -> Stream:
     imp.meta["command"] = f"P = 255 (pwm - {lo:g}) / ({hi:g} - {lo:g}): {outputs.split(' (')[0]} over {source.split(' ')[0]}"
     imp.meta["esc_order"] = esc_order
     return Stream(name, t, P, held=True)
-
-
-def _armed(p: dict, msgs) -> tuple[bool | None, str]:
-    """(whether the log shows the vehicle armed, which of its sources say so): ARM's ArmState, EV's ids
-    that are only written while armed (ARMED_EVENTS: a log that opens armed, LOG_DISARMED 0, holds
-    AUTO_ARMED or NOT_LANDED and no ARMED), and the motor outputs above their disarmed pulse (`_outputs_ran`);
-    None when none says armed and the log has no ARM or EV (outputs at their lowest in a log cut before
-    its arming: the idle checks judge it). Armed when any source says so: a disarmed ArduCopter holds its
-    motor outputs at their lowest pulse or 0 (AP_MotorsMulticopter's shut-down spool state: MOT_PWM_MIN,
-    or 0 with MOT_SAFE_DISARM), writes no such event, and logs ArmState 0."""
-    said = []
-    if any(getattr(m, "ArmState", 0) for m in msgs["ARM"]):
-        said.append("ARM's ArmState")
-    ids = sorted({int(getattr(m, "Id", -1)) for m in msgs["EV"]} & set(ARMED_EVENTS))
-    if ids:
-        said.append("EV " + ", ".join(f"{i} {ARMED_EVENTS[i]}" for i in ids))
-    ran = _outputs_ran(p, msgs)
-    if ran:
-        said.append(ran)
-    if said:
-        return True, "; ".join(said)
-    if msgs["ARM"] or msgs["EV"]:       # (outputs alone at their lowest: a short log before the arming)
-        return False, ", ".join(k for k, v in (("ARM", msgs["ARM"]), ("EV", msgs["EV"]), ("motor outputs", ran is not None))
-                                if v) + " messages"
-    return None, ""
-
-
-def _outputs_ran(p: dict, msgs) -> str | None:
-    """Which motor outputs rose above their lowest pulse by RAN_SHARE of their range ('' when none
-    did; None without RCOU or MOT): the motors' outputs of SERVOn_FUNCTION 33-44, else (ArduCopter 3.x,
-    or no such parameter) outputs 1-4, over MOT_PWM_MIN/MAX else RC3_MIN/MAX."""
-    if msgs["MOT"]:                    # ArduCopter 3.0-3.1's pulses (arducopter3.outputs)
-        ms, fields = msgs["MOT"], [c for c in msgs["MOT"][0].fmt.columns if re.fullmatch(r"Mot\d+", c)]
-    elif msgs["RCOU"]:
-        ms = msgs["RCOU"]
-        pre = next((k for k in arducopter3.RCOU_FIELDS if f"{k}1" in ms[0].fmt.columns), None)
-        if pre is None:
-            return None
-        chans = sorted(int(m[1]) for name, v in p.items() if (m := re.fullmatch(r"SERVO(\d+)_FUNCTION", name))
-                       and MOTOR_FUNCTION <= int(v) <= MOTOR_FUNCTION + 11 and int(m[1]) <= 14) or [1, 2, 3, 4]
-        fields = [f"{pre}{c}" for c in chans if f"{pre}{c}" in ms[0].fmt.columns]
-    else:
-        return None
-    lo, hi = float(p.get("MOT_PWM_MIN", 0) or 0), float(p.get("MOT_PWM_MAX", 0) or 0)
-    if not 0 < lo < hi:
-        lo, hi = float(p.get("RC3_MIN", 1000) or 1000), float(p.get("RC3_MAX", 2000) or 2000)
-    up = [f for f in fields if max(float(getattr(m, f)) for m in ms) > lo + RAN_SHARE * (hi - lo)]
-    if not up:
-        return ""
-    top = max(max(float(getattr(m, f)) for m in ms) for f in up)
-    return f"{ms[0].get_type()} {', '.join(up)} up to {top:g} (above {lo:g}, the disarmed output)"
 
 
 def _gyro(p: dict, msgs, imp: Imported) -> tuple[bool, str, str]:
