@@ -8,6 +8,10 @@ busy machine (tens of seconds to minutes, inside pytest-timeout's 240 s of test_
 flights and test_analyze's step predictions). The plant and the IMU chip's registers are compiled for
 every run; the batched simulator's loop (half a minute) only when a collected test file uses the
 sweeps. With the cache already filled this costs about 2 s; with numba absent or FLIGHTCTL_JIT=0, nothing.
+
+The tests of a file whose fixtures live for the whole file (a simulated fleet diagnosed, a real log read)
+run on one worker (pytest-xdist's `--dist loadgroup`, pyproject.toml): with xdist's default `load` the
+file's tests are spread over the workers and each worker builds the same fixture again.
 """
 from __future__ import annotations
 
@@ -39,6 +43,16 @@ def warm(files, say=lambda text: print(text, file=sys.stderr)) -> None:
         simulate(params, SCENARIOS["paper"]().plan, 2, draw(params, 2, 0), until=0.01, workers=1)
     say(f"conftest: the simulated world{' and the batched simulator' if batch else ''} compiled or loaded from "
         f"numba's cache in {time.perf_counter() - start:.1f} s, before the tests")
+
+
+def pytest_collection_modifyitems(config, items):
+    """One xdist group per file whose tests share a fixture of module or session scope (see above)."""
+    for item in items:
+        defs = getattr(getattr(item, "_fixtureinfo", None), "name2fixturedefs", {})
+        if any(d.scope in ("module", "session", "package") for ds in defs.values() for d in ds
+               if not d.argname.startswith(("tmp_path_factory", "worker_id", "testrun_uid"))
+               and "_pytest" not in (getattr(d.func, "__module__", "") or "")):
+            item.add_marker(pytest.mark.xdist_group(item.path.stem))
 
 
 def _files(ids) -> list[str]:
