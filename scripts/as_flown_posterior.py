@@ -167,7 +167,8 @@ def render(result: dict) -> str:
         d = {f"{c}.{p}": float(v[a['point']]) for (c, p), v in a["draws"].items()}
         lines += ["", f"The posterior's file, `--params paper-posterior` (flightctl/vehicles/paper-posterior.toml): "
                   f"its point is draw {a['point']} (seed {result['seed'] + a['point']}), the passing draw nearest the "
-                  f"posterior's median; its ranges the posterior's 5-95 % intervals: "
+                  f"posterior's median; its ranges the posterior's 5-95 % intervals (the table above), widened to hold the "
+                  f"point where it lies outside them. The point: "
                   + ", ".join(f"`{k}` {_g(v)}" for k, v in d.items()) + "."]
     return "\n".join(lines)
 
