@@ -179,16 +179,19 @@ def _off_n(result: dict) -> int:
 
 
 def facts(result: dict) -> str:
-    """The README's short table: the prior's share against the posterior's, per observation."""
+    """The README's short table, prior and posterior side by side: per observation the share of the
+    prior's draws that pass it, and the share of the draws passing every other one that pass it (the
+    posterior's prediction of it, held out); then the ranges the evidence pins down."""
     a = analyse(result)
-    ok = a["ok"]
+    held = {h["observation"]: h for h in a["held_out"]}
     rows = []
     for o in evidence.OBSERVATIONS:
         v = a["verdicts"][o.id]
-        rows.append([f"{o.id} ({o.source})", _pct(int(v.sum()), a["n"]), _pct(int((v & ok).sum()), int(ok.sum()))])
-    rows.append(["all of the evidence", _pct(a["passed"], a["n"]), "100 % by construction"])
+        post = _pct(*held[o.id]["posterior"]) if o.id in held else "not informative"
+        rows.append([f"{o.id} ({o.source})", _pct(int(v.sum()), a["n"]), post])
+    rows.append(["all of the evidence", _pct(a["passed"], a["n"]), "the posterior: the draws that pass all of it"])
     lines = table(["the paper's observation (sim/sweeps/evidence.py)", f"prior: {result['prior']}'s ranges",
-                   "posterior: the draws that pass all of it"], rows)
+                   "posterior given every other observation (held out)"], rows)
     pins = pinned(a)
     lines += ["", f"Seed {result['seed']}, `python scripts/as_flown_posterior.py` (docs/as-flown.md): what the "
               f"evidence pins down: " + ("; ".join(pins) if pins else "nothing at this size") + "."]
