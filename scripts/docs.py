@@ -95,6 +95,12 @@ BLOCKS = (
     Block("as-flown-monte-carlo", "docs/as-flown.md", "<!-- as-flown monte carlo begin -->",
           "<!-- as-flown monte carlo end -->",
           SCRIPT + ("scripts/as_flown_mc.py", "--from", "docs/as-flown-mc.json", "--doc", "{doc}")),
+    # the posterior (issue 44), rendered from its run's JSON; the run itself (2000 + 7 x 500 draws on the
+    # batched simulator) is `python scripts/as_flown_posterior.py --workers 2`, about 15 min on two cores
+    Block("as-flown-posterior", "docs/as-flown.md", *marked("as-flown posterior"),
+          SCRIPT + ("scripts/as_flown_posterior.py", "--from", "docs/as-flown-posterior.json", "--doc", "{doc}")),
+    Block("paper-facts-posterior", "README.md", *marked("paper facts posterior"),
+          SCRIPT + ("scripts/as_flown_posterior.py", "--from", "docs/as-flown-posterior.json", "--readme", "{doc}")),
     Block("as-flown-gains", "docs/as-flown.md", *marked("as-flown gains"),
           SCRIPT + ("scripts/as_flown_gains.py", "--doc", "{doc}"), minutes=0.5),
     Block("estimator-bias", "docs/as-flown.md", *marked("estimator bias"),

@@ -183,26 +183,37 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
     """The draws flown on the batched simulator (sim/sweeps/batch.py): draw k with seed + k, the vehicle
     `run` flies, both gain sets, judged as `_fly` judges (flies, lands, settles, the paper's figures). `progress`: a
     sim/progress.py Progress, one step a gain set, the vehicles in between."""
-    import numpy as np
-
     from flightctl.sim import causes
-    from flightctl.sim.sweeps.batch import simulate
-    from flightctl.sim.flights.metrics import settles
     from flightctl.sim.flights.scenarios import SCENARIOS
-    from flightctl.sim.sweeps import judge
     params = causes.load_vehicle(spec)
     spans = ranged(params)
     if not spans:
         raise InputError(f"--monte-carlo: {spec or 'the reference airframe'} carries no ranges")
-    sc = SCENARIOS[scenario]()
+    draws = draw(params, n, seed)
+    rows = batch_rows(params, SCENARIOS[scenario](), draws, [seed + k for k in range(n)], progress, workers)
+    return _result(spec, scenario, n, seed, spans, rows,
+                   simulator="batched simulator (sim/sweeps/batch.py): each draw's vehicle flown as the full onboard "
+                             "path flies it, from power-on to its landing, compiled")
+
+
+def batch_rows(params, sc, draws: dict, seeds: list[int], progress=None, workers: int | None = None,
+               structure: str = "flight") -> list[dict]:
+    """The Monte Carlo's rows of `draws` ((cause, parameter) -> (n,) arrays) of `params` flown on the
+    batched simulator with both gain sets (vehicle k with seeds[k]; `structure` the estimator's), each
+    gain set's flights judged as `_fly` judges them (flies, lands, settles, judge.summary's figures)."""
+    import numpy as np
+
+    from flightctl.sim.flights.metrics import settles
+    from flightctl.sim.sweeps import judge
+    from flightctl.sim.sweeps.batch import simulate
+    n = len(seeds)
     steps = [st for st in sc.steps if st.channel != "alt"]
     record = (min(st.t for st in steps) - 0.05, max(st.t + st.window for st in steps) + 0.05) if steps else None
-    draws = draw(params, n, seed)
     out = {}
     for g in GAINS:
         frac = (lambda f, g=g: progress.update(f, f"{g}: {n} vehicles")) if progress is not None else None
-        flight = simulate(causes.load_vehicle(spec, GAIN_SETS[g]), sc.plan, n, draws, seeds=[seed + k for k in range(n)],
-                          record=record, workers=workers or os.cpu_count() or 1, progress=frac)
+        flight = simulate(dataclasses.replace(params, gains=GAIN_SETS[g]), sc.plan, n, draws, seeds=seeds,
+                          record=record, workers=workers or os.cpu_count() or 1, progress=frac, structure=structure)
         flies = flight.flies
         settled = settles(flight.log, sc.steps, 0.0) & flies if steps else flies
         figures = judge.step_figures(flight.log, sc.steps, 0.0) if steps else []
@@ -219,9 +230,7 @@ def run_batch(spec: str | None, scenario: str, n: int, seed: int = 0, progress=N
                       "settles": bool(settled[k]), "outcome": flight.outcome[k],
                       **(judge.summary(mine) if flies[k] and mine else {"score": None})}
         rows.append(row)
-    return _result(spec, scenario, n, seed, spans, rows,
-                   simulator="batched simulator (sim/sweeps/batch.py): each draw's vehicle flown as the full onboard "
-                             "path flies it, from power-on to its landing, compiled")
+    return rows
 
 
 def summary(result: dict) -> str:
