@@ -255,6 +255,7 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
         "command": f"P = 255 (motor - {lo:g}) / ({hi:g} - {lo:g}): the command over motorOutput",
         "gyro_source": source + (f"; {note}" if note and gyro_filter != "none" else ""),
         "gyro_filter": gyro_filter, "gyro_notches": notches,
+        "gyro_loop_filter": chain,            # the low-passes of the gyro the PID loop flies on (predict.py)
         "acc_source": acc_source, "acc_filter": acc_filter,
         "height_source": height_source,
     })
