@@ -4,10 +4,11 @@ of a flight (`base.identify`, diagnose's own) flying the firmware's controller a
 (steps.py) on the rest of the flight, which the identification did not see, or on another log of the same
 vehicle flown with other gains (`cross`).
 
-The loop, per axis, on s = j 2 pi f and z = exp(s T) at the firmware's loop period T (the controller's and
-the filters' difference equations exactly, the vehicle in continuous time behind a zero-order hold):
+The loop, per axis, on s = j 2 pi f and z = exp(s T) at the firmware's loop period T: the controller's and
+the filters' difference equations, the vehicle's rate as the loop samples it (the command held over a
+period, integrated: omega[n + 1] = omega[n] + b T u[n] behind the delay):
 
-    vehicle   omega = G u,  G = b exp(-s tau) (1 - z^-1) / (s^2 T)
+    vehicle   omega = G u,  G = b exp(-s tau) T z^-1 / (1 - z^-1)
               b: the base model linearised at the flight's median command Pm (base.py's channels,
               p_dot = k_p sum_i g_i y_i (P_i - h2)^2, and likewise q_dot, r_dot):
               b = 2 R k_axis sum_i g_i c_i m_i (Pm - h2), c_i the model's lever (y_i, -x_i, -s_i of the
@@ -156,7 +157,7 @@ def closed_loop(f: np.ndarray, b: float, tau: float, parts: dict, loop_chain: st
     T = 1.0 / fs
     s = 2j * np.pi * np.maximum(f, 1e-6)
     z1 = np.exp(-s * T)
-    G = b * np.exp(-s * tau) * (1.0 - z1) / (s * s * T)
+    G = b * np.exp(-s * tau) * T * z1 / (1.0 - z1)
     Fg = _freq(_stages(loop_chain, fs), z1)
     Fr = _freq(_stages(response_chain, fs), z1)
     Fp = _freq([_pt1(parts["p_lowpass_hz"], fs)], z1) if parts["p_lowpass_hz"] else 1.0
