@@ -239,7 +239,7 @@ def predict(model, ctrl: dict, checked: Table, identified_on: str, checked_on: s
         vehicle, declared = model
         e = rate.get(axis, rate)
         if "why" in e:
-            out[axis] = {**head, "why": f"no measured step on {checked_on}: {e['why']}"}
+            out[axis] = {**head, "why": f"no measured step on the rows checked: {e['why']}"}
             continue
         if axis == "z" and not yaw_identified(vehicle):
             out[axis] = {**head, "why": f"{YAW_UNKNOWN} (base.py): no yaw loop to close"}
