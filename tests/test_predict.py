@@ -138,3 +138,23 @@ def test_cs110_cross_prediction(cs110, capsys):
         for k in ("delay_s", "rise_s", "overshoot"):
             assert e[k]["predicted"] is not None and e[k]["measured"] is not None
     assert own["z"].get("why") or math.isfinite(own["z"]["step_error"])
+
+
+@pytest.mark.slow
+def test_diagnose_reports_and_draws_the_prediction(cs110, tmp_path):
+    """`flightctl diagnose LOG --json --steps` on the smooth tune's log: each rate axis with a measured step has its
+    `predicted` entry (the first half's model on the second half, its agreement figures) and the figure is written."""
+    import json
+
+    from flightctl.cli import main
+    out, fig = tmp_path / "r.json", tmp_path / "s.png"
+    assert main(["diagnose", str(CS110 / "example_smooth_tune.BBL"), "--json", str(out), "--steps", str(fig),
+                 "--quiet"]) == 0
+    rate = json.loads(out.read_text())["steps"][0]["rate"]
+    t = cs110["example_smooth_tune"]["t"]
+    cut = f"{t[0] + predict.SPLIT * (t[-1] - t[0]):.1f} s"
+    for ax in ("x", "y"):
+        p = rate[ax]["predicted"]
+        assert p["checked_on"].endswith(f"from {cut}") and p["identified_on"].endswith(f"before {cut}")
+        assert p["step_error"] > 0 and p["delay_s"]["measured"] is not None and "agrees" in p
+    assert fig.stat().st_size > 10_000
