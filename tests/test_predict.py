@@ -158,3 +158,33 @@ def test_diagnose_reports_and_draws_the_prediction(cs110, tmp_path):
         assert p["checked_on"].endswith(f"from {cut}") and p["identified_on"].endswith(f"before {cut}")
         assert p["step_error"] > 0 and p["delay_s"]["measured"] is not None and "agrees" in p
     assert fig.stat().st_size > 10_000
+
+
+@pytest.mark.slow
+def test_the_linearised_effectiveness_is_what_a_plain_regression_sees(cs110):
+    """The effectiveness the loop takes (the base model linearised through the mix, b per share of the mixer) is
+    the slope an independent regression finds, per P unit of the mix's sum of the commands (sum_i m_i P_i, which
+    a share u moves by 4 R u: b / (4 R)): the angular acceleration (12 Hz low-pass, differentiated) on that sum
+    at its best delay, on the smooth tune's first half (roll, pitch)."""
+    from scipy import signal
+
+    from flightctl import params as paramfile
+    first, _, _ = predict.halves(cs110["example_smooth_tune"])
+    vehicle, declared = predict.base_model(first, paramfile.load(None).airframe)
+    t = first["t"]
+    fs = 1.0 / float(np.median(np.diff(t)))
+    P = np.vstack([first[f"P{i}"] for i in range(1, 5)])
+    run = (P > 10).all(axis=0)
+    b, a = signal.butter(2, 12.0, fs=fs)
+    x, y = np.array(declared.x), np.array(declared.y)
+    for ax, mix in (("x", y / np.abs(y).max()), ("y", -x / np.abs(x).max())):
+        wd = np.gradient(signal.filtfilt(b, a, first[f"gyro_{ax}"]), t)[run]
+        drive = signal.filtfilt(b, a, mix @ P)
+        fits = []
+        for d in range(0, int(0.06 * fs), max(1, int(0.0025 * fs))):
+            X = np.column_stack([np.roll(drive, d)[run], np.ones(run.sum())])
+            co, res, *_ = np.linalg.lstsq(X, wd, rcond=None)
+            fits.append((float(res[0]), float(co[0])))
+        slope = min(fits)[1]
+        model = predict.effectiveness(vehicle, declared, ax) / (4 * predict.P_RANGE)   # per P unit of the mix's sum
+        assert model == pytest.approx(slope, rel=0.15), (ax, model, slope)
