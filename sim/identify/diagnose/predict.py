@@ -49,7 +49,7 @@ from flightctl.errors import InputError
 from flightctl.logfile import Table
 from flightctl.sim.identify.diagnose import steps
 from flightctl.sim.identify.diagnose.base import YAW_UNKNOWN, identify, yaw_identified
-from flightctl.sim.identify.diagnose.data import load_file
+from flightctl.sim.identify.diagnose.data import load_file, parse_filters
 from flightctl.sim.identify.diagnose.dataset import DYNAMIC_MIN_HZ, LOWPASS_HZ, sensor_filters
 from flightctl.sim.identify.diagnose.rotorspeed import rotor_speed_lag
 from flightctl.sim.logs.bbfields import version
@@ -90,8 +90,9 @@ def base_model(table: Table, a, progress=lambda *_: None):
 
 
 def _stages(chain: str, fs: float) -> list:
-    from flightctl.sim.identify.diagnose.data import parse_filters
-    return sensor_filters(parse_filters(chain, lambda w: None) if chain else (), fs)
+    def fail(what):
+        raise InputError(f"# gyro_filter: {what}")
+    return sensor_filters(parse_filters(chain, fail), fs)
 
 
 def _freq(stages, z1: np.ndarray) -> np.ndarray:
@@ -125,9 +126,11 @@ def loop_parts(ctrl: dict, meta: dict, axis: str) -> tuple[dict | None, list[str
     the reason when the log's controller cannot be closed."""
     fw = ctrl.get("firmware")
     g = ctrl.get("axes", {}).get(axis, {})
-    if fw != "betaflight" or any(g.get(k, {}).get("value") is None for k in ("kp", "ki", "kd")):
-        return None, [f"the controller's gains of {fw or 'this log'} are not in physical units (controller.unread): "
-                      "the loop cannot be closed"]
+    if fw != "betaflight":
+        return None, [f"the mix from {fw or 'this log'}'s controller output to the motor commands is not read here "
+                      "(Betaflight's only, mixer.c): the loop cannot be closed"]
+    if any(g.get(k, {}).get("value") is None for k in ("kp", "ki", "kd")):
+        return None, ["the controller's gains are not in physical units (controller.unread): the loop cannot be closed"]
     loop = (ctrl.get("loop_hz") or {}).get("value")
     if not loop:
         return None, ["the loop rate is not in the log's header"]
@@ -147,7 +150,8 @@ def loop_parts(ctrl: dict, meta: dict, axis: str) -> tuple[dict | None, list[str
     if axis == "z" and old:
         parts.update(kd=0.0, p_lowpass_hz=hz("yaw_lowpass_hz"))
     if parts["d_lowpass_hz"] and not (axis == "z" and old):
-        missing.append("the D low-pass's type (not in the header: the firmware's default biquad taken)")
+        missing.append("the D low-pass's type (taken as biquad, 3.1's default, fc/config.c:169: the header's "
+                       "enumeration, where it has one, is not read)")
     return parts, missing
 
 
@@ -254,7 +258,7 @@ def predict(model, ctrl: dict, checked: Table, identified_on: str, checked_on: s
         entry, pred = compare(curves[("rate", axis)],
                               lambda f: closed_loop(f, b, tau, parts, loop_chain, checked.meta.get("gyro_filter", "none")), e)
         out[axis] = {**head, **entry, "effectiveness": {"value": round(b, 2), "unit": "rad/s^2 per share of the mixer"},
-                     "delay_s": entry["delay_s"], "timing_s": tau, "controller": parts, "not_modelled": missing}
+                     "timing_s": tau, "controller": parts, "not_modelled": missing}
         drawn[axis] = (curves[("rate", axis)], pred)
     return out, drawn
 
@@ -262,14 +266,20 @@ def predict(model, ctrl: dict, checked: Table, identified_on: str, checked_on: s
 def held_out(table: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple[dict, dict]:
     """The prediction on one log: identified on its first SPLIT of time, checked on the rest."""
     first, second, cut = halves(table)
-    return predict(base_model(first, a, progress), ctrl, second, f"{table.path} before {cut:.1f} s",
+    return predict(_model(first, ctrl, table.meta, a, progress), ctrl, second, f"{table.path} before {cut:.1f} s",
                    f"{table.path} from {cut:.1f} s")
 
 
 def cross(identify_on: Table, check: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple[dict, dict]:
     """Identified on one log, the other's steps predicted with its own controller `ctrl` (a series of one
     vehicle flown with different gains)."""
-    return predict(base_model(identify_on, a, progress), ctrl, check, identify_on.path, check.path)
+    return predict(_model(identify_on, ctrl, check.meta, a, progress), ctrl, check, identify_on.path, check.path)
+
+
+def _model(table: Table, ctrl: dict, meta: dict, a, progress):
+    """The base model of `table`, or, before any identification, why the checked log's controller cannot be closed."""
+    parts, why = loop_parts(ctrl, meta, "x")
+    return base_model(table, a, progress) if parts is not None else why[0]
 
 
 def attach(reports: list[dict], curves: list, tables: list[Table], controllers: list[dict], a, progress) -> None:
