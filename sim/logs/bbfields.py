@@ -14,7 +14,7 @@ import struct
 
 import numpy as np
 
-from flightctl.sim.logs import controller
+from flightctl.sim.logs import bfrates, controller
 from flightctl.physics import G
 from flightctl.sim.logs import identity
 from flightctl.sim.logs.common import DEG, Imported, Stream, backward_note, command_p, euler_from_frd_ned, forward
@@ -230,7 +230,7 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
     imp.streams["motors"] = Stream("motors", t, P, held=True)
     _battery(imp, h, a, col, t, kind, ver)
     _rotor_speeds(imp, h, a, col, t, field, debug, kind)
-    _tracking(imp, a, col, t, field, hires, kind)
+    _tracking(imp, a, col, t, field, hires, kind, h if bfrates.applies(kind, ver, h) else None)
     height_source = "none"
     if "extPos[2]" in col and np.any(a[:, col["extPos[2]"]] != 0):
         imp.streams["height"] = Stream("extPos (motion capture)", t, -a[None, :, col["extPos[2]"]] * 1e-3)
@@ -255,6 +255,7 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
         "command": f"P = 255 (motor - {lo:g}) / ({hi:g} - {lo:g}): the command over motorOutput",
         "gyro_source": source + (f"; {note}" if note and gyro_filter != "none" else ""),
         "gyro_filter": gyro_filter, "gyro_notches": notches,
+        "gyro_loop_filter": chain,            # the low-passes of the gyro the PID loop flies on (predict.py)
         "acc_source": acc_source, "acc_filter": acc_filter,
         "height_source": height_source,
     })
@@ -312,9 +313,10 @@ def _rotor_speeds(imp, h, a, col, t, field, debug, kind):
     imp.meta["motor_poles"] = f"{poles:g}"
 
 
-def _tracking(imp, a, col, t, field, hires, kind):
+def _tracking(imp, a, col, t, field, hires, kind, curve_h=None):
     """What draws rate tracking: the rate setpoint (Betaflight setpoint[0..2], INAV axisRate[0..2];
-    deg/s, the gyro's frame), the sticks (rcCommand, normalised) and the PID terms (axisP/I/D/F, in
+    deg/s, the gyro's frame; a Betaflight 3.1 log's from rcCommand through its rate curve, `curve_h` its
+    header: sim/logs/bfrates.py), the sticks (rcCommand, normalised) and the PID terms (axisP/I/D/F, in
     the mixer's units: 1000 is its full range)."""
     sp = "axisRate" if kind == "inav" else "setpoint"
     if f"{sp}[0]" in col:
@@ -322,6 +324,8 @@ def _tracking(imp, a, col, t, field, hires, kind):
     if "rcCommand[0]" in col:
         rc = field("rcCommand", 4)
         rc = np.where(rc >= 2.0 ** 31, rc - 2.0 ** 32, rc)      # orangebox reads some of INAV's as unsigned
+        if "setpoint" not in imp.streams and curve_h is not None:
+            imp.streams["setpoint"] = Stream(bfrates.source(curve_h), t, bfrates.setpoint(curve_h, rc[:3]))
         rc[:3] /= 500.0
         rc[3] = (rc[3] - 1000.0) / 1000.0
         imp.streams["rc"] = Stream("rcCommand", t, rc)

@@ -79,6 +79,12 @@ def blackbox(h: dict, kind: str, convert: bool) -> dict:
         out["unread"].append(f"the gains' physical scaling ({kind}'s source not read here: raw values)")
     if ff_name is None and not any("kf" in v for v in out["axes"].values()):
         out["unread"].append("feed-forward (no ff_weight or feedforward_weight in the header)")
+    if "dtermSetpointWeight" in h:      # Betaflight 3.1: D on (c setpoint - gyro), pid.c:163, 272-276 of v3.1.5
+        out["d_setpoint_weight"] = _entry([h["dtermSetpointWeight"], h.get("setpointRelaxRatio")],
+                                          float(h["dtermSetpointWeight"]) / 100.0 if convert else None, "-",
+                                          "header dtermSetpointWeight / 100 (raw: it, setpointRelaxRatio): the D term on "
+                                          "c setpoint - gyro, pid.c:163, 272-276 of v3.1.5 (c relaxed by the stick's "
+                                          "deflection when setpointRelaxRatio is under 100)")
     looptime, denom = h.get("looptime"), h.get("pid_process_denom", 1 if kind == "inav" else None)
     if looptime and denom:
         out["loop_hz"] = _entry([looptime, denom], 1e6 / (float(looptime) * float(denom)), "Hz",

@@ -14,7 +14,8 @@ gets it and the static tier's findings beside it; a log the dynamic tier refuses
 alone (hover, motor shares, centre of mass against weak motor against yaw trim, battery, vibration),
 exit status 0, with the refusal as `tier_why`. REPORT.json's `tier` says which. Either way REPORT.json's
 `steps` holds each log's measured step responses, per loop and axis, or the reason it cannot show one
-(steps.py, docs/steps.md); `--steps STEPS.png` draws them; `controller` the firmware's rate controller as
+(steps.py, docs/steps.md), each rate axis's with the step the base model identified on the log's first half
+predicts on its second (`predicted`, predict.py); `--steps STEPS.png` draws them; `controller` the firmware's rate controller as
 the log's settings give it (sim/logs/controller.py).
 
 Several files are one vehicle, diagnosed jointly. One file of many logs (a blackbox file holds one
@@ -48,7 +49,7 @@ from flightctl.errors import InputError, Parser, output_file, write_atomic
 from flightctl.logfile import read_flight_log
 from flightctl.sim import engine
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
-from flightctl.sim.identify.diagnose import report as diagnose_report, steps
+from flightctl.sim.identify.diagnose import predict, report as diagnose_report, steps
 from flightctl.sim.identify.diagnose.verdict import diagnose, say, validate
 from flightctl.sim.identify.static import STATIC_COLUMNS, StaticOnly
 from flightctl.sim.logs import controller
@@ -196,6 +197,7 @@ def _main(argv: list[str]) -> int:
     report = d.report()
     report["steps"], curves = steps.of(tables)
     report["controller"] = [controller.of_table(t) for t in tables]
+    predict.attach(report["steps"], curves, tables, report["controller"], params.airframe, progress)
     _steps_figure(args.steps, curves, plots, images)
     text = diagnose_report.text(d, report) + steps.text(report["steps"]) + controller.text(report["controller"])
     report["runtime_s"] = round(time.perf_counter() - t0, 2)
@@ -274,6 +276,7 @@ def _each(args, params, progress, t0) -> int:
     for e, d in judged:
         reports[e.index]["steps"], c = steps.of([e.table])
         reports[e.index]["controller"] = [controller.of_table(e.table)]
+        predict.attach(reports[e.index]["steps"], c, [e.table], reports[e.index]["controller"], params.airframe, progress)
         curves += c
     for e in entries:
         logs.append({"index": e.index, "judged": True, "report": reports[e.index]} if e.index in reports

@@ -143,6 +143,19 @@ class Response:
     band_hz: float               # coherent (>= MIN_COHERENCE) up to here
     used: int                    # windows with input
     flown: int                   # windows with all motors running
+    fs: float = 0.0              # the grid's rate (Hz) and its window, for a response set beside this one
+    n_seg: int = 0
+
+
+def band_step(H: np.ndarray, f: np.ndarray, band: float, n_seg: int, n_pre: int, n_resp: int) -> np.ndarray:
+    """The step of a frequency response H on the bins f of an n_seg window, rolled off above `band` (raised
+    cosine to twice it), from -n_pre to n_resp rows: the roll-off is zero-phase and smears the impulse to both
+    sides (the module's PRE_SHARE). One definition for the measured steps and a model's set beside them."""
+    taper = np.clip(0.5 * (1.0 + np.cos(np.pi * (f - band) / band)), 0.0, 1.0)
+    taper[f <= band] = 1.0
+    taper[f >= 2.0 * band] = 0.0
+    imp = np.fft.irfft(H * taper, n_seg)
+    return np.cumsum(np.concatenate([imp[..., n_seg - n_pre:], imp[..., :n_resp]], axis=-1), axis=-1)
 
 
 def _uniform(t: np.ndarray, cols: list[np.ndarray], ok: np.ndarray, air: np.ndarray):
@@ -203,19 +216,15 @@ def estimate(t: np.ndarray, u: np.ndarray, y: np.ndarray, ok: np.ndarray, air: n
                f"the setpoint or the response sampled so slowly that nothing above {band:.1f} Hz is in the log (half "
                "their slower rate")
         return why + f", over {int(moving.sum())} windows with input; a step needs {min_band_hz:g} Hz): too little to show a step"
-    taper = np.clip(0.5 * (1.0 + np.cos(np.pi * (f - band) / band)), 0.0, 1.0)
-    taper[f <= band] = 1.0
-    taper[f >= 2.0 * band] = 0.0
-
-    def to_step(h):      # from -n_pre: the roll-off is zero-phase and smears the impulse to both sides
-        imp = np.fft.irfft(h * taper, n_seg)
-        return np.cumsum(np.concatenate([imp[..., n_seg - n_pre:], imp[..., :n_resp]], axis=-1), axis=-1)
+    def to_step(h):
+        return band_step(h, f, band, n_seg, n_pre, n_resp)
 
     power = np.abs(U) ** 2
     lam = WINDOW_REGULARIZATION * power.max(axis=1, keepdims=True)
     Hw = (np.conj(U) * Y + lam * H) / (power + lam)
     Hw[:, 0] = Hw[:, 1]
-    return Response(np.arange(-n_pre, n_resp) / fs, to_step(H), to_step(Hw), band, int(moving.sum()), int(starts.size))
+    return Response(np.arange(-n_pre, n_resp) / fs, to_step(H), to_step(Hw), band, int(moving.sum()), int(starts.size),
+                    fs, n_seg)
 
 
 def _num(x: float, nd: int = 4):
@@ -343,12 +352,28 @@ def text(steps: list[dict]) -> str:
                          f"{e['final']}; {e['windows']} windows, coherent to {e['coherent_to_hz']} Hz"
                          + (" (the rise is the band's: an upper bound, the delay uncertain by half of it)"
                             if e["limited_by_band"] else ""))
+                if "predicted" in e:
+                    L.append("    " + prediction_text(e["predicted"]))
     return "\n".join(L) + ("\n" if L else "")
+
+
+def prediction_text(p: dict) -> str:
+    """One line of a predicted step beside its measured one (predict.py)."""
+    if "why" in p:
+        return f"predicted: {p['why']}"
+    def pair(k, scale, unit):
+        v = p[k]
+        f = lambda x: "-" if x is None else f"{scale * x:.0f}"
+        return f"{k.split('_')[0]} {f(v['predicted'])} {unit} (measured {f(v['measured'])})"
+    return (f"predicted on {p['checked_on']} by the model of {p['identified_on']}: " + ", ".join(
+        (pair("delay_s", 1e3, "ms"), pair("rise_s", 1e3, "ms"), pair("overshoot", 100, "%")))
+        + f"; step error {p['step_error']}; " + ("agrees" if p["agrees"] else f"disagrees: {p['points_to'] or 'its shape'}"))
 
 
 def figure(curves: list[tuple[dict, dict]]):
     """The mean response with its band (the windows' 10th-90th percentiles) per loop and axis, one
-    row per log; an axis the log cannot show says why in its panel."""
+    row per log, and on a rate axis with a prediction (predict.py) the held-out half measured and the step
+    predicted for it; an axis the log cannot show says why in its panel."""
     from matplotlib.figure import Figure
     rows = [(i, loop.name) for i, c in enumerate(curves) for loop in LOOPS if any(k[0] == loop.name for k in c[1])]
     fig = Figure(figsize=(12, 3.2 * max(1, len(rows))), layout="constrained")
@@ -368,6 +393,13 @@ def figure(curves: list[tuple[dict, dict]]):
             lo, hi = np.percentile(r.windows, SPREAD, axis=0)
             ax.fill_between(1e3 * r.t, lo, hi, color="tab:blue", alpha=0.25, label="windows 10-90 %")
             ax.plot(1e3 * r.t, r.step, color="tab:blue", lw=2, label=f"mean of {r.used} windows")
+            held = c.get(("predicted", a)) if name == "rate" else None
+            if held is not None:          # predict.py: the second half measured, the first half's model predicting it
+                m, pred = held
+                e = report[name][a].get("predicted", {})
+                ax.plot(1e3 * m.t, m.step, color="tab:green", lw=1.2, ls="--", label="measured, second half")
+                ax.plot(1e3 * m.t, pred, color="tab:red", lw=1.5,
+                        label=f"predicted (first half's model), error {e.get('step_error')}")
             ax.set_xlabel("time after the step (ms)")
             ax.legend(fontsize=7, loc="lower right")
         axes[row, 0].set_ylabel("response / setpoint")
