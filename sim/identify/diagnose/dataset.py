@@ -168,6 +168,10 @@ class DataSet:
         self.block_edges = list(zip(edges[:-1], edges[1:]))
         self.block_counts = np.diff(edges).astype(float)
         self.measured = self.flat_filtered(self.meas, sensor=False)
+        # what a candidate computes from the files and the accelerometer's sensing alone (rotor_drag's
+        # filtered velocities at each drag): no model's, so every model of this data set and its copies
+        # share it (`rebase` and `add_gyro_filter` change neither the files nor the accelerometer's filters)
+        self.of_files: dict = {}
         self.carried: dict[str, np.ndarray] = {}     # cause -> its filtered term in the base prediction
         self.carried_parameters: dict[str, dict] = {}
         self.extra_free: list[np.ndarray] = []       # free columns a cause of the chain brought (C, n)
