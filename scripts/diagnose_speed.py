@@ -111,7 +111,7 @@ def row(r: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("logs", nargs="*", help="the logs (default: better_tune.BBL, log171.bin, quadrotor_local.ulg)")
-    ap.add_argument("--against", metavar="REV", required=True, help="the commit whose code to set beside this one")
+    ap.add_argument("--against", metavar="REV", help="the commit whose code to set beside this one (required)")
     ap.add_argument("--rounds", type=int, default=3, help="alternating rounds of each log (default 3)")
     ap.add_argument("--markdown", action="store_true", help="print docs/diagnose.md's block: the date, the machine, a table")
     ap.add_argument("--inner", nargs=3, help=argparse.SUPPRESS)
@@ -123,6 +123,8 @@ def main(argv=None) -> int:
     logs = [Path(p) for p in a.logs] or list(LOGS)
     with tempfile.TemporaryDirectory() as tmp:
         try:
+            if a.against is None:
+                raise InputError("--against REV: name the commit whose code to set beside this one")
             if a.rounds < 1:
                 raise InputError(f"--rounds {a.rounds}: at least 1")
             for log in logs:
