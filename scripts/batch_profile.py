@@ -18,6 +18,12 @@ with `callgrind_control --dump=LABEL`, so that each section's count is its own:
   the controller (`onboard.step`: the estimator, the PIDs, the mixer); each per call, and per
   vehicle-step at the rate the loop calls it.
 
+`--against REV` counts the `batch` section (and the 2 s more in the air) of the same flight again on the
+code of REV, a commit of this checkout (its flightctl, sim and hil trees exported by `git archive` into
+a temporary folder, imported from there, numba compiling them afresh): whether a change of the
+benchmark's rate between two stops is the code's (its instructions per vehicle-step moved) or the
+machine's (they did not), which timing on a shared machine cannot tell.
+
 `--workers W` (the set-up and dispatch's own cost, item 3 of issue 48) counts the CPU-seconds of the
 batch on W of the engine's worker processes against one, outside valgrind: this process's and the
 workers' (`time.process_time` in each, before and after, the workers started by a first small batch).
@@ -175,12 +181,10 @@ def controller_loop(E, KC, W, dt, reps):
     return cnt[0]
 
 
-def _inner(n: int, seconds: float, out: str) -> None:
+def _inner(n: int, seconds: float, out: str, batch_only: bool = False) -> None:
     from flightctl.sim.sweeps import batch
     from flightctl.sim.sweeps import flight as fl
-    from flightctl.sim.world.imu import normals_per_read
     params, plan, draws = _flight(n, seconds)
-    loops = _phase_loops()
     run = fl.compiled_fly()
     kept = {}
 
@@ -193,10 +197,16 @@ def _inner(n: int, seconds: float, out: str) -> None:
     _mark("batch")
     longer = batch.simulate(params, plan, n, draws, until=seconds + AIR_S)
     _mark("longer")
+    sections = {"batch": flight.vehicle_steps, "longer": longer.vehicle_steps}
+    if batch_only:                     # (--against: another commit's code, whose phases may be named otherwise)
+        with open(out, "w") as f:
+            json.dump({"sections": sections}, f)
+        return
+    from flightctl.sim.world.imu import normals_per_read
+    loops = _phase_loops()
     X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI = kept["args"][:14]
     k = kept["args"][16]
     dt = float(k[fl.DT])
-    sections = {"batch": flight.vehicle_steps, "longer": longer.vehicle_steps}
     nn = float(np.mean([normals_per_read(c) for c in CC]))
     mag = 1.0 / fl.MAG_EVERY
     rate = {"rk4": 1.0, "forces": 1.0, "chip": 1.0, "vibration": 1.0, "normals": (nn + 3 * mag) / nn,
@@ -237,23 +247,41 @@ def _counts(folder: str) -> dict[str, tuple[int, int]]:
     return out
 
 
-def profile(n: int, seconds: float) -> dict:
+def _counted(n: int, seconds: float, extra: tuple[str, ...] = (), path: str | None = None) -> tuple[dict, dict]:
+    """(the inner run's sections, callgrind's counts by label) of the flight of n vehicles, S s after
+    arming; `path`: the package folder to import flightctl from (another commit's: scripts/revision.py)."""
     here = os.path.abspath(__file__)
     # numba compiles for the CPU it sees, and keys its cache by it: valgrind's (no AVX-512) is not this
     # one's, so that it would compile afresh under valgrind, for an hour. Both runs compile for CPU_NAME.
     env = {**os.environ, "NUMBA_CPU_NAME": CPU_NAME, "NUMBA_CPU_FEATURES": ""}
+    if path is not None:
+        env["PYTHONPATH"] = path
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "sections.json")
         # natively first: numba compiles (and caches) the phases' loops, so that valgrind only loads them
-        subprocess.run([sys.executable, here, "--inner", out, "--vehicles", "2", "--seconds", "0.01"], check=True, env=env)
+        subprocess.run([sys.executable, here, "--inner", out, "--vehicles", "2", "--seconds", "0.01", *extra],
+                       check=True, env=env)
         subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no",
                         "--cache-sim=no", "--dump-instr=no", f"--callgrind-out-file={tmp}/cg.%p",
-                        sys.executable, here, "--inner", out, "--vehicles", str(n), "--seconds", str(seconds)],
+                        sys.executable, here, "--inner", out, "--vehicles", str(n), "--seconds", str(seconds), *extra],
                        check=True, stderr=subprocess.DEVNULL, env={**env, UNDER: "1"})
         with open(out) as f:
             meta = json.load(f)
-        counts = _counts(tmp)
-    by = counts
+        return meta, _counts(tmp)
+
+
+def against(rev: str, n: int, seconds: float) -> dict:
+    """The batch's instructions per vehicle-step on commit `rev`'s code (scripts/revision.py), as `profile` counts them."""
+    import revision
+    with tempfile.TemporaryDirectory() as tmp:
+        meta, by = _counted(n, seconds, ("--batch-only",), revision.package(rev, tmp))
+    steps, more = meta["sections"]["batch"], meta["sections"]["longer"]
+    return {"rev": rev, "per_step": by["batch"][1] / steps, "whole_per_step": by["batch"][0] / steps,
+            "per_air_step": (by["longer"][1] - by["batch"][1]) / (more - steps)}
+
+
+def profile(n: int, seconds: float) -> dict:
+    meta, by = _counted(n, seconds)
     steps, more = meta["sections"]["batch"], meta["sections"]["longer"]
     phases = {name: (by[name][1] / meta["sections"][name], meta["rate"][name]) for name in meta["rate"]}
     return {"vehicles": n, "seconds": seconds, "vehicle_steps": steps, "per_step": by["batch"][1] / steps,
@@ -279,7 +307,22 @@ def table(r: dict) -> list[str]:
     rows.append(f"| a vehicle-step of the benchmark's flight (the calibration's 2 s on the floor, {r['seconds']:g} s of "
                 f"take-off; the set-up in Python besides: {r['whole_per_step']:,.0f} in all) | - | 1 | "
                 f"{r['per_step']:,.0f} | - |")
+    if "against" in r:
+        rows += against_rows(r)
     return [*HEADER, *rows]
+
+
+def against_rows(r: dict) -> list[str]:
+    """The rows of `--against`: the batch's counts on that commit's code, and this code's change from them."""
+    import revision
+    o = r["against"]
+    day = revision.day(o["rev"])
+    change = lambda now, then: f"this code {100.0 * (now / then - 1.0):+.1f} %"
+    return [f"| a vehicle-step in the air on the code of {o['rev']} ({day}; `--against {o['rev']}`) | - | 1 | "
+            f"{o['per_air_step']:,.0f} | {change(r['per_air_step'], o['per_air_step'])} |",
+            f"| a vehicle-step of the benchmark's flight on the code of {o['rev']} (the set-up in Python besides: "
+            f"{o['whole_per_step']:,.0f} in all, {change(r['whole_per_step'], o['whole_per_step'])}) | - | 1 | "
+            f"{o['per_step']:,.0f} | {change(r['per_step'], o['per_step'])} |"]
 
 
 def _worker_cpu() -> float:
@@ -313,7 +356,9 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=0, help="CPU-seconds on this many workers against one")
     ap.add_argument("--json", help="the figures as JSON")
     ap.add_argument("--markdown", action="store_true", help="print docs/batch.md's block: the date, the machine, a table")
+    ap.add_argument("--against", metavar="REV", help="the batch's instructions per vehicle-step on this commit's code too")
     ap.add_argument("--inner", help=argparse.SUPPRESS)
+    ap.add_argument("--batch-only", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.vehicles < 1 or not 0.0 < a.seconds <= 60.0 or a.workers < 0:
         print("batch_profile: --vehicles at least 1, --seconds in (0, 60], --workers 0 or more", file=sys.stderr)
@@ -322,7 +367,7 @@ def main(argv=None) -> int:
         print("batch_profile: valgrind (its callgrind and callgrind_control) is not installed", file=sys.stderr)
         return 2
     if a.inner:
-        _inner(a.vehicles, a.seconds, a.inner)
+        _inner(a.vehicles, a.seconds, a.inner, a.batch_only)
         return 0
     if a.workers:
         for w in sorted({1, a.workers}):
@@ -336,7 +381,17 @@ def main(argv=None) -> int:
     except InputError as e:
         print(f"batch_profile: {e}", file=sys.stderr)
         return 2
+    if a.against is not None:
+        import revision
+        with tempfile.TemporaryDirectory() as tmp:
+            try:
+                revision.package(a.against, tmp)   # a commit git does not know: refused before any count
+            except InputError as e:
+                print(f"batch_profile: {e}", file=sys.stderr)
+                return 2
     r = profile(a.vehicles, a.seconds)
+    if a.against is not None:
+        r["against"] = against(a.against, a.vehicles, a.seconds)
     if out is not None:
         write_atomic(out, json.dumps(r, indent=1))
     lines = table(r)

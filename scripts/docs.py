@@ -13,7 +13,8 @@ reads and replaces them), never by hand. A block is one of:
 - written: the command rewrites the block in the file itself (`{doc}`: the file, `{dir}`: its folder);
   checked on a copy of the file in a temporary folder;
 - measured on a machine: the speed figures of scripts/benchmark.py, the batch's instruction counts of
-  scripts/batch_profile.py (numba's code and valgrind's version) and the HIL link's latency of
+  scripts/batch_profile.py (numba's code and valgrind's version), diagnose's CPU against an earlier
+  commit's of scripts/diagnose_speed.py and the HIL link's latency of
   scripts/hil_latency.py vary with the machine and its load; the block says when and where they were
   measured, and the check holds only its form (the stamp line, the table's header and rows), never
   its numbers.
@@ -75,8 +76,8 @@ BLOCKS = (
           minutes=6),
     Block("benchmark", "README.md", *marked("benchmark"), SCRIPT + ("scripts/benchmark.py", "--markdown"),
           minutes=11, measured=True),
-    Block("batch-profile", "docs/batch.md", *marked("batch profile"), SCRIPT + ("scripts/batch_profile.py", "--markdown"),
-          minutes=10, measured=True),
+    Block("batch-profile", "docs/batch.md", *marked("batch profile"),
+          SCRIPT + ("scripts/batch_profile.py", "--against", "d54954a", "--markdown"), minutes=15, measured=True),
     Block("hil-latency", "docs/hil.md", *marked("hil latency"), SCRIPT + ("scripts/hil_latency.py", "--markdown"),
           minutes=4, measured=True),
     Block("fault-matrix", "docs/safety.md", "<!-- fault matrix: begin (written by `flightctl sim faults`) -->",
@@ -117,6 +118,8 @@ BLOCKS = (
           SCRIPT + ("scripts/fleet_scale.py", "--doc", "{doc}"), minutes=8, measured=True),
     Block("fleet-detection", "docs/fleet.md", *marked("fleet-detection"),
           SCRIPT + ("scripts/fleet_detection.py", "--doc", "{doc}"), minutes=6),
+    Block("diagnose-speed", "docs/diagnose.md", *marked("diagnose speed"),
+          SCRIPT + ("scripts/diagnose_speed.py", "--against", "ed54a24", "--markdown"), minutes=5, measured=True),
     Block("static-tier", "docs/diagnose.md", *marked("static tier"), SCRIPT + ("scripts/static_tier.py", "--doc", "{doc}"),
           minutes=1.5),
     Block("tune-table", "docs/tune.md", *marked("tune procedure"), FLIGHTCTL + ("tune", "--out", "{tmp}/t.toml", "--doc", "{doc}"),

@@ -1,7 +1,8 @@
 """The grid fits of diagnose as they are made fast (docs/diagnose.md, "Speed"), on a real 1 kHz log: the
 walk from every 4th grid point finds each fold's best point and the full data's as the whole grid does,
 and a candidate's change of the prediction kept for the data set's model is the one it computes anew,
-shared by a copy that carries one more term and not by one whose model changed."""
+shared by a copy that carries one more term and not by one whose model changed; rotor_drag's, the
+files' alone, is kept across models and is what each computes anew."""
 from __future__ import annotations
 
 import copy
@@ -13,6 +14,7 @@ from flightctl.cli import main
 from flightctl.logfile import read_flight_log
 from flightctl.params import load
 from flightctl.sim.causes import CAUSES
+from flightctl.sim.causes.rotor_drag import N_NUISANCE
 from flightctl.sim.identify.diagnose.base import equivalent
 from flightctl.sim.identify.diagnose.candidate import COARSE_STRIDE
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS, load_file
@@ -78,3 +80,31 @@ def test_a_kept_change_is_the_computed_one_and_follows_the_model(ds):
     folded = copy.copy(base)
     CAUSES["actuation_delay"].candidate(folded).fold({"delay": 0.01})
     assert folded.changes is not base.changes and not folded.changes
+
+
+def test_rotor_drags_change_is_the_files_alone_and_kept_across_models(ds):
+    rng = np.random.default_rng(48)
+    base = copy.copy(ds)
+    base.of_files = {}
+    cand = CAUSES["rotor_drag"].candidate(base)
+    k = float(rng.choice(cand.grid[1:]))
+    ch = cand.change(k)
+    assert list(base.of_files) == [("rotor_drag", k)]
+    # the drag and its nuisances filtered side by side: row for row what each input filtered alone gives
+    alone = [base.flat_filtered(cand._filtered(k, [x[j] for x in cand._inputs()])) for j in range(1 + N_NUISANCE)]
+    np.testing.assert_array_equal(ch.delta, alone[0])
+    np.testing.assert_array_equal(ch.free[:N_NUISANCE], np.stack(alone[1:]))
+    between = float(np.sqrt(k * cand.grid[list(cand.grid).index(k) + 1]))    # a refinement's drag: not kept
+    cand.change(between)
+    assert ("rotor_drag", between) not in base.of_files
+    # a gyro lag folded in: a new model, the same store, and what the store holds is what that model computes
+    lagged = copy.copy(base)
+    CAUSES["gyro_lag"].candidate(lagged).fold({"tau": float(rng.uniform(0.005, 0.03))})
+    assert lagged.changes is not base.changes and lagged.of_files is base.of_files
+    kept = CAUSES["rotor_drag"].candidate(lagged).change(k)
+    fresh = copy.copy(lagged)
+    fresh.of_files = {}
+    anew = CAUSES["rotor_drag"].candidate(fresh).change(k)
+    np.testing.assert_array_equal(kept.delta, anew.delta)
+    np.testing.assert_array_equal(kept.free, anew.free)
+    assert not np.array_equal(kept.free[N_NUISANCE:], ch.free[N_NUISANCE:])   # the model's own columns did change

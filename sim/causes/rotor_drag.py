@@ -76,6 +76,7 @@ MIN_K_OVER_M = 0.03
 
 
 N_NUISANCE = 4    # RotorDragFit's: the inertial biases along x and y, the gyro offsets on x_b and y_b
+ACC_XY = slice(3, 5)    # the channels the drag acts on: acc_x, acc_y
 
 
 def gyro_drift(f) -> list[np.ndarray]:
@@ -118,10 +119,12 @@ class RotorDragFit(GridCandidate):
     physical_check = (f"k / M from {MIN_K_OVER_M:g} to {MAX_K_OVER_M:g} 1/s: measured quadrotors 0.3-0.6 1/s, momentum theory's ram "
                       "drag g / (2 v_h) 1.03 1/s for the paper's vehicle, an upper estimate (docs/as-flown.md)")
     grid = np.concatenate([[0.0], np.geomspace(0.01, 3.0, 36)])
+    _grid = frozenset(float(k) for k in grid)
     round_to = 3
 
     def _filtered(self, k, inputs):
-        """Per file: the (C, n) response -k/M R^T LPF_k(x) on acc_x, acc_y of inertial horizontal x (2, n)."""
+        """Per file: the (..., C, n) response -k/M R^T LPF_k(x) on acc_x, acc_y of inertial horizontal
+        accelerations x (..., 2, n): all of them in one filter pass per stretch."""
         from scipy import signal   # here, not at the top: `flightctl sim` imports the causes for their effects
         ds, M = self.ds, self.ds.a.M
         out = []
@@ -130,42 +133,52 @@ class RotorDragFit(GridCandidate):
             a = math.exp(-k / M / ds.fs)
             g = (1.0 - a) * M / k if k > 0 else 1.0 / ds.fs
             for s0, s1 in stretches(f.running):
-                v[:, s0:s1] = signal.lfilter([0.0, g], [1.0, -a], x[:, s0:s1], axis=1)
-            u = f.Rm[0] * v[0] + f.Rm[3] * v[1]     # R^T v, body x (horizontal v)
-            w = f.Rm[1] * v[0] + f.Rm[4] * v[1]     # body y
-            d = np.zeros((C, x.shape[1]))
-            d[3:5, :-1] = -k / M * np.vstack([u, w])[:, 1:]     # the accelerometer row k + 1
+                v[..., s0:s1] = signal.lfilter([0.0, g], [1.0, -a], x[..., s0:s1], axis=-1)
+            u = f.Rm[0] * v[..., 0, :] + f.Rm[3] * v[..., 1, :]     # R^T v, body x (horizontal v)
+            w = f.Rm[1] * v[..., 0, :] + f.Rm[4] * v[..., 1, :]     # body y
+            d = np.zeros(x.shape[:-2] + (C, x.shape[-1]))
+            d[..., ACC_XY, :-1] = -k / M * np.stack([u, w], axis=-2)[..., 1:]     # the accelerometer row k + 1
             out.append(d)
         return out
 
-    def _nuisance_inputs(self) -> list[list[np.ndarray]]:
-        """Per nuisance, per file, the (2, n) inertial horizontal acceleration it leaks at unit size:
-        the constant biases along x and y, then the gyro offsets on x_b and y_b (`gyro_drift`);
-        computed once, they do not depend on k."""
-        if getattr(self, "_nuisances", None) is None:
-            ones = [np.ones(f.t.size) for f in self.ds.files]
-            zero = [np.zeros(f.t.size) for f in self.ds.files]
-            drift = [gyro_drift(f) for f in self.ds.files]
-            self._nuisances = ([[np.vstack(v) for v in zip(*pair)] for pair in ((ones, zero), (zero, ones))]
-                               + [[d[j] for d in drift] for j in range(2)])
-        return self._nuisances
+    def _inputs(self) -> list[np.ndarray]:
+        """Per file the (1 + N_NUISANCE, 2, n) inertial horizontal accelerations the fit filters: the
+        measured one, R (0, 0, a_z), then what each nuisance leaks at unit size: the constant biases
+        along x and y, the gyro offsets on x_b and y_b (`gyro_drift`). They do not depend on k:
+        computed once, and filtered together at each k (one pass over the log, not five)."""
+        if getattr(self, "_stacked", None) is None:
+            self._stacked = []
+            for f in self.ds.files:
+                ones, zero = np.ones(f.t.size), np.zeros(f.t.size)
+                self._stacked.append(np.stack([np.vstack([f.Rm[2] * f.acc[2], f.Rm[5] * f.acc[2]]),
+                                               np.vstack([ones, zero]), np.vstack([zero, ones]), *gyro_drift(f)]))
+        return self._stacked
 
-    def change(self, k) -> Change:
+    def change(self, k, keep: bool | None = None) -> Change:
         """The drag prediction at k, and as own free columns the responses to the nuisances (unit
-        inertial biases, unit gyro offsets; zero at k = 0: no drag, no velocity to reconstruct)."""
+        inertial biases, unit gyro offsets; zero at k = 0: no drag, no velocity to reconstruct).
+        Both are the files' and the accelerometer's sensing alone, not the model's: kept in the data
+        set's store (`DataSet.of_files`) at the grid's points and a carried term's k (`keep`), where
+        every later round, the backfit and each gyro lag tried (which predicts the carried terms
+        again) find them (docs/diagnose.md, "Speed")."""
         ds = self.ds
         if k <= 0:
             return Change(np.zeros((C, ds.n)), np.concatenate([np.zeros((N_NUISANCE, C, ds.n)), ds.base_free]))
-        ah = [np.vstack([f.Rm[2] * f.acc[2], f.Rm[5] * f.acc[2]]) for f in ds.files]
-        delta = ds.flat_filtered(self._filtered(k, ah))
-        bias = [ds.flat_filtered(self._filtered(k, x)) for x in self._nuisance_inputs()]
-        return Change(delta, np.concatenate([np.stack(bias), ds.base_free]))
+        key = (self.cause, float(k))
+        acc = ds.of_files.get(key)
+        if acc is None:
+            acc = ds.flat_filtered(self._filtered(k, self._inputs()))[:, ACC_XY]     # the other rows are zero
+            if (float(k) in self._grid if keep is None else keep):
+                ds.of_files[key] = acc
+        both = np.zeros((1 + N_NUISANCE, C, ds.n))
+        both[:, ACC_XY] = acc
+        return Change(both[0], np.concatenate([both[1:], ds.base_free]))
 
     def predict(self, parameters):
         """The drag prediction at k with its nuisances fitted on all data (as the climb speed of
         `rotor_inflow` fits its initial height and speed): a carried effect's term."""
         k = float(parameters["k"])
-        ch = self.change(k)
+        ch = self.change(k, keep=True)
         e = self.r_base - ch.delta
         A = np.stack(list(ch.free[:N_NUISANCE]), axis=-1)
         b = solve(linear_stats(self.ds, e, A), np.ones(N_BLOCKS, bool), self.ds.block_counts)[1]
@@ -195,6 +208,5 @@ class RotorDragFit(GridCandidate):
     def explanatory(self):
         k = max(getattr(self, "_k", 0.0), 1e-3)
         ds = self.ds
-        ah = [np.vstack([f.Rm[2] * f.acc[2], f.Rm[5] * f.acc[2]]) for f in ds.files]
-        d = self._filtered(k, ah)
+        d = self._filtered(k, [x[0] for x in self._inputs()])
         return ds.flat([x[3] * (-ds.a.M / k) for x in d])

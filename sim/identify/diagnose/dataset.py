@@ -168,6 +168,10 @@ class DataSet:
         self.block_edges = list(zip(edges[:-1], edges[1:]))
         self.block_counts = np.diff(edges).astype(float)
         self.measured = self.flat_filtered(self.meas, sensor=False)
+        # what a candidate computes from the files and the accelerometer's sensing alone (rotor_drag's
+        # filtered velocities at each drag): no model's, so every model of this data set and its copies
+        # share it (`rebase` and `add_gyro_filter` change neither the files nor the accelerometer's filters)
+        self.of_files: dict = {}
         self.carried: dict[str, np.ndarray] = {}     # cause -> its filtered term in the base prediction
         self.carried_parameters: dict[str, dict] = {}
         self.extra_free: list[np.ndarray] = []       # free columns a cause of the chain brought (C, n)
@@ -207,14 +211,16 @@ class DataSet:
         preds = [self.predict_file(i, self.D[i]) for i in range(len(self.files))]
         self.base_pred = [p.value for p in preds]
         self.base_rest = [p.rest for p in preds]
-        self.r_base = self.measured - self.flat_filtered(self.base_pred) - sum(self.carried.values())
         self._base_unit0 = None
-        if self.vehicle.identified:
-            U = self.flat_filtered([p.unit for p in preds])
+        if self.vehicle.identified:     # the prediction and its drive's unit channels filtered in one pass
+            both = self.flat_filtered([np.concatenate([p.value[None], p.unit]) for p in preds])
+            filtered, U = both[0], both[1:]
             self._base_unit0 = U[0]
             self.base_free = self._free(U)
         else:
+            filtered = self.flat_filtered(self.base_pred)
             self.base_free = self._free(None)
+        self.r_base = self.measured - filtered - sum(self.carried.values())
 
     def add_gyro_filter(self, b, a) -> None:
         """A first-order gyro filter (b, a), y_k = b0 x_k - a1 y_(k-1), that the log does not declare (a
