@@ -65,10 +65,13 @@ def _patched(tmp_path, name: str, value: float) -> Path:
 
 
 def test_a_real_log_edited_into_another_vehicle_is_refused_by_name(tmp_path, capsys):
-    for name, value, words in (("FRAME_CLASS", 2.0, "FRAME_CLASS = 2: a hexacopter"),
-                               ("FRAME_CLASS", 3.0, "FRAME_CLASS = 3: an octocopter"),
-                               ("FRAME_TYPE", 4.0, "FRAME_TYPE = 4"),
-                               ("SERVO5_FUNCTION", 37.0, "more than four motors")):
+    # a hexa or octo frame over a quad's four outputs: the outputs do not hold the frame's motors
+    for name, value, words in (("FRAME_CLASS", 2.0, "SERVOn_FUNCTION assigns motors [1, 2, 3, 4]: the frame's motors 1-6"),
+                               ("FRAME_CLASS", 3.0, "SERVOn_FUNCTION assigns motors [1, 2, 3, 4]: the frame's motors 1-8"),
+                               ("FRAME_CLASS", 6.0, "FRAME_CLASS = 6: a helicopter"),
+                               ("FRAME_CLASS", 7.0, "FRAME_CLASS = 7: a tricopter"),
+                               ("FRAME_TYPE", 4.0, "FRAME_TYPE = 4: FRAME_CLASS 1, FRAME_TYPE 4 (V-tail)"),
+                               ("SERVO5_FUNCTION", 37.0, "more than the frame's 4 motors")):
         path = _patched(tmp_path, name, value)
         assert main(["log", "import", str(path), str(tmp_path / "o.csv")]) == 2
         err = capsys.readouterr().err
@@ -76,7 +79,7 @@ def test_a_real_log_edited_into_another_vehicle_is_refused_by_name(tmp_path, cap
     plane = tmp_path / "plane.bin"
     plane.write_bytes(REAL.read_bytes().replace(b"ArduCopter V4.6.2", b"ArduPlane V4.6.2\0"))
     assert main(["log", "import", str(plane), str(tmp_path / "o.csv")]) == 2
-    assert "a fixed wing, not a quadrotor" in capsys.readouterr().err
+    assert "a fixed wing, not a multirotor" in capsys.readouterr().err
 
 
 @pytest.fixture(scope="module")
@@ -237,7 +240,8 @@ def test_diagnose_refuses_the_arducopter_3_1_log_and_says_how_to_log_faster(tmp_
 
 
 REFUSED = {"underpowered.log": ("LOG_BITMASK 830", "gyro (IMU) and the motor outputs"),  # ArduCopter 3.0.1
-           "robert_lefebvre_octo_PM.log": ("an octocopter", "Mot1..Mot8"),
+           # an octocopter (MOT's Mot1..Mot8), now a frame this reader takes: its IMU and outputs not logged
+           "robert_lefebvre_octo_PM.log": ("LOG_BITMASK 830", "gyro (IMU) and the motor outputs"),
            "tradheli_brownout.log": ("a traditional helicopter", "GGain")}
 
 
