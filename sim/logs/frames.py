@@ -127,7 +127,7 @@ def px4(p: dict, fail) -> Frame:
         if not all(math.isfinite(v) for v in (x, y, km)) or km == 0:
             fail(f"CA_ROTOR{i}_PX/PY/KM missing or zero: the rotor layout is unknown")
         motors.append((x, -y, km))
-    if any(abs(float(p.get(f"CA_ROTOR{i}_AZ", -1.0)) - 1.0) > 0.05 for i in range(count)):
+    if any(abs(float(p.get(f"CA_ROTOR{i}_AZ", -1.0))) < 0.95 for i in range(count)):      # FRD: -1 is up
         fail("CA_ROTORn_AX/AY/AZ tilt a rotor out of the body's z: a tilted-rotor layout this reader does not take")
     arm = max(math.hypot(x, y) for x, y, _ in motors)
     f = _frame(f"{count} rotors", motors, "")
