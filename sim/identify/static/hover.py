@@ -242,8 +242,9 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
                               f"and a yaw trim of {100 * split:+.1f} +- {100 * split_sd:.2g} % (chi-square {best['chi2']} "
                               f"on {best['dof']} dof)")
             else:
-                out["why"] = (f"one motor's command raised alone (its roll, pitch and yaw parts in its position's and "
-                              f"spin's ratio): {best['hypothesis']} gives {100 * best['thrust_scale']:.1f} +- "
+                out["why"] = (f"one motor's command raised (alone on a quadrotor, with the mixer's share of the others "
+                              f"on more rotors: its roll, pitch and yaw parts in its position's and spin's ratio): "
+                              f"{best['hypothesis']} gives {100 * best['thrust_scale']:.1f} +- "
                               f"{100 * best['thrust_scale_stderr']:.2g} % of the others' thrust for its command "
                               f"(chi-square {best['chi2']} on {best['dof']} dof)")
             alike = [f["hypothesis"] for f in ok if f["parameters"] == best["parameters"] and f is not best]
