@@ -502,3 +502,20 @@ def test_a_log_that_opens_armed_is_read_on_its_other_sources(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "never armed" in err and "EV, motor outputs messages" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "o.csv").exists()
+
+
+def test_the_corpus_headline_counts_airborne_multirotor_flights_only(tmp_path):
+    """A corpus of the real ArduCopter 3.3 flight, it edited into a plane and into a helicopter (FRAME_CLASS
+    6), and the real 4.6 log on the ground: the headline counts one airborne multirotor flight, the two
+    others as logs of another vehicle, not counted, and the ground log as holding no flight."""
+    from flightctl.sim.identify.diagnose.corpus import corpus, headline
+    folder = tmp_path / "c"
+    folder.mkdir()
+    (folder / "flight.bin").write_bytes((EXAMPLES / "log171.bin").read_bytes())
+    (folder / "plane.bin").write_bytes(REAL.read_bytes().replace(b"ArduCopter V4.6.2", b"ArduPlane V4.6.2\0"))
+    (folder / "heli.bin").write_bytes(_patched(tmp_path, "FRAME_CLASS", 6.0).read_bytes())
+    (folder / "ground.bin").write_bytes(REAL.read_bytes())
+    rows = corpus(folder, jobs=1)
+    line = headline(rows)
+    assert line.startswith("**1 of 1 airborne multirotor flights get a diagnosis (100 %)**"), line
+    assert "1 of the 4 logs hold no flight" in line and "2 are logs of another vehicle" in line, line

@@ -38,6 +38,8 @@ FRAME_CLASSES = {0: "an undefined frame", 2: "a hexacopter", 3: "an octocopter",
                  14: "a decacopter", 15: "a scripted frame", 16: "a scripted 6DoF frame", 17: "a scripted frame"}
 QUAD = 1
 MATRIX_CLASSES = sorted({c for c, _ in frames.ARDUPILOT})     # quad, hexa, octa, octa-quad (sim/logs/frames.py)
+ROTORCRAFT_CLASSES = {5, 7, 12, 14}      # Y6, tricopter, dodeca-hexa, decacopter: multirotors not in the table
+# (the other classes are helicopters, single and coaxial rotors, tailsitters and scripted frames)
 TAKES = "diagnose knows the quad, hexa, octo and octo-quad frames (sim/logs/frames.py)"
 RATE_NOTE = ("set LOG_BITMASK's IMU_FAST (and RCOUT) bits, or INS_RAW_LOG_OPT for "
              "the raw gyro (GYR)")
@@ -268,19 +270,24 @@ def _version(firmware: str) -> tuple[int, int]:
     return (int(m[1]), int(m[2])) if m else (0, 0)
 
 
+def _kind(cls: int) -> str:
+    return "a multirotor frame this reader does not take" if cls in ROTORCRAFT_CLASSES else frames.NOT_MULTIROTOR
+
+
 def _frame(p: dict, firmware: str, formats: dict, texts: list[str], imp: Imported) -> frames.Frame:
     """The vehicle's layout (FRAME_CLASS and FRAME_TYPE, or ArduCopter 3.x's build and FRAME, through
     `frames.ardupilot`); InputError naming what the vehicle is when it is no frame of that table."""
     low = firmware.lower()
     if "plane" in low:
         imp.fail(f"{firmware}: " + ("a QuadPlane (VTOL, Q_ENABLE = 1)" if p.get("Q_ENABLE") else "a fixed wing")
-                 + f", not a multirotor: {TAKES}")
+                 + f", {frames.NOT_MULTIROTOR}: {TAKES}")
     if low.startswith(("rover", "ardurover", "apm:rover", "ardusub", "antennatracker", "blimp")):
-        imp.fail(f"{firmware}: not a multirotor: {TAKES}")
+        imp.fail(f"{firmware}: {frames.NOT_MULTIROTOR}: {TAKES}")
     if arducopter3.is_legacy(p):
         cls, name, why = arducopter3.frame_class(p, formats, texts)
         if cls is not None and cls not in MATRIX_CLASSES:
-            imp.fail(f"{firmware or 'ArduCopter'}: {name or FRAME_CLASSES.get(cls, 'not a multirotor')} ({why}): {TAKES}")
+            imp.fail(f"{firmware or 'ArduCopter'}: {name or FRAME_CLASSES.get(cls, 'an unknown frame')} ({why}), "
+                     f"{_kind(cls)}: {TAKES}")
         imp.meta["frame_class_source"] = why or ("not in the log (ArduCopter before 3.2 is built for one frame): a "
                                                  "quadrotor if no more than four outputs move")
         cls = QUAD if cls is None else cls
@@ -289,7 +296,7 @@ def _frame(p: dict, firmware: str, formats: dict, texts: list[str], imp: Importe
         return frames.ardupilot(cls, ftype, imp.fail, what)
     cls = int(p.get("FRAME_CLASS", QUAD))
     if cls not in MATRIX_CLASSES:
-        imp.fail(f"FRAME_CLASS = {cls}: {FRAME_CLASSES.get(cls, 'not a multirotor')}: {TAKES}")
+        imp.fail(f"FRAME_CLASS = {cls}: {FRAME_CLASSES.get(cls, 'an unknown frame')}, {_kind(cls)}: {TAKES}")
     ftype = int(p.get("FRAME_TYPE", 1))
     return frames.ardupilot(cls, ftype, lambda w: imp.fail(f"FRAME_TYPE = {ftype}: {w}"))
 

@@ -28,6 +28,9 @@ import math
 from dataclasses import dataclass
 
 DEG = math.pi / 180.0
+# The words of every refusal of a vehicle that is no multirotor (a plane, a VTOL, a helicopter, a rover): the
+# corpus' headline counts such logs apart from the airborne multirotor flights (diagnose/corpus.py)
+NOT_MULTIROTOR = "not a multirotor"
 CCW, CW = 1.0, -1.0                       # AP_MOTORS_MATRIX_YAW_FACTOR_CCW / _CW (AP_MotorsMatrix.h)
 
 
@@ -148,6 +151,9 @@ ROTOR_NAMES = {1: "a single rotor", 2: "a bicopter", 3: "a tricopter", 6: "a hex
 def betaflight(count: int, firmware: str, reversed_, fail) -> Frame:
     """Betaflight's or INAV's mixer for `count` motors (the header does not name it); `reversed_`:
     yaw_motors_reversed / motor_direction_inverted from the header, None when it is not there."""
+    if count <= 2:
+        fail(f"{count} motor{'s' if count > 1 else ''} (motor[0..{count - 1}]): a plane or a flying wing, "
+             f"{NOT_MULTIROTOR} (its mixer is not in the blackbox header)")
     if count not in BETAFLIGHT:
         fail(f"{count} motors (motor[0..{count - 1}]): {ROTOR_NAMES.get(count, f'{count} motors')} whose mixer the "
              f"blackbox header does not name (it takes {' and '.join(f'{n} ({m})' for n, (m, _) in BETAFLIGHT.items())} "

@@ -44,8 +44,10 @@ UAVCAN_RAW_MAX = 8191.0              # UAVCAN ESC raw command (PX4 before the ou
 MOVES = 0.01                         # an output moves while armed when its spread is over 1 % of its range
 
 
-def _refuse(imp: Imported, what: str, why: str):
-    imp.fail(f"{why}: {what}, not a multirotor this reader takes: {TAKES}")
+def _refuse(imp: Imported, what: str, why: str, rotorcraft: bool = False):
+    """InputError naming the vehicle; `rotorcraft`: a multirotor of a layout not taken, else no multirotor."""
+    kind = "a multirotor this reader does not take" if rotorcraft else frames.NOT_MULTIROTOR
+    imp.fail(f"{why}: {what}, {kind}: {TAKES}")
 
 
 TAKES = "diagnose knows multirotors of CA_ROTOR_COUNT 4 to 12 rotors, and PX4's quad X and + before them"
@@ -58,23 +60,24 @@ def vehicle(u, p: dict, imp: Imported) -> tuple[str, str, int]:
     from flightctl.sim.logs.ulog import topic
     mav = int(p.get("MAV_TYPE", -1))
     if mav not in MULTIROTORS and mav in MAV_TYPES:
-        _refuse(imp, MAV_TYPES[mav], f"MAV_TYPE = {mav}")
+        _refuse(imp, MAV_TYPES[mav], f"MAV_TYPE = {mav}", mav in (15, 29))      # a tricopter, a dodecacopter
     frame = int(p.get("CA_AIRFRAME", 0) or 0)
     if frame in CA_AIRFRAMES:
-        _refuse(imp, CA_AIRFRAMES[frame], f"CA_AIRFRAME = {frame}")
+        _refuse(imp, CA_AIRFRAMES[frame], f"CA_AIRFRAME = {frame}", frame == 10)      # 10: a multirotor with tilt
     vs = topic(u, "vehicle_status")
     if vs is not None and "is_vtol" in vs and np.any(vs["is_vtol"]):
         _refuse(imp, "a VTOL", "vehicle_status.is_vtol")
     if "CA_ROTOR_COUNT" in p:
         count = int(p["CA_ROTOR_COUNT"])
         if not MIN_ROTORS <= count <= MAX_ROTORS:
-            _refuse(imp, ROTOR_COUNTS.get(count, f"{count} rotors"), f"CA_ROTOR_COUNT = {count}")
+            _refuse(imp, ROTOR_COUNTS.get(count, f"{count} rotors"), f"CA_ROTOR_COUNT = {count}", count >= 3)
         f = frames.px4(p, imp.fail)
         return f.rotors(), f.source, f.count
     auto = int(p.get("SYS_AUTOSTART", 0) or 0)
     for lo, hi, what in AUTOSTART_RANGES:
         if lo <= auto <= hi:
-            _refuse(imp, what + " (no CA_ROTOR* parameters to place its rotors)", f"SYS_AUTOSTART = {auto}")
+            _refuse(imp, what + " (no CA_ROTOR* parameters to place its rotors)", f"SYS_AUTOSTART = {auto}",
+                    what.startswith(("a hexa", "an octo")))
     if mav == QUADROTOR:
         plus = 5000 <= auto <= 5999
         rotors = list(PX4_QUAD_PLUS if plus else PX4_QUAD_X)
@@ -86,7 +89,7 @@ def vehicle(u, p: dict, imp: Imported) -> tuple[str, str, int]:
             source = (f"PX4's quad X for SYS_AUTOSTART {auto}{known} (MAV_TYPE 2, no CA_ROTOR* parameters): motor 1 "
                       "front right, 2 rear left, 3 front left, 4 rear right; 1 and 2 counter-clockwise")
     else:
-        imp.fail(f"MAV_TYPE = {mav} and no CA_ROTOR* parameters: not a multirotor this reader knows")
+        imp.fail(f"MAV_TYPE = {mav} and no CA_ROTOR* parameters: a rotor layout this reader does not know")
     arm = max(math.hypot(x, y) for x, y, _ in rotors)
     text = "; ".join(f"{x / arm:.4f} {-y / arm:.4f} {s:+.0f}" for x, y, s in rotors)     # FRD y to our y
     return text, source, 4
