@@ -34,6 +34,7 @@ FRAMES = {0: [(0, -1, 1), (0, 1, 1), (1, 0, -1), (-1, 0, -1)],                  
           13: [(S, -S, 1), (S, S, -1), (-S, S, 1), (-S, -S, -1)],                 # DJI_X: FR, FL, RL, RR
           14: [(S, -S, 1), (-S, -S, -1), (-S, S, 1), (S, S, -1)]}                 # CW_X: FR, RR, RL, FL
 FRAMES[3] = [(x, y, -s) for x, y, s in FRAMES[1]]                                  # H: X with the spins reversed
+FRAMES[2] = FRAMES[1]       # V: X's positions, its yaw factors +-0.7981 and +-1 (AP_MotorsMatrix): X's spins
 
 
 def rotors(table):
@@ -400,10 +401,11 @@ def test_a_delay_shifted_into_the_arducopter_3_3_flight_is_found_on_top_of_its_o
         assert abs(named["actuation_delay"]["delay"] - expected) <= tolerance, (d, named)
 
 
-@pytest.mark.parametrize("frame", [0, 1, 3])
+@pytest.mark.parametrize("frame", [0, 1, 2, 3])
 def test_a_simulated_flight_written_as_an_arducopter_3_1_text_dump_comes_back(flight, frame, tmp_path):
     """ArduCopter 3.1's MOT has no time stamp: each takes the time of the IMU line before it; FRAME is the
-    orientation (0 plus, 1 X, 3 H); the motors span RC3_MIN..RC3_MAX, drawn at random."""
+    orientation (0 plus, 1 X, 2 V, 3 H: the V was refused whole before sim/logs/frames.py); the motors
+    span RC3_MIN..RC3_MAX, drawn at random."""
     log, _ = flight
     rng = np.random.default_rng(31 + frame)
     lo = float(rng.integers(980, 1120))
@@ -425,6 +427,9 @@ def test_a_simulated_flight_written_as_an_arducopter_3_1_text_dump_comes_back(fl
     path.write_text(text_log(["12", "", "ArduCopter V3.1 (5c6503e2)", "Free RAM: 1000", "APM 2"], rows), newline="")
     (t,) = read_foreign(str(path))
     assert np.allclose(rotors(t), FRAMES[frame], atol=1e-4)
+    assert "AP_MotorsMatrix.cpp" in t.meta["rotors_source"] and f"FRAME {frame}" in t.meta["rotors_source"]
+    if frame == 2:
+        assert "QUAD/V" in t.meta["rotors_source"] and "+0.7981" in t.meta["rotors_source"]
     assert t.meta["command_range"] == f"{lo:g} {hi:g}" and t.meta["firmware"] == "ArduCopter V3.1 (5c6503e2)"
     assert np.allclose(t["t"], (ms[kept] - ms[kept][0]) / 1000.0)
     for a in "xyz":

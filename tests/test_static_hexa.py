@@ -146,9 +146,10 @@ def test_a_hexacopters_weak_motor_drawn_at_random_is_named_with_its_size(tmp_pat
     assert fit["thrust_scale"] == pytest.approx(size, abs=0.03), (size, fit)
 
 
-def test_nothing_is_named_on_the_hexacopter_without_a_weak_motor(tmp_path):
+def test_nothing_is_named_on_the_hexacopter_without_a_weak_motor(tmp_path, capsys):
     rng = np.random.default_rng(4500)
     rep = diagnose(write_arducopter(fly_hexa(rng, np.ones(6)), tmp_path / "hexa0.bin", rng), tmp_path)
+    assert "    frame: ArduPilot's HEXA/X (FRAME_CLASS 2, FRAME_TYPE 1" in capsys.readouterr().out   # the text report
     st = rep["static"]
     assert st["pattern"]["verdict"] == "none", st["pattern"]
     assert np.allclose(st["motors"]["share"], 1.0, atol=0.03), st["motors"]
