@@ -123,7 +123,7 @@ def _entry(index: int, name: str, read, progress) -> LogEntry:
 
 def each_log(path: str, index: int | None = None, progress=None) -> list[LogEntry]:
     """Every log of `path` (or the one at `index`, from 1), each read or skipped on its own: a log
-    that is empty, damaged or not a quadrotor never takes the others with it. File-level problems
+    that is empty, damaged or of a vehicle not read never takes the others with it. File-level problems
     (unreadable, unknown, an index that does not exist) raise InputError."""
     k = _kind(path)
     say = progress or (lambda *a: None)
