@@ -6,7 +6,7 @@ the hover rows (`blocks`), each with its block-jackknife standard error:
   asks for more than its weight); its inverse is the thrust-to-weight ratio at full command. A ratio of
   the blocks' means, never the mean of the rows' ratios: on a vibrating accelerometer that one is
   biased high by var(acc_z) / acc_z^2 and more.
-- **each motor's share of the hover thrust** (the four's mean is 1) and its **drift** over the flight
+- **each motor's share of the hover thrust** (the motors' mean is 1) and its **drift** over the flight
   (the blocks' shares regressed on their times).
 - **what the pattern of the shares is**, worked out from eq. 25's structure on the log's rotor layout:
   in hover the rotors' thrusts balance the weight and hold zero roll, pitch and yaw torque about the
@@ -51,7 +51,7 @@ def _num(x, digits=4):
 
 def _gains(share: np.ndarray) -> np.ndarray:
     """The gain a model with equal rotors calls each rotor: the inverse of its share of the hover
-    command's thrust, against the four's mean."""
+    command's thrust, against the motors' mean."""
     g = 1.0 / np.asarray(share, float)
     return g / g.mean()
 
@@ -95,7 +95,7 @@ def shares(bl: Blocks, c: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
            "check": (f"a share drifts when its change over the {span:.0f} s between the first and last block is at least "
                      f"{100 * DRIFT_TOL:g} % and {DRIFT_T:g} standard errors (regression over the {bl.n_blocks} blocks), over "
                      f"at least {MIN_DRIFT_SPAN_S:g} s"),
-           "what": "each motor's share of the hover thrust through the curve (the mean of the four is 1), block "
+           "what": "each motor's share of the hover thrust through the curve (the motors' mean is 1), block "
                    "jackknife standard error; drift: the blocks' shares regressed on time"}
     return out, m, per_block
 
