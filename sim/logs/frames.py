@@ -139,6 +139,27 @@ def px4(p: dict, fail) -> Frame:
                  f"clockwise; arm {arm:.3g} m)")
 
 
+# PX4 before the control allocation (no CA_ROTOR*): the quad X (SYS_AUTOSTART 4000-4999): motor 1 front right,
+# 2 rear left, 3 front left, 4 rear right; the quad + (5000-5999): 1 right, 2 left, 3 front, 4 rear; 1 and 2
+# counter-clockwise in both. FRD (x, y, spin +1 counter-clockwise), arm length 1.
+PX4_QUAD_X = ((1.0, 1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, -1.0, -1.0), (-1.0, 1.0, -1.0))
+PX4_QUAD_PLUS = ((0.0, 1.0, 1.0), (0.0, -1.0, 1.0), (1.0, 0.0, -1.0), (-1.0, 0.0, -1.0))
+
+
+def px4_quad(auto: int) -> Frame:
+    """PX4's quad X or + by SYS_AUTOSTART, for a log without CA_ROTOR* (MAV_TYPE 2)."""
+    plus = 5000 <= auto <= 5999
+    f = _frame("quad +" if plus else "quad X", [(x, -y, s) for x, y, s in (PX4_QUAD_PLUS if plus else PX4_QUAD_X)], "")
+    if plus:
+        source = (f"PX4's quad + for SYS_AUTOSTART {auto} (no CA_ROTOR* parameters): motor 1 right, 2 left, "
+                  "3 front, 4 rear; 1 and 2 counter-clockwise")
+    else:
+        known = "" if 4000 <= auto <= 4999 else " (not in PX4's quad X range 4000-4999: assumed)"
+        source = (f"PX4's quad X for SYS_AUTOSTART {auto}{known} (MAV_TYPE 2, no CA_ROTOR* parameters): motor 1 "
+                  "front right, 2 rear left, 3 front left, 4 rear right; 1 and 2 counter-clockwise")
+    return Frame(f.name, f.x, f.y, f.spin, f.yaw_factor, source)
+
+
 # Betaflight's and INAV's src/main/flight/mixer.c: {roll, pitch, yaw} per motor (throttle 1 left out)
 BETAFLIGHT = {4: ("mixerQuadX", ((-1.0, 1.0, -1.0), (-1.0, -1.0, 1.0), (1.0, 1.0, 1.0), (1.0, -1.0, -1.0))),
               6: ("mixerHex6X", ((-0.5, 0.866025, 1.0), (-0.5, -0.866025, 1.0), (0.5, 0.866025, -1.0),

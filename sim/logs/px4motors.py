@@ -34,11 +34,6 @@ AUTOSTART_RANGES = ((2000, 3999, "a fixed wing"), (6000, 7999, "a hexacopter"), 
                     (11000, 11999, "a hexacopter (coaxial)"), (12000, 12999, "an octocopter (coaxial)"),
                     (13000, 13999, "a VTOL"), (14000, 14999, "a multirotor with tilt"), (16000, 16999, "a helicopter"),
                     (17000, 17999, "an autogyro"), (50000, 69999, "a ground or water vehicle"))
-# PX4's quad X (SYS_AUTOSTART 4000-4999): motor 1 front right, 2 rear left, 3 front left, 4 rear right,
-# 1 and 2 counter-clockwise; quad + (5000-5999): 1 right, 2 left, 3 front, 4 rear, 1 and 2 counter-
-# clockwise. FRD (x, y, spin +1 counter-clockwise), arm length 1.
-PX4_QUAD_X = ((1.0, 1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, -1.0, -1.0), (-1.0, 1.0, -1.0))
-PX4_QUAD_PLUS = ((0.0, 1.0, 1.0), (0.0, -1.0, 1.0), (1.0, 0.0, -1.0), (-1.0, 0.0, -1.0))
 MOTOR_FUNCTION = 101                 # output function of motor 1 (PX4's OutputFunction: 101-112 motors 1-12)
 UAVCAN_RAW_MAX = 8191.0              # UAVCAN ESC raw command (PX4 before the output functions: (u + 1) / 2 x 8191)
 MOVES = 0.01                         # an output moves while armed when its spread is over 1 % of its range
@@ -67,32 +62,23 @@ def vehicle(u, p: dict, imp: Imported) -> tuple[str, str, int]:
     vs = topic(u, "vehicle_status")
     if vs is not None and "is_vtol" in vs and np.any(vs["is_vtol"]):
         _refuse(imp, "a VTOL", "vehicle_status.is_vtol")
-    if "CA_ROTOR_COUNT" in p:
+    auto = int(p.get("SYS_AUTOSTART", 0) or 0)
+    placed = "CA_ROTOR_COUNT" in p
+    for lo, hi, what in AUTOSTART_RANGES:
+        rotorcraft = what.startswith(("a hexa", "an octo"))
+        if lo <= auto <= hi and not (rotorcraft and placed):      # a hexa or octo is read by its CA_ROTOR*
+            _refuse(imp, what + (" (no CA_ROTOR* parameters to place its rotors)" if rotorcraft else ""),
+                    f"SYS_AUTOSTART = {auto}", rotorcraft)
+    if placed:
         count = int(p["CA_ROTOR_COUNT"])
         if not MIN_ROTORS <= count <= MAX_ROTORS:
             _refuse(imp, ROTOR_COUNTS.get(count, f"{count} rotors"), f"CA_ROTOR_COUNT = {count}", count >= 3)
         f = frames.px4(p, imp.fail)
         return f.rotors(), f.source, f.count
-    auto = int(p.get("SYS_AUTOSTART", 0) or 0)
-    for lo, hi, what in AUTOSTART_RANGES:
-        if lo <= auto <= hi:
-            _refuse(imp, what + " (no CA_ROTOR* parameters to place its rotors)", f"SYS_AUTOSTART = {auto}",
-                    what.startswith(("a hexa", "an octo")))
-    if mav == QUADROTOR:
-        plus = 5000 <= auto <= 5999
-        rotors = list(PX4_QUAD_PLUS if plus else PX4_QUAD_X)
-        if plus:
-            source = (f"PX4's quad + for SYS_AUTOSTART {auto} (no CA_ROTOR* parameters): motor 1 right, 2 left, "
-                      "3 front, 4 rear; 1 and 2 counter-clockwise")
-        else:
-            known = "" if 4000 <= auto <= 4999 else " (not in PX4's quad X range 4000-4999: assumed)"
-            source = (f"PX4's quad X for SYS_AUTOSTART {auto}{known} (MAV_TYPE 2, no CA_ROTOR* parameters): motor 1 "
-                      "front right, 2 rear left, 3 front left, 4 rear right; 1 and 2 counter-clockwise")
-    else:
+    if mav != QUADROTOR:
         imp.fail(f"MAV_TYPE = {mav} and no CA_ROTOR* parameters: a rotor layout this reader does not know")
-    arm = max(math.hypot(x, y) for x, y, _ in rotors)
-    text = "; ".join(f"{x / arm:.4f} {-y / arm:.4f} {s:+.0f}" for x, y, s in rotors)     # FRD y to our y
-    return text, source, 4
+    f = frames.px4_quad(auto)
+    return f.rotors(), f.source, f.count
 
 
 def functions(p: dict) -> dict[str, dict[int, int]]:
