@@ -34,6 +34,7 @@ FRAMES = {0: [(0, -1, 1), (0, 1, 1), (1, 0, -1), (-1, 0, -1)],                  
           13: [(S, -S, 1), (S, S, -1), (-S, S, 1), (-S, -S, -1)],                 # DJI_X: FR, FL, RL, RR
           14: [(S, -S, 1), (-S, -S, -1), (-S, S, 1), (S, S, -1)]}                 # CW_X: FR, RR, RL, FL
 FRAMES[3] = [(x, y, -s) for x, y, s in FRAMES[1]]                                  # H: X with the spins reversed
+FRAMES[2] = FRAMES[1]       # V: X's positions, its yaw factors +-0.7981 and +-1 (AP_MotorsMatrix): X's spins
 
 
 def rotors(table):
@@ -65,10 +66,13 @@ def _patched(tmp_path, name: str, value: float) -> Path:
 
 
 def test_a_real_log_edited_into_another_vehicle_is_refused_by_name(tmp_path, capsys):
-    for name, value, words in (("FRAME_CLASS", 2.0, "FRAME_CLASS = 2: a hexacopter"),
-                               ("FRAME_CLASS", 3.0, "FRAME_CLASS = 3: an octocopter"),
-                               ("FRAME_TYPE", 4.0, "FRAME_TYPE = 4"),
-                               ("SERVO5_FUNCTION", 37.0, "more than four motors")):
+    # a hexa or octo frame over a quad's four outputs: the outputs do not hold the frame's motors
+    for name, value, words in (("FRAME_CLASS", 2.0, "SERVOn_FUNCTION assigns motors [1, 2, 3, 4]: the frame's motors 1-6"),
+                               ("FRAME_CLASS", 3.0, "SERVOn_FUNCTION assigns motors [1, 2, 3, 4]: the frame's motors 1-8"),
+                               ("FRAME_CLASS", 6.0, "FRAME_CLASS = 6: a helicopter"),
+                               ("FRAME_CLASS", 7.0, "FRAME_CLASS = 7: a tricopter"),
+                               ("FRAME_TYPE", 4.0, "FRAME_TYPE = 4: FRAME_CLASS 1, FRAME_TYPE 4 (V-tail)"),
+                               ("SERVO5_FUNCTION", 37.0, "more than the frame's 4 motors")):
         path = _patched(tmp_path, name, value)
         assert main(["log", "import", str(path), str(tmp_path / "o.csv")]) == 2
         err = capsys.readouterr().err
@@ -76,7 +80,7 @@ def test_a_real_log_edited_into_another_vehicle_is_refused_by_name(tmp_path, cap
     plane = tmp_path / "plane.bin"
     plane.write_bytes(REAL.read_bytes().replace(b"ArduCopter V4.6.2", b"ArduPlane V4.6.2\0"))
     assert main(["log", "import", str(plane), str(tmp_path / "o.csv")]) == 2
-    assert "a fixed wing, not a quadrotor" in capsys.readouterr().err
+    assert "a fixed wing, not a multirotor" in capsys.readouterr().err
 
 
 @pytest.fixture(scope="module")
@@ -237,7 +241,8 @@ def test_diagnose_refuses_the_arducopter_3_1_log_and_says_how_to_log_faster(tmp_
 
 
 REFUSED = {"underpowered.log": ("LOG_BITMASK 830", "gyro (IMU) and the motor outputs"),  # ArduCopter 3.0.1
-           "robert_lefebvre_octo_PM.log": ("an octocopter", "Mot1..Mot8"),
+           # an octocopter (MOT's Mot1..Mot8), now a frame this reader takes: its IMU and outputs not logged
+           "robert_lefebvre_octo_PM.log": ("LOG_BITMASK 830", "gyro (IMU) and the motor outputs"),
            "tradheli_brownout.log": ("a traditional helicopter", "GGain")}
 
 
@@ -396,10 +401,11 @@ def test_a_delay_shifted_into_the_arducopter_3_3_flight_is_found_on_top_of_its_o
         assert abs(named["actuation_delay"]["delay"] - expected) <= tolerance, (d, named)
 
 
-@pytest.mark.parametrize("frame", [0, 1, 3])
+@pytest.mark.parametrize("frame", [0, 1, 2, 3])
 def test_a_simulated_flight_written_as_an_arducopter_3_1_text_dump_comes_back(flight, frame, tmp_path):
     """ArduCopter 3.1's MOT has no time stamp: each takes the time of the IMU line before it; FRAME is the
-    orientation (0 plus, 1 X, 3 H); the motors span RC3_MIN..RC3_MAX, drawn at random."""
+    orientation (0 plus, 1 X, 2 V, 3 H: the V was refused whole before sim/logs/frames.py); the motors
+    span RC3_MIN..RC3_MAX, drawn at random."""
     log, _ = flight
     rng = np.random.default_rng(31 + frame)
     lo = float(rng.integers(980, 1120))
@@ -421,6 +427,9 @@ def test_a_simulated_flight_written_as_an_arducopter_3_1_text_dump_comes_back(fl
     path.write_text(text_log(["12", "", "ArduCopter V3.1 (5c6503e2)", "Free RAM: 1000", "APM 2"], rows), newline="")
     (t,) = read_foreign(str(path))
     assert np.allclose(rotors(t), FRAMES[frame], atol=1e-4)
+    assert "AP_MotorsMatrix.cpp" in t.meta["rotors_source"] and f"FRAME {frame}" in t.meta["rotors_source"]
+    if frame == 2:
+        assert "QUAD/V" in t.meta["rotors_source"] and "+0.7981" in t.meta["rotors_source"]
     assert t.meta["command_range"] == f"{lo:g} {hi:g}" and t.meta["firmware"] == "ArduCopter V3.1 (5c6503e2)"
     assert np.allclose(t["t"], (ms[kept] - ms[kept][0]) / 1000.0)
     for a in "xyz":
@@ -498,3 +507,20 @@ def test_a_log_that_opens_armed_is_read_on_its_other_sources(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "never armed" in err and "EV, motor outputs messages" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "o.csv").exists()
+
+
+def test_the_corpus_headline_counts_airborne_multirotor_flights_only(tmp_path):
+    """A corpus of the real ArduCopter 3.3 flight, it edited into a plane and into a helicopter (FRAME_CLASS
+    6), and the real 4.6 log on the ground: the headline counts one airborne multirotor flight, the two
+    others as logs of another vehicle, not counted, and the ground log as holding no flight."""
+    from flightctl.sim.identify.diagnose.corpus import corpus, headline
+    folder = tmp_path / "c"
+    folder.mkdir()
+    (folder / "flight.bin").write_bytes((EXAMPLES / "log171.bin").read_bytes())
+    (folder / "plane.bin").write_bytes(REAL.read_bytes().replace(b"ArduCopter V4.6.2", b"ArduPlane V4.6.2\0"))
+    (folder / "heli.bin").write_bytes(_patched(tmp_path, "FRAME_CLASS", 6.0).read_bytes())
+    (folder / "ground.bin").write_bytes(REAL.read_bytes())
+    rows = corpus(folder, jobs=1)
+    line = headline(rows)
+    assert line.startswith("**1 of 1 airborne multirotor flights get a diagnosis (100 %)**"), line
+    assert "1 of the 4 logs hold no flight" in line and "2 are logs of another vehicle" in line, line

@@ -215,4 +215,4 @@ def test_a_byte_identical_copy_is_counted_once_and_named(tmp_path):
     assert dup.log == "b/copy.ulg" and dup.status == "duplicate" and "copy of a.ulg" in dup.reason
     assert dup.cells()[4] == "duplicate"
     line = headline(todo + refused)
-    assert "of 2 airborne flights" in line and "of the 2 logs" in line and "1 file a byte-identical copy" in line, line
+    assert "of 2 airborne multirotor flights" in line and "of the 2 logs" in line and "1 file a byte-identical copy" in line, line

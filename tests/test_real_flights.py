@@ -88,7 +88,7 @@ def _corpus(folders, tmp_path) -> list[str]:
 
 def _headline(lines: list[str]) -> tuple[int, int]:
     """(flights diagnosed, airborne flights) from the table's headline."""
-    m = re.match(r"\*\*(\d+) of (\d+) airborne flights get a diagnosis", lines[0])
+    m = re.match(r"\*\*(\d+) of (\d+) airborne multirotor flights get a diagnosis", lines[0])
     assert m, lines[0]
     return int(m[1]), int(m[2])
 
@@ -112,7 +112,7 @@ def test_the_docs_table_is_what_the_corpus_command_computes_quick(tmp_path):
         assert row in doc, (row, [r for r in doc if r.startswith(row.split(" | ")[0])])
     diagnosed = sum("| refused |" not in r for r in rows[2:])
     flights = sum(not any(w in r for w in ("| never armed", "| header only", "| too short to judge",
-                                           "may never have left the ground")) for r in rows[2:])
+                                           "may never have left the ground", "not a multirotor")) for r in rows[2:])
     assert _headline(lines) == (diagnosed, flights)
 
 

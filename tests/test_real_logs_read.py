@@ -107,9 +107,11 @@ def _never_armed_on_the_bench(u):
 
 @pytest.mark.parametrize("name, change, words", [
     ("vtol.ulg", lambda u: u.initial_parameters.update(MAV_TYPE=22), "MAV_TYPE = 22: a VTOL"),
-    ("octo.ulg", lambda u: u.initial_parameters.update(CA_ROTOR_COUNT=8), "CA_ROTOR_COUNT = 8: an octocopter"),
+    # eight rotors declared, four outputs assigned (a whole octocopter is read: sim/logs/frames.py)
+    ("octo.ulg", lambda u: u.initial_parameters.update(CA_ROTOR_COUNT=8), "assign motors [1, 2, 3, 4]: motors 1-8 are needed"),
+    ("dodeca.ulg", lambda u: u.initial_parameters.update(CA_ROTOR_COUNT=14), "CA_ROTOR_COUNT = 14"),
     ("plane.ulg", lambda u: u.initial_parameters.update(CA_AIRFRAME=1), "CA_AIRFRAME = 1: a fixed wing"),
-    ("hexa_x.ulg", lambda u: u.initial_parameters.update(PWM_MAIN_FUNC5=105, PWM_MAIN_FUNC6=106), "more than four motors"),
+    ("hexa_x.ulg", lambda u: u.initial_parameters.update(PWM_MAIN_FUNC5=105, PWM_MAIN_FUNC6=106), "than the layout's 4"),
     ("unarmed.ulg", _never_armed, "never armed"),
     ("unarmed_no_layout.ulg", _never_armed_on_the_bench, "never armed")])
 def test_a_real_px4_log_edited_into_another_vehicle_is_refused_by_name(tmp_path, capsys, name, change, words):

@@ -19,7 +19,7 @@ import numpy as np
 
 from flightctl.errors import InputError, read_bytes
 from flightctl.logfile import Table
-from flightctl.sim.identify.diagnose.data import all_running
+from flightctl.sim.identify.diagnose.data import all_running, motor_columns
 from flightctl.sim.logs.common import EXTRA as EXTRA_COLUMNS
 from flightctl.sim.logs.common import Imported, flight_text, parser_said, to_table
 
@@ -116,14 +116,14 @@ def _entry(index: int, name: str, read, progress) -> LogEntry:
     except InputError as e:
         return LogEntry(index, None, reason(str(e), name), 0.0)
     t = table["t"]
-    running = all_running(np.vstack([table[f"P{i}"] for i in range(1, 5)]))
+    running = all_running(np.vstack([table[c] for c in motor_columns(table)]))
     running_s = float(np.sum(np.diff(t)[running[:-1]])) if t.size > 1 else 0.0
     return LogEntry(index, table, None, float(t[-1] - t[0]), text, running_s)
 
 
 def each_log(path: str, index: int | None = None, progress=None) -> list[LogEntry]:
     """Every log of `path` (or the one at `index`, from 1), each read or skipped on its own: a log
-    that is empty, damaged or not a quadrotor never takes the others with it. File-level problems
+    that is empty, damaged or of a vehicle not read never takes the others with it. File-level problems
     (unreadable, unknown, an index that does not exist) raise InputError."""
     k = _kind(path)
     say = progress or (lambda *a: None)

@@ -31,8 +31,9 @@ FRAME_CONFIG = {"QUAD": 1, "HEXA": 2, "OCTA": 3, "OCTA_QUAD": 4, "Y6": 5, "HELI"
 # MOT's motor fields to (FRAME_CLASS, what the count alone tells)
 MOTOR_COUNTS = {3: (7, "a tricopter"), 4: (1, "a quadrotor"), 6: (2, "a hexacopter or a Y6"),
                 8: (3, "an octocopter or an octo-quad")}
-ORIENTATION = {0: 0, 1: 1, 3: 3}              # FRAME to today's FRAME_TYPE: plus, X, H
-UNTAKEN = {2: "V", 4: "V-tail", 5: "A-tail"}
+BUILDS = {1: "Quad", 2: "Hexa", 3: "Octa", 4: "OctaQuad"}   # FRAME_CLASS to the build's AP_Motors class
+ORIENTATION = {0: 0, 1: 1, 2: 2, 3: 3}        # FRAME to today's FRAME_TYPE: plus, X, V, H (the same matrices)
+UNTAKEN = {4: "V-tail", 5: "A-tail"}
 LOG_IMU, LOG_MOTORS = 7, 10                   # LOG_BITMASK bits
 RCOU_FIELDS = ("Chan", "Ch", "C")             # RCOU's output n is Chan<n> (3.1.1-3.2), Ch<n> (3.3-dev), C<n> (3.3)
 
@@ -63,13 +64,13 @@ def frame_class(p: dict, formats: dict, texts: list[str]) -> tuple[int | None, s
 
 
 def frame_type(p: dict, imp: Imported) -> int:
-    """Today's FRAME_TYPE of the quad's FRAME (orientation); InputError for a geometry not taken."""
+    """Today's FRAME_TYPE of FRAME (the orientation); InputError for a geometry not taken."""
     f = int(p.get("FRAME", 1))
     if f in UNTAKEN:
-        imp.fail(f"FRAME = {f}: ArduCopter's quad {UNTAKEN[f]} frame, a geometry (unequal yaw factors) this reader "
-                 "does not take")
+        imp.fail(f"FRAME = {f}: ArduCopter's quad {UNTAKEN[f]} frame, a geometry (front motors without a yaw factor, "
+                 "so no spin to read their shares by) this reader does not take")
     if f not in ORIENTATION:
-        imp.notes.append(f"FRAME = {f}: taken as X, as ArduCopter 3.x's AP_MotorsQuad takes any value but 0, 2-5")
+        imp.notes.append(f"FRAME = {f}: taken as X, as ArduCopter 3.x's AP_MotorsQuad takes any value but 0-5")
     return ORIENTATION.get(f, 1)
 
 
@@ -98,12 +99,13 @@ def unlogged(p: dict, gyro: bool, motors: bool) -> str:
             + f"; add {sum(1 << b for b, _ in lacks)}")
 
 
-def outputs(p: dict, msgs: dict, imp: Imported) -> tuple[str, list[str]]:
-    """(the message of the motor pulses, its fields for motors 1-4): MOT's Mot1..4, else RCOU's first four
-    pulse fields (Chan, Ch or C and the output's number, as its FMT names them); InputError when outputs
-    5-8 move while armed with no auxiliary function (RCn_FUNCTION 0): more motors than four."""
+def outputs(p: dict, msgs: dict, n: int, imp: Imported) -> tuple[str, list[str]]:
+    """(the message of the motor pulses, its fields for motors 1-n): MOT's Mot1..n, else RCOU's first n
+    pulse fields (Chan, Ch or C and the output's number, as its FMT names them); InputError when the
+    outputs after the n-th move while armed with no auxiliary function (RCn_FUNCTION 0): more motors than
+    the frame's."""
     if msgs["MOT"]:
-        return "MOT", [f"Mot{m}" for m in range(1, 5)]
+        return "MOT", [f"Mot{m}" for m in range(1, n + 1)]
     rc = msgs["RCOU"]
     if not rc:
         return "", []
@@ -111,15 +113,17 @@ def outputs(p: dict, msgs: dict, imp: Imported) -> tuple[str, list[str]]:
     if chan is None:
         imp.fail(f"RCOU's fields ({', '.join(rc[0].fmt.columns)}) name no output pulses (Chan1, Ch1 or C1): the "
                  "motor commands are not in this log")
+    if not hasattr(rc[0], f"{chan}{n}"):
+        imp.fail(f"RCOU has no {chan}{n}: the {n} motors' commands are not all in this log")
     lo, hi = float(p.get("RC3_MIN", 1000)), float(p.get("RC3_MAX", 2000))
     moving = []
-    for c in range(5, 9):
+    for c in range(n + 1, 9):
         if not hasattr(rc[0], f"{chan}{c}") or int(p.get(f"RC{c}_FUNCTION", 0) or 0) != 0:
             continue
         v = np.array([getattr(m, f"{chan}{c}") for m in rc], dtype=float)
         if np.ptp(v) > MOVES * (hi - lo):
             moving.append(c)
     if moving:
-        imp.fail(f"outputs {', '.join(map(str, moving))} move with motors 1-4 and have no auxiliary function "
-                 f"(RC{moving[0]}_FUNCTION = 0): more than four motors, not a quadrotor: diagnose knows quadrotors (4)")
-    return "RCOU", [f"{chan}{m}" for m in range(1, 5)]
+        imp.fail(f"outputs {', '.join(map(str, moving))} move with motors 1-{n} and have no auxiliary function "
+                 f"(RC{moving[0]}_FUNCTION = 0): more motors than the frame's {n}")
+    return "RCOU", [f"{chan}{m}" for m in range(1, n + 1)]

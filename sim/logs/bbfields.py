@@ -16,12 +16,9 @@ import numpy as np
 
 from flightctl.sim.logs import bfrates, controller
 from flightctl.physics import G
-from flightctl.sim.logs import identity
+from flightctl.sim.logs import frames, identity
 from flightctl.sim.logs.common import DEG, Imported, Stream, backward_note, command_p, euler_from_frd_ned, forward
 
-QUAD_X = ((-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0))   # motors 1-4: rear right, front right,
-QUAD_X_SPIN = (-1.0, 1.0, 1.0, -1.0)                               # rear left, front left; 1 and 4 clockwise
-ROTOR_NAMES = {1: "a single rotor", 2: "a bicopter", 3: "a tricopter", 6: "a hexacopter", 8: "an octocopter"}
 RPM = 2.0 * math.pi / 60.0
 LOWPASS_TYPES = {0: "pt1", 1: "biquad", 2: "pt2", 3: "pt3"}        # Betaflight's lowpass_type enum
 # Betaflight's debug modes (debugType_e): GYRO_SCALED holds the gyro before its filters (deg/s) up to
@@ -172,10 +169,9 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
     motors = sorted((n for n in names if n.startswith("motor[")), key=lambda n: int(n[6:-1]))
     if not motors:
         imp.fail("no motor[] fields: the motor commands were not logged")
-    if len(motors) != 4:
-        what = ROTOR_NAMES.get(len(motors), f"{len(motors)} motors")
-        imp.fail(f"{len(motors)} motors (motor[0..{len(motors) - 1}]): {what}, not a quadrotor: diagnose knows "
-                 "quadrotors (4)")
+    reversed_ = h.get("yaw_motors_reversed", h.get("motor_direction_inverted"))
+    mixer = "INAV" if kind == "inav" else "Betaflight"
+    frame = frames.betaflight(len(motors), mixer, reversed_, imp.fail)
     for need in ("time", "gyroADC[0]", "accSmooth[0]"):
         if need not in col:
             imp.fail(f"no {need.split('[')[0]} field: {'the time' if need == 'time' else 'that sensor'} was not logged")
@@ -240,17 +236,10 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
         height_source = "baro"
     if "quat[0]" in col:
         imp.streams["attitude"] = Stream("quat", t, euler_from_frd_ned(field("quat", 4)))
-    reversed_ = h.get("yaw_motors_reversed", h.get("motor_direction_inverted"))
-    spins = tuple(-s for s in QUAD_X_SPIN) if reversed_ else QUAD_X_SPIN
-    s2 = math.sqrt(0.5)
-    mixer = "INAV's quad X" if kind == "inav" else "Betaflight's quad X"
     imp.meta.update({
         "vehicle": "foreign", "format": ("inav" if kind == "inav" else "betaflight") + " blackbox", "source": name,
         "firmware": firmware, "craft": str(h.get("Craft name", "")).strip(),
-        "rotors": "; ".join(f"{x * s2:.4f} {y * s2:.4f} {s:+.0f}" for (x, y), s in zip(QUAD_X, spins)),
-        "rotors_source": (f"{mixer} (motor 1 rear right, 2 front right, 3 rear left, 4 front left), "
-                          + (f"yaw_motors_reversed = {int(reversed_)}" if reversed_ is not None else
-                             "the motor direction not in the header: props in (motors 1 and 4 clockwise) assumed")),
+        "rotors": frame.rotors(), "rotors_source": frame.source,
         "command_range": f"{lo:g} {hi:g}",
         "command": f"P = 255 (motor - {lo:g}) / ({hi:g} - {lo:g}): the command over motorOutput",
         "gyro_source": source + (f"; {note}" if note and gyro_filter != "none" else ""),
@@ -291,6 +280,9 @@ def _battery(imp, h, a, col, t, kind, ver):
 def _rotor_speeds(imp, h, a, col, t, field, debug, kind):
     """omega1..4 (rad/s): INDIflight's ESC telemetry; Betaflight 4.3+'s eRPM[] (bidirectional DShot,
     eRPM / 100); the debug modes DSHOT_RPM_TELEMETRY (the same) and RPM_FILTER (Hz, after a pt1)."""
+    if imp.streams["motors"].values.shape[0] != 4:
+        imp.notes.append("rotor speeds not read: their columns are a quad's (omega1-4)")
+        return
     poles = h.get("motor_poles")
     pole_note = "" if poles else f" (motor_poles not in the header: Betaflight's default {DEFAULT_POLES} assumed)"
     poles = float(poles or DEFAULT_POLES)

@@ -20,13 +20,13 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import FLIGHT_COLUMNS, FlightLogWriter, Table, read_flight_log
-from flightctl.sim.identify.diagnose.data import all_running   # all four motors above 1 % of their range
+from flightctl.sim.identify.diagnose.data import MOTOR_COLUMNS, all_running   # all motors above 1 % of their range
 from flightctl.sim.identify.diagnose.dataset import DYNAMIC_MIN_HZ   # what diagnose needs to time and to follow
 
 AXES = ("x", "y", "z")
 # Extra columns (docs/log-import.md has each one's source and unit): the measurements the diagnosis
 # reads, then what draws rate tracking (the rate setpoint, the sticks, the PID terms).
-EXTRA = (("current", "height", "omega1", "omega2", "omega3", "omega4", "gyro_f_x", "gyro_f_y", "gyro_f_z")
+EXTRA = (MOTOR_COLUMNS + ("current", "height", "omega1", "omega2", "omega3", "omega4", "gyro_f_x", "gyro_f_y", "gyro_f_z")
          + tuple(f"setpoint_{a}" for a in AXES) + ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle")
          + tuple(f"pid_{term}_{a}" for term in "pidf" for a in AXES) + ("vibe_x", "vibe_y", "vibe_z", "clip"))
 # stream name -> its columns (streams of one value write the stream's name)
@@ -76,7 +76,7 @@ class Stream:
 @dataclass
 class Imported:
     """A foreign log read: streams by column group, metadata, notes. Required streams: `gyro` (3, n,
-    rad/s), `acc` (3, n, m/s^2), `motors` (4, n, P on 0-255); optional: `battery_v`, `current`,
+    rad/s), `acc` (3, n, m/s^2), `motors` (N, n, P on 0-255: the `# rotors:` line's N); optional: `battery_v`, `current`,
     `height`, `range`, `alt`, `omega` (4, rad/s), `attitude` (3: roll, pitch, yaw), `gyro_f` (3),
     `setpoint` (3, rad/s), `attitude_sp` (3: the attitude setpoint's roll, pitch, yaw), `rc` (4), `pid` (12:
     P, I, D, F terms on x, y, z)."""
@@ -144,7 +144,7 @@ def time_base(imp: Imported) -> Stream:
 
 
 def command_p(imp: Imported, raw: np.ndarray, lo, hi, outside: str) -> np.ndarray:
-    """The motor commands `raw` (4, n) as P on 0-255 over [lo, hi] (scalars, or (4, 1) per motor),
+    """The motor commands `raw` (N, n) as P on 0-255 over [lo, hi] (scalars, or (N, 1) per motor),
     clipped; a note "N `outside` clipped to 0-255" when N samples had a command outside the range."""
     P = 255.0 * (raw - lo) / (hi - lo)
     clipped = int(((P < 0) | (P > 255)).any(axis=0).sum())
@@ -257,7 +257,7 @@ def flight_text(imp: Imported, progress=None) -> str:
     t, own = t[island], own[:, island]
     cols: dict[str, np.ndarray] = {"t": t - t[0]}
     P = _on(t, imp.streams["motors"])
-    for i in range(4):
+    for i in range(P.shape[0]):           # P5.. of a vehicle of more motors: MOTOR_COLUMNS
         cols[f"P{i + 1}"] = P[i]
     for name, s in imp.streams.items():
         if name in ("motors", "range"):

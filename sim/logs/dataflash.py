@@ -8,8 +8,8 @@ without either (LOG_BITMASK without IMU) has ATT's as its time base and no gyro 
 none`), which the static tier reads (docs/diagnose.md, "Static tier").
 
 The vehicle: the firmware (ArduCopter, ArduPlane, ...), FRAME_CLASS and FRAME_TYPE with ArduPilot's
-motor positions and spins (AP_MotorsMatrix: motor angle from the nose, clockwise positive seen from
-above; its yaw factor is the spin). The motors: SERVOn_FUNCTION 33-36 are motors 1-4, their pulses
+motor positions and spins (sim/logs/frames.py: AP_MotorsMatrix's quad, hexa, octo and octo-quad matrices).
+The motors: SERVOn_FUNCTION 33.. are motors 1..N of the frame's N, their pulses
 in RCOU's Cn, mapped onto 0-255 over MOT_PWM_MIN..MAX (RC3_MIN..MAX when those are 0, as ArduCopter does).
 ArduCopter before FRAME_CLASS (3.0-3.4: FRAME, MOT, CURR, TimeMS) is read as `arducopter3` describes.
 """
@@ -27,7 +27,7 @@ import numpy as np
 
 from flightctl.sim.logs import controller
 from flightctl.errors import InputError, read_bytes
-from flightctl.sim.logs import arducopter3, identity
+from flightctl.sim.logs import arducopter3, frames, identity
 from flightctl.sim.logs.dfarming import MOTOR_FUNCTION, armed as _armed
 from flightctl.sim.logs.common import (CELL_FULL_V, DEG, FRD, MIN_ROWS, Imported, Stream, command_p, parser_said,
                                       rate_notes)
@@ -37,18 +37,10 @@ FRAME_CLASSES = {0: "an undefined frame", 2: "a hexacopter", 3: "an octocopter",
                  10: "a tailsitter", 11: "a dual helicopter", 12: "a dodeca-hexa", 13: "a quad helicopter",
                  14: "a decacopter", 15: "a scripted frame", 16: "a scripted 6DoF frame", 17: "a scripted frame"}
 QUAD = 1
-# AP_MotorsMatrix's quad frames (FRAME_TYPE): per motor 1-4 (angle from the nose in degrees, clockwise
-# positive; spin +1 counter-clockwise)
-QUAD_FRAMES = {
-    0: ("PLUS", ((90, 1), (-90, 1), (0, -1), (180, -1))),
-    1: ("X", ((45, 1), (-135, 1), (-45, -1), (135, -1))),
-    3: ("H", ((45, -1), (-135, -1), (-45, 1), (135, 1))),
-    6: ("PLUSREV", ((90, -1), (-90, -1), (0, 1), (180, 1))),
-    12: ("BF_X", ((135, -1), (45, 1), (-135, 1), (-45, -1))),
-    13: ("DJI_X", ((45, 1), (-45, -1), (-135, 1), (135, -1))),
-    14: ("CW_X", ((45, 1), (135, -1), (-135, 1), (-45, -1))),
-    18: ("BF_X_REV", ((135, 1), (45, -1), (-135, -1), (-45, 1))),
-}
+MATRIX_CLASSES = sorted({c for c, _ in frames.ARDUPILOT})     # quad, hexa, octa, octa-quad (sim/logs/frames.py)
+ROTORCRAFT_CLASSES = {5, 7, 12, 14}      # Y6, tricopter, dodeca-hexa, decacopter: multirotors not in the table
+# (the other classes are helicopters, single and coaxial rotors, tailsitters and scripted frames)
+TAKES = "diagnose knows the quad, hexa, octo and octo-quad frames (sim/logs/frames.py)"
 RATE_NOTE = ("set LOG_BITMASK's IMU_FAST (and RCOUT) bits, or INS_RAW_LOG_OPT for "
              "the raw gyro (GYR)")
 OLD_RATE_NOTE = ("ArduCopter before 3.3 logs IMU in its 50 Hz loop and the motor outputs in its 10 Hz loop, "
@@ -278,79 +270,74 @@ def _version(firmware: str) -> tuple[int, int]:
     return (int(m[1]), int(m[2])) if m else (0, 0)
 
 
-def _vehicle(p: dict, firmware: str, formats: dict, texts: list[str], imp: Imported) -> None:
-    """InputError naming what the vehicle is when it is not a quadrotor."""
+def _kind(cls: int) -> str:
+    return "a multirotor frame this reader does not take" if cls in ROTORCRAFT_CLASSES else frames.NOT_MULTIROTOR
+
+
+def _frame(p: dict, firmware: str, formats: dict, texts: list[str], imp: Imported) -> frames.Frame:
+    """The vehicle's layout (FRAME_CLASS and FRAME_TYPE, or ArduCopter 3.x's build and FRAME, through
+    `frames.ardupilot`); InputError naming what the vehicle is when it is no frame of that table."""
     low = firmware.lower()
     if "plane" in low:
         imp.fail(f"{firmware}: " + ("a QuadPlane (VTOL, Q_ENABLE = 1)" if p.get("Q_ENABLE") else "a fixed wing")
-                 + ", not a quadrotor: diagnose knows quadrotors (4)")
+                 + f", {frames.NOT_MULTIROTOR}: {TAKES}")
     if low.startswith(("rover", "ardurover", "apm:rover", "ardusub", "antennatracker", "blimp")):
-        imp.fail(f"{firmware}: not a multirotor: diagnose knows quadrotors (4)")
+        imp.fail(f"{firmware}: {frames.NOT_MULTIROTOR}: {TAKES}")
     if arducopter3.is_legacy(p):
         cls, name, why = arducopter3.frame_class(p, formats, texts)
-        if cls is not None and cls != QUAD:
-            imp.fail(f"{firmware or 'ArduCopter'}: {name or FRAME_CLASSES.get(cls, 'not a quadrotor')} ({why}), not a "
-                     "quadrotor: diagnose knows quadrotors (4)")
+        if cls is not None and cls not in MATRIX_CLASSES:
+            imp.fail(f"{firmware or 'ArduCopter'}: {name or FRAME_CLASSES.get(cls, 'an unknown frame')} ({why}), "
+                     f"{_kind(cls)}: {TAKES}")
         imp.meta["frame_class_source"] = why or ("not in the log (ArduCopter before 3.2 is built for one frame): a "
                                                  "quadrotor if no more than four outputs move")
-        return
+        cls = QUAD if cls is None else cls
+        ftype = arducopter3.frame_type(p, imp)
+        what = f"FRAME {int(p['FRAME'])}, {why or 'a quad build'}; ArduCopter 3.x's AP_Motors{arducopter3.BUILDS[cls]}"
+        return frames.ardupilot(cls, ftype, imp.fail, what)
     cls = int(p.get("FRAME_CLASS", QUAD))
-    if cls != QUAD:
-        imp.fail(f"FRAME_CLASS = {cls}: {FRAME_CLASSES.get(cls, 'not a quadrotor')}, not a quadrotor: diagnose "
-                 "knows quadrotors (4)")
+    if cls not in MATRIX_CLASSES:
+        imp.fail(f"FRAME_CLASS = {cls}: {FRAME_CLASSES.get(cls, 'an unknown frame')}, {_kind(cls)}: {TAKES}")
+    ftype = int(p.get("FRAME_TYPE", 1))
+    return frames.ardupilot(cls, ftype, lambda w: imp.fail(f"FRAME_TYPE = {ftype}: {w}"))
 
 
-def _rotors(p: dict, imp: Imported) -> tuple[str, str]:
-    """(`rotors` metadata, its source) of the quadrotor's FRAME_TYPE (FRAME before FRAME_CLASS)."""
-    legacy = arducopter3.is_legacy(p)
-    ftype = arducopter3.frame_type(p, imp) if legacy else int(p.get("FRAME_TYPE", 1))
-    if ftype not in QUAD_FRAMES:
-        imp.fail(f"FRAME_TYPE = {ftype}: a quad frame whose geometry (V, V-tail, A-tail, Y4, no-yaw-torque) this "
-                 "reader does not take")
-    name, motors = QUAD_FRAMES[ftype]
-    rotors = "; ".join(f"{math.cos(a * DEG):.4f} {-math.sin(a * DEG):.4f} {s:+d}" for a, s in motors)
-    what = (f"FRAME {int(p['FRAME'])}; ArduCopter 3.x's AP_MotorsQuad" if legacy
-            else f"FRAME_CLASS 1, FRAME_TYPE {ftype}; AP_MotorsMatrix")
-    source = (f"ArduPilot's QUAD/{name} ({what}): motors 1-4 at "
-              + ", ".join(f"{a:+d} deg {'CCW' if s > 0 else 'CW'}" for a, s in motors) + " from the nose, clockwise positive")
-    return rotors, source
-
-
-def _outputs(p: dict, msgs, imp: Imported) -> tuple[list[tuple[str, str]], str, str]:
-    """([(message, field) of motors 1-4], which outputs in words, esc_order) from SERVOn_FUNCTION, or
-    ArduCopter 3.x's fixed outputs 1-4."""
+def _outputs(p: dict, msgs, n: int, imp: Imported) -> tuple[list[tuple[str, str]], str, str]:
+    """([(message, field) of motors 1-n], which outputs in words, esc_order) from SERVOn_FUNCTION, or
+    ArduCopter 3.x's fixed outputs 1-n."""
     if arducopter3.is_legacy(p):
-        msg, fields = arducopter3.outputs(p, msgs, imp)
+        msg, fields = arducopter3.outputs(p, msgs, n, imp)
         if not msg:
             imp.fail("no MOT or RCOU messages: " + arducopter3.unlogged(p, True, False))
-        return [(msg, f) for f in fields], f"{msg} {', '.join(fields)} (ArduCopter 3.x: motors 1-4 on outputs 1-4)", "0 1 2 3"
+        return ([(msg, f) for f in fields], f"{msg} {', '.join(fields)} (ArduCopter 3.x: motors 1-{n} on outputs 1-{n})",
+                " ".join(str(k) for k in range(n)))
     chan = {}
     for name, value in p.items():
         m = re.fullmatch(r"SERVO(\d+)_FUNCTION", name)
         if m and MOTOR_FUNCTION <= int(value) <= MOTOR_FUNCTION + 11:
             chan[int(value) - MOTOR_FUNCTION + 1] = int(m[1])
     if not chan:
-        chan = {k: k for k in range(1, 5)}
-        imp.notes.append("no SERVOn_FUNCTION parameters: motors 1-4 taken on outputs 1-4")
-    if max(chan) > 4:
+        chan = {k: k for k in range(1, n + 1)}
+        imp.notes.append(f"no SERVOn_FUNCTION parameters: motors 1-{n} taken on outputs 1-{n}")
+    if max(chan) > n:
         imp.fail(f"motors {sorted(chan)} assigned (SERVOn_FUNCTION 33-{MOTOR_FUNCTION + max(chan) - 1}): more than "
-                 "four motors: diagnose knows quadrotors (4)")
-    if sorted(chan) != [1, 2, 3, 4]:
-        imp.fail(f"SERVOn_FUNCTION assigns motors {sorted(chan)}: motors 1-4 are needed")
+                 f"the frame's {n} motors")
+    if sorted(chan) != list(range(1, n + 1)):
+        imp.fail(f"SERVOn_FUNCTION assigns motors {sorted(chan)}: the frame's motors 1-{n} are needed")
     out = []
-    for m in range(1, 5):
+    for m in range(1, n + 1):
         c = chan[m]
         msg = "RCOU" if c <= 14 else "RCO2" if c <= 18 else "RCO3"
         ms = msgs[msg]
         if not ms or not hasattr(ms[0], f"C{c}"):
             imp.fail(f"no {msg}.C{c} (motor {m} on SERVO{c}): the motor commands were not logged")
         out.append((msg, f"C{c}"))
-    outputs = ", ".join(f"SERVO{chan[m]}" for m in range(1, 5))
-    return out, f"RCOU {outputs} (SERVOn_FUNCTION 33-36 = motors 1-4)", " ".join(str(chan[m] - 1) for m in range(1, 5))
+    outputs = ", ".join(f"SERVO{chan[m]}" for m in range(1, n + 1))
+    return (out, f"RCOU {outputs} (SERVOn_FUNCTION 33-{32 + n} = motors 1-{n})",
+            " ".join(str(chan[m] - 1) for m in range(1, n + 1)))
 
 
-def _motors(p: dict, msgs, imp: Imported) -> Stream:
-    fields, outputs, esc_order = _outputs(p, msgs, imp)
+def _motors(p: dict, msgs, n: int, imp: Imported) -> Stream:
+    fields, outputs, esc_order = _outputs(p, msgs, n, imp)
     rows = [(_t(msgs[msg]), _col(msgs[msg], f)) for msg, f in fields]
     t = rows[0][0]
     raw = np.vstack([np.interp(t, tr, v) if tr.size != t.size else v for tr, v in rows])
@@ -434,10 +421,9 @@ def read(path: str, text: bool = False) -> Imported:
     if armed and msgs["EV"] and not msgs["ARM"] and not any(getattr(m, "Id", -1) == 10 for m in msgs["EV"]):
         imp.notes.append(f"no EV ARMED: the log opens armed (LOG_DISARMED 0 logs from the arming only); armed by {said}")
     firmware = _firmware(msgs, texts)
-    _vehicle(p, firmware, formats, texts, imp)
+    frame = _frame(p, firmware, formats, texts, imp)
     filtered, gsource, asource = _gyro(p, msgs, imp)
-    rotors, source = _rotors(p, imp)
-    imp.streams["motors"] = _motors(p, msgs, imp)
+    imp.streams["motors"] = _motors(p, msgs, frame.count, imp)
     _measurements(p, msgs, imp)
     old = arducopter3.is_legacy(p) and _version(firmware) < (3, 3)
     rate_notes(imp, f"motor commands ({imp.streams['motors'].name})", (OLD_RATE_NOTE if old else "") + RATE_NOTE)
@@ -445,7 +431,7 @@ def read(path: str, text: bool = False) -> Imported:
     notches = "harmonic notch (INS_HNTCH_ENABLE)" if p.get("INS_HNTCH_ENABLE") else "none"
     imp.meta.update({
         "vehicle": "foreign", "format": "ardupilot dataflash", "source": path, "firmware": firmware,
-        "craft": "", "rotors": rotors, "rotors_source": source, "gyro_source": gsource, "gyro_filter": gyro_filter,
+        "craft": "", "rotors": frame.rotors(), "rotors_source": frame.source, "gyro_source": gsource, "gyro_filter": gyro_filter,
         "gyro_notches": notches, "acc_source": asource, "acc_filter": acc_filter,
     })
     imp.meta.update(identity.ardupilot(texts, p, msgs["GPS"]))
@@ -511,7 +497,10 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
     _thrust_curve(p, imp)
     order = [int(k) for k in imp.meta.pop("esc_order").split()]
     esc = msgs["ESC"]
-    if esc and hasattr(esc[0], "RPM"):
+    if esc and len(order) != 4:
+        imp.notes.append(f"ESC telemetry of {len(order)} motors not read: the rotor speeds' columns are a quad's "
+                         "(omega1-4)")
+    elif esc and hasattr(esc[0], "RPM"):
         inst = {i: [m for m in esc if getattr(m, "Instance", -1) == i] for i in order}
         if all(inst[i] for i in order):
             t = _t(inst[order[0]])

@@ -15,6 +15,8 @@ import re
 
 import numpy as np
 
+from flightctl.sim.identify.diagnose.data import MAX_ROTORS, MIN_ROTORS
+from flightctl.sim.logs import frames
 from flightctl.sim.logs.common import Imported, Stream, command_p
 
 MAV_TYPES = {0: "a generic vehicle", 1: "a fixed wing", 3: "a coaxial helicopter", 4: "a helicopter",
@@ -32,62 +34,51 @@ AUTOSTART_RANGES = ((2000, 3999, "a fixed wing"), (6000, 7999, "a hexacopter"), 
                     (11000, 11999, "a hexacopter (coaxial)"), (12000, 12999, "an octocopter (coaxial)"),
                     (13000, 13999, "a VTOL"), (14000, 14999, "a multirotor with tilt"), (16000, 16999, "a helicopter"),
                     (17000, 17999, "an autogyro"), (50000, 69999, "a ground or water vehicle"))
-# PX4's quad X (SYS_AUTOSTART 4000-4999): motor 1 front right, 2 rear left, 3 front left, 4 rear right,
-# 1 and 2 counter-clockwise; quad + (5000-5999): 1 right, 2 left, 3 front, 4 rear, 1 and 2 counter-
-# clockwise. FRD (x, y, spin +1 counter-clockwise), arm length 1.
-PX4_QUAD_X = ((1.0, 1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, -1.0, -1.0), (-1.0, 1.0, -1.0))
-PX4_QUAD_PLUS = ((0.0, 1.0, 1.0), (0.0, -1.0, 1.0), (1.0, 0.0, -1.0), (-1.0, 0.0, -1.0))
 MOTOR_FUNCTION = 101                 # output function of motor 1 (PX4's OutputFunction: 101-112 motors 1-12)
 UAVCAN_RAW_MAX = 8191.0              # UAVCAN ESC raw command (PX4 before the output functions: (u + 1) / 2 x 8191)
 MOVES = 0.01                         # an output moves while armed when its spread is over 1 % of its range
 
 
-def _refuse(imp: Imported, what: str, why: str):
-    imp.fail(f"{why}: {what}, not a quadrotor: diagnose knows quadrotors (4)")
+def _refuse(imp: Imported, what: str, why: str, rotorcraft: bool = False):
+    """InputError naming the vehicle; `rotorcraft`: a multirotor of a layout not taken, else no multirotor."""
+    kind = "a multirotor this reader does not take" if rotorcraft else frames.NOT_MULTIROTOR
+    imp.fail(f"{why}: {what}, {kind}: {TAKES}")
 
 
-def vehicle(u, p: dict, imp: Imported) -> tuple[str, str]:
-    """(`rotors` metadata, its source) of a quadrotor; InputError naming what the vehicle is otherwise."""
+TAKES = "diagnose knows multirotors of CA_ROTOR_COUNT 4 to 12 rotors, and PX4's quad X and + before them"
+MULTIROTORS = (QUADROTOR, 13, 14)            # MAV_TYPE quadrotor, hexarotor, octorotor
+
+
+def vehicle(u, p: dict, imp: Imported) -> tuple[str, str, int]:
+    """(`rotors` metadata, its source, the motor count) of a multirotor (`frames.px4` for CA_ROTOR*, else
+    PX4's quad X or +); InputError naming what the vehicle is otherwise."""
     from flightctl.sim.logs.ulog import topic
     mav = int(p.get("MAV_TYPE", -1))
-    if mav != QUADROTOR and mav in MAV_TYPES:
-        _refuse(imp, MAV_TYPES[mav], f"MAV_TYPE = {mav}")
+    if mav not in MULTIROTORS and mav in MAV_TYPES:
+        _refuse(imp, MAV_TYPES[mav], f"MAV_TYPE = {mav}", mav in (15, 29))      # a tricopter, a dodecacopter
     frame = int(p.get("CA_AIRFRAME", 0) or 0)
     if frame in CA_AIRFRAMES:
-        _refuse(imp, CA_AIRFRAMES[frame], f"CA_AIRFRAME = {frame}")
-    auto = int(p.get("SYS_AUTOSTART", 0) or 0)
-    for lo, hi, what in AUTOSTART_RANGES:
-        if lo <= auto <= hi:
-            _refuse(imp, what, f"SYS_AUTOSTART = {auto}")
+        _refuse(imp, CA_AIRFRAMES[frame], f"CA_AIRFRAME = {frame}", frame == 10)      # 10: a multirotor with tilt
     vs = topic(u, "vehicle_status")
     if vs is not None and "is_vtol" in vs and np.any(vs["is_vtol"]):
         _refuse(imp, "a VTOL", "vehicle_status.is_vtol")
-    if "CA_ROTOR_COUNT" in p:
+    auto = int(p.get("SYS_AUTOSTART", 0) or 0)
+    placed = "CA_ROTOR_COUNT" in p
+    for lo, hi, what in AUTOSTART_RANGES:
+        rotorcraft = what.startswith(("a hexa", "an octo"))
+        if lo <= auto <= hi and not (rotorcraft and placed):      # a hexa or octo is read by its CA_ROTOR*
+            _refuse(imp, what + (" (no CA_ROTOR* parameters to place its rotors)" if rotorcraft else ""),
+                    f"SYS_AUTOSTART = {auto}", rotorcraft)
+    if placed:
         count = int(p["CA_ROTOR_COUNT"])
-        if count != 4:
-            _refuse(imp, ROTOR_COUNTS.get(count, f"{count} rotors"), f"CA_ROTOR_COUNT = {count}")
-        rotors = []
-        for i in range(4):
-            x, y, km = (float(p.get(f"CA_ROTOR{i}_{k}", math.nan)) for k in ("PX", "PY", "KM"))
-            if not all(math.isfinite(v) for v in (x, y, km)) or km == 0:
-                imp.fail(f"CA_ROTOR{i}_PX/PY/KM missing or zero: the rotor layout is unknown")
-            rotors.append((x, y, 1.0 if km > 0 else -1.0))      # KM > 0: counter-clockwise (PX4's control allocation)
-        source = "PX4's CA_ROTOR{0..3}_PX/PY/KM parameters (FRD positions, KM > 0 counter-clockwise)"
-    elif mav == QUADROTOR:
-        plus = 5000 <= auto <= 5999
-        rotors = list(PX4_QUAD_PLUS if plus else PX4_QUAD_X)
-        if plus:
-            source = (f"PX4's quad + for SYS_AUTOSTART {auto} (no CA_ROTOR* parameters): motor 1 right, 2 left, "
-                      "3 front, 4 rear; 1 and 2 counter-clockwise")
-        else:
-            known = "" if 4000 <= auto <= 4999 else " (not in PX4's quad X range 4000-4999: assumed)"
-            source = (f"PX4's quad X for SYS_AUTOSTART {auto}{known} (MAV_TYPE 2, no CA_ROTOR* parameters): motor 1 "
-                      "front right, 2 rear left, 3 front left, 4 rear right; 1 and 2 counter-clockwise")
-    else:
-        imp.fail(f"MAV_TYPE = {mav} and no CA_ROTOR* parameters: not a quadrotor this reader knows")
-    arm = max(math.hypot(x, y) for x, y, _ in rotors)
-    text = "; ".join(f"{x / arm:.4f} {-y / arm:.4f} {s:+.0f}" for x, y, s in rotors)     # FRD y to our y
-    return text, source
+        if not MIN_ROTORS <= count <= MAX_ROTORS:
+            _refuse(imp, ROTOR_COUNTS.get(count, f"{count} rotors"), f"CA_ROTOR_COUNT = {count}", count >= 3)
+        f = frames.px4(p, imp.fail)
+        return f.rotors(), f.source, f.count
+    if mav != QUADROTOR:
+        imp.fail(f"MAV_TYPE = {mav} and no CA_ROTOR* parameters: a rotor layout this reader does not know")
+    f = frames.px4_quad(auto)
+    return f.rotors(), f.source, f.count
 
 
 def functions(p: dict) -> dict[str, dict[int, int]]:
@@ -128,20 +119,20 @@ def _spread(x: np.ndarray, on: np.ndarray) -> np.ndarray:
     return x.std(axis=1)
 
 
-def motors(u, p: dict, imp: Imported, armed) -> Stream:
-    """The motor commands as P on 0-255 (held between samples), with `command_range`, `command` and
-    `motor_outputs` in the metadata; InputError naming why the motors cannot be found."""
+def motors(u, p: dict, imp: Imported, armed, count: int = 4) -> Stream:
+    """The `count` motors' commands as P on 0-255 (held between samples), with `command_range`, `command`
+    and `motor_outputs` in the metadata; InputError naming why the motors cannot be found."""
     from flightctl.sim.logs.ulog import topic
     by_group = functions(p)
-    if len(by_group) > 1 or any(max(m) > 4 for m in by_group.values()):
+    if len(by_group) > 1 or any(max(m) > count for m in by_group.values()):
         assigned = ", ".join(f"{g} motors {sorted(m)}" for g, m in by_group.items())
-        if any(max(m) > 4 for m in by_group.values()):
-            imp.fail(f"more than four motors assigned ({assigned}): diagnose knows quadrotors (4)")
+        if any(max(m) > count for m in by_group.values()):
+            imp.fail(f"more motors assigned ({assigned}) than the layout's {count}")
         imp.fail(f"the motors are split over output groups ({assigned}): not read")
-    group, chan = next(iter(by_group.items())) if by_group else (None, {m: m for m in range(1, 5)})
-    if by_group and sorted(chan) != [1, 2, 3, 4]:
-        imp.fail(f"{group}_FUNCn assign motors {sorted(chan)}: motors 1-4 are needed")
-    channels = [chan[m] - 1 for m in range(1, 5)]
+    group, chan = next(iter(by_group.items())) if by_group else (None, {m: m for m in range(1, count + 1)})
+    if by_group and sorted(chan) != list(range(1, count + 1)):
+        imp.fail(f"{group}_FUNCn assign motors {sorted(chan)}: motors 1-{count} are needed")
+    channels = [chan[m] - 1 for m in range(1, count + 1)]
     best = None
     for inst, n, t, out, on in _candidates(u, armed):
         if max(channels) >= out.shape[0]:
@@ -159,22 +150,23 @@ def motors(u, p: dict, imp: Imported, armed) -> Stream:
     others = [i for i in np.flatnonzero(moving) if i not in channels and i < n]
     if not by_group and others:
         imp.fail(f"actuator_outputs[{inst}] outputs {', '.join(str(i + 1) for i in others)} move with the motors: "
-                 f"more than four motors ({int(len(others)) + 4}): diagnose knows quadrotors (4)")
+                 f"more motors ({int(len(others)) + count}) than the layout's {count}")
     raw = out[channels]
     lo, hi, what = _range(p, group, chan, raw)
     where = (f"actuator_outputs[{inst}] outputs {', '.join(str(c + 1) for c in channels)}"
-             + (f" ({group}_FUNC{', '.join(str(chan[m]) for m in range(1, 5))} = 101-104)" if group else
-                " (no output functions in this PX4: motors 1-4 on the first four outputs of the group that moves)"))
+             + (f" ({group}_FUNC{', '.join(str(chan[m]) for m in range(1, count + 1))} = 101-{100 + count})" if group
+                else f" (no output functions in this PX4: motors 1-{count} on the first outputs of the group that moves)"))
     imp.meta["motor_outputs"] = f"{where}; {what}"
     am = topic(u, "actuator_motors")
-    if am is not None and all(f"control[{i}]" in am for i in range(4)):
-        c = np.vstack([am[f"control[{i}]"] for i in range(4)]).astype(float)
+    if am is not None and all(f"control[{i}]" in am for i in range(count)):
+        c = np.vstack([am[f"control[{i}]"] for i in range(count)]).astype(float)
         if np.isfinite(c).any() and np.nanmax(c) > 0:
             stopped = int((~np.isfinite(c)).any(axis=0).sum())
             if stopped:
                 imp.notes.append(f"{stopped} actuator_motors samples without a command (NaN: stopped) read as 0")
             imp.meta["command_range"] = "0 1"
-            imp.meta["command"] = "P = 255 actuator_motors.control[0..3] (PX4's normalised motor commands, 0-1)"
+            imp.meta["command"] = (f"P = 255 actuator_motors.control[0..{count - 1}] (PX4's normalised motor commands, "
+                                   "0-1)")
             return Stream("actuator_motors", am["timestamp"] * 1e-6, np.clip(np.nan_to_num(c) * 255.0, 0.0, 255.0),
                           held=True)
     P = command_p(imp, raw, lo[:, None], hi[:, None], "actuator_outputs samples outside their MIN..MAX (stopped or "
@@ -189,17 +181,17 @@ def motors(u, p: dict, imp: Imported, armed) -> Stream:
 def _range(p: dict, group: str | None, chan: dict[int, int], raw: np.ndarray):
     """(MIN per motor, MAX per motor, their description) of the motors' outputs."""
     if group is not None:
-        lo = np.array([float(p.get(f"{group}_MIN{chan[m]}", math.nan)) for m in range(1, 5)])
-        hi = np.array([float(p.get(f"{group}_MAX{chan[m]}", math.nan)) for m in range(1, 5)])
-        dis = [p.get(f"{group}_DIS{chan[m]}") for m in range(1, 5)]
+        lo = np.array([float(p.get(f"{group}_MIN{chan[m]}", math.nan)) for m in sorted(chan)])
+        hi = np.array([float(p.get(f"{group}_MAX{chan[m]}", math.nan)) for m in sorted(chan)])
+        dis = [p.get(f"{group}_DIS{chan[m]}") for m in sorted(chan)]
         if np.isfinite(lo).all() and np.isfinite(hi).all() and (hi > lo).all():
             return lo, hi, (f"{group}_MIN/MAX {lo.min():g}-{hi.max():g}"
                             + (f", disarmed {dis[0]}" if dis[0] is not None else ""))
     if np.nanmax(raw) > 2500 and int(p.get("UAVCAN_ENABLE", 0) or 0) >= 3:
-        return (np.zeros(4), np.full(4, UAVCAN_RAW_MAX),
+        return (np.zeros(len(chan)), np.full(len(chan), UAVCAN_RAW_MAX),
                 f"UAVCAN ESC raw commands 0-{UAVCAN_RAW_MAX:g} ((u + 1) / 2 x {UAVCAN_RAW_MAX:g}, PX4 before 1.13)")
-    lo = [p.get(f"PWM_MAIN_MIN{i}", -1) for i in range(1, 5)]
-    hi = [p.get(f"PWM_MAIN_MAX{i}", -1) for i in range(1, 5)]
+    lo = [p.get(f"PWM_MAIN_MIN{i}", -1) for i in range(1, len(chan) + 1)]
+    hi = [p.get(f"PWM_MAIN_MAX{i}", -1) for i in range(1, len(chan) + 1)]
     lo = np.array([v if v > 0 else p.get("PWM_MAIN_MIN", p.get("PWM_MIN", 1000)) for v in lo], dtype=float)
     hi = np.array([v if v > 0 else p.get("PWM_MAIN_MAX", p.get("PWM_MAX", 2000)) for v in hi], dtype=float)
     return lo, hi, f"PWM_MAIN_MIN/MAX {lo.min():g}-{hi.max():g} us"

@@ -81,7 +81,7 @@ def read(path: str) -> Imported | str:
     armed = armed_times(u)
     if armed is not None and not armed[1].any():
         imp.fail("never armed: the motors did not run in this log (actuator_armed / vehicle_status.arming_state)")
-    rotors, source = px4motors.vehicle(u, p, imp)        # refuses what is not a quadrotor, names why
+    rotors, source, count = px4motors.vehicle(u, p, imp)   # refuses what is no multirotor it takes, names why
     sc = topic(u, "sensor_combined")
     if sc is None or "gyro_rad[0]" not in sc:
         imp.fail("no sensor_combined topic: the gyro was not logged")
@@ -95,7 +95,7 @@ def read(path: str) -> Imported | str:
         imp.notes.append(f"damaged: {damage}")
     ta = t + sc.get("accelerometer_timestamp_relative", np.zeros(t.size)) * 1e-6
     imp.streams["acc"] = Stream("sensor_combined accelerometer", ta, a * FRD)
-    imp.streams["motors"] = px4motors.motors(u, p, imp, armed)
+    imp.streams["motors"] = px4motors.motors(u, p, imp, armed, count)
     rate_notes(imp, "motor commands", PROFILE_NOTE)
     _measurements(u, p, imp)
     cutoff = float(p.get("IMU_GYRO_CUTOFF", 0) or 0)
@@ -189,7 +189,10 @@ def _measurements(u, p: dict, imp: Imported) -> None:
         sp = np.vstack([rs[k] for k in ("roll", "pitch", "yaw")]).astype(float)
         imp.streams["setpoint"] = Stream("vehicle_rates_setpoint", rs["timestamp"] * 1e-6, sp * FRD)
     esc = topic(u, "esc_status")
-    if esc is not None and all(f"esc[{i}].esc_rpm" in esc for i in range(4)):
+    if esc is not None and imp.streams["motors"].values.shape[0] != 4:
+        imp.notes.append(f"esc_status of {imp.streams['motors'].values.shape[0]} motors not read: the rotor speeds' "
+                         "columns are a quad's (omega1-4)")
+    elif esc is not None and all(f"esc[{i}].esc_rpm" in esc for i in range(4)):
         order = imp.meta.pop("esc_order", None)
         idx = [int(k) for k in order.split()] if order else [0, 1, 2, 3]
         rpm = np.vstack([esc[f"esc[{i}].esc_rpm"] for i in idx]).astype(float)

@@ -25,6 +25,7 @@ from pathlib import Path
 from flightctl.errors import InputError, output_file, output_room, write_atomic
 from flightctl.sim.identify.static import summary
 from flightctl.sim.identify.diagnose.results import default_path
+from flightctl.sim.logs.frames import NOT_MULTIROTOR
 
 TABLE_BEGIN = "<!-- diagnose --corpus table: begin -->"
 TABLE_END = "<!-- diagnose --corpus table: end -->"
@@ -218,25 +219,37 @@ def run_one(row: Row) -> Row:
 NO_FLIGHT = ("header only", "never armed", "too short to judge", "may never have left the ground")
 
 
+def other_vehicle(row: Row) -> bool:
+    """The log is of a vehicle that is no multirotor (a plane, a VTOL, a helicopter, a rover: the readers'
+    refusals say `frames.NOT_MULTIROTOR`): not one of the airborne multirotor flights of the headline."""
+    return row.status == "refused" and NOT_MULTIROTOR in row.reason
+
+
 def flew(row: Row) -> bool:
-    """The log holds a flight: it was diagnosed (a tier answered), or refused for a reason other than
-    holding no flight (a failure of diagnose's counts as a flight not answered)."""
-    return row.status == "diagnosed" or (row.status != "duplicate" and not any(w in row.reason for w in NO_FLIGHT))
+    """The log holds a multirotor's flight: it was diagnosed (a tier answered), or refused for a reason
+    other than holding no flight or being another vehicle (a failure of diagnose's counts as a flight
+    not answered)."""
+    return row.status == "diagnosed" or (row.status != "duplicate" and not other_vehicle(row)
+                                         and not any(w in row.reason for w in NO_FLIGHT))
 
 
 def headline(rows: list[Row]) -> str:
-    """The share of the airborne flights that get a diagnosis, and of which tier; a byte-identical copy
-    of another file is counted once (its own line)."""
+    """The share of the airborne multirotor flights that get a diagnosis, and of which tier; the logs of
+    other vehicles and those of no flight counted apart; a byte-identical copy of another file counted
+    once (its own line)."""
     copies = sum(r.status == "duplicate" for r in rows)
     logs = len(rows) - copies
+    others = sum(other_vehicle(r) for r in rows)
     flights = [r for r in rows if flew(r)]
     done = [r for r in flights if r.status == "diagnosed"]
     static_only = sum(r.tier() == "static" for r in done)
     share = f"{100 * len(done) / len(flights):.0f} %" if flights else "-"
-    return (f"**{len(done)} of {len(flights)} airborne flights get a diagnosis ({share})**: "
+    return (f"**{len(done)} of {len(flights)} airborne multirotor flights get a diagnosis ({share})**: "
             f"{len(done) - static_only} the dynamic tier, {static_only} the static tier only; "
-            f"{logs - len(flights)} of the {logs} logs hold no flight (header only, never armed, "
+            f"{logs - len(flights) - others} of the {logs} logs hold no flight (header only, never armed, "
             "too short or idle, or by its barometer never off the ground)"
+            + (f"; {others} {'is a log' if others == 1 else 'are logs'} of another vehicle (a plane, a VTOL, a "
+               "helicopter: 'not a multirotor'), not counted" if others else "")
             + (f"; {copies} file{'s' if copies > 1 else ''} a byte-identical copy of another, counted once" if copies
                else ""))
 

@@ -65,7 +65,9 @@ REST_G = 0.1             # share of g
 # the vehicle may never have left the ground: said beside a refusal (base._shown), never a verdict.
 BARO_CLIMB_M = 0.5
 HEIGHT_SOURCES = ("mocap", "rangefinder")   # heights good to a few cm: they also give the airborne test
-FOREIGN_COLUMNS = ("height", "current", "omega1", "omega2", "omega3", "omega4")
+MIN_ROTORS, MAX_ROTORS = 4, 12      # the static tier's layouts (sim/logs/frames.py); the dynamic tier's model is the quad's
+MOTOR_COLUMNS = tuple(f"P{i}" for i in range(5, MAX_ROTORS + 1))   # motors 5.. beside the contract's P1-P4
+FOREIGN_COLUMNS = ("height", "current", "omega1", "omega2", "omega3", "omega4") + MOTOR_COLUMNS
 FILTER_KINDS = ("pt1", "pt2", "pt3", "biquad")
 
 
@@ -89,16 +91,17 @@ class Layout:
 
     @classmethod
     def parse(cls, text: str, source: str, fail) -> "Layout":
-        """`x1 y1 s1; x2 y2 s2; x3 y3 s3; x4 y4 s4` (a log's `# rotors:` line, in arm lengths)."""
+        """`x1 y1 s1; x2 y2 s2; ...` (a log's `# rotors:` line, in arm lengths): MIN_ROTORS to MAX_ROTORS
+        rotors (sim/logs/frames.py's layouts), half of them each way."""
         rotors = [r.split() for r in text.split(";") if r.strip()]
-        if len(rotors) != 4:
-            fail(f"# rotors: {len(rotors)} rotors; diagnose knows quadrotors (4)")
+        if not MIN_ROTORS <= len(rotors) <= MAX_ROTORS:
+            fail(f"# rotors: {len(rotors)} rotors; diagnose knows multirotors of {MIN_ROTORS} to {MAX_ROTORS}")
         try:
             x, y, s = (tuple(float(r[k]) for r in rotors) for k in range(3))
         except (ValueError, IndexError):
             fail(f"# rotors: {text!r} is not 'x y spin' for each rotor")
         if any(v not in (-1.0, 1.0) for v in s) or sum(s) != 0:
-            fail(f"# rotors: spins {s}: each is +1 or -1, two of each")
+            fail(f"# rotors: spins {s}: each is +1 or -1, as many of each")
         if not all(math.isfinite(v) and abs(v) <= 10 for v in x + y):
             fail(f"# rotors: positions {x}, {y} are not arm lengths")
         return cls(x, y, s, "arm", source)
@@ -209,8 +212,19 @@ def _tilt_rotation(acc_mean):
     return np.array([[ct, st * sf, st * cf], [0.0, cf, -sf], [-st, ct * sf, ct * cf]])
 
 
+def motor_columns(table) -> tuple[str, ...]:
+    """The commands' columns: the contract's P1-P4 and, for a vehicle of more motors, P5.. in order while
+    they hold a command (MOTOR_COLUMNS; the `# rotors:` line says how many there are)."""
+    out = [f"P{i}" for i in range(1, 5)]
+    for c in MOTOR_COLUMNS:
+        if c not in table or not np.isfinite(table[c]).any():
+            break
+        out.append(c)
+    return tuple(out)
+
+
 def all_running(P: np.ndarray) -> np.ndarray:
-    """(n,) bool: the rows of a foreign log's commands P (4, n) where all four motors run (above IDLE_P)."""
+    """(n,) bool: the rows of a foreign log's commands P (N, n) where all its motors run (above IDLE_P)."""
     return (P > IDLE_P).all(axis=0)
 
 
@@ -354,6 +368,9 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc:
     if "rotors" not in meta:
         table.fail("# vehicle: foreign without a '# rotors:' line: the rotor layout is unknown")
     layout = Layout.parse(meta["rotors"], meta.get("rotors_source", "the log's '# rotors:' line"), table.fail)
+    if len(layout.x) != P.shape[0]:
+        table.fail(f"# rotors: {len(layout.x)} rotors, but the log has the commands of {P.shape[0]} motors "
+                   f"({', '.join(motor_columns(table))})")
     running = all_running(P)
     if "height" in table and meta.get("height_source", "") in HEIGHT_SOURCES and np.isfinite(table["height"]).any():
         h = table["height"]
@@ -453,7 +470,7 @@ def load_file(table: Table, a: Airframe) -> FileData:
     foreign`) says its layout in its metadata. Either may declare its sensor filters."""
     t = table["t"]
     n = t.size
-    P = np.vstack([table[f"P{i}"] for i in range(1, 5)])
+    P = np.vstack([table[c] for c in motor_columns(table)])
     gyro = np.vstack([table[c] for c in ("gyro_x", "gyro_y", "gyro_z")])
     acc = np.vstack([table[c] for c in ("acc_x", "acc_y", "acc_z")])
     notes = [f"damaged: {table.meta['damaged']}"] if table.meta.get("damaged") else []   # (a reader's `# damaged:`)

@@ -351,6 +351,17 @@ def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str
     return rnd, judged
 
 
+def quad_only(files) -> None:
+    """InputError (the dynamic tier refused, the static tier answers) for a layout of other than four
+    rotors: the dynamic tier's per-rotor parts are written for four (`DataSet.thrust_columns`, the hover
+    gains and the rotor speeds' checks of base.identify and rotorspeed, the per-motor causes'
+    candidates), while its torques (`DataSet.predict_file`: eq. 25's sums over the layout) are not."""
+    n = len(files[0].layout.x)
+    if n != 4:
+        raise InputError(f"{files[0].path}: the dynamic tier's model is a quadrotor's (its per-rotor thrust columns, hover gains and "
+                         f"per-motor causes are written for four rotors): {n} rotors ({files[0].layout.source})")
+
+
 def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[EffectSpec, ...] = (),
              params_given: bool = False, accepted=None) -> Diagnosis:
     """Every candidate of `flightctl.sim.causes` fitted and scored on the logs, on top of the base
@@ -362,6 +373,7 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
     notes: list[str] = []
     files = _files(tables, a, notes, progress)
     try:
+        quad_only(files)
         sensor_rate(tables, files)
         lowpass, static_only, slow = LOWPASS_HZ, None, None
         rate = motor_rate(tables)

@@ -148,6 +148,7 @@ def text(st: dict) -> str:
     """The static findings as the text report's lines."""
     L = [f"  static tier ({st['hover_s']:.1f} s of hover in {st['airborne_s']:.1f} s airborne; sensors "
          f"{st['rates']['sensors_hz']:g} Hz, motors {st['rates']['motors_hz']:g} Hz; thrust curve: {st['thrust_curve']}):"]
+    L.append(f"    frame: {st['layout']['source']}")
     h = st.get("hover")
     if h:
         L.append(f"    hover: command {h['command']:.3f} +- {h['command_stderr']:.2g} of the range, thrust "

@@ -6,7 +6,7 @@ the hover rows (`blocks`), each with its block-jackknife standard error:
   asks for more than its weight); its inverse is the thrust-to-weight ratio at full command. A ratio of
   the blocks' means, never the mean of the rows' ratios: on a vibrating accelerometer that one is
   biased high by var(acc_z) / acc_z^2 and more.
-- **each motor's share of the hover thrust** (the four's mean is 1) and its **drift** over the flight
+- **each motor's share of the hover thrust** (the motors' mean is 1) and its **drift** over the flight
   (the blocks' shares regressed on their times).
 - **what the pattern of the shares is**, worked out from eq. 25's structure on the log's rotor layout:
   in hover the rotors' thrusts balance the weight and hold zero roll, pitch and yaw torque about the
@@ -51,7 +51,7 @@ def _num(x, digits=4):
 
 def _gains(share: np.ndarray) -> np.ndarray:
     """The gain a model with equal rotors calls each rotor: the inverse of its share of the hover
-    command's thrust, against the four's mean."""
+    command's thrust, against the motors' mean."""
     g = 1.0 / np.asarray(share, float)
     return g / g.mean()
 
@@ -95,9 +95,51 @@ def shares(bl: Blocks, c: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
            "check": (f"a share drifts when its change over the {span:.0f} s between the first and last block is at least "
                      f"{100 * DRIFT_TOL:g} % and {DRIFT_T:g} standard errors (regression over the {bl.n_blocks} blocks), over "
                      f"at least {MIN_DRIFT_SPAN_S:g} s"),
-           "what": "each motor's share of the hover thrust through the curve (the mean of the four is 1), block "
+           "what": "each motor's share of the hover thrust through the curve (the motors' mean is 1), block "
                    "jackknife standard error; drift: the blocks' shares regressed on time"}
     return out, m, per_block
+
+
+def _mixer(layout: Layout) -> np.ndarray:
+    """(N, 4) the mixer's columns in thrust (eq. 25's structure, as the firmwares mix: AP_MotorsMatrix's
+    throttle, roll, pitch and yaw factors, sim/logs/frames.py): 1, y_i, x_i, s_i. The rotors' wrench of
+    thrusts f is the same columns' transpose (times the arm and eq. 28's torque ratio), so a vehicle in
+    hover with thrusts S c for its commanded thrusts c = A v holds A^T S A v = (W, 0, 0, 0)."""
+    return np.column_stack([np.ones(len(layout.x)), layout.y, layout.x, layout.spin])
+
+
+def weak_shares(layout: Layout, j: int, scale: float) -> np.ndarray:
+    """(N,) the commanded thrusts' shares (mean 1) in hover when motor j gives `scale` of the thrust for its
+    command (`_mixer`: c = A (A^T S A)^-1 e_1). A quadrotor's mixer is square: motor j's command alone rises,
+    by 1 / scale; more rotors than four share the correction as the mixer's columns allow."""
+    A = _mixer(layout)
+    S = np.ones(A.shape[0])
+    S[j] = scale
+    c = A @ np.linalg.lstsq(A.T @ (S[:, None] * A), np.eye(4)[0], rcond=None)[0]
+    return c / c.mean()
+
+
+def _weak_pattern(layout: Layout, j: int) -> np.ndarray:
+    """(N, 1) the direction of a weak motor j's pattern of the shares (its small-loss limit, `weak_shares`):
+    for a quadrotor e_j - 1/N exactly."""
+    e = weak_shares(layout, j, 1.0 - 1e-4) - 1.0
+    return (e * (1.0 - 1.0 / e.size) / e[j])[:, None]
+
+
+def _weak_size(layout: Layout, j: int, beta: float) -> tuple[float, float]:
+    """(the scale whose `weak_shares` project on `_weak_pattern` as beta, d scale / d beta): the weak motor's
+    thrust for its command against the others'. A quadrotor's is (1 - beta / N) / (1 + (N - 1) / N beta)."""
+    e = _weak_pattern(layout, j)[:, 0]
+    proj = lambda sc: float((weak_shares(layout, j, sc) - 1.0) @ e / (e @ e))
+    lo, hi = 0.05, 1.5
+    if not proj(hi) <= beta <= proj(lo):
+        return (hi if beta < proj(hi) else lo), 0.0
+    for _ in range(60):                       # the projection falls as the scale rises: bisection
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if proj(mid) > beta else (lo, mid)
+    sc = 0.5 * (lo + hi)
+    h = 1e-5
+    return sc, 2.0 * h / (proj(sc - h) - proj(sc + h))
 
 
 def _hypotheses(layout: Layout) -> dict[str, np.ndarray]:
@@ -105,14 +147,13 @@ def _hypotheses(layout: Layout) -> dict[str, np.ndarray]:
     parameters). Exact in the shares: a centre of mass at d asks for sum_i s_i r_i = N d (the torque
     balance about it, eq. 25's roll and pitch rows), the opposite of `trim_pattern`'s gains; a yaw
     trim for a difference of the spins' pairs (eq. 25's yaw row); a weak motor for its own command's
-    thrust alone raised (the direction exact, its size a scale)."""
+    thrust raised through the mixer (`_weak_pattern`: alone on a quadrotor; the direction exact in the
+    small-loss limit, its size a scale, `_weak_size`)."""
     s = np.asarray(layout.spin, float)[:, None]
     out = {"yaw trim": s}
     n = s.shape[0]
     for j in range(n):
-        e = -np.full((n, 1), 1.0 / n)
-        e[j] += 1.0
-        out[f"weak motor {j + 1}"] = e
+        out[f"weak motor {j + 1}"] = _weak_pattern(layout, j)
     out["centre of mass"] = -trim_pattern(layout)
     out["centre of mass and yaw trim"] = np.hstack([-trim_pattern(layout), s])
     return out
@@ -152,9 +193,8 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
         p = float(stats.chi2.sf(chi2, dof)) if dof > 0 else 1.0
         size = None
         if name.startswith("weak motor"):
-            n = A.shape[0]          # its thrust for its command against the others'; d size / d beta = -1 / den^2
-            size = (1.0 - beta[0] / n) / (1.0 + (n - 1) / n * beta[0])
-            size_sd = beta_sd[0] / (1.0 + (n - 1) / n * beta[0]) ** 2
+            size, slope = _weak_size(layout, int(name.split()[-1]) - 1, float(beta[0]))
+            size_sd = beta_sd[0] * abs(slope)
             if not (MIN_WEAK <= size < 1.0):
                 p = 0.0                 # a stronger motor, or one too weak to hover: not physical
         fits.append({"hypothesis": name, "parameters": A.shape[1], "chi2": round(chi2, 2), "dof": dof,
@@ -202,8 +242,9 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
                               f"and a yaw trim of {100 * split:+.1f} +- {100 * split_sd:.2g} % (chi-square {best['chi2']} "
                               f"on {best['dof']} dof)")
             else:
-                out["why"] = (f"one motor's command raised alone (its roll, pitch and yaw parts in its position's and "
-                              f"spin's ratio): {best['hypothesis']} gives {100 * best['thrust_scale']:.1f} +- "
+                out["why"] = (f"one motor's command raised (alone on a quadrotor, with the mixer's share of the others "
+                              f"on more rotors: its roll, pitch and yaw parts in its position's and spin's ratio): "
+                              f"{best['hypothesis']} gives {100 * best['thrust_scale']:.1f} +- "
                               f"{100 * best['thrust_scale_stderr']:.2g} % of the others' thrust for its command "
                               f"(chi-square {best['chi2']} on {best['dof']} dof)")
             alike = [f["hypothesis"] for f in ok if f["parameters"] == best["parameters"] and f is not best]
