@@ -279,3 +279,23 @@ def test_damping_is_the_least_damped_mode_the_margin_speaks_of():
     unstable = analyse(load(None, TABLE4), (lag,), estimators=(TRUTH,), channels=("roll",))
     g = unstable.loops[TRUTH]["roll"].figures
     assert not g["stable"] and g["damping"] < 0.0
+
+
+def test_a_deadbeat_mode_is_no_mode_of_the_loop():
+    """A mode at the z-plane's origin (a delay's held sample: the flight estimator's realisation has
+    them) has no frequency: its log(z) / T is rounding (docs/analyze.md once printed roll's wn as 8664.58
+    rad/s, then 8640.68 on another machine, zeta 0.997, beside a 57 % overshoot). Whatever its share,
+    the damping is the least damped mode with dynamics; drawn here at random."""
+    from flightctl.sim.analysis.loops import dominant, least_damped
+    rng = np.random.default_rng(6101)
+    period = 1.0 / 450.0
+    for _ in range(20):
+        zeta, wn = rng.uniform(0.02, 0.5), rng.uniform(3.0, 60.0)
+        osc = -zeta * wn + 1j * wn * np.sqrt(1.0 - zeta ** 2)
+        z = np.exp(np.array([osc, np.conj(osc)]) * period)
+        z_dead = rng.uniform(1e-12, 1e-8) * np.exp(1j * rng.uniform(-np.pi, np.pi))
+        s = (np.array([*z, z_dead]) - 1.0) / period                      # the delta form's eigenvalues
+        share = np.array([0.3, 0.3, rng.uniform(10.0, 1e4)], complex)   # the deadbeat mode's, the largest
+        got_zeta, got_wn = least_damped(s, share, period)
+        assert got_zeta == pytest.approx(zeta, rel=1e-6) and got_wn == pytest.approx(wn, rel=1e-6)
+        assert dominant(s, share, period)[1] == pytest.approx(wn, rel=1e-6)

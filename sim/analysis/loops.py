@@ -43,6 +43,14 @@ MIN_HORIZON, MAX_HORIZON = 20.0, 120.0   # s, of the step responses
 DRIFT_RATE = 1e-4           # 1/s: a closed-loop mode slower than this (a time constant beyond 2.8 h)
                             # is drift, not dynamics (rounding moves a pole at 0 by ~1e-6 at most)
 SEEN_SHARE = 0.01           # a mode with 1 % of the largest share of the step response is one it shows
+DEADBEAT = 1e-6             # |z| below this: a mode at the z-plane's origin, a pure delay of the discrete
+                            # loop (a sample held one period), with no frequency or damping of its own;
+                            # its log(z) / T is rounding (once printed as wn 8664.58, then 8640.68, rad/s)
+
+
+def _modal(s, period: float):
+    """The modes with dynamics: neither drift (|s| < DRIFT_RATE) nor deadbeat (|z| = |1 + T s| < DEADBEAT)."""
+    return (np.abs(s) >= DRIFT_RATE) & (np.abs(1.0 + period * np.asarray(s)) >= DEADBEAT)
 
 
 @dataclass
@@ -238,8 +246,8 @@ def modes(A, B, C, tol: float = 1e-9):
 
 def dominant(s, share, period: float) -> tuple[float, float]:
     """Damping ratio and natural frequency (rad/s) of the closed-loop mode with the largest share of
-    the step response, drift modes aside."""
-    live = np.abs(s) >= DRIFT_RATE
+    the step response, drift and deadbeat modes aside."""
+    live = _modal(s, period)
     if not live.any():
         return math.nan, math.nan
     size = np.abs(share[live])
@@ -254,8 +262,8 @@ def least_damped(s, share, period: float) -> tuple[float, float]:
     response sees (its share at least SEEN_SHARE of the largest), drift modes aside: the figure a
     phase margin speaks of. The largest share alone can be a real pole (damping 1) while a small,
     barely damped or growing oscillation rides on it (1.000 was once printed at a 4 degree margin).
-    Negative for a growing mode."""
-    live = np.abs(s) >= DRIFT_RATE
+    Negative for a growing mode. Deadbeat modes (a delay's) are no mode a margin speaks of."""
+    live = _modal(s, period)
     size = np.where(np.isfinite(np.abs(share)), np.abs(share), np.inf)
     seen = live & (size >= SEEN_SHARE * np.max(size[live], initial=0.0))
     if not seen.any():
