@@ -189,7 +189,8 @@ def _command(argv: list[str]) -> int:
         print(version())
         return 0
     if argv[0] not in COMMANDS:
-        print(f"flightctl: unknown command {argv[0]!r}\n{usage()}", file=sys.stderr)
+        print(f"flightctl: unknown command {argv[0]!r} (commands: {', '.join(COMMANDS)}; flightctl --help)",
+              file=sys.stderr)
         return 2
     matplotlib_home()
     module = None

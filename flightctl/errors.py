@@ -34,10 +34,10 @@ def output_file(path, what: str = "", suffix: str | None = None) -> Path:
     `what`: the flag it came from, for the message."""
     p = Path(path)
     name = f"{what} {p}" if what else str(p)
-    if suffix is not None and p.suffix.lower() != suffix:
-        raise InputError(f"{name}: the output should end in {suffix}")
     if p.is_dir():
         raise InputError(f"{name}: is a directory, a file name is needed")
+    if suffix is not None and p.suffix.lower() != suffix:
+        raise InputError(f"{name}: the output should end in {suffix}")
     folder = p.resolve().parent
     if not folder.is_dir():
         raise InputError(f"{name}: the directory {folder} does not exist")
@@ -46,6 +46,14 @@ def output_file(path, what: str = "", suffix: str | None = None) -> Path:
     if p.exists() and not os.access(p, os.W_OK):
         raise InputError(f"{name}: the file exists and is not writable by this user")
     return p
+
+
+def output_prefix(prefix: str, what: str = "--plot") -> str:
+    """A file-name prefix a command writes PREFIX-NAME.png files from (each then checked by
+    `output_file`): it must end in a name, not in a folder (`dir/` would write `dir/-bode.png`)."""
+    if not prefix or prefix.endswith(("/", os.sep)) or os.path.isdir(prefix):
+        raise InputError(f"{what} {prefix}: a file-name prefix is needed (PREFIX-NAME.png), not a directory")
+    return prefix
 
 
 def output_room(path, need: float, what: str = "", why: str = "") -> Path:

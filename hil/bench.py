@@ -46,7 +46,7 @@ from pathlib import Path
 
 from flightctl import __version__
 from flightctl.cli import interrupted
-from flightctl.boards import Board, BoardOptions, BoardUnavailable, described, open_board
+from flightctl.boards import Board, BoardOptions, BoardUnavailable, check_options, described, open_board
 from flightctl.errors import InputError, Parser, output_file, seed, write_atomic
 from flightctl.hal import PWM_RANGE
 from flightctl.hil import instruments as ins
@@ -416,6 +416,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
         p.error(f"--max {args.max:g}: above 0 to 255 (the command range)")
     if args.max_rpm is not None and not 0.0 < args.max_rpm < math.inf:
         p.error(f"--max-rpm {args.max_rpm:g}: a speed above 0 is needed")
+    check_options(args.board, args.board_file)
     if args.instruments is None:
         args.instruments = "pty" if args.board == "sim" else "serial:/dev/ttyACM0,115200"
     if args.write_params and args.profile == "staircase":
@@ -488,8 +489,12 @@ def main(argv: list[str] | None = None) -> int:
     limits = Limits(args.max, prop_limit(params) if args.max_rpm is None else args.max_rpm * ins.RPM,
                     args.step_timeout, args.silent)
     # every output checked before a motor turns: a run's measurements are never lost at the end
-    out = output_file(args.out, "--out")
-    raw_path = output_file(args.raw if args.raw else out.with_name(f"{out.stem}-raw{out.suffix or '.csv'}"), "--raw")
+    out = output_file(args.out, "--out", ".csv")
+    raw_path = output_file(args.raw if args.raw else out.with_name(f"{out.stem}-raw.csv"), "--raw", ".csv")
+    if raw_path.resolve() == out.resolve():
+        raise InputError(f"--raw {raw_path}: the same file as --out: the raw samples would overwrite the bench log")
+    if args.plot and args.no_plot:
+        raise InputError("--plot and --no-plot exclude each other")
     if not args.no_plot:
         output_file(args.plot or out.with_suffix(".png"), "--plot", ".png")
     if args.write_params:

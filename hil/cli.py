@@ -95,7 +95,7 @@ def serve_main(args) -> int:
     except ValueError as e:
         raise InputError(str(e)) from None
     if args.json:
-        output_file(args.json, "--json")
+        output_file(args.json, "--json", ".json")
     params = load(args.params)
     # the link's end first (a port in use, a missing device: one line before the plant is built and compiled)
     if kind == "tcp":
@@ -218,7 +218,7 @@ def check_times(args) -> None:
 def demo_main(args) -> int:
     check_times(args)
     if args.json:
-        output_file(args.json, "--json")
+        output_file(args.json, "--json", ".json")
     params = load(args.params)
     # The motor-loss gain schedule, solved once per vehicle and process (control/spin.py), before the link
     # opens: the PC side gives up on a flight side silent for IDLE_S once the first command has come.

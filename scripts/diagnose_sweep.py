@@ -1,6 +1,6 @@
 """One effect hidden at a time, every cause and none, three seeds each (docs/diagnose.md, "Results"):
 the flights of the slow hidden-effect test (`pytest tests/test_diagnose_hidden.py -m slow`), drawn,
-flown and diagnosed exactly as it does (its seeds, tests/test_diagnose_cases.py's drawing, the 44 s
+flown and diagnosed exactly as it does (its seeds, tests/test_diagnose_cases.py's drawing, the 48 s
 `excite` plan, `flightctl sim --effect` then `flightctl diagnose` on the log alone). Prints a row per
 flight (what was hidden, what was named and recovered, the held-out gain, the runner-up and what it
 did to `acc_z`), then the totals and how much of its tolerance each cause used; `--doc` writes them

@@ -159,11 +159,13 @@ def main(argv: list[str]) -> int:
         if f.at >= flown.plan.duration:
             raise InputError(f"--fault {f.name}: at = {f.at:g} s, but {flown.name}'s plan ends "
                              f"{flown.plan.duration:g} s after arming: the fault would never be injected")
-    log_path = output_file(args.log, "--log")
+    log_path = output_file(args.log, "--log", ".csv")
     log_room(log_path, SIM_CALIBRATE_S + flown.plan.duration, params.airframe.loop_hz,
              len(FLIGHT_COLUMNS + MAG_COLUMNS + TRUTH_COLUMNS))
     if args.json:
-        output_file(args.json, "--json")
+        output_file(args.json, "--json", ".json")
+    if args.plot and args.no_plot:
+        raise InputError("--plot and --no-plot exclude each other")
     if not args.no_plot:
         output_file(args.plot or log_path.with_suffix(".png"), "--plot", ".png")
     link = None
@@ -250,7 +252,7 @@ def monte_carlo_main(args) -> int:
     for f in args.fault:
         faults.parse(f)
     if args.json:
-        output_file(args.json, "--json")
+        output_file(args.json, "--json", ".json")
     if args.plot:
         output_file(args.plot, "--plot", ".png")
     bar = Progress(2 if args.batch else 2 * args.monte_carlo, "monte carlo ") if not args.quiet else None
@@ -282,12 +284,12 @@ def faults_main(argv: list[str]) -> int:
                                     "default: the reference airframe")
     p.add_argument("--seed", type=seed, default=0, help="seed of the sensor noise (a whole number from 0)")
     args = p.parse_args(argv)
-    out = output_file(args.json, "--json")
+    out = output_file(args.json, "--json", ".json")
     logs = output_dir(args.logs, "--logs") if args.logs else output_dir(out.resolve().parent, "--json")
     if args.doc and not Path(args.doc).is_file():
         raise InputError(f"--doc {args.doc}: no such file")
     if args.doc:
-        output_file(args.doc, "--doc")
+        output_file(args.doc, "--doc", ".md")
     params = causes.load_vehicle(args.params, GAIN_SETS["table6"])
     faultmatrix.log_room(logs, params)
     logs.mkdir(parents=True, exist_ok=True)

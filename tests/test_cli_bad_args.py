@@ -77,6 +77,44 @@ CASES = [
     (["hil", "demo", "--cut", "1", "inf", "--json", "{o}/h.json"], "--cut 1 inf"),
     (["hil", "demo", "--json", "{o}/no/h.json"], "does not exist"),
     (["params", "show", "no-such-vehicle"], "no-such-vehicle"),
+    # the review's tries that were not clean (issue 49): wrong suffixes, conflicting or ignored options, a
+    # key given twice, a board's options on a board without them
+    (["sim", "hover", "--log", "{o}/x.txt"], "should end in .csv"),
+    (["sim", "hover", "--log", "{o}/x.csv", "--json", "{o}/m.txt"], "should end in .json"),
+    (["sim", "hover", "--log", "{o}/x.csv", "--plot", "{o}/x.png", "--no-plot"], "exclude each other"),
+    (["sim", "hover", "--log", "{o}/x.csv", "--effect", "motor_lag:tau=0.1,tau=0.2"], "tau given twice"),
+    (["sim", "hover", "--log", "{o}/x.csv", "--effect", "gremlin:k=1"], "gremlin"),
+    (["sim", "hover", "--log", "{o}/x.csv", "--effect", "motor_lag:tau"], "bad item"),
+    (["sim", "hover", "--log", "{o}/x.csv", "--effect", "motor_lag:tau=nan"], "tau"),
+    (["sim", "hover", "--log", "{o}/x.csv", "--fault", "motor_stop:at=soon"], "not a number"),
+    (["sim", "hover", "--log", "{o}/x.csv", "--gains", "table5"], "invalid choice"),
+    (["sim", "faults", "--json", "{o}/m.txt"], "should end in .json"),
+    (["run", "--board", "sim", "--plan", "hover", "--log", "{f}"], "not a directory"),
+    (["run", "--board", "sim", "--plan", "hover", "--log", "{o}", "--board-file", "{f}"], "no wiring file"),
+    (["run", "--board", "pi", "--plan", "hover", "--log", "{o}", "--board-file", "{o}/none.toml"], "no such file"),
+    (["run", "--board", "hil", "--plan", "hover", "--log", "{o}"], "needs --link"),
+    (["run", "--board", "hil", "--link", "nonsense", "--plan", "hover", "--log", "{o}"], "expected"),
+    (["run", "--board", "sim", "--link", "tcp:1:2", "--plan", "hover", "--log", "{o}"], "no link"),
+    (["run", "--board", "sim", "--plan-queue", "{f}", "--log", "{o}"], "not a directory"),
+    (["bench", "--board", "nosuch", "--out", "{o}/b.csv"], "unknown board"),
+    (["bench", "--board", "sim", "--out", "{o}/b.txt"], "should end in .csv"),
+    (["bench", "--board", "sim", "--out", "{o}/b.csv", "--raw", "{o}/b.csv"], "the same file as --out"),
+    (["bench", "--board", "sim", "--out", "{o}/b.csv", "--plot", "{o}/b.png", "--no-plot"], "exclude each other"),
+    (["bench", "--board", "sim", "--out", "{o}/b.csv", "--board-file", "{f}"], "no wiring file"),
+    (["bench", "--board", "sim", "--ramp", "1e9", "--out", "{o}/b.csv"], "--ramp 1e+09"),
+    (["hil", "serve", "--link", "tcp:0", "--json", "{o}/h.txt"], "should end in .json"),
+    (["hil", "demo", "--json", "{o}/h.txt"], "should end in .json"),
+    (["analyze", "--json", "{o}/a.txt"], "should end in .json"),
+    (["analyze", "--plot", "{o}/"], "a file-name prefix is needed"),
+    (["analyze", "--alt", "nan"], "--alt nan"),
+    (["diagnose", "{f}", "--json", "{o}/r.txt"], "should end in .json"),
+    (["diagnose", "{f}", "--json", "{o}/r.json", "--plot", "{o}/"], "a file-name prefix is needed"),
+    (["diagnose", "{f}", "--json", "{o}/r.json", "--steps", "{o}/s.jpg"], "should end in .png"),
+    (["diagnose", "--corpus", "{o}", "--table", "{o}/t.txt"], "should end in .md"),
+    (["diagnose", "--corpus", "{o}", "--json", "{o}/c.json", "--results", "{o}/r.txt"], "should end in .jsonl"),
+    (["identify", "bench", "{f}", "--json", "{o}/fit.txt"], "should end in .json"),
+    (["identify", "rcbenchmark", "{f}", "--out", "{o}/b.txt"], "should end in .csv"),
+    (["tune", "--out", "{o}/g.toml", "--json", "{o}/t.txt"], "should end in .json"),
 ]
 
 
@@ -90,6 +128,14 @@ def test_a_bad_argument_is_one_line_exit_2_and_nothing_written(tmp_path, monkeyp
     line = one_line(capsys.readouterr().err)
     assert line.startswith(f"flightctl {argv[0]}") and says in line, line
     assert list(out.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv", [["nosuch"], ["--frob"]])
+def test_an_unknown_command_is_one_line(capsys, argv):
+    """It printed the whole usage block (21 lines) after its line."""
+    assert main(argv) == 2
+    line = one_line(capsys.readouterr().err)
+    assert line.startswith(f"flightctl: unknown command {argv[0]!r}") and "sim, identify" in line, line
 
 
 # --- as a user without the privilege to write anywhere -----------------------------------------------

@@ -1,46 +1,67 @@
-"""`rotor_inflow`'s climb speed (sim/causes/rotor_inflow.py, `climb_speed`): the body-z velocity that
-diagnose rebuilds from a log, against the simulator's truth (positions and attitude in the log's
-truth columns). A vehicle whose centre of mass is off drifts at metres per second with tens of
-degrees of tilt; there most of w_b is the horizontal velocity's part along z_b, which the
-reconstruction must include."""
+"""rotor_inflow's climb speed (sim/causes/rotor_inflow.py, `climb_speed`) against the simulator's truth.
+
+Issue 49: on the 48 s `excite` plan the reconstructed body-z speed was off by 0.085 m/s rms and by
+0.19 m/s at the take-off and the landing: its correction to the range took the accelerometer's bias
+as constant, and the simulated chip's bias drifts as it warms up (sim/world/devices.py, SensorNoise).
+A large hidden k then left an acc_z residual at the low heights that diagnose named ground_effect
+(the slow sweep's seed 119). The size of k and the flight's seed are drawn; the test never tells
+diagnose what was hidden."""
 from __future__ import annotations
+
+import csv
 
 import numpy as np
 
 from flightctl.cli import main
-from flightctl.logfile import MAG_COLUMNS, read_flight_log
+from flightctl.logfile import read_flight_log
 from flightctl.params import load
-from flightctl.sim.world.board import TRUTH_COLUMNS
+from flightctl.sim.causes.ground_effect import GE_MAX_Z
 from flightctl.sim.causes.rotor_inflow import climb_speed
-from flightctl.sim.identify.diagnose.cli import FOREIGN_COLUMNS
 from flightctl.sim.identify.diagnose.data import load_file
 from flightctl.sim.identify.diagnose.dataset import DataSet, Vehicle
-from flightctl.sim.world.model import rotation
-from test_diagnose_cases import quick_plan
+
+from test_diagnose_cases import draw
 
 
-def test_the_climb_speed_includes_the_drift_along_the_tilted_body_axis(tmp_path):
-    rng = np.random.default_rng(23)
-    d, angle = rng.uniform(0.006, 0.01), rng.uniform(0.0, 2.0 * np.pi)
-    dx, dy = float(d * np.cos(angle)), float(d * np.sin(angle))
-    log = tmp_path / "drift.csv"
-    main(["sim", "--plan", str(quick_plan(tmp_path)), "--log", str(log), "--seed", "3", "--no-plot", "--quiet",
-          "--effect", f"com_offset:dx={dx!r},dy={dy!r}"])     # its fast steps end in a hard touchdown
+def truth_columns(path) -> dict[str, np.ndarray]:
+    """The simulator's true_* columns (the flight-log reader keeps the contract's columns only)."""
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(line for line in fh if not line.startswith("#")))
+    head = rows[0]
+    return {c: np.array([float(r[head.index(c)]) for r in rows[1:]])
+            for c in ("t", "true_x", "true_y", "true_z", "true_roll", "true_pitch", "true_yaw")}
+
+
+def true_w(log, t):
+    """The body-z speed z_b . v from the logged truth (position differenced, attitude ZYX)."""
+    tl = log["t"]
+    vx, vy, vz = (np.gradient(log[c], tl) for c in ("true_x", "true_y", "true_z"))
+    f, th, ps = log["true_roll"], log["true_pitch"], log["true_yaw"]
+    w = ((np.cos(ps) * np.sin(th) * np.cos(f) + np.sin(ps) * np.sin(f)) * vx
+         + (np.sin(ps) * np.sin(th) * np.cos(f) - np.cos(ps) * np.sin(f)) * vy + np.cos(th) * np.cos(f) * vz)
+    return np.interp(t, tl, w)
+
+
+def test_climb_speed_follows_the_truth_through_a_whole_excite_flight(tmp_path):
+    rng = np.random.default_rng(4919)
+    cause, truth = draw(rng, "rotor_inflow")
+    seed = int(rng.integers(1000))
+    path = tmp_path / "inflow.csv"
+    assert main(["sim", "excite", "--log", str(path), "--seed", str(seed), "--no-plot", "--quiet",
+                 "--effect", f"rotor_inflow:k={truth['k']!r}"]) == 0
+    table = read_flight_log(path)
     a = load(None).airframe
-    fd = load_file(read_flight_log(log, min_seconds=1, min_rows=10, extra=FOREIGN_COLUMNS), a)
+    fd = load_file(table, a)
     ds = DataSet([fd], Vehicle.known(a, fd.layout))
-    (w,) = climb_speed(ds)
-    truth = read_flight_log(log, extra=MAG_COLUMNS + TRUTH_COLUMNS)
-    t = truth["t"]
-    v = np.vstack([np.gradient(truth[c], t) for c in ("true_x", "true_y", "true_z")])
-    R = np.array(rotation(truth["true_roll"], truth["true_pitch"], truth["true_yaw"]))
-    w_true = R[2] * v[0] + R[5] * v[1] + R[8] * v[2]                  # z_b . v
-    w_true = 0.5 * (w_true[:-1] + w_true[1:])                        # over each period, as `climb_speed`
-    _, s0, s1 = ds.stretches[0]                                      # from the take-off, at rest
-    rows = np.arange(s0 + 450, s1)                                   # past its first second
-    horizontal = np.hypot(v[0], v[1])[rows]
-    assert np.percentile(horizontal, 95) > 2.0                       # it drifted
-    vertical_only = (R[8] * v[2])[rows]                              # what the vertical speed alone gives
-    err = w[rows] - w_true[rows]
-    assert np.sqrt(np.mean(err ** 2)) < 0.25 * np.sqrt(np.mean((vertical_only - w_true[rows]) ** 2))
-    assert np.sqrt(np.mean(err ** 2)) < 0.3                           # m/s
+    w = climb_speed(ds)[0]
+    (i, s0, s1), = ds.stretches
+    t = fd.t[s0:s1 + 1]
+    ref = true_w(truth_columns(path), t)
+    err = w[s0:s1] - 0.5 * (ref[:-1] + ref[1:])
+    # near the floor, where ground_effect is judged: the vehicle is level there, and the speed is the
+    # vertical part (the horizontal part drifts with the gyro's offset, which no range corrects)
+    low = np.isfinite(fd.z[s0:s1]) & (fd.z[s0:s1] < GE_MAX_Z)
+    rms = float(np.sqrt(np.mean(err[low] ** 2)))
+    assert rms < 0.02, f"climb speed below {GE_MAX_Z} m off by {rms:.3f} m/s rms (k {truth['k']:.3f}, seed {seed})"
+    ends = np.abs(err[[0, -1]])
+    assert ends.max() < 0.04, f"at the take-off and the landing, off by {ends} m/s"

@@ -4,7 +4,7 @@ and diagnose the log alone through the CLI. The tolerances (docs/diagnose.md) ar
 the spread of the recovered values seen over the slow sweep, and never tighter than the grid or
 rounding.
 
-Two flights: the `excite` plan (44 s, the slow sweep) and `QUICK_PLAN` below, the same manoeuvres
+Two flights: the `excite` plan (48 s, the slow sweep) and `QUICK_PLAN` below, the same manoeuvres
 in 21 s (one fast seed per cause in the default run)."""
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ plant, and runs `flightctl diagnose` on the log file (the test never tells it wh
 must name the cause, recover the size within the tolerance of docs/diagnose.md, and show a positive
 held-out gain; with nothing hidden it must answer none. The chain holds exactly the hidden cause, so a
 look-alike (the project's `gyro_lag` beside the contract's lags and delay) is never named instead. The default run flies one seed of every
-cause on the 21 s quick plan; `-m slow` flies three seeds of every cause on the 44 s `excite` plan."""
+cause on the 21 s quick plan; `-m slow` flies three seeds of every cause on the 48 s `excite` plan."""
 from __future__ import annotations
 
 import numpy as np

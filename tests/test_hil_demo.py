@@ -66,9 +66,12 @@ def test_link_loss_on_the_ground_stops(tmp_path):
 
 
 def test_the_hil_board_without_a_link_is_one_line(tmp_path, capsys, caplog):
-    assert cli(["run", "--board", "hil", "--plan", "hover", "--log", str(tmp_path)]) == 3
-    assert [r.getMessage() for r in caplog.records] == [
-        "not flying: the hil board needs --link serial:/dev/serial0,921600 or tcp:HOST:PORT"]
+    """A missing or malformed --link is an argument error (issue 49: it was exit 3, "cannot fly here")."""
+    assert cli(["run", "--board", "hil", "--plan", "hover", "--log", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "flightctl run: error: --board hil needs --link serial:/dev/serial0,921600 or tcp:HOST:PORT (docs/hil.md)"]
+    assert cli(["run", "--board", "hil", "--link", "serial", "--plan", "hover", "--log", str(tmp_path)]) == 2
+    assert "expected" in capsys.readouterr().err
     assert cli(["hil", "serve", "--link", "udp:5"]) == 2
     assert "expected" in capsys.readouterr().err
 

@@ -14,6 +14,7 @@ if it drives real ESCs, a `stop_motors`), and one line in BOARDS.
 from __future__ import annotations
 
 import importlib
+import os
 from dataclasses import dataclass, field
 from typing import Callable, NamedTuple
 
@@ -115,6 +116,33 @@ def opener(name: str) -> Callable[[Params, BoardOptions], Board]:
 def described(*leave_out: str) -> str:
     """The boards for a --help text (but those named)."""
     return "; ".join(f"{name}: {entry.doc}" for name, entry in BOARDS.items() if name not in leave_out)
+
+
+WIRED = ("pi", "pi5", "auto")    # the boards a --board-file wires
+
+
+def check_options(name: str, board_file: str | None, link: str | None = None) -> None:
+    """The board's own options, checked with the arguments (InputError, exit 2): a --board-file only
+    for a board it wires, and a file that is there; --link for the hil board, which needs one, in a
+    form `flightctl.comms.link.parse_link` reads. An option the board would ignore is refused, not
+    ignored."""
+    _entry(name)
+    if board_file is not None:
+        if name not in WIRED:
+            raise InputError(f"--board-file {board_file}: the {name} board has no wiring file "
+                             f"(--board-file goes with --board {', '.join(WIRED)})")
+        if not os.path.isfile(board_file):
+            raise InputError(f"--board-file {board_file}: no such file")
+    if link is not None and name != "hil":
+        raise InputError(f"--link {link}: the {name} board has no link (--link goes with --board hil)")
+    if name == "hil":
+        from flightctl.comms.link import parse_link
+        if link is None:
+            raise InputError("--board hil needs --link serial:/dev/serial0,921600 or tcp:HOST:PORT (docs/hil.md)")
+        try:
+            parse_link(link)
+        except ValueError as e:
+            raise InputError(str(e)) from None
 
 
 def open_board(name: str, params: Params, options: BoardOptions = BoardOptions()) -> Board:

@@ -41,6 +41,7 @@ import argparse
 import json
 import logging
 import math
+import os
 import signal
 import sys
 import threading
@@ -50,8 +51,8 @@ from pathlib import Path
 
 from flightctl import __version__
 from flightctl.battery import CELLS, FULL_CELL_V, LOW_CELL_V, implausible
-from flightctl.boards import (MIN_BATTERY_V_RANGE, Board, BoardOptions, BoardUnavailable, described,
-                              opener, stop_motors)
+from flightctl.boards import (MIN_BATTERY_V_RANGE, Board, BoardOptions, BoardUnavailable, check_options,
+                              described, opener, stop_motors)
 from flightctl.clock import freeze_gc
 from flightctl.control.controller import FlightController
 from flightctl.control.spin import SpinController
@@ -323,6 +324,10 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     args = p.parse_args(argv)
     if args.plan and args.plan_queue:
         p.error("--plan and --plan-queue exclude each other")
+    check_options(args.board, args.board_file, args.link)
+    for flag, folder in (("--log", args.log), ("--plan-queue", args.plan_queue)):
+        if folder is not None and os.path.exists(folder) and not os.path.isdir(folder):
+            p.error(f"{flag} {folder}: not a directory")
     # a safety threshold outside its range is refused, never a check turned off (a nan compares false)
     for flag, value, (lo, hi), unit, why in (
             ("--plan-max-age", args.plan_max_age, PLAN_MAX_AGE_RANGE_S, "s", "a plan older is stale"),
@@ -331,7 +336,6 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
              f"from the {LOW_CELL_V:g} V a cell lands at to the {FULL_CELL_V:g} V of a full one, {CELLS} cells")):
         if value is not None and not lo <= value <= hi:
             p.error(f"{flag} {value:g}: {lo:g} to {hi:g} {unit} ({why})")
-    return args
     return args
 
 

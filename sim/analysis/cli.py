@@ -22,7 +22,7 @@ import numpy as np
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError, Parser, output_file, write_atomic
+from flightctl.errors import InputError, Parser, output_file, output_prefix, write_atomic
 from flightctl.sim.cli import gains_label
 from flightctl.params import GAIN_SETS, Params
 from flightctl.plans import HOVER_ALT
@@ -189,10 +189,10 @@ def main(argv: list[str]) -> int:
     if not (0.05 <= args.alt <= 4.0) or not math.isfinite(args.alt):
         raise InputError(f"--alt {args.alt:g}: the sonar reads 0.05 to 4 m")
     if args.json:
-        output_file(args.json, "--json")
+        output_file(args.json, "--json", ".json")
     if args.plot:
         for kind in ("bode", "step"):
-            output_file(f"{args.plot}-{kind}.png", "--plot")
+            output_file(f"{output_prefix(args.plot)}-{kind}.png", "--plot")
     params = causes.load_vehicle(args.params, GAIN_SETS[args.gains] if args.gains else None)
     gains = gains_label(args, params)
     effects = tuple(causes.parse(e) for e in args.effect)

@@ -109,6 +109,8 @@ def parse(text: str) -> Effect:
         name, sep, value = item.partition("=")
         if not sep:
             raise InputError(f"--effect {text!r}: expected CAUSE:name=value,... (bad item {item!r})")
+        if name.strip() in parameters:
+            raise InputError(f"--effect {text!r}: {name.strip()} given twice")
         try:
             parameters[name.strip()] = float(value)
         except ValueError:

@@ -71,9 +71,10 @@ def _check_params_update(path: str, values: dict[str, float]) -> None:
 
 def identify(args) -> Identified:
     _doc, columns, text, fit = KINDS[args.kind]
-    for flag, path in (("--json", args.json), ("--write-params", args.write_params), ("--plot", args.plot)):
+    for flag, path, suffix in (("--json", args.json, ".json"), ("--write-params", args.write_params, ".toml"),
+                               ("--plot", args.plot, ".png")):
         if path:
-            output_file(path, flag)
+            output_file(path, flag, suffix)
     airframe = paramfile.load(args.params).airframe
     table = read_table(args.file, columns, text_columns=text)
     try:
@@ -103,7 +104,7 @@ def identify(args) -> Identified:
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
     if args.kind == "rcbenchmark":
-        output_file(args.out, "--out")
+        output_file(args.out, "--out", ".csv")
         from flightctl.sim.identify import realdata
         lines = realdata.convert(args.runs, args.out)
     elif args.kind == "real-data":

@@ -354,7 +354,7 @@ def main(argv: list[str] | None = None) -> int:
         raise InputError(f"--scenario {args.scenario}: not a named scenario ({', '.join(sorted(SCENARIOS))})")
     out = output_file(args.out, "--out", ".toml")
     if args.json:
-        output_file(args.json, "--json")
+        output_file(args.json, "--json", ".json")
     if args.plot:
         output_file(args.plot, "--plot", ".png")
     if args.doc:
@@ -362,7 +362,7 @@ def main(argv: list[str] | None = None) -> int:
         begin, end = marked("tune robust" if args.robust else "tune strict" if args.strict else "tune procedure")
         if not Path(args.doc).is_file() or block(Path(args.doc).read_text(), begin, end) is None:
             raise InputError(f"--doc {args.doc}: no block {begin} ... {end} in it")
-        output_file(args.doc, "--doc")
+        output_file(args.doc, "--doc", ".md")
     params = causes.load_vehicle(args.params)
     if params.effects:
         print("flightctl tune: the plant carries " + ", ".join(e.cause for e in params.effects)

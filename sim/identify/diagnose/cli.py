@@ -45,7 +45,7 @@ import time
 from pathlib import Path
 
 from flightctl import params as paramfile
-from flightctl.errors import InputError, Parser, output_file, write_atomic
+from flightctl.errors import InputError, Parser, output_file, output_prefix, write_atomic
 from flightctl.logfile import read_flight_log
 from flightctl.sim import engine
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
@@ -184,9 +184,11 @@ def _main(argv: list[str]) -> int:
     out_json = Path(args.json)
     if args.index is not None and args.index < 1:
         raise InputError(f"--index {args.index}: logs are counted from 1")
-    output_file(out_json, "--json")
+    output_file(out_json, "--json", ".json")
+    if args.plot:
+        output_prefix(args.plot)
     if args.steps:
-        output_file(Path(args.steps), "--steps")
+        output_file(Path(args.steps), "--steps", ".png")
     if len(args.logs) == 1 and _per_log(args.logs[0], args.index):
         return _each(args, params, progress, t0)
     tables = read_logs(args.logs, args.index, progress)
@@ -211,6 +213,7 @@ def _main(argv: list[str]) -> int:
 def _plot_paths(prefix: str | None, n_tables: int, tag: str = "") -> dict[str, Path]:
     if not prefix:
         return {}
+    output_prefix(prefix)
     plots = {k: Path(f"{prefix}{tag}-{k}.png") for k in ("residuals", "explained")}
     plots.update({f"read-{k}": Path(f"{prefix}{tag}-read-{k}.png") for k in range(1, n_tables + 1)})
     for path in plots.values():

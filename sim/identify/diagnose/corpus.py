@@ -342,9 +342,9 @@ def main(args) -> int:
         raise InputError(f"--jobs {args.jobs}: at least 1")
     out_table = Path(args.table) if args.table else None
     out_json = Path(args.json) if args.json else None
-    for path, flag in ((out_table, "--table"), (out_json, "--json")):
+    for path, flag, suffix in ((out_table, "--table", ".md"), (out_json, "--json", ".json")):
         if path is not None:
-            output_file(path, flag)
+            output_file(path, flag, suffix)
     from flightctl.sim.identify.fleet import cli as fleet
     fleet_dir, mapping = fleet.check(args, [Path(c) for c in args.corpus], find_logs, _jobs)
     # the results table: --results, else beside --json, else in the fleet report's folder (a table alone,
@@ -352,7 +352,7 @@ def main(args) -> int:
     results = Path(args.results) if getattr(args, "results", None) else (
         default_path(out_json) if out_json else fleet_dir / "results.jsonl" if fleet_dir else None)
     if results is not None and results.parent != fleet_dir:
-        output_file(results, "--results")
+        output_file(results, "--results", ".jsonl")
     if results is not None:       # each log's report goes beside the table: the disk's room first
         n = sum(len(find_logs(Path(c))) for c in args.corpus if Path(c).is_dir())
         output_room(results, n * REPORT_BYTES, "--results" if args.results else "the results table",
