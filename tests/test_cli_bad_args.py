@@ -9,6 +9,7 @@ write anywhere and prove nothing: the helper checks first that the child cannot 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -305,3 +306,13 @@ def test_a_fault_matrix_whose_logs_have_no_room_is_refused_before_the_first_flig
     line = one_line(capsys.readouterr().err)
     assert line.startswith("flightctl sim: error: --logs") and f"{free / 1e6:.1f} MB free on its disk" in line, line
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_every_try_of_the_review_list_is_clean():
+    """scripts/bad_args.py's 289 tries over every command (about 2 min on one core): each one line on
+    stderr, exit 2, no traceback, nothing written, but the few marked `kept:` with their reason."""
+    done = subprocess.run([sys.executable, str(Path(__file__).parents[1] / "scripts" / "bad_args.py")],
+                          capture_output=True, text=True, timeout=1200)
+    assert done.returncode == 0, [line for line in done.stdout.splitlines() if line.startswith("BAD")]
+    assert re.search(r"(\d+) of (\d+) tries clean, (\d+) kept on purpose, 0 not clean", done.stdout)
