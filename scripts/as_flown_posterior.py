@@ -2,7 +2,7 @@
 the paper's evidence by rejection ABC on the batched simulator (sim/sweeps/posterior.py, the evidence
 sim/sweeps/evidence.py), each term's Bayes factor, and the posterior's parameter file.
 
-    python scripts/as_flown_posterior.py [--n 2000] [--n-off 500] [--seed 44] [--workers 2]
+    python scripts/as_flown_posterior.py [--n 16000] [--n-off 1500] [--seed 44] [--workers 2]
         fly the prior's draws and each model without one term (and with each candidate), write
         docs/as-flown-posterior.json, flightctl/vehicles/paper-posterior.toml and the docs blocks
     python scripts/as_flown_posterior.py --from docs/as-flown-posterior.json [--doc DOC] [--readme README]
@@ -239,8 +239,8 @@ def write_vehicle(result: dict, path: Path = VEHICLE) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--n", type=int, default=2000, help="draws of the prior (default 2000)")
-    ap.add_argument("--n-off", type=int, default=500, help="draws of each other model (default 500)")
+    ap.add_argument("--n", type=int, default=16000, help="draws of the prior (default 16000: about 120 pass)")
+    ap.add_argument("--n-off", type=int, default=1500, help="draws of each other model (default 1500)")
     ap.add_argument("--seed", type=int, default=44)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--from", dest="source", help="render this run's JSON instead of flying")
