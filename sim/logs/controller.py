@@ -39,6 +39,10 @@ AXES = ("x", "y", "z")
 BF_MIXER = 1000.0
 BF_SCALE = {"kp": 0.032029, "ki": 0.244381, "kd": 0.000529}
 BF_UNITS = {"kp": "1/(rad/s)", "ki": "1/rad", "kd": "s/rad"}
+# INAV's (src/main/flight/pid.h at 30ec1fe: FP_PID_RATE_P/I/D_MULTIPLIER; pid.c updatePIDCoefficients: kP = P / 31,
+# kI = I / 4, kD = D / 1905, on the rate error in deg/s, giving the PID sum in the motor's own units, which
+# mixer.c's mixTable adds to the throttle: over the header's motorOutput range, a share of the logged range)
+INAV_SCALE = {"kp": 31.0, "ki": 4.0, "kd": 1905.0}
 BF_SOURCE = {"kp": "pid_init.c:274, pid.h:44 PTERM_SCALE", "ki": "pid_init.c:275, pid.h:45 ITERM_SCALE",
              "kd": "pid_init.c:276, pid.h:46 DTERM_SCALE"}
 
@@ -59,6 +63,12 @@ def blackbox(h: dict, kind: str, convert: bool) -> dict:
     when `convert` (Betaflight from 3.1, whose constants these are), else raw and named unread."""
     out = {"firmware": kind, "axes": {}, "filters": {}, "unread": []}
     ff_name, ff = _first(h, ("ff_weight", "feedforward_weight"))
+    span = None
+    if kind == "inav":
+        mo = h.get("motorOutput")
+        span = float(mo[1]) - float(mo[0]) if isinstance(mo, (list, tuple)) and len(mo) >= 2 else None
+        if not span:
+            out["unread"].append("motorOutput (not in the header): INAV's gains cannot be put in shares of the motor range")
     for j, (a, key) in enumerate(zip(AXES, ("rollPID", "pitchPID", "yawPID"))):
         pid = h.get(key)
         if not isinstance(pid, (list, tuple)) or len(pid) < 3:
@@ -66,6 +76,11 @@ def blackbox(h: dict, kind: str, convert: bool) -> dict:
             continue
         axis = {}
         for k, raw in zip(("kp", "ki", "kd"), pid[:3]):
+            if span:
+                axis[k] = _entry(raw, float(raw) / INAV_SCALE[k] * DEG_PER_RAD / span, BF_UNITS[k],
+                                 f"header {key} / {INAV_SCALE[k]:g} (INAV pid.h FP_PID_RATE_*_MULTIPLIER, pid.c "
+                                 f"updatePIDCoefficients) over motorOutput's {span:g} (mixer.c mixTable)")
+                continue
             value = float(raw) * BF_SCALE[k] / BF_MIXER * DEG_PER_RAD if convert else None
             axis[k] = _entry(raw, value, BF_UNITS[k] if convert else "raw",
                              f"header {key}; " + (BF_SOURCE[k] + ", over PID_MIXER_SCALING (pid.h:32)" if convert
@@ -75,7 +90,7 @@ def blackbox(h: dict, kind: str, convert: bool) -> dict:
             axis["kf"] = _entry(raw_f, None, "raw", f"header {ff_name or key}: pid.c:1081, a setpoint change's unit "
                                                    "that varies by version: not converted")
         out["axes"][a] = axis
-    if not convert:
+    if not convert and not span:
         out["unread"].append(f"the gains' physical scaling ({kind}'s source not read here: raw values)")
     if ff_name is None and not any("kf" in v for v in out["axes"].values()):
         out["unread"].append("feed-forward (no ff_weight or feedforward_weight in the header)")
@@ -139,6 +154,7 @@ def px4(p: dict) -> dict:
                 "dterm_lowpass_hz": ("IMU_DGYRO_CUTOFF", "Hz", "IMU_DGYRO_CUTOFF (the angular acceleration the D term takes)"),
                 "loop_hz": ("IMU_GYRO_RATEMAX", "Hz", "IMU_GYRO_RATEMAX (the rate loop runs on each gyro sample)")}, out)
     out["loop_hz"] = out.pop("loop").get("loop_hz")
+    out["rotors_from_ca"] = "CA_ROTOR_COUNT" in p     # the control allocation's pseudo-inverse mixes (loops.py)
     return out
 
 
@@ -162,6 +178,8 @@ def ardupilot(p: dict) -> dict:
     _params(p, {"gyro_lowpass_hz": ("INS_GYRO_FILTER", "Hz", "INS_GYRO_FILTER"),
                 "loop_hz": ("SCHED_LOOP_RATE", "Hz", "SCHED_LOOP_RATE")}, out)
     out["loop_hz"] = out.pop("loop").get("loop_hz")
+    # the motors' thrust linearisation and spin range (AP_MotorsMulticopter; loops.py's R)
+    out["motors"] = {k: float(p[k]) for k in ("MOT_THST_EXPO", "MOT_SPIN_MIN", "MOT_SPIN_MAX") if k in p}
     return out
 
 
@@ -175,6 +193,8 @@ def flightctl(flat: dict[str, float]) -> dict:
     out["loop_hz"] = _entry(flat["loop_hz"], flat["loop_hz"], "Hz", "[airframe] loop_hz")
     out["filters"]["tau_rate_s"] = _entry(flat["filters.tau_rate"], flat["filters.tau_rate"], "s",
                                           "[filters] tau_rate: the EMA on the rates the D term takes (0: none)")
+    out["thrust_curve"] = {k: _entry(flat[k], flat[k], unit, f"[airframe] {k}: eq. 26, the mixer's inverse")
+                           for k, unit in (("h1", "N"), ("h2", "P units"))}
     return out
 
 

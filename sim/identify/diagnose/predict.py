@@ -47,7 +47,7 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import Table
-from flightctl.sim.identify.diagnose import steps
+from flightctl.sim.identify.diagnose import loops, steps
 from flightctl.sim.identify.diagnose.base import YAW_UNKNOWN, identify, yaw_identified
 from flightctl.sim.identify.diagnose.data import load_file, parse_filters
 from flightctl.sim.identify.diagnose.dataset import DYNAMIC_MIN_HZ, LOWPASS_HZ, sensor_filters
@@ -109,26 +109,28 @@ def _pt1(hz: float, fs: float):
     return [k, 0.0], [1.0, -(1.0 - k)]
 
 
-def effectiveness(vehicle, declared, axis: str) -> float:
-    """b (rad/s^2 per unit share of the mixer) of one axis: the module's linearisation."""
+def effectiveness(vehicle, declared, axis: str, parts: dict | None = None) -> float:
+    """b (rad/s^2 per unit of the controller's output) of one axis: the module's linearisation, with the
+    firmware's mix m and range R (loops.py) where `parts` gives them, else Betaflight's."""
     idn = vehicle.identification
     lay = vehicle.layout
     k = idn[{"x": "k_p", "y": "k_q", "z": "k_r"}[axis]]["value"]
     lever = {"x": np.array(lay.y), "y": -np.array(lay.x), "z": -np.array(lay.spin, float)}[axis]
-    mix = {"x": np.array(declared.y) / np.max(np.abs(declared.y)), "y": -np.array(declared.x) / np.max(np.abs(declared.x)),
-           "z": -np.array(declared.spin, float)}[axis]
     pm, h2 = idn["median_P"]["value"], idn["h2"]["value"]
-    return float(2.0 * P_RANGE * k * np.sum(np.array(vehicle.gains) * lever * mix) * (pm - h2))
+    parts = parts or {}
+    mix = np.array(parts["mix"]) if "mix" in parts else loops.bf_mix(declared, axis)
+    R = parts.get("R", P_RANGE)
+    R = R(pm) if callable(R) else R
+    return float(2.0 * R * k * np.sum(np.array(vehicle.gains) * lever * mix) * (pm - h2))
 
 
-def loop_parts(ctrl: dict, meta: dict, axis: str) -> tuple[dict | None, list[str]]:
+def loop_parts(ctrl: dict, meta: dict, axis: str, declared=None) -> tuple[dict | None, list[str]]:
     """The controller of one axis as the loop takes it (gains, filters, c), and what is not modelled; None and
-    the reason when the log's controller cannot be closed."""
+    the reason when the log's controller cannot be closed. Other firmwares than Betaflight: loops.py."""
     fw = ctrl.get("firmware")
     g = ctrl.get("axes", {}).get(axis, {})
     if fw != "betaflight":
-        return None, [f"the mix from {fw or 'this log'}'s controller output to the motor commands is not read here "
-                      "(Betaflight's only, mixer.c): the loop cannot be closed"]
+        return loops.parts(ctrl, meta, axis, declared)
     if any(g.get(k, {}).get("value") is None for k in ("kp", "ki", "kd")):
         return None, ["the controller's gains are not in physical units (controller.unread): the loop cannot be closed"]
     loop = (ctrl.get("loop_hz") or {}).get("value")
@@ -156,20 +158,33 @@ def loop_parts(ctrl: dict, meta: dict, axis: str) -> tuple[dict | None, list[str
 
 
 def closed_loop(f: np.ndarray, b: float, tau: float, parts: dict, loop_chain: str, response_chain: str) -> np.ndarray:
-    """The rate loop's response from the setpoint to the logged gyro at the frequencies f (Hz): the module's loop."""
+    """The loop's response from the setpoint to the logged response at the frequencies f (Hz): the module's loop.
+    The controller u = Cr r - Cy omega: FF kf Ft r, and P, I, D on Fe (Ft r - y) (D on c Ft r - y_d, y_d the
+    gyro the D term takes: the loop's filtered one, or the raw one through its own low-pass); the attitude loop
+    (flightctl's) on the estimator's angle A Fg omega with its D on the filtered rate."""
     fs = parts["loop_hz"]
     T = 1.0 / fs
     s = 2j * np.pi * np.maximum(f, 1e-6)
     z1 = np.exp(-s * T)
-    G = b * np.exp(-s * tau) * T * z1 / (1.0 - z1)
+    A = T * z1 / (1.0 - z1)                  # the command held a period and integrated
+    G = b * np.exp(-s * tau) * A
     Fg = _freq(_stages(loop_chain, fs), z1)
     Fr = _freq(_stages(response_chain, fs), z1)
-    Fp = _freq([_pt1(parts["p_lowpass_hz"], fs)], z1) if parts["p_lowpass_hz"] else 1.0
-    Fd = _freq(sensor_filters((("biquad", parts["d_lowpass_hz"]),), fs), z1) if parts["d_lowpass_hz"] else 1.0
+    lp = lambda key, kind="pt1": (_freq(sensor_filters(((parts.get("d_filter", "biquad") if key == "d_lowpass_hz" else kind,
+                                                         parts[key]),), fs), z1) if parts.get(key) else 1.0)
+    Fp = _freq([_pt1(parts["p_lowpass_hz"], fs)], z1) if parts.get("p_lowpass_hz") else 1.0
+    Fd = lp("d_lowpass_hz")
+    Ft, Fe = lp("target_lowpass_hz"), lp("error_lowpass_hz")
     PI = parts["kp"] * Fp + parts["ki"] * T / (1.0 - z1)
-    D = parts["kd"] * Fd * (1.0 - z1) / T
-    H = Fr * G * (PI + parts["c"] * D) / (1.0 + G * (PI + D) * Fg)
-    H[f == 0] = 1.0 if parts["ki"] else H[1]
+    if parts.get("loop") == "attitude":
+        Fema = lp("tau_rate_hz")
+        Cr, Cy, Fr = PI, PI * Fg * A + parts["kd"] * Fema * Fg, Fr * A
+    else:
+        D = parts["kd"] * Fd * (1.0 - z1) / T
+        Cr = parts.get("kf", 0.0) * Ft + Fe * Ft * (PI + parts["c"] * D)
+        Cy = Fe * (PI * Fg + D * (1.0 if parts.get("d_on_raw_gyro") else Fg))
+    H = Fr * G * Cr / (1.0 + G * Cy)
+    H[f == 0] = 1.0 if parts["ki"] or parts.get("loop") == "attitude" else H[1]
     return H
 
 
@@ -229,11 +244,17 @@ def _points_to(out: dict, excess: dict) -> str | None:
     return None
 
 
+def loop_of(ctrl: dict) -> str:
+    """The loop a log's controller closes around the rate: flightctl's the attitude (eq. 24), the others the rate."""
+    return "attitude" if ctrl.get("firmware") == "flightctl" else "rate"
+
+
 def predict(model, ctrl: dict, checked: Table, identified_on: str, checked_on: str) -> tuple[dict, dict]:
-    """Each rate axis's predicted step beside the one `checked` measures: (per axis the entry or why
-    not, per axis (measured Response, predicted curve) for the figure)."""
+    """Each axis's predicted step of the loop the controller closes (`loop_of`) beside the one `checked`
+    measures: (per axis the entry or why not, per axis (measured Response, predicted curve) for the figure)."""
     measured, curves = steps.measure(checked)
-    rate = measured.get("rate", {})
+    loop = loop_of(ctrl)
+    rate = measured.get(loop, {})
     out, drawn = {}, {}
     for axis in steps.AXES:
         head = {"identified_on": identified_on, "checked_on": checked_on}
@@ -248,18 +269,19 @@ def predict(model, ctrl: dict, checked: Table, identified_on: str, checked_on: s
         if axis == "z" and not yaw_identified(vehicle):
             out[axis] = {**head, "why": f"{YAW_UNKNOWN} (base.py): no yaw loop to close"}
             continue
-        parts, missing = loop_parts(ctrl, checked.meta, axis)
+        parts, missing = loop_parts(ctrl, checked.meta, axis, declared)
         if parts is None:
             out[axis] = {**head, "why": missing[0]}
             continue
-        b = effectiveness(vehicle, declared, axis)
+        b = effectiveness(vehicle, declared, axis, parts)
         tau = float(vehicle.identification["timing"]["value"])
-        loop_chain = checked.meta.get("gyro_loop_filter", checked.meta.get("gyro_filter", "none"))
-        entry, pred = compare(curves[("rate", axis)],
+        loop_chain = parts.get("gyro_loop_chain") or checked.meta.get("gyro_loop_filter", checked.meta.get("gyro_filter", "none"))
+        entry, pred = compare(curves[(loop, axis)],
                               lambda f: closed_loop(f, b, tau, parts, loop_chain, checked.meta.get("gyro_filter", "none")), e)
-        out[axis] = {**head, **entry, "effectiveness": {"value": round(b, 2), "unit": "rad/s^2 per share of the mixer"},
-                     "timing_s": tau, "controller": parts, "not_modelled": missing}
-        drawn[axis] = (curves[("rate", axis)], pred)
+        shown = {k: (round(v(vehicle.identification["median_P"]["value"]), 6) if callable(v) else v) for k, v in parts.items()}
+        out[axis] = {**head, **entry, "effectiveness": {"value": round(b, 2), "unit": "rad/s^2 per unit of the controller's output"},
+                     "timing_s": tau, "controller": shown, "not_modelled": missing}
+        drawn[axis] = (curves[(loop, axis)], pred)
     return out, drawn
 
 
@@ -286,7 +308,7 @@ def attach(reports: list[dict], curves: list, tables: list[Table], controllers: 
     """Each log's rate axes with a measured step get `predicted` (`held_out`) in the report's `steps`; the
     figure's curves get ("predicted", axis): (the held-out measured Response, the predicted step)."""
     for rep, (_, c), table, ctrl in zip(reports, curves, tables, controllers):
-        rate = rep.get("rate", {})
+        rate = rep.get(loop_of(ctrl), {})
         if "why" in rate or not any("why" not in rate.get(x, {"why": ""}) for x in steps.AXES):
             continue
         out, drawn = held_out(table, ctrl, a, lambda m: progress(f"step prediction, its first half: {m}"))
