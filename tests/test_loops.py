@@ -81,3 +81,78 @@ def test_a_sim_flights_model_predicts_another_flights_attitude_steps(tmp_path, c
             assert abs(e[k]["predicted"] / e[k]["measured"] - 1.0) < 0.10, (ax, k, e[k])
         assert ax in drawn
     assert json.loads(json.dumps(out)) == out
+
+
+def _sample_by_sample(b, k, p, chain_hz, n):
+    """The loop of predict.closed_loop with loops.py's parts, one loop period at a time: the vehicle
+    omega[i + 1] = omega[i] + b T u[i - k]; the rate loop's target and error low-passes, FF, D on the (filtered)
+    error or on the raw gyro; the attitude loop on the estimator's angle (the filtered gyro summed)."""
+    from test_predict import _Df
+    from flightctl.sim.identify.diagnose.dataset import sensor_filters
+    fs = p["loop_hz"]
+    T = 1.0 / fs
+    f = lambda kind, hz: _Df(sensor_filters(((kind, hz),), fs)) if hz else (lambda x: x)
+    fg, fr = f("biquad", chain_hz), f("biquad", chain_hz)
+    fd, ft = f(p["d_filter"], p["d_lowpass_hz"]), f("pt1", p["target_lowpass_hz"])
+    fe, fe_d = f("pt1", p["error_lowpass_hz"]), f("pt1", p["error_lowpass_hz"])
+    fema = f("pt1", p.get("tau_rate_hz", 0.0))
+    omega, integ, prev, angle = 0.0, 0.0, 0.0, 0.0
+    u = np.zeros(n + k + 1)
+    out = np.zeros(n)
+    for i in range(n):
+        y = fg(omega)
+        if p["loop"] == "attitude":
+            out[i] = angle
+            e = 1.0 - angle
+            integ += p["ki"] * e * T
+            u[i + k] = p["kp"] * e + integ - p["kd"] * fema(y)
+            angle += T * y
+        else:
+            out[i] = fr(omega)
+            rt = ft(1.0)
+            e = fe(rt - y)
+            integ += p["ki"] * e * T
+            xd = fe_d(p["c"] * rt - (omega if p["d_on_raw_gyro"] else y))
+            d = p["kd"] * fd((xd - prev) / T)
+            prev = xd
+            u[i + k] = p["kf"] * rt + p["kp"] * e + integ + d
+        omega += b * T * u[i]
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_general_loop_is_the_loop_simulated(seed):
+    """predict.closed_loop with ArduPilot's form (target and error low-passes, D on the error, FF), PX4's (D on the
+    raw gyro's own low-pass) and flightctl's attitude loop: its step equals the loop simulated sample by sample
+    (to 1e-3), with the vehicle, gains, filters and delay drawn."""
+    rng = np.random.default_rng(100 + seed)
+    fs = float(rng.choice([400.0, 450.0, 1000.0]))
+    k = int(rng.integers(1, 12))
+    chain_hz = float(rng.uniform(40, 90))
+    base = {"c": 0.0, "kf": 0.0, "loop_hz": fs, "d_lowpass_hz": 0.0, "d_filter": "biquad", "p_lowpass_hz": 0.0,
+            "target_lowpass_hz": 0.0, "error_lowpass_hz": 0.0, "d_on_raw_gyro": False, "loop": "rate"}
+    forms = [
+        ({"c": 1.0, "kf": rng.uniform(0.0, 0.05), "d_filter": "pt1", "d_lowpass_hz": rng.uniform(10, 40),
+          "target_lowpass_hz": rng.uniform(10, 40), "error_lowpass_hz": float(rng.choice([0.0, rng.uniform(20, 60)])),
+          "kp": rng.uniform(0.05, 0.2), "ki": rng.uniform(0.05, 0.2), "kd": rng.uniform(0.001, 0.006)},
+         rng.uniform(150, 400)),
+        ({"d_on_raw_gyro": True, "d_lowpass_hz": rng.uniform(20, 60), "kf": rng.uniform(0.0, 0.05),
+          "kp": rng.uniform(0.1, 0.2), "ki": rng.uniform(0.1, 0.3), "kd": rng.uniform(0.001, 0.004)},
+         rng.uniform(150, 400)),
+        ({"loop": "attitude", "tau_rate_hz": float(rng.choice([0.0, rng.uniform(20, 60)])),
+          "kp": rng.uniform(3.0, 6.0), "ki": rng.uniform(0.0, 0.5), "kd": rng.uniform(0.15, 0.3)},
+         rng.uniform(25, 45)),
+    ]
+    n_seg = 16384
+    f = np.fft.rfftfreq(n_seg, 1.0 / fs)
+    for form, b in forms:
+        p = {**base, **form}
+        for _ in range(8):          # the drawn loop made stable: its effectiveness halved until it is
+            sim = _sample_by_sample(b, k, p, chain_hz, 3000)
+            if np.max(np.abs(sim)) < 3.0 and abs(sim[-200:].mean() - 1.0) < 0.05:
+                break
+            b *= 0.5
+        assert np.max(np.abs(sim)) < 3.0 and abs(sim[-200:].mean() - 1.0) < 0.05, ("not a stable loop", p, b)
+        H = predict.closed_loop(f, b, k / fs, p, f"biquad {chain_hz:g}", f"biquad {chain_hz:g}")
+        step = np.cumsum(np.fft.irfft(H, n_seg))[:3000]
+        assert np.max(np.abs(step - sim)) < 1e-3, (p["loop"], p["d_on_raw_gyro"], np.max(np.abs(step - sim)))
