@@ -1,7 +1,9 @@
-"""The predicted steps beside the measured ones (docs/steps.md, "Predicted and measured"): each Betaflight log
-with a rate setpoint, the base model identified on its first half predicting its second half's steps
-(`predict.held_out`), and PID-Analyzer's CS110 pair (tests/data/pid-analyzer), each tune's log predicted by
-the model of the other with its own gains (`predict.cross`). One row per prediction and rate axis.
+"""The predicted steps beside the measured ones (docs/steps.md, "Predicted and measured"): each shipped log
+with a measured rate step (Betaflight's, PX4's), the base model identified on its first half predicting its
+second half's steps (`predict.held_out`); PID-Analyzer's CS110 pair (tests/data/pid-analyzer), each tune's
+log predicted by the model of the other with its own gains (`predict.cross`); and two `flightctl sim excite`
+flights of the paper's vehicle (seeds 0 and 1), the first's model flying the second's attitude PIDs (eq. 24),
+where the truth is known. One row per prediction and axis.
 
     python scripts/steps_predicted.py
 """
@@ -14,7 +16,8 @@ ROOT = Path(__file__).resolve().parents[1]
 FLIGHTS = ROOT / ".." / "shared" / "data" / "real" / "flights"
 CS110 = ROOT / "tests" / "data" / "pid-analyzer"
 HELD_OUT = ((FLIGHTS / "betaflight" / "LOG00037.BFL", 1), (FLIGHTS / "betaflight" / "btfl_002.bbl", 1),
-            (CS110 / "example_smooth_tune.BBL", 1), (CS110 / "better_tune.BBL", 1))
+            (CS110 / "example_smooth_tune.BBL", 1), (CS110 / "better_tune.BBL", 1),
+            (FLIGHTS / "px4" / "quadrotor_local.ulg", 1))
 CROSS = (("example_smooth_tune.BBL", "better_tune.BBL"), ("better_tune.BBL", "example_smooth_tune.BBL"))
 AXIS = {"x": "roll", "y": "pitch", "z": "yaw"}
 
@@ -40,6 +43,26 @@ def rows(name_id: str, name_ck: str, out: dict) -> list[list[str]]:
     return L
 
 
+def _sim(a, predict, controller) -> list[list[str]]:
+    """The two simulated excite flights: identified on seed 0, its attitude steps predicted on seed 1."""
+    import contextlib
+    import io
+    import tempfile
+
+    from flightctl.cli import main as cli
+    from flightctl.logfile import read_flight_log
+    with tempfile.TemporaryDirectory() as d:
+        logs = [Path(d) / f"excite{s}.csv" for s in (0, 1)]
+        for seed, log in enumerate(logs):
+            with contextlib.redirect_stdout(io.StringIO()):      # the flights' own summaries are not the table's
+                code = cli(["sim", "excite", "--seed", str(seed), "--log", str(log), "--no-plot", "--quiet"])
+            if code not in (0, 1):
+                raise SystemExit(f"flightctl sim excite --seed {seed} failed")
+        A, B = (read_flight_log(p, min_rows=10) for p in logs)
+        pred, _ = predict.cross(A, B, controller.of_table(B), a)
+    return rows("flightctl sim excite, seed 0", "seed 1 (attitude loop, Table 6's gains)", pred)
+
+
 def main(argv: list[str]) -> int:
     from flightctl import params as paramfile
     from flightctl.sim.docs import table
@@ -57,6 +80,7 @@ def main(argv: list[str]) -> int:
     for ident, check in CROSS:
         pred, _ = predict.cross(tables[ident], tables[check], controller.of_table(tables[check]), a)
         out += rows(ident, f"{check} (its own gains)", pred)
+    out += _sim(a, predict, controller)
     header = ["identified on", "checked on", "axis", "delay ms predicted (measured, spread)",
               "rise 10-90 % ms predicted (measured, spread)", "overshoot % predicted (measured, spread)",
               "step error", "agrees, or what it points to"]
