@@ -1,6 +1,8 @@
 """The prediction, checked (docs/steps.md, "Predicted and measured"): the base model identified on one part
 of a flight (`base.identify`, diagnose's own) flying the firmware's controller as the log gives it
-(sim/logs/controller.py) predicts each rate-loop axis's step response; it is set beside the step measured
+(sim/logs/controller.py; PX4's, ArduPilot's, INAV's and flightctl's attitude loop and mix in loops.py, whose
+terms the closed loop below takes: target and error low-passes, FF, D on the raw gyro, the attitude loop's
+angle) predicts each axis's step response of the loop it closes; it is set beside the step measured
 (steps.py) on the rest of the flight, which the identification did not see, or on another log of the same
 vehicle flown with other gains (`cross`).
 
