@@ -156,3 +156,35 @@ def test_the_general_loop_is_the_loop_simulated(seed):
         H = predict.closed_loop(f, b, k / fs, p, f"biquad {chain_hz:g}", f"biquad {chain_hz:g}")
         step = np.cumsum(np.fft.irfft(H, n_seg))[:3000]
         assert np.max(np.abs(step - sim)) < 1e-3, (p["loop"], p["d_on_raw_gyro"], np.max(np.abs(step - sim)))
+
+
+def test_px4_mix_is_what_the_real_allocator_did():
+    """quadrotor_local.ulg (PX4 on an FMU-v6C, CA_ROTOR* quad X): each logged actuator_motors.control[i],
+    regressed on the torque and thrust setpoints of the same allocation cycle (their timestamp_sample), has
+    the module's mix of the log's own rotors as its torque slopes (FRD to the project's frame: roll as it is,
+    pitch and yaw reversed), within 0.03, R^2 over 0.999: the allocation's normalisation as it flew."""
+    pyulog = pytest.importorskip("pyulog")
+    from real import FLIGHTS, need
+    from flightctl.sim.logs import read_foreign
+    path = str(need(FLIGHTS / "px4" / "quadrotor_local.ulg"))
+    table = read_foreign(path)[0]
+    rot = [tuple(float(v) for v in r.split()) for r in table.meta["rotors"].split(";")]
+    layout = frames.Frame("log", tuple(r[0] for r in rot), tuple(r[1] for r in rot), tuple(r[2] for r in rot),
+                          tuple(r[2] for r in rot), table.meta["rotors_source"])
+    c = controller.of_table(table)
+    mix = {a: np.array(predict.loop_parts(c, table.meta, a, layout)[0]["mix"]) for a in "xyz"}
+    d = {x.name: x.data for x in pyulog.ULog(path).data_list if x.multi_id == 0}
+    tq, th, am = d["vehicle_torque_setpoint"], d["vehicle_thrust_setpoint"], d["actuator_motors"]
+    index = {s: i for i, s in enumerate(tq["timestamp_sample"])}
+    j = np.array([index.get(s, -1) for s in am["timestamp_sample"]])
+    same = j >= 0
+    assert same.mean() > 0.95
+    j = j[same]
+    X = np.column_stack([tq["xyz[0]"][j], tq["xyz[1]"][j], tq["xyz[2]"][j], th["xyz[2]"][j], np.ones(j.size)])
+    for i in range(4):
+        y = am[f"control[{i}]"][same]
+        run = y > 0.05                                  # armed and spinning
+        co, *_ = np.linalg.lstsq(X[run], y[run], rcond=None)
+        r2 = 1.0 - np.var(y[run] - X[run] @ co) / np.var(y[run])
+        assert r2 > 0.999, (i, r2)
+        assert np.allclose(co[:3], [mix["x"][i], -mix["y"][i], -mix["z"][i]], atol=0.03), (i, co, mix)
