@@ -188,3 +188,25 @@ def test_px4_mix_is_what_the_real_allocator_did():
         r2 = 1.0 - np.var(y[run] - X[run] @ co) / np.var(y[run])
         assert r2 > 0.999, (i, r2)
         assert np.allclose(co[:3], [mix["x"][i], -mix["y"][i], -mix["z"][i]], atol=0.03), (i, co, mix)
+
+
+def test_real_px4_and_inav_logs_get_their_loop_or_the_datas_reason():
+    """quadrotor_local.ulg's measured rate steps get a prediction entry whose reason is the data's (its motor
+    commands at 10 Hz, the base model's timing needs 48 Hz), no longer an unread mix; INAV's 10-inch log's loop is
+    formed (its gains in shares of the motor range, quad X +-1, its loop rate): the prediction waits on a step."""
+    pytest.importorskip("orangebox")
+    from real import FLIGHTS, need
+    from flightctl.sim.logs import read_foreign
+    px4 = read_foreign(str(need(FLIGHTS / "px4" / "quadrotor_local.ulg")))[0]
+    out, drawn = predict.held_out(px4, controller.of_table(px4), Params().airframe)
+    for ax in "xy":
+        assert out[ax]["why"].startswith("the motor outputs logged at 10.0 Hz"), out[ax]
+    assert not drawn
+    inav = read_foreign(str(need(FLIGHTS / "inav" / "blackbox_log_2026-02-21_145057.TXT")))[1]
+    c = controller.of_table(inav)
+    layout = frames.betaflight(4, "INAV", None, _fail)
+    for ax in "xyz":
+        p, missing = predict.loop_parts(c, inav.meta, ax, layout)
+        assert p is not None and np.allclose(np.abs(p["mix"]), 1.0) and p["R"] == 255.0, (ax, missing)
+        assert p["kp"] == c["axes"][ax]["kp"]["value"] > 0 and p["loop_hz"] == c["loop_hz"]["value"]
+        assert any("feed-forward" in m for m in missing)
