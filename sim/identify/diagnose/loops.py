@@ -27,7 +27,8 @@ of PX4-Autopilot, ardupilot and inav are over the fetch limit, read through the 
 - INAV: src/main/flight/mixer.c at 30ec1fe (mixTable: rpyMix = (pitch m.pitch + roll m.roll - yaw m.yaw)
   mixerScale, mixerScale 1, motor = rpyMix + throttle in the motor's own units): the PID sum acts in the
   logged motor units; controller.py converts INAV's gains to shares of the logged motorOutput range, so
-  m = mixerQuadX's +-1 and R = 255. D on the measurement (pid.c dTermProcess), its FF (the setpoint's
+  m = mixerQuadX's +-1 and R = 255. D on the measurement (pid.c dTermProcess) through dterm_lpf_hz of
+  dterm_lpf_type (filter.h's lowpassFilterType_e), yaw's P through yaw_lpf_hz; its FF (the setpoint's
   derivative on a multirotor, FP_PID_RATE_D_FF_MULTIPLIER) not modelled.
 - flightctl (the attitude loop, eq. 24 on the angles): u in N, eq. 25's mixer (+-1 per rotor: motor 1
   -u_theta + u_psi, 2 u_phi - u_psi, 3 u_theta + u_psi, 4 -u_phi - u_psi; flightctl/control/mixer.py) and
@@ -41,8 +42,9 @@ import math
 
 import numpy as np
 
-AXES = ("x", "y", "z")
 AP_DEFAULTS = {"MOT_THST_EXPO": 0.65, "MOT_SPIN_MIN": 0.15, "MOT_SPIN_MAX": 0.95}   # AP_MotorsMulticopter.cpp defaults
+# INAV's lowpassFilterType_e (src/main/common/filter.h): the header's dterm_lpf_type
+INAV_LPF = {0: "pt1", 1: "biquad", 2: "pt2", 3: "pt3"}
 FLIGHTCTL_MIX = {"x": (0.0, 1.0, 0.0, -1.0), "y": (-1.0, 0.0, 1.0, 0.0), "z": (1.0, -1.0, 1.0, -1.0)}   # eq. 25
 
 
@@ -129,13 +131,17 @@ def parts(ctrl: dict, meta: dict, axis: str, declared) -> tuple[dict | None, lis
         p["R"] = R
         missing += ["the slew-rate limiter (SMAX) and the PID's own limits", "the gyro's notch filters"]
     elif fw == "inav":
-        p.update(d_lowpass_hz=_v(flt.get("dterm_lowpass_hz")) or 0.0, kf=0.0)
-        p["d_filter"] = "pt1"
+        kind = (flt.get("dterm_lowpass_type") or {}).get("raw")
+        p.update(d_lowpass_hz=_v(flt.get("dterm_lowpass_hz")) or 0.0, kf=0.0, d_filter=INAV_LPF.get(kind, "pt1"))
+        if axis == "z":       # pid.c pTermProcess: yaw's P through a pt1 at yaw_lpf_hz (0: off)
+            p["p_lowpass_hz"] = _v(flt.get("yaw_lowpass_hz")) or 0.0
         if declared is not None:
             p["mix"] = bf_mix(declared, axis).tolist()
         p["R"] = 255.0
         missing += ["INAV's control-derivative feed-forward (FF on the setpoint's change)", "TPA",
-                    "the D low-pass's type (a pt1 taken: INAV's default dterm_lpf_type)"]
+                    "the D low-pass's type " + (f"{INAV_LPF[kind]} (dterm_lpf_type {kind}), with Betaflight's pt2/pt3 "
+                                                "cut-off correction taken" if kind in INAV_LPF else
+                                                "(dterm_lpf_type not in the header: a pt1 taken)")]
     elif fw == "flightctl":
         h1, h2 = (_v(ctrl.get("thrust_curve", {}).get(k)) for k in ("h1", "h2"))
         if h1 is None or h2 is None:
