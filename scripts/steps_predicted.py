@@ -3,7 +3,8 @@ with a measured rate step (Betaflight's, PX4's), the base model identified on it
 second half's steps (`predict.held_out`); PID-Analyzer's CS110 pair (tests/data/pid-analyzer), each tune's
 log predicted by the model of the other with its own gains (`predict.cross`); and two `flightctl sim excite`
 flights of the paper's vehicle (seeds 0 and 1), the first's model flying the second's attitude PIDs (eq. 24),
-where the truth is known. One row per prediction and axis.
+where the truth is known, and a simulated flight of steps in both halves predicted as a log is (held out).
+One row per prediction and axis.
 
     python scripts/steps_predicted.py
 """
@@ -18,6 +19,7 @@ CS110 = ROOT / "tests" / "data" / "pid-analyzer"
 HELD_OUT = ((FLIGHTS / "betaflight" / "LOG00037.BFL", 1), (FLIGHTS / "betaflight" / "btfl_002.bbl", 1),
             (CS110 / "example_smooth_tune.BBL", 1), (CS110 / "better_tune.BBL", 1),
             (FLIGHTS / "px4" / "quadrotor_local.ulg", 1))
+PLAN = ROOT / "tests" / "data" / "plans" / "steps-both-halves.toml"
 CROSS = (("example_smooth_tune.BBL", "better_tune.BBL"), ("better_tune.BBL", "example_smooth_tune.BBL"))
 AXIS = {"x": "roll", "y": "pitch", "z": "yaw"}
 
@@ -44,7 +46,8 @@ def rows(name_id: str, name_ck: str, out: dict) -> list[list[str]]:
 
 
 def _sim(a, predict, controller) -> list[list[str]]:
-    """The two simulated excite flights: identified on seed 0, its attitude steps predicted on seed 1."""
+    """The two simulated excite flights: identified on seed 0, its attitude steps predicted on seed 1; then a flight
+    of steps in both halves (tests/data/plans/steps-both-halves.toml), its second half by its first's model."""
     import contextlib
     import io
     import tempfile
@@ -58,9 +61,17 @@ def _sim(a, predict, controller) -> list[list[str]]:
                 code = cli(["sim", "excite", "--seed", str(seed), "--log", str(log), "--no-plot", "--quiet"])
             if code not in (0, 1):
                 raise SystemExit(f"flightctl sim excite --seed {seed} failed")
-        A, B = (read_flight_log(p, min_rows=10) for p in logs)
+        both = Path(d) / "both.csv"
+        with contextlib.redirect_stdout(io.StringIO()):
+            code = cli(["sim", "--plan", str(PLAN), "--log", str(both), "--no-plot", "--quiet"])
+        if code != 0:
+            raise SystemExit(f"flightctl sim --plan {PLAN.name} failed")
+        A, B, C = (read_flight_log(p, min_rows=10) for p in logs + [both])
         pred, _ = predict.cross(A, B, controller.of_table(B), a)
-    return rows("flightctl sim excite, seed 0", "seed 1 (attitude loop, Table 6's gains)", pred)
+        held, _ = predict.held_out(C, controller.of_table(C), a)
+    cut = held["x"]["identified_on"].rsplit(" ", 2)[-2]
+    return (rows("flightctl sim excite, seed 0", "seed 1 (attitude loop, Table 6's gains)", pred)
+            + rows(f"flightctl sim {PLAN.stem} to {cut} s", f"its rest, from {cut} s (attitude loop)", held))
 
 
 def main(argv: list[str]) -> int:

@@ -210,3 +210,24 @@ def test_real_px4_and_inav_logs_get_their_loop_or_the_datas_reason():
         assert p is not None and np.allclose(np.abs(p["mix"]), 1.0) and p["R"] == 255.0, (ax, missing)
         assert p["kp"] == c["axes"][ax]["kp"]["value"] > 0 and p["loop_hz"] == c["loop_hz"]["value"]
         assert any("feed-forward" in m for m in missing)
+
+
+def test_diagnose_predicts_a_sim_flights_held_out_attitude_steps(tmp_path, capsys):
+    """`flightctl diagnose LOG --json` on a flight of roll and pitch steps in both its halves
+    (tests/data/plans/steps-both-halves.toml): REPORT.json's steps[0].attitude.<axis>.predicted, the first
+    half's model flying the log's eq. 24 PIDs on the second half, agrees with the measured step on roll and
+    pitch (step error under 0.08, delay within 10 %, `agrees`), with the effectiveness 2 l / J within 5 %."""
+    from pathlib import Path
+    plan = Path(__file__).parent / "data" / "plans" / "steps-both-halves.toml"
+    log, out = tmp_path / "both.csv", tmp_path / "r.json"
+    assert main(["sim", "--plan", str(plan), "--log", str(log), "--no-plot", "--quiet"]) == 0
+    assert main(["diagnose", str(log), "--json", str(out), "--quiet"]) in (0, 1)
+    capsys.readouterr()
+    att = json.loads(out.read_text())["steps"][0]["attitude"]
+    a = Params().airframe
+    for ax, J in (("x", a.Jxx), ("y", a.Jyy)):
+        p = att[ax]["predicted"]
+        assert p["identified_on"].endswith("before 23.0 s") and p["checked_on"].endswith("from 23.0 s"), p
+        assert p["step_error"] < 0.08 and p["agrees"], (ax, p)
+        assert abs(p["delay_s"]["predicted"] / p["delay_s"]["measured"] - 1.0) < 0.10, (ax, p["delay_s"])
+        assert abs(p["effectiveness"]["value"] / (2.0 * a.l / J) - 1.0) < 0.05, (ax, p["effectiveness"])
