@@ -14,12 +14,12 @@ of PX4-Autopilot, ardupilot and inav are over the fetch limit, read through the 
   columns divided by one scale, max over the two of sqrt(|col|^2 / (n_nonzero / 2)), its yaw column by its
   largest entry (updateControlAllocationMatrixScale, normalizeControlAllocationMatrix); the torque comes
   from the rate controller in those normalised units (mc_rate_control, RateControl::update: P, I on the
-  error, D on the angular acceleration, FF on the setpoint, each times MC_*RATE_K); actuator_motors is the
+  error, D on the angular acceleration, P, I, D times MC_*RATE_K, FF on the setpoint apart); actuator_motors is the
   allocation's 0-1, the reader's P = 255 x it: R = 255. Before the control allocation (no CA_ROTOR*) the
   mixer files' normalisation is not read: named.
-- ArduPilot: libraries/AP_Motors/AP_MotorsMatrix.cpp at 0001fe6 (normalise_rpy_factors: the roll, pitch and
-  yaw factors scaled to a largest magnitude of 0.5; output_armed_stabilizing: thrust_i = throttle + roll_in
-  roll_factor_i + ...), then AP_MotorsMulticopter's thrust-to-actuator linearisation (MOT_THST_EXPO e:
+- ArduPilot: libraries/AP_Motors/AP_MotorsMatrix.cpp (normalise_rpy_factors: the roll, pitch and yaw
+  factors scaled to a largest magnitude of 0.5, alike in the file's old and current versions in the index;
+  output_armed_stabilizing, read at 0001fe6: thrust_i = throttle + roll_in roll_factor_i + ...), then AP_MotorsMulticopter's thrust-to-actuator linearisation (MOT_THST_EXPO e:
   thrust = (1 - e) a + e a^2, so da/dthrust = 1 / (1 - e + 2 e a)) and the spin range (P / 255 = MOT_SPIN_MIN
   + (MOT_SPIN_MAX - MOT_SPIN_MIN) a over the reader's MOT_PWM_MIN..MAX): R = 255 (SPIN_MAX - SPIN_MIN) /
   (1 - e + 2 e a) at the flight's median command. The PIDs (AC_PID::update_all): the target through FLTT,
