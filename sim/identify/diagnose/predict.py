@@ -155,20 +155,29 @@ def loop_parts(ctrl: dict, meta: dict, axis: str) -> tuple[dict | None, list[str
     return parts, missing
 
 
-def closed_loop(f: np.ndarray, b: float, tau: float, parts: dict, loop_chain: str, response_chain: str) -> np.ndarray:
-    """The rate loop's response from the setpoint to the logged gyro at the frequencies f (Hz): the module's loop."""
+def loop_terms(f: np.ndarray, tau: float, parts: dict, loop_chain: str, response_chain: str) -> dict:
+    """The module's loop at the frequencies f (Hz), per unit effectiveness and per unit gain: the vehicle's
+    `G` (b = 1), the gyro's `Fg` in the loop and `Fr` in the response, the controller's `P`, `I`, `D` terms
+    (kp Fp, ki T / (1 - z^-1), kd Fd (1 - z^-1) / T at unit gains). The open loop is b G Fg (kp P + ki I +
+    kd D); `closed_loop` closes it."""
     fs = parts["loop_hz"]
     T = 1.0 / fs
     s = 2j * np.pi * np.maximum(f, 1e-6)
     z1 = np.exp(-s * T)
-    G = b * np.exp(-s * tau) * T * z1 / (1.0 - z1)
-    Fg = _freq(_stages(loop_chain, fs), z1)
-    Fr = _freq(_stages(response_chain, fs), z1)
-    Fp = _freq([_pt1(parts["p_lowpass_hz"], fs)], z1) if parts["p_lowpass_hz"] else 1.0
     Fd = _freq(sensor_filters((("biquad", parts["d_lowpass_hz"]),), fs), z1) if parts["d_lowpass_hz"] else 1.0
-    PI = parts["kp"] * Fp + parts["ki"] * T / (1.0 - z1)
-    D = parts["kd"] * Fd * (1.0 - z1) / T
-    H = Fr * G * (PI + parts["c"] * D) / (1.0 + G * (PI + D) * Fg)
+    return {"G": np.exp(-s * tau) * T * z1 / (1.0 - z1), "Fg": _freq(_stages(loop_chain, fs), z1),
+            "Fr": _freq(_stages(response_chain, fs), z1),
+            "P": _freq([_pt1(parts["p_lowpass_hz"], fs)], z1) if parts["p_lowpass_hz"] else np.ones_like(z1),
+            "I": T / (1.0 - z1), "D": Fd * (1.0 - z1) / T}
+
+
+def closed_loop(f: np.ndarray, b: float, tau: float, parts: dict, loop_chain: str, response_chain: str) -> np.ndarray:
+    """The rate loop's response from the setpoint to the logged gyro at the frequencies f (Hz): the module's loop."""
+    t = loop_terms(f, tau, parts, loop_chain, response_chain)
+    PI = parts["kp"] * t["P"] + parts["ki"] * t["I"]
+    D = parts["kd"] * t["D"]
+    G = b * t["G"]
+    H = t["Fr"] * G * (PI + parts["c"] * D) / (1.0 + G * (PI + D) * t["Fg"])
     H[f == 0] = 1.0 if parts["ki"] else H[1]
     return H
 
@@ -265,15 +274,26 @@ def predict(model, ctrl: dict, checked: Table, identified_on: str, checked_on: s
 
 def held_out(table: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple[dict, dict]:
     """The prediction on one log: identified on its first SPLIT of time, checked on the rest."""
+    return held_out_model(table, ctrl, a, progress)[1:]
+
+
+def held_out_model(table: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple:
+    """`held_out` with the model it checked: (the model or why not, per axis the entry, the curves)."""
     first, second, cut = halves(table)
-    return predict(_model(first, ctrl, table.meta, a, progress), ctrl, second, f"{table.path} before {cut:.1f} s",
-                   f"{table.path} from {cut:.1f} s")
+    model = _model(first, ctrl, table.meta, a, progress)
+    return (model, *predict(model, ctrl, second, f"{table.path} before {cut:.1f} s", f"{table.path} from {cut:.1f} s"))
 
 
 def cross(identify_on: Table, check: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple[dict, dict]:
     """Identified on one log, the other's steps predicted with its own controller `ctrl` (a series of one
     vehicle flown with different gains)."""
-    return predict(_model(identify_on, ctrl, check.meta, a, progress), ctrl, check, identify_on.path, check.path)
+    return cross_model(identify_on, check, ctrl, a, progress)[1:]
+
+
+def cross_model(identify_on: Table, check: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple:
+    """`cross` with the model it checked: (the model or why not, per axis the entry, the curves)."""
+    model = _model(identify_on, ctrl, check.meta, a, progress)
+    return (model, *predict(model, ctrl, check, identify_on.path, check.path))
 
 
 def _model(table: Table, ctrl: dict, meta: dict, a, progress):
