@@ -27,8 +27,8 @@ from a log").
    step (`steps.band_step` at `STEP_HZ`, `STEP_S` long; steps.metrics): the rise (10-90 %) and the overshoot.
    A candidate **meets the targets** when its worst over the models meets each: phase margin >= --target-pm,
    gain margin >= --target-gm, Ms <= --ms, overshoot <= --overshoot, every draw's step settling to its
-   setpoint (`SETTLED`), and its median rise no slower than the logged gains' median (or --rise-ms). Among
-   those the fastest median rise wins; within `TIE` of it, the least change (the sum of |log factor|).
+   setpoint (`SETTLED`), and, with --rise-ms, its median rise no slower. Among those the fastest median rise
+   wins; within `TIE` of it, the least change (the sum of |log factor|).
    None meets them: the axis gets no recommendation and the report names the candidate nearest (the least
    worst shortfall, each target's in its own scale) and which target fails.
 5. **The lines to paste** in the log's firmware's own terms (`paste`): Betaflight's CLI `set` lines (the
@@ -75,7 +75,7 @@ class Targets:
     gm_db: float = TARGETS["gm_db"]
     ms: float = TARGETS["ms"]
     overshoot: float = TARGETS["overshoot"]
-    rise_s: float | None = None          # None: no slower than the logged gains' median predicted rise
+    rise_s: float | None = None          # the slowest median rise allowed (None: unbounded, the fastest wins)
     max_change: float = 2.0
 
 
@@ -217,7 +217,7 @@ def tune_axis(ax: Axis, tg: Targets) -> dict:
     recommendation or the nearest candidate and why none."""
     logged = ax.figures(np.ones((1, 3)))
     now = _summary(logged, 0)
-    rise_max = tg.rise_s if tg.rise_s is not None else (now["rise_s"]["median"] or math.inf)
+    rise_max = tg.rise_s if tg.rise_s is not None else math.inf
     grid = _grid(ax.parts, tg.max_change)
     coarse = ax.figures(grid, with_steps=False)
     ok_m = ((coarse["pm_deg"].min(axis=0) >= tg.pm_deg) & (coarse["gm_db"].min(axis=0) >= tg.gm_db)

@@ -385,8 +385,8 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("--ms", type=float, default=fromlog.TARGETS["ms"], help="the largest peak sensitivity (default %(default)g)")
     g.add_argument("--overshoot", type=float, default=fromlog.TARGETS["overshoot"], metavar="SHARE",
                    help="the largest step overshoot, a share (default %(default)g)")
-    g.add_argument("--rise-ms", type=float, metavar="MS", help="the slowest median rise (10-90 %%) allowed (default: the "
-                   "logged gains' predicted)")
+    g.add_argument("--rise-ms", type=float, metavar="MS", help="the slowest median rise (10-90 %%) allowed (default: "
+                   "none; the fastest that meets the other targets wins)")
     g.add_argument("--max-change", type=float, default=2.0, metavar="X",
                    help="each gain changes at most by this factor either way (default %(default)g)")
     g.add_argument("--draws", type=int, default=fromlog.DRAWS, help="plausible models drawn per axis (default %(default)d)")
