@@ -108,9 +108,10 @@ def _crossings(x: np.ndarray) -> np.ndarray:
     return np.sign(x[..., 1:]) * np.sign(x[..., :-1]) < 0
 
 
-def loop_margins(L: np.ndarray) -> dict[str, np.ndarray]:
-    """Phase margin (deg), gain margin (dB) and Ms of open loops L (..., F) on a rising frequency grid (module
-    docstring, 4): +inf where the loop has no such crossing."""
+def loop_margins(L: np.ndarray, f: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Phase margin (deg), gain margin (dB) and Ms of open loops L (..., F) on a rising frequency grid f (module
+    docstring, 4): +inf where the loop has no such crossing; with f, the frequencies (Hz) of the smallest phase
+    margin's gain crossover and of the smallest gain margin's phase crossover (nan without one)."""
     mag = np.abs(L)
     ph = np.degrees(np.unwrap(np.angle(L), axis=-1))
     lm = np.log(np.maximum(mag, 1e-300))
@@ -125,7 +126,14 @@ def loop_margins(L: np.ndarray) -> dict[str, np.ndarray]:
     lm_c = lm[..., :-1] + v * (lm[..., 1:] - lm[..., :-1])
     gm = np.where(pc & (lm_c < 0), -lm_c * 20.0 / math.log(10.0), np.inf).min(axis=-1)
     ms = (1.0 / np.abs(1.0 + L)).max(axis=-1)
-    return {"pm_deg": pm, "gm_db": gm, "ms": ms}
+    out = {"pm_deg": pm, "gm_db": gm, "ms": ms}
+    if f is not None:
+        pm_all = np.where(gc, (ph_c + 180.0 + 180.0) % 360.0 - 180.0, np.inf)
+        gm_all = np.where(pc & (lm_c < 0), -lm_c, np.inf)
+        for name, x in (("gain_crossover_hz", pm_all), ("phase_crossover_hz", gm_all)):
+            j = np.argmin(x, axis=-1)
+            out[name] = np.where(np.isfinite(np.take_along_axis(x, j[..., None], -1)[..., 0]), f[j], np.nan)
+    return out
 
 
 def _grid(parts: dict, m: float) -> np.ndarray:
@@ -158,11 +166,12 @@ class Axis:
         """Per model and candidate (M, K): the margins, Ms and (with_steps) the step's rise, overshoot, final."""
         g = self.gains(factors)
         kp, ki, kd = (g[:, j, None] for j in range(3))
-        out = {k: np.empty((self.b.size, len(g))) for k in ("pm_deg", "gm_db", "ms", "rise_s", "overshoot", "final")}
+        out = {k: np.empty((self.b.size, len(g))) for k in ("pm_deg", "gm_db", "ms", "gain_crossover_hz",
+                                                            "phase_crossover_hz", "rise_s", "overshoot", "final")}
         c = self.parts["c"]
         for i, (bm, tm, te) in enumerate(zip(self.b, self.m, self.e)):
             L = bm * tm["G"] * tm["Fg"] * (kp * tm["P"] + ki * tm["I"] + kd * tm["D"])
-            for k, v in loop_margins(L).items():
+            for k, v in loop_margins(L, self.fm).items():
                 out[k][i] = v
             if not with_steps:
                 continue
@@ -180,7 +189,8 @@ class Axis:
 def _summary(fig: dict, j: int) -> dict:
     """The median and the worst over the models of candidate j's figures."""
     worst = {"pm_deg": np.min, "gm_db": np.min, "ms": np.max, "rise_s": np.max, "overshoot": np.max}
-    out = {}
+    out = {k: _num(float(np.nanmedian(fig[k][:, j]))) if np.isfinite(fig[k][:, j]).any() else None
+           for k in ("gain_crossover_hz", "phase_crossover_hz")}
     for k, w in worst.items():
         x = fig[k][:, j]
         x = np.where(np.isnan(x), np.inf if k in ("ms", "rise_s", "overshoot") else -np.inf, x)
@@ -292,10 +302,43 @@ def from_log(table, a, targets: Targets, check_on=None, draws: int = DRAWS, seed
         b, tau = drawn_models(vehicle, declared, axis, draws, rng)
         entry.update(tune_axis(Axis(parts, b, tau, *_loop_chain(table.meta)), targets))
         entry["not_modelled"] = e.get("not_modelled", [])
+        band, fc = e.get("band_hz"), entry["logged"]["phase_crossover_hz"]
+        if band and fc and fc > band:
+            entry["extrapolated"] = (f"the check saw the loop up to {band:.3g} Hz (its coherent band); the gain margins "
+                                     f"are read at {fc:.3g} Hz (the logged gains' phase crossover, median), where only the "
+                                     "model speaks: its timing as a pure delay, no motor lag")
     if not any(v.get("recommended") for v in report["axes"].values()):
         report["refused"] = "no axis gets gains: " + "; ".join(
             f"{steps.NAMES[x]}: {v.get('refused') or v.get('why')}" for x, v in report["axes"].items())
     return report
+
+
+def against(first, second, a, targets: Targets, draws: int = DRAWS, seed: int = 0, progress=lambda *_: None) -> dict:
+    """A vehicle flown with two tunes, the truth known (docs/tune.md, "Two tunes of one vehicle"): gains from the
+    first log (`from_log`, checked on the second log with its own gains), and, per axis with a model, the step each
+    set of gains is predicted to give on the second log's windows beside the step the second tune measured there:
+    the second tune's gains (the check), the first tune's, the gains from the log (recommended, or the nearest
+    candidate where none meets the targets). The first log's model, identified on the whole of it."""
+    report = from_log(first, a, targets, second, draws, seed, progress)
+    c1, c2 = ctl.of_table(first), ctl.of_table(second)
+    model = predict.base_model(first, a)
+    out = {"report": report, "axes": {}}
+    for axis in steps.AXES:
+        e = report["axes"].get(axis, {})
+        if "new" not in e or isinstance(model, str):
+            continue
+        mine = json.loads(json.dumps(c2))
+        for k, v in e["new"]["gains"].items():
+            mine["axes"][axis][k]["value"] = v
+        row = {}
+        for name, c in (("second tune's gains", c2), ("first tune's gains", c1), ("gains from the log", mine)):
+            p, _ = predict.predict(model, c, second, first.path, second.path)
+            row[name] = {k: p[axis].get(k) for k in ("step_error", "delay_s", "rise_s", "overshoot", "model_full_band")}
+        out["axes"][axis] = {"recommended": e["recommended"], "factors": e["new"]["factors"],
+                             "second_over_first": {k: float(f"{c2['axes'][axis][k]['value'] / c1['axes'][axis][k]['value']:.4g}")
+                                                   for k in GAIN_KEYS if c1["axes"][axis][k]["value"]},
+                             "predicted_on_second": row}
+    return out
 
 
 # ---- the lines to paste (module docstring, 5)
@@ -373,6 +416,8 @@ def text(report: dict) -> str:
                  f"(x{nw['factors']['kp']:.3g}, x{nw['factors']['ki']:.3g}, x{nw['factors']['kd']:.3g}): " + fig(nw))
         if not e["recommended"]:
             L.append(f"  {name}: no gains: {e['why']}")
+        if e.get("extrapolated"):
+            L.append(f"  {name}: note: {e['extrapolated']}")
     if "refused" in report:
         L.append(f"refused: {report['refused']}")
     return "\n".join(L) + "\n"

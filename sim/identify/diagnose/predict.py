@@ -208,7 +208,7 @@ def compare(r: steps.Response, H_of, measured: dict) -> tuple[dict, np.ndarray]:
             excess[k] = x
         out[k] = d
     worst = _points_to(out, excess)
-    entry = {"step_error": steps._num(err, 3), "final": steps._num(m["final"], 3), **out,
+    entry = {"step_error": steps._num(err, 3), "final": steps._num(m["final"], 3), "band_hz": steps._num(r.band_hz, 3), **out,
              "model_full_band": {k: steps._num(own[k]) for k in ("delay_s", "rise_s", "overshoot")},
              "agrees": bool(err < AGREE_ERROR and worst is None)}
     if worst is not None:
