@@ -442,7 +442,7 @@ def main(args, a) -> int:
     say = (lambda m: print(f"tune --from-log: {m}", file=sys.stderr)) if not args.quiet else (lambda m: None)
 
     def one(path, what):
-        tables = read_logs([path], args.index, say)
+        tables = read_logs([path], args.index, lambda m: None)    # quiet until the logs are read: bad input is one line
         if len(tables) != 1:
             raise InputError(f"{what} {path}: {len(tables)} logs in the file; name one with --index")
         return tables[0]

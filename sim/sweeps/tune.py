@@ -343,7 +343,7 @@ def _from_log(args) -> int:
         raise InputError(f"--index {args.index}: 1 or more")
     for flag, f in (("--from-log", args.from_log), ("--check-on", args.check_on)):
         if f is not None and not Path(f).is_file():
-            raise InputError(f"{flag} {f}: no such file")
+            raise InputError(f"{flag} {f}: " + ("is a directory, a flight log is needed" if Path(f).is_dir() else "no such file"))
     if args.out:
         output_file(args.out, "--out")
     if args.json:
