@@ -35,8 +35,8 @@ def markdown(name1: str, name2: str, res: dict) -> list[str]:
         pred = x["predicted_on_second"]
         own = pred["second tune's gains"]
         what = "recommended" if e["recommended"] else "nearest (none meets the targets)"
-        L.append(f"| {name1} | {name2} | {AXIS[a]} | {what}: P x{nw['factors']['kp']:.3g}, I x{nw['factors']['ki']:.3g}, "
-                 f"D x{nw['factors']['kd']:.3g} (the second tune: "
+        L.append(f"| {name1} | {name2} | {AXIS[a]} | {what}: "
+                 + ", ".join(f"{k[1].upper()} x{v:.3g}" for k, v in nw["factors"].items()) + " (the second tune: "
                  + ", ".join(f"{k[1].upper()} x{v:.3g}" for k, v in x["second_over_first"].items())
                  + f") | logged, worst of {rep['draws']}: {fig(lg)}; new: {fig(nw)} | "
                  + "; ".join(f"{n}: {p['step_error']:.3f} (delay {_ms(p['delay_s']['predicted'])}, rise "

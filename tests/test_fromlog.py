@@ -299,3 +299,23 @@ def test_the_synthetic_vehicle_flies_predicts_loop():
         f = np.fft.rfftfreq(8192, 1 / FS)
         H = predict.closed_loop(f, truth.b(100.0, ax), truth.delay / FS, parts, "pt1 90", "pt1 90")
         assert np.max(np.abs(np.cumsum(np.fft.irfft(H, 8192))[:y.size] - y)) < 1e-4, ax
+
+
+@pytest.mark.slow
+def test_the_command_on_a_synthetic_log(tmp_path, capsys):
+    """`flightctl tune --from-log LOG.csv --out lines.txt --json r.json` on the synthetic log (a CSV with its rate
+    setpoint): exit 0, the Betaflight lines written are the report's gains as the firmware's integers (no D on
+    3.1's yaw), the CPU time printed and within the two minutes."""
+    from flightctl.cli import main
+    table, _ = synthetic_log(3)
+    write_csv(table, tmp_path / "s.csv")
+    lines, js = tmp_path / "lines.txt", tmp_path / "r.json"
+    assert main(["tune", "--from-log", str(tmp_path / "s.csv"), "--out", str(lines), "--json", str(js), "--quiet",
+                 "--draws", "16"]) == 0
+    rep = json.loads(js.read_text())
+    sets = {ln.split()[1]: int(ln.split()[3]) for ln in lines.read_text().splitlines() if ln.startswith("set ")}
+    for ax, g in fromlog.recommended(rep).items():
+        for k, v in g.items():
+            assert sets[f"{fromlog.BF_NAMES[k]}_{fromlog.BF_AXES[ax]}"] == fromlog.bf_raw(k, v)
+    assert "d_yaw" not in sets and rep["cpu_s"] < 120
+    assert "s of CPU" in capsys.readouterr().out

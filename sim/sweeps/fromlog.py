@@ -256,8 +256,10 @@ def tune_axis(ax: Axis, tg: Targets) -> dict:
         out["why"] = ("no gains within x" + f"{tg.max_change:g} of the logged ones meet the targets on every drawn model: "
                       "nearest fails " + ", ".join(n for n, s in zip(SHORT_NAMES, short[j]) if s > 0))
     g = ax.gains(grid[pool[j]][None])[0]
-    out["new"] = {"gains": {k: float(f"{v:.6g}") for k, v in zip(GAIN_KEYS, g)},
-                  "factors": {k: float(f"{v:.4g}") for k, v in zip(GAIN_KEYS, grid[pool[j]])}, **_summary(fig, j)}
+    keys = GAIN_KEYS if ax.parts["kd"] else GAIN_KEYS[:2]        # no D in this loop (3.1's yaw): none written
+    out["new"] = {"gains": {k: float(f"{v:.6g}") for k, v in zip(GAIN_KEYS, g) if k in keys},
+                  "factors": {k: float(f"{v:.4g}") for k, v in zip(GAIN_KEYS, grid[pool[j]]) if k in keys},
+                  **_summary(fig, j)}
     return out
 
 
@@ -412,8 +414,8 @@ def text(report: dict) -> str:
         L.append(f"  {name} logged   P {lg['gains']['kp']:.4g} I {lg['gains']['ki']:.4g} D {lg['gains']['kd']:.4g}: "
                  + fig(lg))
         tag = "new     " if e["recommended"] else "nearest "
-        L.append(f"  {name} {tag} P {nw['gains']['kp']:.4g} I {nw['gains']['ki']:.4g} D {nw['gains']['kd']:.4g} "
-                 f"(x{nw['factors']['kp']:.3g}, x{nw['factors']['ki']:.3g}, x{nw['factors']['kd']:.3g}): " + fig(nw))
+        L.append(f"  {name} {tag} " + " ".join(f"{k[1].upper()} {v:.4g}" for k, v in nw["gains"].items()) + " ("
+                 + ", ".join(f"x{v:.3g}" for v in nw["factors"].values()) + "): " + fig(nw))
         if not e["recommended"]:
             L.append(f"  {name}: no gains: {e['why']}")
         if e.get("extrapolated"):
@@ -442,7 +444,8 @@ def main(args, a) -> int:
     say = (lambda m: print(f"tune --from-log: {m}", file=sys.stderr)) if not args.quiet else (lambda m: None)
 
     def one(path, what):
-        tables = read_logs([path], args.index, lambda m: None)    # quiet until the logs are read: bad input is one line
+        tables = read_logs([path], args.index, lambda m: None,    # quiet until the logs are read: bad input is one line
+                           extra=steps.LOOPS[0].setpoint)         # a CSV log's rate setpoint, where it has one
         if len(tables) != 1:
             raise InputError(f"{what} {path}: {len(tables)} logs in the file; name one with --index")
         return tables[0]
