@@ -134,6 +134,8 @@ BLOCKS = (
     Block("open-question-as-flown-table", "docs/diagnose.md", *marked("open question as-flown"),
           SCRIPT + ("scripts/open_question.py", "--from", "docs/open-question-as-flown.json", "--table")),
     Block("steps-table", "docs/steps.md", *marked("steps table"), SCRIPT + ("scripts/steps_table.py",), minutes=1),
+    Block("tune-from-log", "docs/tune.md", *marked("tune from log"), SCRIPT + ("scripts/fromlog_cs110.py",),
+          minutes=1.5),
     Block("steps-predicted", "docs/steps.md", *marked("steps predicted"), SCRIPT + ("scripts/steps_predicted.py",),
           minutes=2.5),
     analyze("analyze-base-table4", "analyze base table4", "--gains", "table4", "--estimator", "truth",

@@ -47,6 +47,7 @@ import numpy as np
 from flightctl.errors import InputError, Parser, output_file, seed, write_atomic
 from flightctl.params import TABLE4, TABLE6, Gains, dumps
 from flightctl.sim import engine
+from flightctl.sim.sweeps import fromlog
 
 SETTLE_S = 3.0
 STEPS = {"alt": 2.0, "roll": math.radians(5), "pitch": math.radians(5), "yaw": math.radians(30)}
@@ -326,12 +327,37 @@ def doc_block(found: dict, strict: bool, command: str) -> tuple[str, str]:
     return "tune procedure", "\n".join(lines)
 
 
+def _from_log(args) -> int:
+    """`--from-log`: its flags checked before any work, then sim/sweeps/fromlog.py."""
+    from flightctl import params as paramfile
+    bad = [f for f in ("robust", "strict", "plot", "doc", "params") if getattr(args, f) not in (None, False)]
+    if bad:
+        raise InputError(f"--from-log: --{bad[0]} is not for it (it tunes the logged firmware's rate loop)")
+    for name, v, lo, hi in (("--target-pm", args.target_pm, 0.0, 90.0), ("--target-gm", args.target_gm, 0.0, 40.0),
+                            ("--ms", args.ms, 1.0, 10.0), ("--overshoot", args.overshoot, 0.0, 2.0),
+                            ("--max-change", args.max_change, 1.0, 10.0), ("--draws", args.draws, 1, 10000),
+                            ("--rise-ms", args.rise_ms if args.rise_ms is not None else 1.0, 0.1, 10000.0)):
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise InputError(f"{name} {v:g}: between {lo:g} and {hi:g}")
+    if args.index is not None and args.index < 1:
+        raise InputError(f"--index {args.index}: 1 or more")
+    for flag, f in (("--from-log", args.from_log), ("--check-on", args.check_on)):
+        if f is not None and not Path(f).is_file():
+            raise InputError(f"{flag} {f}: " + ("is a directory, a flight log is needed" if Path(f).is_dir() else "no such file"))
+    if args.out:
+        output_file(args.out, "--out")
+    if args.json:
+        output_file(args.json, "--json", ".json")
+    return fromlog.main(args, paramfile.load(None).airframe)
+
+
 def main(argv: list[str] | None = None) -> int:
     from flightctl.sim import causes
     from flightctl.sim.sweeps.montecarlo import ranged
     p = Parser(prog="flightctl tune", description=__doc__.split("\n\n")[0].replace("\n", " "))
     p.add_argument("--params", help="parameter file or shipped vehicle (default: the reference airframe)")
-    p.add_argument("--out", required=True, metavar="GAINS.toml", help="the parameter file to write, with the tuned [gains]")
+    p.add_argument("--out", metavar="GAINS.toml", help="the parameter file to write, with the tuned [gains] (with "
+                   "--from-log: the lines to paste, in the log's firmware's terms)")
     p.add_argument("--json", metavar="T.json", help="what was found per channel, with Table 4 beside it")
     p.add_argument("--plot", metavar="P.png", help="the tuned gains and Table 4 flown through the simulator")
     p.add_argument("--strict", action="store_true",
@@ -345,7 +371,31 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--doc", metavar="FILE.md", help="write what was found into FILE's block (<!-- tune procedure: "
                    "begin --> ... end -->, or tune strict, tune robust: docs/tune.md)")
     engine.add_flag(p, "with --robust")
+    g = p.add_argument_group("gains from a flight log (--from-log, docs/tune.md; exit 1: every axis refused)")
+    g.add_argument("--from-log", metavar="LOG", help="a flight log (Betaflight blackbox, or any diagnose reads): the "
+                   "vehicle identified from it, its logged gains checked against its steps, new gains for the models "
+                   "it leaves plausible")
+    g.add_argument("--check-on", metavar="LOG2", help="check the model of the whole LOG on this log of the same vehicle "
+                   "(flown with its own gains) instead of LOG's second half")
+    g.add_argument("--index", type=int, help="which log of a blackbox file of many (1 = the first)")
+    g.add_argument("--target-pm", type=float, default=fromlog.TARGETS["pm_deg"], metavar="DEG",
+                   help="the least phase margin over the plausible models (default %(default)g)")
+    g.add_argument("--target-gm", type=float, default=fromlog.TARGETS["gm_db"], metavar="DB",
+                   help="the least gain margin (default %(default)g dB)")
+    g.add_argument("--ms", type=float, default=fromlog.TARGETS["ms"], help="the largest peak sensitivity (default %(default)g)")
+    g.add_argument("--overshoot", type=float, default=fromlog.TARGETS["overshoot"], metavar="SHARE",
+                   help="the largest step overshoot, a share (default %(default)g)")
+    g.add_argument("--rise-ms", type=float, metavar="MS", help="the slowest median rise (10-90 %%) allowed (default: "
+                   "none; the fastest that meets the other targets wins)")
+    g.add_argument("--max-change", type=float, default=2.0, metavar="X",
+                   help="each gain changes at most by this factor either way (default %(default)g)")
+    g.add_argument("--draws", type=int, default=fromlog.DRAWS, help="plausible models drawn per axis (default %(default)d)")
+    g.add_argument("--quiet", action="store_true", help="no progress lines")
     args = p.parse_args(argv)
+    if args.from_log is not None:
+        return _from_log(args)
+    if args.out is None:
+        raise InputError("--out GAINS.toml is needed (or --from-log LOG)")
     engine.use(args.scheduler)
     if args.robust is not None and not 1 <= args.robust <= 10000:
         raise InputError(f"--robust {args.robust}: between 1 and 10000 draws")

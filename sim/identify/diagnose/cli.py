@@ -106,10 +106,10 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def read_logs(paths: list[str], index: int | None, progress) -> list:
+def read_logs(paths: list[str], index: int | None, progress, extra: tuple[str, ...] = ()) -> list:
     """Each log as a flight-log table: this project's CSV, or a foreign log through
     `flightctl.sim.logs` (every log of a blackbox file that can be read, or the one at `index`);
-    the logs skipped are named on the progress lines."""
+    the logs skipped are named on the progress lines; `extra`: more columns a CSV log keeps."""
     from flightctl.sim.logs import kind, read_foreign
     tables = []
     for log in paths:
@@ -117,7 +117,7 @@ def read_logs(paths: list[str], index: int | None, progress) -> list:
         if kind(log) is not None:
             tables += read_foreign(log, index, progress)
         else:
-            tables.append(read_flight_log(log, min_seconds=MIN_LOG_S, min_rows=10, extra=FOREIGN_COLUMNS + STATIC_COLUMNS))
+            tables.append(read_flight_log(log, min_seconds=MIN_LOG_S, min_rows=10, extra=FOREIGN_COLUMNS + STATIC_COLUMNS + extra))
     for t in tables:          # a malformed `# thrust_curve:` is bad input, refused before any work
         declared_curve(t)
     return tables

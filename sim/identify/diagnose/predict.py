@@ -159,33 +159,48 @@ def loop_parts(ctrl: dict, meta: dict, axis: str, declared=None) -> tuple[dict |
     return parts, missing
 
 
-def closed_loop(f: np.ndarray, b: float, tau: float, parts: dict, loop_chain: str, response_chain: str) -> np.ndarray:
-    """The loop's response from the setpoint to the logged response at the frequencies f (Hz): the module's loop.
-    The controller u = Cr r - Cy omega: FF kf Ft r, and P, I, D on Fe (Ft r - y) (D on c Ft r - y_d, y_d the
-    gyro the D term takes: the loop's filtered one, or the raw one through its own low-pass); the attitude loop
-    (flightctl's) on the estimator's angle A Fg omega with its D on the filtered rate."""
+def loop_terms(f: np.ndarray, tau: float, parts: dict, loop_chain: str, response_chain: str) -> dict:
+    """The module's loop at the frequencies f (Hz), per unit effectiveness and per unit gain, linear in the
+    gains: the vehicle's `G` (b = 1), the response's filter `Fr`, and the controller u = Cr r - Cy omega with
+    Cr = kp rP + ki rI + kd rD + kf rF and Cy = kp yP + ki yI + kd yD. The rate loop: FF kf Ft r, and P, I,
+    D on Fe (Ft r - y) (D on c Ft r - y_d, y_d the gyro the D term takes: the loop's filtered one, or the raw
+    one through its own low-pass); the attitude loop (flightctl's) on the estimator's angle A Fg omega with its
+    D on the filtered rate. The open loop is b G Cy; `closed_loop` closes it."""
     fs = parts["loop_hz"]
     T = 1.0 / fs
     s = 2j * np.pi * np.maximum(f, 1e-6)
     z1 = np.exp(-s * T)
     A = T * z1 / (1.0 - z1)                  # the command held a period and integrated
-    G = b * np.exp(-s * tau) * A
     Fg = _freq(_stages(loop_chain, fs), z1)
     Fr = _freq(_stages(response_chain, fs), z1)
+    one = np.ones_like(z1)
     lp = lambda key, kind="pt1": (_freq(sensor_filters(((parts.get("d_filter", "biquad") if key == "d_lowpass_hz" else kind,
-                                                         parts[key]),), fs), z1) if parts.get(key) else 1.0)
-    Fp = _freq([_pt1(parts["p_lowpass_hz"], fs)], z1) if parts.get("p_lowpass_hz") else 1.0
-    Fd = lp("d_lowpass_hz")
-    Ft, Fe = lp("target_lowpass_hz"), lp("error_lowpass_hz")
-    PI = parts["kp"] * Fp + parts["ki"] * T / (1.0 - z1)
+                                                         parts[key]),), fs), z1) if parts.get(key) else one)
+    Fp = _freq([_pt1(parts["p_lowpass_hz"], fs)], z1) if parts.get("p_lowpass_hz") else one
+    I = T / (1.0 - z1)
     if parts.get("loop") == "attitude":
-        Fema = lp("tau_rate_hz")
-        Cr, Cy, Fr = PI, PI * Fg * A + parts["kd"] * Fema * Fg, Fr * A
-    else:
-        D = parts["kd"] * Fd * (1.0 - z1) / T
-        Cr = parts.get("kf", 0.0) * Ft + Fe * Ft * (PI + parts["c"] * D)
-        Cy = Fe * (PI * Fg + D * (1.0 if parts.get("d_on_raw_gyro") else Fg))
-    H = Fr * G * Cr / (1.0 + G * Cy)
+        return {"G": np.exp(-s * tau) * A, "Fr": Fr * A, "rP": Fp, "rI": I, "rD": 0.0 * one, "rF": 0.0 * one,
+                "yP": Fp * Fg * A, "yI": I * Fg * A, "yD": lp("tau_rate_hz") * Fg}
+    D = lp("d_lowpass_hz") * (1.0 - z1) / T
+    Ft, Fe = lp("target_lowpass_hz"), lp("error_lowpass_hz")
+    return {"G": np.exp(-s * tau) * A, "Fr": Fr, "rP": Fe * Ft * Fp, "rI": Fe * Ft * I,
+            "rD": parts["c"] * Fe * Ft * D, "rF": Ft, "yP": Fe * Fp * Fg, "yI": Fe * I * Fg,
+            "yD": Fe * D * (one if parts.get("d_on_raw_gyro") else Fg)}
+
+
+def controller(t: dict, kp, ki, kd, kf=0.0):
+    """The loop's controller from `loop_terms` at these gains (scalars, or arrays broadcast over the
+    frequencies): the setpoint's path Cr and the response's path Cy."""
+    return (kp * t["rP"] + ki * t["rI"] + kd * t["rD"] + kf * t["rF"],
+            kp * t["yP"] + ki * t["yI"] + kd * t["yD"])
+
+
+def closed_loop(f: np.ndarray, b: float, tau: float, parts: dict, loop_chain: str, response_chain: str) -> np.ndarray:
+    """The loop's response from the setpoint to the logged response at the frequencies f (Hz): the module's loop."""
+    t = loop_terms(f, tau, parts, loop_chain, response_chain)
+    Cr, Cy = controller(t, parts["kp"], parts["ki"], parts["kd"], parts.get("kf", 0.0))
+    G = b * t["G"]
+    H = t["Fr"] * G * Cr / (1.0 + G * Cy)
     H[f == 0] = 1.0 if parts["ki"] or parts.get("loop") == "attitude" else H[1]
     return H
 
@@ -216,7 +231,7 @@ def compare(r: steps.Response, H_of, measured: dict) -> tuple[dict, np.ndarray]:
             excess[k] = x
         out[k] = d
     worst = _points_to(out, excess)
-    entry = {"step_error": steps._num(err, 3), "final": steps._num(m["final"], 3), **out,
+    entry = {"step_error": steps._num(err, 3), "final": steps._num(m["final"], 3), "band_hz": steps._num(r.band_hz, 3), **out,
              "model_full_band": {k: steps._num(own[k]) for k in ("delay_s", "rise_s", "overshoot")},
              "agrees": bool(err < AGREE_ERROR and worst is None)}
     if worst is not None:
@@ -289,15 +304,26 @@ def predict(model, ctrl: dict, checked: Table, identified_on: str, checked_on: s
 
 def held_out(table: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple[dict, dict]:
     """The prediction on one log: identified on its first SPLIT of time, checked on the rest."""
+    return held_out_model(table, ctrl, a, progress)[1:]
+
+
+def held_out_model(table: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple:
+    """`held_out` with the model it checked: (the model or why not, per axis the entry, the curves)."""
     first, second, cut = halves(table)
-    return predict(_model(first, ctrl, table.meta, a, progress), ctrl, second, f"{table.path} before {cut:.1f} s",
-                   f"{table.path} from {cut:.1f} s")
+    model = _model(first, ctrl, table.meta, a, progress)
+    return (model, *predict(model, ctrl, second, f"{table.path} before {cut:.1f} s", f"{table.path} from {cut:.1f} s"))
 
 
 def cross(identify_on: Table, check: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple[dict, dict]:
     """Identified on one log, the other's steps predicted with its own controller `ctrl` (a series of one
     vehicle flown with different gains)."""
-    return predict(_model(identify_on, ctrl, check.meta, a, progress), ctrl, check, identify_on.path, check.path)
+    return cross_model(identify_on, check, ctrl, a, progress)[1:]
+
+
+def cross_model(identify_on: Table, check: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple:
+    """`cross` with the model it checked: (the model or why not, per axis the entry, the curves)."""
+    model = _model(identify_on, ctrl, check.meta, a, progress)
+    return (model, *predict(model, ctrl, check, identify_on.path, check.path))
 
 
 def _model(table: Table, ctrl: dict, meta: dict, a, progress):
