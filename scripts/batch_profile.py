@@ -90,6 +90,7 @@ def _phase_loops():
     """The phases' compiled loops: each calls one compiled copy the batch's loop inlines, REPS times per vehicle."""
     from flightctl.sim.sweeps import flight as fl
     from flightctl.sim.sweeps import onboard as ob
+    from flightctl.sim.sweeps import pcg64
     from flightctl.sim.world import compiled, imu
     cc = compiled.compiled_copy
     plant = compiled.functions()
@@ -101,7 +102,7 @@ def _phase_loops():
         "forces": cc(forces_loop, allocates=True, work=plant["work"], forces=plant["forces"], held_command=held),
         "chip": cc(chip_loop, allocates=True, chip_words=imu.chip_frame_compiled(fl.put_word)),
         "vibration": cc(vibration_loop, vibration=cc(imu.vibration, remainder=cc(imu.remainder))),
-        "normals": cc(normals_loop, allocates=True, normals=cc(fl.normals, allocates=True),
+        "normals": cc(normals_loop, allocates=True, normals=cc(fl.normals, standard_normal=pcg64.compiled_normal(cc)),
                       normals_per_read=cc(imu.normals_per_read)),
         "gauss": cc(gauss_loop, gauss=cc(fl.gauss, uniform=u)),
         "controller": cc(controller_loop, allocates=True, ob_step=o["step"]),

@@ -141,7 +141,7 @@ class _Vehicles:
         self.kc = np.zeros((n, ob.N_K))
         self.words = np.zeros((n, 7))             # each chip's burst, as the driver decodes it (`flight.put_word`)
         self.cs, self.cc = np.zeros((n, N_CHIP_STATE)), np.zeros((n, N_CHIP_CONST))
-        self.normal = generators([np.random.default_rng(s) for s in seeds])   # each chip's `NoisePool`
+        self.normal = fl.chip_generators(seeds)     # each chip's `NoisePool`
         self.rng = []             # each vehicle's `World.rng`, whose `random()`s the loop takes from uni
         self.most = most          # the most uniforms a vehicle takes in a chunk
         self.uni = np.zeros((n, SPARE * most))
@@ -180,40 +180,6 @@ class _Vehicles:
             self.uni[v, :m - u] = self.uni[v, u:].copy()
             self.uni[v, m - u:] = uniforms(self.rng[v], u)
             self.w[v, fl.W_U] = 0.0
-
-
-def generators(gens: list) -> list:
-    """The vehicles' numpy generators as `fly` takes them: a numba typed List where it is compiled (whose
-    generators are the same objects: their state moves on in numpy's), else the list. The list is made
-    and grown by compiled functions (`listed`), from numba's cache: numba.typed.List's own methods
-    compile afresh in every process (a third of a second, more than the appends)."""
-    if not gens or fl.compiled_fly() is None:
-        return gens
-    first, more = listed()
-    typed = first(gens[0])
-    for g in gens[1:]:
-        more(typed, g)
-    return typed
-
-
-def list_of(g):
-    """A numba typed list holding g (`listed`: compiled, where `List` is numba.typed.List)."""
-    out = List()
-    out.append(g)
-    return out
-
-
-def append_to(out, g) -> None:
-    """out.append(g), compiled (`listed`)."""
-    out.append(g)
-
-
-@functools.cache
-def listed():
-    """`list_of` and `append_to` compiled (and cached by numba), for `generators`."""
-    from numba.typed import List as typed_list
-    from flightctl.sim.world.compiled import compiled_copy
-    return compiled_copy(list_of, allocates=True, List=typed_list), compiled_copy(append_to, allocates=True)
 
 
 def uniforms(r: random.Random, k: int) -> np.ndarray:
