@@ -7,9 +7,7 @@ import pytest
 from flightctl.sim.sweeps import pcg64
 from flightctl.sim.world import compiled
 
-pytestmark = pytest.mark.skipif(not compiled.enabled(), reason="compiled only (numba)")
-
-
+@pytest.mark.skipif(not compiled.enabled(), reason="compiled only (numba)")
 def test_the_words_give_numpys_normals_and_state():
     """Seeds drawn at random (small, large, 2^63 and up): 30,000 normals each equal to
     `default_rng(seed).standard_normal`, the ziggurat's tail and wedges included, and the words then
@@ -36,3 +34,18 @@ def test_the_words_give_numpys_normals_and_state():
         assert (int(G[v, 0]) << 64 | int(G[v, 1])) == st["state"]
         assert (int(G[v, 2]) << 64 | int(G[v, 3])) == st["inc"]
     assert np.abs(out).max() > pcg64.ZIGGURAT_NOR_R       # the tail's branch was taken
+
+
+def test_the_seeding_is_numpys_for_every_kind_of_seed():
+    """`seeded` (one-word seeds at once in numpy's modular arithmetic, others by NumPy) gives
+    `np.random.PCG64(seed)`'s state and increment for 3,000 seeds drawn below 2^32, its ends, and a
+    mixed list with seeds of several words."""
+    rng = np.random.default_rng(4848)
+    small = [0, 1, (1 << 32) - 1] + [int(s) for s in rng.integers(0, 1 << 32, 3000)]
+    mixed = small[:5] + [1 << 32, int(rng.integers(1 << 40, 1 << 62)), 12345678901234567890]
+    for seeds in (small, mixed, small[:1]):
+        G = pcg64.seeded(seeds)
+        assert G.dtype == np.uint64 and G.shape == (len(seeds), 4)
+        for v, s in enumerate(seeds):
+            st = np.random.PCG64(s).state["state"]
+            assert (int(G[v, 0]) << 64 | int(G[v, 1]), int(G[v, 2]) << 64 | int(G[v, 3])) == (st["state"], st["inc"]), s

@@ -35,13 +35,63 @@ ZIGGURAT_NOR_INV_R = 0.27366123732975827203338247596
 
 
 def seeded(seeds) -> np.ndarray:
-    """The (n, 4) uint64 words of `np.random.PCG64(s)` for each seed s (NumPy's seeding)."""
+    """The (n, 4) uint64 words of `np.random.PCG64(s)` for each seed s: NumPy's seeding (`SeedSequence(s)`,
+    its `generate_state(4, uint64)`, `pcg64_set_seed`), for seeds below 2^32 across the vehicles at once
+    in numpy's uint32 and uint64 arithmetic (modular, as C's), others by NumPy itself."""
+    s = np.asarray(seeds, dtype=object)
+    if len(s) and all(isinstance(v, (int, np.integer)) and 0 <= v < 1 << 32 for v in s):
+        return _seeded_words(np.asarray(s, dtype=np.uint32))
     out = np.empty((len(seeds), 4), dtype=np.uint64)
-    for v, s in enumerate(seeds):
-        st = np.random.PCG64(s).state["state"]
+    for v, seed in enumerate(seeds):
+        st = np.random.PCG64(seed).state["state"]
         a, b = st["state"], st["inc"]
         out[v] = (a >> 64, a & MASK64, b >> 64, b & MASK64)
     return out
+
+
+# numpy/random/bit_generator.pyx (SeedSequence): its hash's constants, a pool of four 32-bit words
+_INIT_A, _MULT_A, _INIT_B, _MULT_B = 0x43B0D7E5, 0x931E8875, 0x8B51F9DD, 0x58F38DED
+_MIX_L, _MIX_R, _POOL = np.uint32(0xCA01F9DD), np.uint32(0x4973F715), 4
+_U16 = np.uint32(16)
+
+
+def _seeded_words(entropy: np.ndarray) -> np.ndarray:
+    """`seeded` of one-word seeds (uint32), a vehicle per entry: SeedSequence's `mix_entropy` (hashmix, mix),
+    `generate_state` (eight words, as four little-endian uint64), then `pcg_setseq_128_srandom_r`."""
+    const = [_INIT_A]
+
+    def hashmix(value):
+        value = value ^ np.uint32(const[0])
+        const[0] = const[0] * _MULT_A & 0xFFFFFFFF
+        value = value * np.uint32(const[0])
+        return value ^ (value >> _U16)
+
+    def mix(x, y):
+        r = _MIX_L * x - _MIX_R * y
+        return r ^ (r >> _U16)
+    zero = np.zeros_like(entropy)
+    pool = [hashmix(entropy if i == 0 else zero) for i in range(_POOL)]
+    for src in range(_POOL):
+        for dst in range(_POOL):
+            if src != dst:
+                pool[dst] = mix(pool[dst], hashmix(pool[src]))
+    h, words = _INIT_B, []
+    for i in range(8):
+        v = pool[i % _POOL] ^ np.uint32(h)
+        h = h * _MULT_B & 0xFFFFFFFF
+        v = v * np.uint32(h)
+        words.append((v ^ (v >> _U16)).astype(np.uint64))
+    val = [words[2 * j] | (words[2 * j + 1] << _S32) for j in range(4)]
+    ihi = (val[2] << _S1) | (val[3] >> np.uint64(63))          # inc = initseq << 1 | 1
+    ilo = (val[3] << _S1) | _ONE
+    hi, lo = ihi.copy(), ilo.copy()                              # state 0, one step: inc
+    lo2 = lo + val[1]                                            # + initstate
+    hi = hi + val[0] + (lo2 < lo).astype(np.uint64)
+    nhi = mulhi(lo2, _MUL_LO) + lo2 * _MUL_HI + hi * _MUL_LO     # one step
+    nlo = lo2 * _MUL_LO
+    lo = nlo + ilo
+    hi = nhi + ihi + (lo < nlo).astype(np.uint64)
+    return np.ascontiguousarray(np.stack([hi, lo, ihi, ilo], axis=1))
 
 
 def mulhi(a, b):
