@@ -7,6 +7,7 @@ import pytest
 from flightctl.sim.sweeps import pcg64
 from flightctl.sim.world import compiled
 
+
 @pytest.mark.skipif(not compiled.enabled(), reason="compiled only (numba)")
 def test_the_words_give_numpys_normals_and_state():
     """Seeds drawn at random (small, large, 2^63 and up): 30,000 normals each equal to
