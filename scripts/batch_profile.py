@@ -336,7 +336,8 @@ def _worker_cpu() -> float:
 
 def cpu_seconds(n: int, seconds: float, workers: int) -> tuple[float, float, int, float]:
     """(CPU-seconds of this process, of the engine's workers, vehicle-steps, wall s) of one batch on `workers`,
-    after a first batch that starts the workers (sim/engine.py keeps them for the command's life)."""
+    after a first batch that starts the workers (sim/engine.py keeps them for the command's life); they
+    are ended after it, so that an idle cluster takes nothing from a one-worker batch measured next."""
     from flightctl.sim import engine
     from flightctl.sim.sweeps import batch
     from flightctl.sim.sweeps import flight as fl
@@ -352,6 +353,7 @@ def cpu_seconds(n: int, seconds: float, workers: int) -> tuple[float, float, int
     flight = batch.simulate(params, plan, n, draws, until=seconds, workers=workers)
     wall = time.perf_counter() - wall
     here, used = time.process_time() - here, workers_cpu() - before
+    engine.close()
     return here, used, flight.vehicle_steps, wall
 
 
