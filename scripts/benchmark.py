@@ -152,6 +152,9 @@ def batch_rate(n: int = 10000, seconds: float = 1.0, workers: int = 1) -> tuple[
     draws = draw(params, n, 0)
     plan = SCENARIOS["paper"]().plan
     compiled_fly()                    # compiled, or loaded from numba's cache, before the clock starts
+    if workers > 1:                   # the engine's workers started (and their numba cache loaded) before it too:
+        simulate(params, plan, 2 * workers, {k: v[:2 * workers] for k, v in draws.items()}, until=0.01,
+                 workers=workers)     # a command pays that once (the "first call" rows), not per batch
     start, cpu = time.perf_counter(), time.process_time()
     flight = simulate(params, plan, n, draws, until=seconds, workers=workers)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu
@@ -424,14 +427,18 @@ def figures(repeat: int) -> list[tuple[str, str, str]]:
     rows.append(("the motor-loss gain schedule (as-flown, judged over its Jp, motor time constant and delay ranges)",
                  f"{cold:.1f} s of CPU to build, {1e3 * warm:.0f} ms to read back from the disk cache", "-"))
     rows.append(("one loop of the two-rotor controller (after a lost motor)", f"{us_spin:.1f} us", "-"))
+    one_core = None
     for workers in sorted({1, os.cpu_count() or 1}):
         rates = [batch_rate(workers=workers) for _ in range(repeat)]
         rate, cpu = max(r[0] for r in rates), max(r[1] for r in rates)
+        one_core = one_core or rate
         rows.append((f"batched simulator, 10,000 as-flown vehicles on {workers} core{'s' if workers > 1 else ''}, each "
-                     "flown as the full path flies it (the chip, the sonar, the calibration, the take-off)",
+                     "flown as the full path flies it (the chip, the sonar, the calibration, the take-off)"
+                     + ("; the engine's workers started before the clock" if workers > 1 else ""),
                      f"{rate / 1e6:.2f} M vehicle-steps/s (best of {repeat}; {rate / workers / 1e6:.2f} M per core"
-                     + (f", {cpu / 1e6:.2f} M per s of this process's CPU)" if workers == 1 else ")"),
-                     ">= 2.0 M per core"))
+                     + (f", {cpu / 1e6:.2f} M per s of this process's CPU)" if workers == 1 else
+                        f", {rate / one_core:.2f}x one core)"),
+                     ">= 2.0 M per core" + (f"; >= {0.9 * workers:.1f}x one core" if workers > 1 else "")))
     airborne = max(batch_rate(n=2000, seconds=10.0)[0] for _ in range(repeat))
     rows.append(("batched simulator, 2,000 as-flown vehicles for 12 s on 1 core (10 s after arming: mostly in the "
                  "air, as a Monte Carlo flies)", f"{airborne / 1e6:.2f} M vehicle-steps/s (best of {repeat})", "-"))

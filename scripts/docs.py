@@ -77,7 +77,7 @@ BLOCKS = (
     Block("benchmark", "README.md", *marked("benchmark"), SCRIPT + ("scripts/benchmark.py", "--markdown"),
           minutes=11, measured=True),
     Block("batch-profile", "docs/batch.md", *marked("batch profile"),
-          SCRIPT + ("scripts/batch_profile.py", "--against", "d54954a", "--markdown"), minutes=15, measured=True),
+          SCRIPT + ("scripts/batch_profile.py", "--against", "c36445f", "--markdown"), minutes=15, measured=True),
     Block("hil-latency", "docs/hil.md", *marked("hil latency"), SCRIPT + ("scripts/hil_latency.py", "--markdown"),
           minutes=4, measured=True),
     Block("fault-matrix", "docs/safety.md", "<!-- fault matrix: begin (written by `flightctl sim faults`) -->",

@@ -31,6 +31,8 @@ from flightctl.sim.sweeps import onboard as ob
 from flightctl.sim.world.board import SIM_CALIBRATE_S
 
 GROUP = 256          # vehicles whose arrays are set up and flown together
+TASKS = 4            # the engine's tasks per worker (each several groups): few, so that the scheduler's round
+                     # trips and the jobs' pickling are few, enough that a worker slow to start is evened out
 CHUNK = 225          # loop periods flown per call of the compiled loop (the uniforms refilled between)
 SPARE = 8            # chunks' worth of uniforms each vehicle holds (refilled when less than one is left)
 WIDE = ("P1", "P2", "P3", "P4", "acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z", "alt")  # fl.N_WIDE's
@@ -141,10 +143,9 @@ class _Vehicles:
         self.kc = np.zeros((n, ob.N_K))
         self.words = np.zeros((n, 7))             # each chip's burst, as the driver decodes it (`flight.put_word`)
         self.cs, self.cc = np.zeros((n, N_CHIP_STATE)), np.zeros((n, N_CHIP_CONST))
-        self.normal = generators([np.random.default_rng(s) for s in seeds])   # each chip's `NoisePool`
+        self.normal = fl.chip_generators(seeds)     # each chip's `NoisePool`
         self.rng = []             # each vehicle's `World.rng`, whose `random()`s the loop takes from uni
         self.most = most          # the most uniforms a vehicle takes in a chunk
-        self.uni = np.zeros((n, SPARE * most))
         # the vehicles' parameters at once, each drawn value an (n,) array (elementwise arithmetic, as a
         # float's): the controllers' constants and the chips' vibration, a column each
         p = drawn_params(params, draws, effects=False)
@@ -154,17 +155,21 @@ class _Vehicles:
         for j, value in enumerate(ob.constants(p, structure)):
             self.kc[:, j] = value
         noise = SensorNoise()
+        dies, kept, raw, spare = [], np.full(n, np.nan), [], SPARE * most
         for v, seed in enumerate(seeds):
             r = random.Random(seed)                 # `World.rng`: the sonar's tick, the chip's die, the power monitor
             r.randrange(1 << 32)
-            s, c = chip_die(noise, a, r)            # (its draws take nothing of the vehicle's values)
-            self.cs[v], self.cc[v] = s, c
+            dies.append(chip_die(noise, a, r))      # (its draws take nothing of the vehicle's values)
             for _ in range(template["start_draws"]):
                 r.gauss(0.0, 1.0)
             if r.gauss_next is not None:            # `random.gauss`'s second number, kept for its next call
-                self.w[v, fl.W_GAUSS], self.w[v, fl.W_HAS_GAUSS] = r.gauss_next, 1.0
+                kept[v] = r.gauss_next
             self.rng.append(r)
-            self.uni[v] = uniforms(r, SPARE * most)
+            raw.append(random_bits(r, spare))
+        self.uni = uniforms_of(b"".join(raw), n, spare)
+        self.cs[:], self.cc[:] = [d[0] for d in dies], [d[1] for d in dies]
+        has = kept == kept
+        self.w[has, fl.W_GAUSS], self.w[has, fl.W_HAS_GAUSS] = kept[has], 1.0
         vibration_constants(self.cc.T, vehicle_noise(noise, p.sensors), p.airframe)
         self.cc[:, template["registered"]] = template["values"]
 
@@ -182,47 +187,24 @@ class _Vehicles:
             self.w[v, fl.W_U] = 0.0
 
 
-def generators(gens: list) -> list:
-    """The vehicles' numpy generators as `fly` takes them: a numba typed List where it is compiled (whose
-    generators are the same objects: their state moves on in numpy's), else the list. The list is made
-    and grown by compiled functions (`listed`), from numba's cache: numba.typed.List's own methods
-    compile afresh in every process (a third of a second, more than the appends)."""
-    if not gens or fl.compiled_fly() is None:
-        return gens
-    first, more = listed()
-    typed = first(gens[0])
-    for g in gens[1:]:
-        more(typed, g)
-    return typed
-
-
-def list_of(g):
-    """A numba typed list holding g (`listed`: compiled, where `List` is numba.typed.List)."""
-    out = List()
-    out.append(g)
-    return out
-
-
-def append_to(out, g) -> None:
-    """out.append(g), compiled (`listed`)."""
-    out.append(g)
-
-
-@functools.cache
-def listed():
-    """`list_of` and `append_to` compiled (and cached by numba), for `generators`."""
-    from numba.typed import List as typed_list
-    from flightctl.sim.world.compiled import compiled_copy
-    return compiled_copy(list_of, allocates=True, List=typed_list), compiled_copy(append_to, allocates=True)
-
-
 def uniforms(r: random.Random, k: int) -> np.ndarray:
-    """The next k numbers of `r.random()`, at once: CPython's `random()` takes two 32-bit outputs a, b
-    of the Mersenne Twister and returns ((a >> 5) 2^26 + (b >> 6)) / 2^53 (each step exact in doubles),
-    and `getrandbits(64 k)` holds the next 2 k outputs in order from its lowest 32 bits up; r's state
-    moves on as k calls of `random()` move it (tests/test_batch.py)."""
-    words = np.frombuffer(r.getrandbits(64 * k).to_bytes(8 * k, "little"), dtype="<u4")
-    return ((words[0::2] >> 5) * 67108864.0 + (words[1::2] >> 6)) * (1.0 / 9007199254740992.0)
+    """The next k numbers of `r.random()`, at once (`uniforms_of`); r's state moves on as k calls of
+    `random()` move it (tests/test_batch.py)."""
+    return uniforms_of(random_bits(r, k), 1, k)[0]
+
+
+def random_bits(r: random.Random, k: int) -> bytes:
+    """The Mersenne Twister's next 2 k 32-bit outputs, in order, as little-endian bytes: `getrandbits(64 k)`
+    holds them from its lowest 32 bits up."""
+    return r.getrandbits(64 * k).to_bytes(8 * k, "little")
+
+
+def uniforms_of(raw: bytes, n: int, k: int) -> np.ndarray:
+    """(n, k) numbers of `random()` from n generators' `random_bits(r, k)` one after another: CPython's
+    `random()` takes two 32-bit outputs a, b and returns ((a >> 5) 2^26 + (b >> 6)) / 2^53 (each step
+    exact in doubles); all of the vehicles' at once, in one pass of numpy's."""
+    words = np.frombuffer(raw, dtype="<u4").reshape(n, 2 * k)
+    return ((words[:, 0::2] >> 5) * 67108864.0 + (words[:, 1::2] >> 6)) * (1.0 / 9007199254740992.0)
 
 
 def _judge(w: np.ndarray, g: float) -> tuple[str, bool, bool]:
@@ -246,6 +228,11 @@ def _fly_group(job) -> tuple:
     finally:
         if collecting:
             gc.enable()
+
+
+def _fly_groups(jobs: list) -> list:
+    """`_fly_group` of each job in turn: one of the engine's tasks."""
+    return [_fly_group(job) for job in jobs]
 
 
 def _arm_and_record(dt: float, record: tuple[float, float] | None) -> tuple[int, int]:
@@ -328,18 +315,22 @@ def simulate(params: Params, plan: Plan, n: int, draws: dict[tuple[str, str], np
     jobs = [(params, plan, {key: v[a:b] for key, v in draws.items()}, None if gains is None else list(gains[a:b]),
              seeds[a:b], record, until, structure, wide) for a, b in zip(cuts[:-1], cuts[1:])]
     flown = [0]
-
-    def done(k: int, part) -> None:
-        flown[0] += len(jobs[k][4])
-        if progress is not None:
-            progress(flown[0] / n)
     if workers <= 1 or len(jobs) == 1:
         parts = []
-        for k, job in enumerate(jobs):
+        for job in jobs:
             parts.append(_fly_group(job))
-            done(k, parts[-1])
+            flown[0] += len(job[4])
+            if progress is not None:
+                progress(flown[0] / n)
     else:
-        parts = engine.run(_fly_group, jobs, workers, done)
+        cut = np.linspace(0, len(jobs), min(len(jobs), workers * TASKS) + 1).astype(int)
+        tasks = [jobs[a:b] for a, b in zip(cut[:-1], cut[1:])]
+
+        def done(k: int, part) -> None:
+            flown[0] += sum(len(job[4]) for job in tasks[k])
+            if progress is not None:
+                progress(flown[0] / n)
+        parts = [part for task in engine.run(_fly_groups, tasks, workers, done) for part in task]
     judged = [j for part in parts for j in part[0]]
     rec = np.concatenate([part[1] for part in parts], axis=0)
     dt = params.airframe.dt

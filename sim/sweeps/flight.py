@@ -363,18 +363,33 @@ def landing_setpoint(w, t_plan: float, j: int) -> float:
     return start + (0.0 - start) * 0.5 * (1.0 - cos(pi * s))
 
 
+def chip_generators(seeds) -> list | np.ndarray:
+    """The vehicles' chips' generators, each `NoisePool`'s `np.random.default_rng(seed)`: compiled, as
+    the four uint64 words of its PCG64 (sim/sweeps/pcg64.py, whose normals are NumPy's), else the
+    generators themselves."""
+    if compiled_fly() is None:
+        return [np.random.default_rng(s) for s in seeds]
+    from flightctl.sim.sweeps import pcg64
+    return pcg64.seeded(seeds)
+
+
+def standard_normal(gen) -> float:
+    """The chip's next normal: `Generator.standard_normal` (compiled: `pcg64.standard_normal` on its words)."""
+    return gen.standard_normal()
+
+
 def normals(gen, w, e, at: int, count: int) -> None:
     """`NoisePool.index(count)` of the vehicle's chip and its numbers into e[at:at + count], drawn here
-    from the vehicle's own generator (numba's `standard_normal` is NumPy's, number for number): a read
+    from the vehicle's own generator (`standard_normal`: NumPy's, number for number): a read
     whose numbers would cross the pool's block skips the block's rest, drawn and unused, as the pool's
     next block starts where the last one ended. w[W_POOL]: the position in the block."""
     i = int(w[W_POOL])
     if i + count > NOISE_BLOCK:
         for _ in range(NOISE_BLOCK - i):
-            gen.standard_normal()
+            standard_normal(gen)
         i = 0
     for j in range(count):
-        e[at + j] = gen.standard_normal()
+        e[at + j] = standard_normal(gen)
     w[W_POOL] = i + count
 
 
@@ -383,7 +398,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI, SP, R
     """Loop periods i0 + 1 .. i0 + n of every vehicle (rows of the arrays): X the plants' states, W the
     world's and loop's (`w`), E and KC the controllers' (sim/sweeps/onboard.py), Q the plants' constants
     (sim/world/compiled.py `layout_rows`), RING and NRING, FRAC the delayed commands, WORDS, CS, CC the
-    chips' burst words (`put_word`), state and constants, GEN their numpy generators (`NoisePool`'s), UNI the Mersenne
+    chips' burst words (`put_word`), state and constants, GEN their generators (`chip_generators`), UNI the Mersenne
     Twisters' uniforms, SP the plan's setpoints per period from i0 + 1, REC the judged record (rows
     from period rec0 on: true and estimated roll, pitch, yaw), k the shared constants (`N_WORLD`), jump the
     driver's limits per word. The loop arms at period i_arm."""
@@ -560,6 +575,7 @@ ob_step, ob_on_range, ob_heading, ob_set_reference, ob_arm, ob_landing_start = (
 @functools.cache
 def compiled_fly():
     """`fly` compiled (numba), every call bound to a compiled copy of its one plain source, or None."""
+    from flightctl.sim.sweeps import pcg64
     from flightctl.sim.world import compiled, imu
     if not compiled.enabled():
         return None
@@ -570,7 +586,7 @@ def compiled_fly():
     g = cc(gauss, uniform=u)
     at = plant["forces"]
     held = cc(held_command)
-    return cc(fly, allocates=True, work=plant["work"], normals=cc(normals, allocates=True),
+    return cc(fly, allocates=True, work=plant["work"], normals=cc(normals, standard_normal=pcg64.compiled_normal(cc)),
               normals_per_read=cc(imu.normals_per_read),
               plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held,
                               time_weighted=cc(time_weighted), floor_spin=cc(floor_spin), floor_brake=cc(floor_brake)),
