@@ -497,10 +497,7 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
     _thrust_curve(p, imp)
     order = [int(k) for k in imp.meta.pop("esc_order").split()]
     esc = msgs["ESC"]
-    if esc and len(order) != 4:
-        imp.notes.append(f"ESC telemetry of {len(order)} motors not read: the rotor speeds' columns are a quad's "
-                         "(omega1-4)")
-    elif esc and hasattr(esc[0], "RPM"):
+    if esc and hasattr(esc[0], "RPM"):             # one ESC instance per motor output, any motor count
         inst = {i: [m for m in esc if getattr(m, "Instance", -1) == i] for i in order}
         if all(inst[i] for i in order):
             t = _t(inst[order[0]])
@@ -508,7 +505,7 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
             if np.any(w != 0):
                 imp.streams["omega"] = Stream("ESC RPM", t, np.abs(w) * 2.0 * math.pi / 60.0)
                 imp.meta["omega_source"] = (f"ESC telemetry RPM of instances {', '.join(map(str, order))} (the motors' "
-                                            "output channels) for motors 1-4")
+                                            f"output channels) for motors 1-{len(order)}")
 
 
 def _pid_targets(msgs, imp: Imported) -> None:

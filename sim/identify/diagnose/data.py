@@ -67,7 +67,8 @@ BARO_CLIMB_M = 0.5
 HEIGHT_SOURCES = ("mocap", "rangefinder")   # heights good to a few cm: they also give the airborne test
 MIN_ROTORS, MAX_ROTORS = 4, 12      # the static tier's layouts (sim/logs/frames.py); the dynamic tier's model is the quad's
 MOTOR_COLUMNS = tuple(f"P{i}" for i in range(5, MAX_ROTORS + 1))   # motors 5.. beside the contract's P1-P4
-FOREIGN_COLUMNS = ("height", "current", "omega1", "omega2", "omega3", "omega4") + MOTOR_COLUMNS
+OMEGA_COLUMNS = tuple(f"omega{i}" for i in range(1, MAX_ROTORS + 1))   # each motor's measured speed (rad/s)
+FOREIGN_COLUMNS = ("height", "current") + OMEGA_COLUMNS + MOTOR_COLUMNS
 FILTER_KINDS = ("pt1", "pt2", "pt3", "biquad")
 
 
@@ -142,7 +143,7 @@ class FileData:
     foreign: bool = False   # a log of another vehicle (its `# vehicle: foreign`): the base model is identified
     gyro_filter: tuple = ()  # the causal filters between the sensor and the logged gyro (parse_filters)
     acc_filter: tuple = ()
-    omega: np.ndarray | None = None   # (4, n) measured rotor speed (rad/s) when logged
+    omega: np.ndarray | None = None   # (N, n) each motor's measured speed (rad/s) when logged
     battery_cells: int | None = None  # the pack's cell count when the log says it (`# battery_cells:`)
     notes: list[str] = field(default_factory=list)
     baro_climb: float | None = None   # m: how far a coarse height (a barometer) rose while the motors ran
@@ -417,8 +418,8 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc:
             baro = float(np.percentile(flying, 95)) - level
         if not imu and not np.isfinite(z).any():
             up &= _off_the_ground(table["t"], height, up, notes)
-    if all(f"omega{i}" in table for i in range(1, 5)):
-        omega = np.vstack([table[f"omega{i}"] for i in range(1, 5)])
+    if all(f"omega{i}" in table for i in range(1, P.shape[0] + 1)):      # one speed per motor, as the commands
+        omega = np.vstack([table[f"omega{i}"] for i in range(1, P.shape[0] + 1)])
     return layout, up, z, omega, baro, height
 
 
