@@ -76,3 +76,14 @@ def test_betaflights_hexa_x_and_a_plane():
         frames.betaflight(1, "INAV", None, fail)
     with pytest.raises(InputError, match="tricopter"):
         frames.betaflight(3, "Betaflight", None, fail)
+
+
+def test_betaflights_octocopter_is_refused_by_the_mixers_it_could_be():
+    """Eight motors are four Betaflight mixers (mixer_init.c's mixers[]: OCTOX8, OCTOX8P, OCTOFLATP,
+    OCTOFLATX) with other positions and spins, and the blackbox header names none of them: refused by
+    name, not read as any one; six motors read as hexa X, the header's silence on HEX6, HEX6H and Y6 said."""
+    with pytest.raises(InputError) as e:
+        frames.betaflight(8, "Betaflight", None, fail)
+    for name in ("OCTOX8", "OCTOX8P", "OCTOFLATP", "OCTOFLATX", "mixer_type"):
+        assert name in str(e.value), (name, str(e.value))
+    assert "HEX6H" in frames.betaflight(6, "Betaflight", None, fail).source
