@@ -415,9 +415,11 @@ def read(path: str, text: bool = False) -> Imported:
     imp.notes += msgs.get("_skipped", [])
     if "_damage" in msgs:
         imp.notes.append(f"damaged: read up to where the parser stopped ({msgs['_damage'][0]})")
-    armed, said = _armed(p, msgs)
+    armed, said, conflict = _armed(p, msgs)
     if armed is False:                 # before the vehicle: what a bench log's frame says does not matter
         imp.fail(f"never armed: the motors did not run in this log ({said})")
+    if conflict:
+        imp.notes.append(f"the arming's sources disagree: {conflict}")
     if armed and msgs["EV"] and not msgs["ARM"] and not any(getattr(m, "Id", -1) == 10 for m in msgs["EV"]):
         imp.notes.append(f"no EV ARMED: the log opens armed (LOG_DISARMED 0 logs from the arming only); armed by {said}")
     firmware = _firmware(msgs, texts)
