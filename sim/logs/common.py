@@ -26,7 +26,7 @@ from flightctl.sim.identify.diagnose.dataset import DYNAMIC_MIN_HZ   # what diag
 AXES = ("x", "y", "z")
 # Extra columns (docs/log-import.md has each one's source and unit): the measurements the diagnosis
 # reads, then what draws rate tracking (the rate setpoint, the sticks, the PID terms).
-EXTRA = (MOTOR_COLUMNS + ("current", "height") + OMEGA_COLUMNS + ("gyro_f_x", "gyro_f_y", "gyro_f_z")
+EXTRA = (MOTOR_COLUMNS + ("current", "height", "landed") + OMEGA_COLUMNS + ("gyro_f_x", "gyro_f_y", "gyro_f_z")
          + tuple(f"setpoint_{a}" for a in AXES) + ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle")
          + tuple(f"pid_{term}_{a}" for term in "pidf" for a in AXES) + ("vibe_x", "vibe_y", "vibe_z", "clip"))
 # stream name -> its columns (streams of one value write the stream's name)
@@ -77,7 +77,7 @@ class Stream:
 class Imported:
     """A foreign log read: streams by column group, metadata, notes. Required streams: `gyro` (3, n,
     rad/s), `acc` (3, n, m/s^2), `motors` (N, n, P on 0-255: the `# rotors:` line's N); optional: `battery_v`, `current`,
-    `height`, `range`, `alt`, `omega` (one per motor, rad/s), `attitude` (3: roll, pitch, yaw), `gyro_f` (3),
+    `height`, `range`, `alt`, `landed` (1 landed: the autopilot's landing detector, held), `omega` (one per motor, rad/s), `attitude` (3: roll, pitch, yaw), `gyro_f` (3),
     `setpoint` (3, rad/s), `attitude_sp` (3: the attitude setpoint's roll, pitch, yaw), `rc` (4), `pid` (12:
     P, I, D, F terms on x, y, z)."""
     path: str

@@ -188,6 +188,13 @@ def _measurements(u, p: dict, imp: Imported) -> None:
     if rs is not None and all(k in rs for k in ("roll", "pitch", "yaw")):
         sp = np.vstack([rs[k] for k in ("roll", "pitch", "yaw")]).astype(float)
         imp.streams["setpoint"] = Stream("vehicle_rates_setpoint", rs["timestamp"] * 1e-6, sp * FRD)
+    land = topic(u, "vehicle_land_detected")
+    if land is not None and "landed" in land:
+        ok = land["timestamp"] >= u.start_timestamp                  # (a first sample stamped 0 is none)
+        if ok.any():
+            imp.streams["landed"] = Stream("vehicle_land_detected landed", land["timestamp"][ok] * 1e-6,
+                                           land["landed"][ok][None].astype(float), held=True)
+            imp.meta["landed_source"] = "PX4's vehicle_land_detected.landed"
     esc = topic(u, "esc_status")
     n = imp.streams["motors"].values.shape[0]
     order = imp.meta.pop("esc_order", None)
