@@ -76,3 +76,37 @@ def test_betaflights_hexa_x_and_a_plane():
         frames.betaflight(1, "INAV", None, fail)
     with pytest.raises(InputError, match="tricopter"):
         frames.betaflight(3, "Betaflight", None, fail)
+
+
+def test_betaflights_octocopter_is_refused_by_the_mixers_it_could_be():
+    """Eight motors are four Betaflight mixers (mixer_init.c's mixers[]: OCTOX8, OCTOX8P, OCTOFLATP,
+    OCTOFLATX) with other positions and spins, and the blackbox header names none of them: refused by
+    name, not read as any one; six motors read as hexa X, the header's silence on HEX6, HEX6H and Y6 said."""
+    with pytest.raises(InputError) as e:
+        frames.betaflight(8, "Betaflight", None, fail)
+    for name in ("OCTOX8", "OCTOX8P", "OCTOFLATP", "OCTOFLATX", "mixer_type"):
+        assert name in str(e.value), (name, str(e.value))
+    assert "HEX6H" in frames.betaflight(6, "Betaflight", None, fail).source
+
+
+def test_betaflights_erpm_of_a_hexacopter_is_read_for_its_six_motors():
+    """Betaflight's blackbox.c logs eRPM[0..7], one per motor (eRPM / 100): a hexacopter's six are read as
+    omega1..6 (rpm = 100 eRPM / (motor_poles / 2)); they were read for quads only. Speeds drawn at random."""
+    from flightctl.sim.logs.bbfields import _rotor_speeds
+    from flightctl.sim.logs.common import Imported, Stream
+    rng = np.random.default_rng(4546)
+    n, rows, poles = 6, 50, 14.0
+    erpm = rng.integers(100, 400, size=(rows, n)).astype(float)
+    names = [f"eRPM[{i}]" for i in range(n)]
+    col = {c: i for i, c in enumerate(names)}
+    t = np.arange(rows) * 0.002
+    imp = Imported("hexa.bbl", {"motors": Stream("motor[]", t, np.zeros((n, rows)))}, {}, [])
+
+    def field(prefix, k, cols=None):
+        return np.vstack([erpm[:, col[f"{prefix}[{i}]"]] if f"{prefix}[{i}]" in col else np.full(rows, np.nan)
+                          for i in (cols or range(k))])
+
+    _rotor_speeds(imp, {"motor_poles": poles}, erpm, col, t, field, 0, "betaflight")
+    w = imp.streams["omega"].values
+    assert w.shape == (n, rows) and "eRPM[0..5]" in imp.meta["omega_source"]
+    assert np.allclose(w, erpm.T * 100.0 / (poles / 2.0) * 2.0 * math.pi / 60.0)

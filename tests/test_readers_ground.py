@@ -136,3 +136,31 @@ def test_motors_spinning_on_the_ground_that_shake_the_accelerometer_are_not_flig
     assert any("IMU held still" in n and "on the ground" in n for n in f.notes)
     air = (f.t > t[0] + 20.0) & (f.t < t[0] + 85.0)
     assert f.airborne[air].mean() > 0.95, f.airborne[air].mean()
+
+
+def test_the_landing_detector_is_weighed_against_the_airborne_rows(tmp_path):
+    """The autopilot's own landing detector is read (PX4's vehicle_land_detected.landed; ArduCopter's EV
+    NOT_LANDED / LAND_COMPLETE) and set beside the rows taken as airborne: on quadrotor_local.ulg and
+    log171.bin they agree; with the detector's flag rewritten to 'landed' over a window of the hover (its
+    start and length drawn from a seeded generator) the disagreement is said, sized to the window less
+    the detector's lag at either end (data.LANDED_LAG_S)."""
+    from flightctl.sim.identify.diagnose.data import LANDED_LAG_S
+    from flightctl.sim.logs import each_log
+    from pathlib import Path
+    for path in (FLIGHTS / "px4" / "quadrotor_local.ulg", Path(__file__).parent / "data" / "ardupilot" / "log171.bin"):
+        (e,) = each_log(str(need(path)))
+        f = load_file(e.table, Airframe())
+        assert any(n.startswith("the landing detector agrees") for n in f.notes), (path.name, f.notes)
+    csv = _imported(tmp_path, FLIGHTS / "px4" / "quadrotor_local.ulg", "ql.csv")
+    meta, names, rows = rows_and_header(csv.read_text())
+    t = np.array([float(r[0]) for r in rows])
+    rng = np.random.default_rng(4547)
+    start, length = float(rng.uniform(30.0, 60.0)), float(rng.uniform(5.0, 15.0))
+    j = names.index("landed")
+    for k in np.flatnonzero((t >= start) & (t < start + length)):
+        rows[k][j] = "1"
+    f = load_file(read_flight_log(str(write(meta, names, rows, tmp_path / "said_landed.csv")), extra=FOREIGN_COLUMNS),
+                  Airframe())
+    note = next(n for n in f.notes if n.startswith("the landing detector and the IMU disagree"))
+    said = float(note.split(": ")[1].split(" s")[0])
+    assert said == pytest.approx(length - 2 * LANDED_LAG_S, abs=0.3), (start, length, note)

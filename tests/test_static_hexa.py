@@ -95,13 +95,18 @@ def fly_hexa(rng: np.random.Generator, scale: np.ndarray, seconds: float = 75.0)
         spin = float(np.mean(P)) / 255.0
         acc = spec + rng.normal(0.0, 0.05 + 1.5 * spin, 3)            # the rotors' vibration
         gyro = w + rng.normal(0.0, 0.003, 3)
-        out.append((t, P.copy(), gyro, acc, att[0], att[1], att[2], vz))
+        out.append((t, P.copy(), gyro, acc, att[0], att[1], att[2], vz, f.copy()))
     return out
 
 
-def write_arducopter(rows, path, rng):
+C_OMEGA = H1 * 200.0 ** 2 / 1200.0 ** 2    # N s^2: eq. 27's f = c Omega^2, 1200 rad/s at P = H2 + 200
+
+
+def write_arducopter(rows, path, rng, esc: bool = False):
     """The flight as an ArduCopter 4.x hexacopter's log at its default rates (FRAME_CLASS 2, FRAME_TYPE 1,
-    SERVO1-6_FUNCTION 33-38, the thrust curve declared as eq. 26: MOT_THST_EXPO 1 above MOT_SPIN_MIN)."""
+    SERVO1-6_FUNCTION 33-38, the thrust curve declared as eq. 26: MOT_THST_EXPO 1 above MOT_SPIN_MIN); with
+    `esc`, each motor's ESC telemetry too (ESC instances 0-5 on outputs 1-6, RPM at 10 Hz: the speed its
+    thrust turns, eq. 27, with 1 % noise)."""
     f = DataFlash()
     f.add("MSG", 1000, "ArduCopter V4.5.7 (1a2b3c4d)")
     params = {"FRAME_CLASS": 2, "FRAME_TYPE": 1, "MOT_PWM_MIN": PWM[0], "MOT_PWM_MAX": PWM[1],
@@ -110,7 +115,7 @@ def write_arducopter(rows, path, rng):
     for k, v in params.items():
         f.add("PARM", 1000, k, float(v))
     f.add("ARM", 3_000_000, 1)
-    for k, (t, P, gyro, acc, roll, pitch, yaw, _) in enumerate(rows):
+    for k, (t, P, gyro, acc, roll, pitch, yaw, _, thrusts) in enumerate(rows):
         us = int(round((10.0 + t) * 1e6))
         if k % IMU_EVERY == 0:       # FRD: y and z change sign
             f.add("IMU", us, 0, gyro[0], -gyro[1], -gyro[2], acc[0], -acc[1], -acc[2])
@@ -120,6 +125,10 @@ def write_arducopter(rows, path, rng):
             f.add("RCOU", us - 5, *pwm)
             f.add("BAT", us, 0, float(16.4 - 0.02 * amps - 0.004 * t + rng.normal(0.0, 0.01)), float(amps))
             f.add("ATT", us, 0.0, math.degrees(roll), 0.0, -math.degrees(pitch), 0.0, -math.degrees(yaw) % 360.0)
+            if esc:
+                for i, fi in enumerate(thrusts):
+                    rpm = math.sqrt(max(fi, 0.0) / C_OMEGA) * 60.0 / (2.0 * math.pi) * (1.0 + rng.normal(0.0, 0.01))
+                    f.add("ESC", us + 10 + i, i, float(rpm))
     path.write_bytes(f.bytes())
     return path
 
@@ -154,3 +163,22 @@ def test_nothing_is_named_on_the_hexacopter_without_a_weak_motor(tmp_path, capsy
     assert st["pattern"]["verdict"] == "none", st["pattern"]
     assert np.allclose(st["motors"]["share"], 1.0, atol=0.03), st["motors"]
     assert st["hover"]["passed"] and st["hover"]["thrust_share"] == pytest.approx(1.0 / TW, rel=0.05), st["hover"]
+
+
+def test_a_hexacopters_rotor_speeds_name_its_weak_motor_by_its_speed_per_command(tmp_path):
+    """The six ESCs' RPM (ArduPilot's ESC message, one instance per motor output) read for a hexacopter
+    (they were read for quads only: "ESC telemetry of 6 motors not read"), through the static tier's
+    N-motor path: the speed-per-command curve over six rotors and the weak motor told by its speed. Motor
+    and scale drawn from a seeded generator; the speed gain is sqrt(scale) (eq. 27: f = c Omega^2)."""
+    rng = np.random.default_rng(4545)
+    motor, size = int(rng.integers(1, 7)), float(rng.uniform(0.70, 0.90))
+    scale = np.ones(6)
+    scale[motor - 1] = size
+    rep = diagnose(write_arducopter(fly_hexa(rng, scale), tmp_path / "hexa_esc.bin", rng, esc=True), tmp_path)
+    st = rep["static"]
+    speeds = st["pattern"]["rotor_speeds"]
+    assert speeds is not None and len(speeds["speed_gain"]) == 6, st["pattern"]
+    weak = speeds["weak_motor"]
+    assert weak["motor"] == motor, (motor, size, speeds)
+    assert weak["speed_gain"] == pytest.approx(math.sqrt(size), abs=0.02), (size, weak)
+    assert weak["thrust_scale"] == pytest.approx(size, abs=0.04), (size, weak)

@@ -278,19 +278,23 @@ def _battery(imp, h, a, col, t, kind, ver):
 
 
 def _rotor_speeds(imp, h, a, col, t, field, debug, kind):
-    """omega1..4 (rad/s): INDIflight's ESC telemetry; Betaflight 4.3+'s eRPM[] (bidirectional DShot,
-    eRPM / 100); the debug modes DSHOT_RPM_TELEMETRY (the same) and RPM_FILTER (Hz, after a pt1)."""
-    if imp.streams["motors"].values.shape[0] != 4:
-        imp.notes.append("rotor speeds not read: their columns are a quad's (omega1-4)")
-        return
+    """omega1..N (rad/s), one per motor: INDIflight's ESC telemetry; Betaflight 4.3+'s eRPM[0..N-1]
+    (bidirectional DShot, eRPM / 100; blackbox.c logs one per motor, up to 8); the debug modes
+    DSHOT_RPM_TELEMETRY and RPM_FILTER (debug[0..3]: four values, so a quad's only)."""
+    n = imp.streams["motors"].values.shape[0]
     poles = h.get("motor_poles")
     pole_note = "" if poles else f" (motor_poles not in the header: Betaflight's default {DEFAULT_POLES} assumed)"
     poles = float(poles or DEFAULT_POLES)
-    if "omegaUnfiltered[0]" in col and np.any(field("omegaUnfiltered", 4) != 0):
-        w, source = field("omegaUnfiltered", 4), "omegaUnfiltered (ESC telemetry, rad/s)"
-    elif "eRPM[0]" in col and np.any(field("eRPM", 4) > 0):
-        w = field("eRPM", 4) * 100.0 / (poles / 2.0) * RPM
-        source = f"eRPM[0..3] (bidirectional DShot, eRPM / 100): rpm = 100 eRPM / (motor_poles / 2), motor_poles {poles:g}"
+    has = lambda name: all(f"{name}[{i}]" in col for i in range(n))
+    if has("omegaUnfiltered") and np.any(field("omegaUnfiltered", n) != 0):
+        w, source = field("omegaUnfiltered", n), f"omegaUnfiltered[0..{n - 1}] (ESC telemetry, rad/s)"
+    elif has("eRPM") and np.any(field("eRPM", n) > 0):
+        w = field("eRPM", n) * 100.0 / (poles / 2.0) * RPM
+        source = (f"eRPM[0..{n - 1}] (bidirectional DShot, eRPM / 100): rpm = 100 eRPM / (motor_poles / 2), "
+                  f"motor_poles {poles:g}")
+    elif n != 4 and debug in (DSHOT_RPM_TELEMETRY, RPM_FILTER) and kind != "inav":
+        imp.notes.append(f"rotor speeds not read: debug[0..3] holds four motors' speeds, the log has {n} motors")
+        return
     elif kind != "inav" and debug == DSHOT_RPM_TELEMETRY and "debug[3]" in col:
         w = field("debug", 4) * 100.0 / (poles / 2.0) * RPM
         source = f"debug[0..3] (debug_mode DSHOT_RPM_TELEMETRY, eRPM / 100), motor_poles {poles:g}"

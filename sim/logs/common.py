@@ -20,18 +20,18 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import FLIGHT_COLUMNS, FlightLogWriter, Table, read_flight_log
-from flightctl.sim.identify.diagnose.data import MOTOR_COLUMNS, all_running   # all motors above 1 % of their range
+from flightctl.sim.identify.diagnose.data import MOTOR_COLUMNS, OMEGA_COLUMNS, all_running   # all motors above 1 % of their range
 from flightctl.sim.identify.diagnose.dataset import DYNAMIC_MIN_HZ   # what diagnose needs to time and to follow
 
 AXES = ("x", "y", "z")
 # Extra columns (docs/log-import.md has each one's source and unit): the measurements the diagnosis
 # reads, then what draws rate tracking (the rate setpoint, the sticks, the PID terms).
-EXTRA = (MOTOR_COLUMNS + ("current", "height", "omega1", "omega2", "omega3", "omega4", "gyro_f_x", "gyro_f_y", "gyro_f_z")
+EXTRA = (MOTOR_COLUMNS + ("current", "height", "landed") + OMEGA_COLUMNS + ("gyro_f_x", "gyro_f_y", "gyro_f_z")
          + tuple(f"setpoint_{a}" for a in AXES) + ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle")
          + tuple(f"pid_{term}_{a}" for term in "pidf" for a in AXES) + ("vibe_x", "vibe_y", "vibe_z", "clip"))
 # stream name -> its columns (streams of one value write the stream's name)
 GROUPS = {"gyro": tuple(f"gyro_{a}" for a in AXES), "acc": tuple(f"acc_{a}" for a in AXES), "gyro_f": tuple(f"gyro_f_{a}" for a in AXES),
-          "omega": tuple(f"omega{i}" for i in range(1, 5)), "attitude": ("roll", "pitch", "yaw"),
+          "omega": OMEGA_COLUMNS, "attitude": ("roll", "pitch", "yaw"),
           "attitude_sp": ("roll_sp", "pitch_sp", "yaw_sp"),
           "setpoint": tuple(f"setpoint_{a}" for a in AXES), "rc": ("rc_roll", "rc_pitch", "rc_yaw", "rc_throttle"),
           "pid": tuple(c for c in EXTRA if c.startswith("pid_")), "vibe": ("vibe_x", "vibe_y", "vibe_z")}
@@ -77,7 +77,7 @@ class Stream:
 class Imported:
     """A foreign log read: streams by column group, metadata, notes. Required streams: `gyro` (3, n,
     rad/s), `acc` (3, n, m/s^2), `motors` (N, n, P on 0-255: the `# rotors:` line's N); optional: `battery_v`, `current`,
-    `height`, `range`, `alt`, `omega` (4, rad/s), `attitude` (3: roll, pitch, yaw), `gyro_f` (3),
+    `height`, `range`, `alt`, `landed` (1 landed: the autopilot's landing detector, held), `omega` (one per motor, rad/s), `attitude` (3: roll, pitch, yaw), `gyro_f` (3),
     `setpoint` (3, rad/s), `attitude_sp` (3: the attitude setpoint's roll, pitch, yaw), `rc` (4), `pid` (12:
     P, I, D, F terms on x, y, z)."""
     path: str
@@ -263,7 +263,7 @@ def flight_text(imp: Imported, progress=None) -> str:
         if name in ("motors", "range"):
             continue
         v = own if s is base else _on(t, s)
-        for j, c in enumerate(GROUPS.get(name, (name,))):
+        for j, c in zip(range(len(v)), GROUPS.get(name, (name,))):    # (omega: as many as the log's motors)
             cols[c] = v[j]
     if "range" in imp.streams:
         cols["range"] = _new_samples(t, imp.streams["range"])

@@ -415,9 +415,11 @@ def read(path: str, text: bool = False) -> Imported:
     imp.notes += msgs.get("_skipped", [])
     if "_damage" in msgs:
         imp.notes.append(f"damaged: read up to where the parser stopped ({msgs['_damage'][0]})")
-    armed, said = _armed(p, msgs)
+    armed, said, conflict = _armed(p, msgs)
     if armed is False:                 # before the vehicle: what a bench log's frame says does not matter
         imp.fail(f"never armed: the motors did not run in this log ({said})")
+    if conflict:
+        imp.notes.append(f"the arming's sources disagree: {conflict}")
     if armed and msgs["EV"] and not msgs["ARM"] and not any(getattr(m, "Id", -1) == 10 for m in msgs["EV"]):
         imp.notes.append(f"no EV ARMED: the log opens armed (LOG_DISARMED 0 logs from the arming only); armed by {said}")
     firmware = _firmware(msgs, texts)
@@ -495,12 +497,10 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
     _pid_targets(msgs, imp)
     _vibe(msgs, imp)
     _thrust_curve(p, imp)
+    _landed(msgs, imp)
     order = [int(k) for k in imp.meta.pop("esc_order").split()]
     esc = msgs["ESC"]
-    if esc and len(order) != 4:
-        imp.notes.append(f"ESC telemetry of {len(order)} motors not read: the rotor speeds' columns are a quad's "
-                         "(omega1-4)")
-    elif esc and hasattr(esc[0], "RPM"):
+    if esc and hasattr(esc[0], "RPM"):             # one ESC instance per motor output, any motor count
         inst = {i: [m for m in esc if getattr(m, "Instance", -1) == i] for i in order}
         if all(inst[i] for i in order):
             t = _t(inst[order[0]])
@@ -508,7 +508,21 @@ def _measurements(p: dict, msgs, imp: Imported) -> None:
             if np.any(w != 0):
                 imp.streams["omega"] = Stream("ESC RPM", t, np.abs(w) * 2.0 * math.pi / 60.0)
                 imp.meta["omega_source"] = (f"ESC telemetry RPM of instances {', '.join(map(str, order))} (the motors' "
-                                            "output channels) for motors 1-4")
+                                            f"output channels) for motors 1-{len(order)}")
+
+
+def _landed(msgs, imp: Imported) -> None:
+    """The landing detector's state from EV (dfarming.ARMED_EVENTS): NOT_LANDED 28 the take-off, LAND_COMPLETE 18
+    the landing; landed before the first NOT_LANDED (not landed from the log's start when LAND_COMPLETE comes
+    first: a log that opens in the air), held between them."""
+    ev = [m for m in msgs["EV"] if int(getattr(m, "Id", -1)) in (18, 28)]
+    if not ev or "gyro" not in imp.streams:
+        return
+    t = np.concatenate([[imp.streams["gyro"].t[0]], _t(ev)])
+    v = np.array([1.0 if int(ev[0].Id) == 28 else 0.0] + [1.0 if int(m.Id) == 18 else 0.0 for m in ev])
+    order = np.argsort(t, kind="stable")
+    imp.streams["landed"] = Stream("EV NOT_LANDED / LAND_COMPLETE", t[order], v[order][None], held=True)
+    imp.meta["landed_source"] = "ArduCopter's EV 28 NOT_LANDED and 18 LAND_COMPLETE"
 
 
 def _pid_targets(msgs, imp: Imported) -> None:

@@ -26,6 +26,7 @@ FORMATS = {  # name: (type id, format, columns)
     "PIDR": (141, "Qfffffff", "TimeUS,Tar,Act,Err,P,I,D,FF"),
     "PIDP": (142, "Qfffffff", "TimeUS,Tar,Act,Err,P,I,D,FF"),
     "PIDY": (143, "Qfffffff", "TimeUS,Tar,Act,Err,P,I,D,FF"),
+    "EV": (144, "QB", "TimeUS,Id"),
 }
 
 

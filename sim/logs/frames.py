@@ -17,10 +17,14 @@ is `layout.rotors()`; the report names `layout.source`.
   (AP_Motors_Class.h of 3.2; AP_MotorsQuad::setup_motors has these positions and spins).
 - **PX4**: the CA_ROTOR_COUNT rotors at CA_ROTORn_PX/PY (m, FRD), KM > 0 counter-clockwise (the control
   allocation's parameters, src/modules/control_allocator/module.yaml), any count.
-- **Betaflight and INAV**: their logs do not name the mixer (`mixerMode` is not in the blackbox header);
-  the motor count chooses it: 4 quad X, 6 hexa X (src/main/flight/mixer.c, `mixerQuadX`, `mixerHex6X`:
-  {throttle, roll, pitch, yaw} per motor, roll +1 on the left, pitch +1 at the rear, yaw -1 clockwise
-  with the props in). Another count, or a custom mixer (`mmix` is not logged), is refused.
+- **Betaflight and INAV**: their logs do not name the mixer (`mixerMode` is not in the blackbox header:
+  its `mixer_type` is the mixing law, LEGACY/LINEAR/DYNAMIC/EZLANDING, and `features` holds no layout);
+  the motor count chooses it: 4 quad X, 6 hexa X (src/main/flight/mixer_init.c, `mixerQuadX`,
+  `mixerHex6X`: {throttle, roll, pitch, yaw} per motor, roll +1 on the left, pitch +1 at the rear, yaw -1
+  clockwise with the props in). Six motors are also HEX6 (plus), HEX6H and Y6, which the header does not
+  tell apart: hexa X is assumed and the report says so. Eight motors are four mixers as common as each
+  other (OCTOX8, OCTOX8P, OCTOFLATP, OCTOFLATX: mixer_init.c's `mixers[]`, 266-268 and 282 at betaflight
+  301d01abc4): refused by name. Another count, or a custom mixer (`mmix` is not logged), is refused.
 """
 from __future__ import annotations
 
@@ -160,13 +164,19 @@ def px4_quad(auto: int) -> Frame:
     return Frame(f.name, f.x, f.y, f.spin, f.yaw_factor, source)
 
 
-# Betaflight's and INAV's src/main/flight/mixer.c: {roll, pitch, yaw} per motor (throttle 1 left out)
+# Betaflight's src/main/flight/mixer_init.c (mixer.c before 4.3; INAV's mixer.c): {roll, pitch, yaw} per motor (throttle 1 left out)
 BETAFLIGHT = {4: ("mixerQuadX", ((-1.0, 1.0, -1.0), (-1.0, -1.0, 1.0), (1.0, 1.0, 1.0), (1.0, -1.0, -1.0))),
               6: ("mixerHex6X", ((-0.5, 0.866025, 1.0), (-0.5, -0.866025, 1.0), (0.5, 0.866025, -1.0),
                             (0.5, -0.866025, -1.0), (-1.0, 0.0, -1.0), (1.0, 0.0, 1.0)))}
 BF_NAMES = {4: "motor 1 rear right, 2 front right, 3 rear left, 4 front left",
             6: "motor 1 rear right, 2 front right, 3 rear left, 4 front left, 5 right, 6 left"}
 ROTOR_NAMES = {1: "a single rotor", 2: "a bicopter", 3: "a tricopter", 6: "a hexacopter", 8: "an octocopter"}
+# The other mixers of a count (mixer_init.c's `mixers[]`, betaflight 301d01abc4, all compiled: USE_UNCOMMON_MIXERS
+# is defined in src/main/target/common_pre.h:422): six motors HEX6 (mixerHex6P, plus), HEX6H, Y6 (coaxial) beside
+# HEX6X; eight motors OCTOX8 (coaxial X, mixer_init.c:166), OCTOX8P (coaxial plus, :177), OCTOFLATP (:188) and
+# OCTOFLATX (:199), none the default of its count
+OTHER_MIXERS = {6: "HEX6 (plus), HEX6H and Y6 (coaxial)"}
+BF_OCTO = "OCTOX8 (coaxial X), OCTOX8P (coaxial plus), OCTOFLATP (flat plus) or OCTOFLATX (flat X)"
 
 
 def betaflight(count: int, firmware: str, reversed_, fail) -> Frame:
@@ -175,6 +185,10 @@ def betaflight(count: int, firmware: str, reversed_, fail) -> Frame:
     if count <= 2:
         fail(f"{count} motor{'s' if count > 1 else ''} (motor[0..{count - 1}]): a plane or a flying wing, "
              f"{NOT_MULTIROTOR} (its mixer is not in the blackbox header)")
+    if count == 8:
+        fail(f"8 motors (motor[0..7]): an octocopter, whose mixer {firmware}'s blackbox header does not name: "
+             f"{BF_OCTO} (src/main/flight/mixer_init.c, mixers[]: eight motors each, with other positions and spins; "
+             "the header's mixer_type is the mixing law, not the layout), not told apart by the log")
     if count not in BETAFLIGHT:
         fail(f"{count} motors (motor[0..{count - 1}]): {ROTOR_NAMES.get(count, f'{count} motors')} whose mixer the "
              f"blackbox header does not name (it takes {' and '.join(f'{n} ({m})' for n, (m, _) in BETAFLIGHT.items())} "
@@ -184,7 +198,9 @@ def betaflight(count: int, firmware: str, reversed_, fail) -> Frame:
     # the yaw factor: -1 on the clockwise rotors with the props in (the default), all reversed by the header's flag
     f = _frame(name, [(-pitch, roll, sign * yaw) for roll, pitch, yaw in mix], "")
     return Frame(f.name, f.x, f.y, f.spin, f.yaw_factor,
-                 f"{firmware}'s {name} (src/main/flight/mixer.c, chosen by the "
-                 f"{count} motors: the header does not name the mixer; {BF_NAMES[count]}), "
+                 f"{firmware}'s {name} (src/main/flight/mixer_init.c, chosen by the "
+                 f"{count} motors: the header does not name the mixer"
+                 + (f", and {OTHER_MIXERS[count]} have {count} motors too: {name} assumed" if count in OTHER_MIXERS else "")
+                 + f"; {BF_NAMES[count]}), "
                  + (f"yaw_motors_reversed = {int(reversed_)}" if reversed_ is not None else
                     "the motor direction not in the header: props in assumed"))

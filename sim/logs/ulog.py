@@ -188,18 +188,25 @@ def _measurements(u, p: dict, imp: Imported) -> None:
     if rs is not None and all(k in rs for k in ("roll", "pitch", "yaw")):
         sp = np.vstack([rs[k] for k in ("roll", "pitch", "yaw")]).astype(float)
         imp.streams["setpoint"] = Stream("vehicle_rates_setpoint", rs["timestamp"] * 1e-6, sp * FRD)
+    land = topic(u, "vehicle_land_detected")
+    if land is not None and "landed" in land:
+        ok = land["timestamp"] >= u.start_timestamp                  # (a first sample stamped 0 is none)
+        if ok.any():
+            imp.streams["landed"] = Stream("vehicle_land_detected landed", land["timestamp"][ok] * 1e-6,
+                                           land["landed"][ok][None].astype(float), held=True)
+            imp.meta["landed_source"] = "PX4's vehicle_land_detected.landed"
     esc = topic(u, "esc_status")
-    if esc is not None and imp.streams["motors"].values.shape[0] != 4:
-        imp.notes.append(f"esc_status of {imp.streams['motors'].values.shape[0]} motors not read: the rotor speeds' "
-                         "columns are a quad's (omega1-4)")
-    elif esc is not None and all(f"esc[{i}].esc_rpm" in esc for i in range(4)):
-        order = imp.meta.pop("esc_order", None)
-        idx = [int(k) for k in order.split()] if order else [0, 1, 2, 3]
+    n = imp.streams["motors"].values.shape[0]
+    order = imp.meta.pop("esc_order", None)
+    idx = [int(k) for k in order.split()] if order else list(range(n))
+    if esc is not None and not all(f"esc[{i}].esc_rpm" in esc for i in idx):
+        imp.notes.append(f"esc_status holds no esc_rpm for esc[{','.join(map(str, idx))}] (the {n} motors' ESCs): "
+                         "no rotor speeds")
+    elif esc is not None:
         rpm = np.vstack([esc[f"esc[{i}].esc_rpm"] for i in idx]).astype(float)
         if np.any(rpm != 0):
             imp.streams["omega"] = Stream("esc_status rpm", esc["timestamp"] * 1e-6, np.abs(rpm) * 2.0 * math.pi / 60.0)
             imp.meta["omega_source"] = (f"esc_status esc[{','.join(map(str, idx))}].esc_rpm (the ESCs' telemetry, "
-                                        "rpm) for motors 1-4")
+                                        f"rpm) for motors 1-{n}")
         else:
             imp.notes.append("esc_status rpm are all zero: no rotor speeds")
-    imp.meta.pop("esc_order", None)

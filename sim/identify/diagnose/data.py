@@ -64,10 +64,14 @@ REST_G = 0.1             # share of g
 # of a metre), but one that never rose this far above its level at rest while the motors ran says that
 # the vehicle may never have left the ground: said beside a refusal (base._shown), never a verdict.
 BARO_CLIMB_M = 0.5
+# The autopilots' landing detectors hold their checks this long before they declare a landing: PX4's LNDMC_TRIG_TIME
+# (default 1.0 s, its parameter reference), ArduCopter's LAND_DETECTOR_TRIGGER_SEC (1.0 s, ArduCopter/config.h)
+LANDED_LAG_S = 1.0
 HEIGHT_SOURCES = ("mocap", "rangefinder")   # heights good to a few cm: they also give the airborne test
 MIN_ROTORS, MAX_ROTORS = 4, 12      # the static tier's layouts (sim/logs/frames.py); the dynamic tier's model is the quad's
 MOTOR_COLUMNS = tuple(f"P{i}" for i in range(5, MAX_ROTORS + 1))   # motors 5.. beside the contract's P1-P4
-FOREIGN_COLUMNS = ("height", "current", "omega1", "omega2", "omega3", "omega4") + MOTOR_COLUMNS
+OMEGA_COLUMNS = tuple(f"omega{i}" for i in range(1, MAX_ROTORS + 1))   # each motor's measured speed (rad/s)
+FOREIGN_COLUMNS = ("height", "current", "landed") + OMEGA_COLUMNS + MOTOR_COLUMNS
 FILTER_KINDS = ("pt1", "pt2", "pt3", "biquad")
 
 
@@ -142,7 +146,7 @@ class FileData:
     foreign: bool = False   # a log of another vehicle (its `# vehicle: foreign`): the base model is identified
     gyro_filter: tuple = ()  # the causal filters between the sensor and the logged gyro (parse_filters)
     acc_filter: tuple = ()
-    omega: np.ndarray | None = None   # (4, n) measured rotor speed (rad/s) when logged
+    omega: np.ndarray | None = None   # (N, n) each motor's measured speed (rad/s) when logged
     battery_cells: int | None = None  # the pack's cell count when the log says it (`# battery_cells:`)
     notes: list[str] = field(default_factory=list)
     baro_climb: float | None = None   # m: how far a coarse height (a barometer) rose while the motors ran
@@ -402,6 +406,7 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc:
         notes.append(f"no precise height: airborne taken as all motors running with the mean command at least "
                      f"{THROTTLE_SHARE:g} of its median, from the first time it reaches {HOVER_SHARE:g} of it "
                      f"(averaged over {SMOOTH_S:g} s: the take-off) to the last (the landing)")
+    _landing_detector(table, up, dt, notes)
     omega = None
     baro = None
     height = None
@@ -417,9 +422,34 @@ def _foreign(table: Table, P: np.ndarray, Rm: np.ndarray, gyro: np.ndarray, acc:
             baro = float(np.percentile(flying, 95)) - level
         if not imu and not np.isfinite(z).any():
             up &= _off_the_ground(table["t"], height, up, notes)
-    if all(f"omega{i}" in table for i in range(1, 5)):
-        omega = np.vstack([table[f"omega{i}"] for i in range(1, 5)])
+    if all(f"omega{i}" in table for i in range(1, P.shape[0] + 1)):      # one speed per motor, as the commands
+        omega = np.vstack([table[f"omega{i}"] for i in range(1, P.shape[0] + 1)])
     return layout, up, z, omega, baro, height
+
+
+def _landing_detector(table: Table, up: np.ndarray, dt: float, notes: list[str]) -> None:
+    """The autopilot's own landing detector (`landed`, 1 landed: PX4's vehicle_land_detected, ArduCopter's
+    EV NOT_LANDED / LAND_COMPLETE) against the rows taken as airborne, said. It declares a landing after its
+    checks have held LANDED_LAG_S, so rows within that (and a row's period: the state is sampled) of its
+    flying are not counted against it; airborne rows further from its flying are a disagreement."""
+    if "landed" not in table or not np.isfinite(table["landed"]).any():
+        return
+    t = table["t"]
+    landed = np.nan_to_num(table["landed"], nan=0.0) > 0.5
+    source = table.meta.get("landed_source", "the log")
+    fly_t = t[~landed & np.isfinite(table["landed"])]
+    if fly_t.size:
+        j = np.clip(np.searchsorted(fly_t, t), 1, max(1, fly_t.size - 1))
+        near = np.minimum(np.abs(t - fly_t[j - 1]), np.abs(t - fly_t[np.minimum(j, fly_t.size - 1)])) <= LANDED_LAG_S + dt
+    else:
+        near = np.zeros(t.size, bool)
+    both = up & landed & ~near
+    if both.any():
+        notes.append(f"the landing detector and the IMU disagree: {both.sum() * dt:.1f} s taken as airborne where the "
+                     f"autopilot's landing detector ({source}) says landed, more than {LANDED_LAG_S:g} s from its flying")
+    else:
+        notes.append(f"the landing detector agrees: {up.sum() * dt:.1f} s taken as airborne, within the "
+                     f"{fly_t.size * dt:.1f} s it says flying and its {LANDED_LAG_S:g} s lag ({source})")
 
 
 def _off_the_ground(t: np.ndarray, height: np.ndarray, up: np.ndarray, notes: list[str]) -> np.ndarray:

@@ -259,7 +259,7 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
                                "weak_motor": check.get("weak_motor")}
     else:
         out["rotor_speeds"] = None
-        out["without_speeds"] = ("no rotor speeds in the log (ESC telemetry, omega1-4): a weak motor is told from a "
+        out["without_speeds"] = ("no rotor speeds in the log (ESC telemetry, one per motor): a weak motor is told from a "
                                  "centre of mass or a yaw trim by its pattern's ratio alone; with the speeds, a weak "
                                  "motor turns slower for its command than the others")
     return out
