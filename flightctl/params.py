@@ -195,6 +195,27 @@ class Params:
                     return f.metadata["source"]
         raise KeyError(name)
 
+    def effect(self, causes: str | tuple[str, ...]) -> EffectSpec | None:
+        """The first `[[effect]]` the file carries of the cause (or one of the causes) named, else None."""
+        causes = (causes,) if isinstance(causes, str) else causes
+        return next((e for e in self.effects if e.cause in causes), None)
+
+    def effect_value(self, cause: str, name: str) -> float:
+        """A parameter of an effect the file carries, 0 where it carries none."""
+        e = self.effect(cause)
+        return float(dict(e.parameters).get(name, 0.0)) if e is not None else 0.0
+
+    def effect_range(self, causes: str | tuple[str, ...], name: str, value: float) -> tuple[float, float]:
+        """The range the file gives a parameter of one of `causes` (`range.NAME`), around `value`;
+        (value, value) where it gives none."""
+        causes = (causes,) if isinstance(causes, str) else causes
+        for e in self.effects:
+            if e.cause in causes:
+                for n, lo, hi in e.ranges:
+                    if n == name:
+                        return min(lo, value), max(hi, value)
+        return value, value
+
     def digest(self) -> str:
         """A short hash of the values (sha256 of `dumps`, sources left out): two runs with the same
         digest flew the same parameters."""

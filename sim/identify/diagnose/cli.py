@@ -29,14 +29,13 @@ file, row or column; exit status 2, see flightctl.cli).
 """
 from __future__ import annotations
 
-import os
-
 # One BLAS thread, set before numpy is imported (here, at the command's entry point: flightctl.cli imports
 # nothing numerical before it), so that OpenBLAS starts no thread pool: its fits are small matrices, and on
 # a busy machine its threads spun for a quarter to two fifths of the user time (docs/diagnose.md, "Speed").
 # A process that had numpy loaded before (a test calling `main`) gets its pool set to one thread in `main`.
-for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_name] = "1"
+from flightctl.blas import OneBlasThread, one_thread_environment   # flightctl/blas.py: nothing numerical
+
+one_thread_environment()
 
 import argparse
 import json
@@ -158,7 +157,6 @@ class Progress:
 
 
 def main(argv: list[str]) -> int:
-    from flightctl.control.spin_design import OneBlasThread
     with OneBlasThread():
         return _main(argv)
 
