@@ -47,9 +47,10 @@ from flightctl import params as paramfile
 from flightctl.errors import InputError, Parser, output_file, output_prefix, write_atomic
 from flightctl.logfile import read_flight_log
 from flightctl.sim import engine
+from flightctl.sim.progress import Stages
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
 from flightctl.sim.identify.diagnose import predict, report as diagnose_report, steps
-from flightctl.sim.identify.diagnose.verdict import diagnose, say, validate
+from flightctl.sim.identify.diagnose.verdict import diagnose, validate
 from flightctl.sim.identify.static import STATIC_COLUMNS, StaticOnly
 from flightctl.sim.logs import controller
 from flightctl.sim.identify.static.curve import declared as declared_curve
@@ -130,32 +131,6 @@ def _per_log(path: str, index: int | None) -> bool:
     return kind(path) is not None and count_logs(path) > 1
 
 
-class Progress:
-    """Progress lines on stderr, one per stage, each with the time elapsed. On a terminal they are
-    live; otherwise (scripts, checks, `2> log`) they are held until the logs are read and accepted
-    (`release`: the base model stands), then live, so that bad input is the only line on stderr, as
-    measured-data.md requires, and a long diagnosis still shows where it is."""
-
-    def __init__(self, quiet: bool = False):
-        self.t0 = time.perf_counter()
-        self.quiet = quiet
-        self.held: list[str] | None = None if sys.stderr.isatty() else []
-
-    def __call__(self, *args) -> None:
-        if self.quiet:
-            return
-        line = f"[{time.perf_counter() - self.t0:6.1f} s] " + " ".join(map(str, args))
-        if self.held is None:
-            say(line)
-        else:
-            self.held.append(line)
-
-    def release(self) -> None:
-        for line in self.held or ():
-            say(line)
-        self.held = None
-
-
 def main(argv: list[str]) -> int:
     with OneBlasThread():
         return _main(argv)
@@ -176,7 +151,7 @@ def _main(argv: list[str]) -> int:
         raise InputError("name the flight logs to diagnose, or a folder of them with --corpus DIR")
     if args.json is None:
         raise InputError("--json REPORT.json is required (its keys: docs/diagnose.md)")
-    progress = Progress(args.quiet)
+    progress = Stages(args.quiet, prefix="diagnose:")
     t0 = time.perf_counter()
     params = paramfile.load(args.params)
     out_json = Path(args.json)
