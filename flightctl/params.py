@@ -24,15 +24,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from flightctl.errors import InputError, number, read_text, read_toml, write_atomic
+from flightctl.schema import check_range, entry
 
 
 INERTIA_TOLERANCE = 0.10  # accepted excess of one principal inertia over the sum of the others
 
 
 def _p(default, unit, lo, hi, source, doc="", log=False):
-    """One schema entry: stored as dataclass field metadata. `log`: a plausible range of this value is
+    """One schema entry (flightctl/schema.py) with its source. `log`: a plausible range of this value is
     drawn uniformly in its logarithm (a time constant whose plausible values span decades)."""
-    return field(default=default, metadata=dict(unit=unit, lo=lo, hi=hi, source=source, doc=doc, log=log))
+    return entry(default, unit, lo, hi, doc, source=source, log=log)
 
 
 @dataclass(frozen=True)
@@ -241,10 +242,7 @@ def _build(cls, table: dict, where: str, base=None):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputError(f"{name}: expected a number, got {type(value).__name__} {_short(value)}")
         v = number(value)
-        if v is None or not meta["lo"] <= v <= meta["hi"]:
-            shown = f"{v:g}" if v is not None else _short(value)
-            raise InputError(f"{name}: {shown} {meta['unit']} is out of range "
-                             f"[{meta['lo']:g}, {meta['hi']:g}]")
+        check_range(name, value if v is None else v, meta, _short(value))
         value = v
         values[key] = value
     return dataclasses.replace(base, **values)
