@@ -3,7 +3,7 @@
 A parameter file is flat TOML for the airframe (the names of ``conventions.md``), each value
 optionally with its plausible range (``range.NAME = [lo, hi]``, drawn by the Monte Carlo), two optional
 tables, ``[gains]`` and ``[filters]``, and any number of ``[[effect]]`` tables: model extensions
-(measured-data.md) that the simulator and diagnose carry into the base model. ``--params NAME``
+(docs/measured-data.md) that the simulator and diagnose carry into the base model. ``--params NAME``
 also takes the name of a shipped vehicle file (``flightctl/vehicles/NAME.toml``). Anything unknown, mistyped or out of range is refused with
 one line that names the key: the program never flies with a bad file.
 
@@ -161,7 +161,7 @@ class Sensors:
 
 @dataclass(frozen=True)
 class EffectSpec:
-    """A model extension carried by a parameter file (measured-data.md: an identified model grows
+    """A model extension carried by a parameter file (docs/measured-data.md: an identified model grows
     as its errors are found). The onboard code only reads and writes it; the simulator and diagnose
     build the term from its `cause` (their registry checks the name and parameters)."""
     cause: str

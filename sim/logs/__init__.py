@@ -1,4 +1,4 @@
-"""Flight logs of other autopilots, read into this project's flight-log table (measured-data.md,
+"""Flight logs of other autopilots, read into this project's flight-log table (docs/measured-data.md,
 "Foreign logs"; docs/log-import.md): PX4's ULog through pyulog, ArduPilot's DataFlash through
 pymavlink's DFReader, and the blackbox of Betaflight, INDIflight and INAV through orangebox 0.4.0, all
 in the `logs` extra (orangebox is GPL-3.0: an optional extra only).

@@ -1,4 +1,4 @@
-"""`flightctl diagnose`: name what the model gets wrong in flight logs (measured-data.md).
+"""`flightctl diagnose`: name what the model gets wrong in flight logs (docs/measured-data.md).
 
     flightctl diagnose FLIGHT.csv|F.ulg|F.bin|F.bbl|F.bfl|F.txt [...] [--index N] [--params PARAMS.toml]
                        --json REPORT.json [--validate OTHER ...] [--plot PREFIX] [--steps STEPS.png] [--quiet]
