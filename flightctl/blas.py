@@ -3,9 +3,8 @@ control/spin_design.py; `flightctl diagnose`; the parallel engine's workers, sim
 timing scripts).
 
 The numerical work here is small matrices (5x5 LQR problems, a diagnosis' fits), on which OpenBLAS's
-thread pool costs more than the work: on a loaded 2-core machine the gain schedule took 12 s of CPU
-with it and 0.7 s without (scripts/benchmark.py), and diagnose's threads spun for a quarter to two
-fifths of the user time (docs/diagnose.md, "Speed"). Two ways, for the two moments:
+thread pool costs more than the work (docs/diagnose.md, "One BLAS thread"; the schedule's cost with
+one thread: README's speed table, scripts/benchmark.py). Two ways, for the two moments:
 - `ONE_THREAD` / `one_thread_environment()`: the environment that makes BLAS start one thread, for a
   process before numpy is imported (a command's entry point) or for child processes;
 - `OneBlasThread`: within it, the OpenBLAS libraries already loaded run one thread (Linux; elsewhere,
