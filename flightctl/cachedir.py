@@ -1,6 +1,7 @@
 """A cache folder that only its user can write: the one definition both disk caches use (numba's
 compiled simulator, sim/world/compiled.py; the two-rotor landing's gain schedule,
-control/spin_design.py).
+control/spin_design.py), and the user's flightctl cache of JSON results by key (`user_folder`,
+`cached_json`).
 
 A cache is loaded as the process' own work: compiled machine code, or gains the vehicle flies on.
 A folder another user owns or can write lets that user plant what this process then loads (a
@@ -13,9 +14,14 @@ only through it. Where no candidate passes, the cache is not used: the work is d
 """
 from __future__ import annotations
 
+import json
 import os
 import stat
+import sys
 from pathlib import Path
+from typing import Callable
+
+from flightctl.errors import InputError, write_atomic
 
 
 REFUSED = ": refused, another user could have planted its contents"   # the end of a reason that is a refusal
@@ -62,3 +68,48 @@ def own_folder(candidates, given: str | None = None) -> tuple[Path | None, list[
             return Path(c), passed
         passed.append(f"{c} ({given}) {why}" if given and i == 0 else f"{c} {why}")
     return None, passed
+
+
+_SAID: set[str] = set()   # the caches whose passed-over folder has been said
+
+
+def user_folder(what: str) -> Path | None:
+    """The first of FLIGHTCTL_CACHE, $XDG_CACHE_HOME/flightctl, ~/.cache/flightctl that is a folder only
+    this user can write (another user's could hold planted results), made where absent; None where
+    none is (the work is then done at each start). A folder passed over as another user's is said once
+    per cache (`what` names it) on stderr; one that cannot be made, no home, is no news."""
+    given = os.environ.get("FLIGHTCTL_CACHE")
+    home = os.path.expanduser("~")
+    base = os.environ.get("XDG_CACHE_HOME") or (os.path.join(home, ".cache") if home != "~" else "")
+    candidates = ([Path(given)] if given else []) + ([Path(base) / "flightctl"] if base else [])
+    folder, passed = own_folder(candidates, "FLIGHTCTL_CACHE" if given else None)
+    if what not in _SAID and any(REFUSED in why for why in passed):
+        _SAID.add(what)
+        where = f"it is kept in {folder}" if folder is not None else "it is computed at each start"
+        print(f"flightctl: {what}: {'; '.join(passed)}: {where}", file=sys.stderr)
+    return folder
+
+
+def cached_json(name: str, inputs: list, compute: Callable[[], dict], what: str) -> dict:
+    """The result of `compute()` for `inputs`: read from the user's cache folder's file `name` where it
+    holds the same inputs, else computed and written there (atomically, with its "inputs"; a folder
+    that cannot be written is no error: the result is then computed at each start)."""
+    folder = user_folder(what)
+    path = folder / name if folder is not None else None
+    s = None
+    if path is not None:
+        try:
+            s = json.loads(path.read_text())
+            if s.get("inputs") != inputs:
+                s = None
+        except (OSError, ValueError):
+            s = None
+    if s is None:
+        s = compute()
+        s["inputs"] = inputs
+        if path is not None:
+            try:
+                write_atomic(path, json.dumps(s))
+            except (OSError, InputError):
+                pass
+    return s

@@ -1,4 +1,4 @@
-"""The measured-data files of `measured-data.md`: reading with one-line errors, and the flight log writer.
+"""The measured-data files of `docs/measured-data.md`: reading with one-line errors, and the flight log writer.
 
 Every reader returns a `Table`: float columns (empty cells and `nan` are NaN) plus the `# key: value`
 metadata. Errors name the file, the row (line number in the file) or column, and what is wrong.
@@ -30,7 +30,7 @@ IMU_COLUMNS = ("gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z")
 # Columns that may be empty on most rows: range is only written on rows where an echo arrived.
 SPARSE_COLUMNS = ("range",) + MAG_COLUMNS
 # The controller's own estimates and setpoints: a log of another autopilot may not have them
-# (measured-data.md: empty cells are missing values); the measurements and commands are required.
+# (docs/measured-data.md: empty cells are missing values); the measurements and commands are required.
 ESTIMATE_COLUMNS = ("roll", "pitch", "yaw", "alt", "roll_sp", "pitch_sp", "yaw_sp", "alt_sp")
 BENCH_COLUMNS = ("motor", "P", "thrust", "omega", "voltage", "current")
 YAW_DRAG_COLUMNS = ("torque", "yaw_rate")
@@ -214,7 +214,7 @@ def read_flight_log(path: str | Path, min_seconds: float = 0.0, min_rows: int = 
     return table
 
 
-# measured-data.md's ranges of the flight log columns, beyond which a row is not a measurement
+# docs/measured-data.md's ranges of the flight log columns, beyond which a row is not a measurement
 _FLIGHT_RANGES = ([(f"P{i}", (0.0, 255.0), "the command range 0-255") for i in range(1, 5)]
                   + [(f"gyro_{a}", (-100.0, 100.0), "a gyro reading (+-100 rad/s)") for a in "xyz"]
                   + [(f"acc_{a}", (-1000.0, 1000.0), "an accelerometer reading (+-1000 m/s^2)") for a in "xyz"]

@@ -3,7 +3,7 @@
 A parameter file is flat TOML for the airframe (the names of ``conventions.md``), each value
 optionally with its plausible range (``range.NAME = [lo, hi]``, drawn by the Monte Carlo), two optional
 tables, ``[gains]`` and ``[filters]``, and any number of ``[[effect]]`` tables: model extensions
-(measured-data.md) that the simulator and diagnose carry into the base model. ``--params NAME``
+(docs/measured-data.md) that the simulator and diagnose carry into the base model. ``--params NAME``
 also takes the name of a shipped vehicle file (``flightctl/vehicles/NAME.toml``). Anything unknown, mistyped or out of range is refused with
 one line that names the key: the program never flies with a bad file.
 
@@ -24,15 +24,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from flightctl.errors import InputError, number, read_text, read_toml, write_atomic
+from flightctl.schema import check_range, entry
 
 
 INERTIA_TOLERANCE = 0.10  # accepted excess of one principal inertia over the sum of the others
 
 
 def _p(default, unit, lo, hi, source, doc="", log=False):
-    """One schema entry: stored as dataclass field metadata. `log`: a plausible range of this value is
+    """One schema entry (flightctl/schema.py) with its source. `log`: a plausible range of this value is
     drawn uniformly in its logarithm (a time constant whose plausible values span decades)."""
-    return field(default=default, metadata=dict(unit=unit, lo=lo, hi=hi, source=source, doc=doc, log=log))
+    return entry(default, unit, lo, hi, doc, source=source, log=log)
 
 
 @dataclass(frozen=True)
@@ -160,7 +161,7 @@ class Sensors:
 
 @dataclass(frozen=True)
 class EffectSpec:
-    """A model extension carried by a parameter file (measured-data.md: an identified model grows
+    """A model extension carried by a parameter file (docs/measured-data.md: an identified model grows
     as its errors are found). The onboard code only reads and writes it; the simulator and diagnose
     build the term from its `cause` (their registry checks the name and parameters)."""
     cause: str
@@ -195,6 +196,27 @@ class Params:
                     return f.metadata["source"]
         raise KeyError(name)
 
+    def effect(self, causes: str | tuple[str, ...]) -> EffectSpec | None:
+        """The first `[[effect]]` the file carries of the cause (or one of the causes) named, else None."""
+        causes = (causes,) if isinstance(causes, str) else causes
+        return next((e for e in self.effects if e.cause in causes), None)
+
+    def effect_value(self, cause: str, name: str) -> float:
+        """A parameter of an effect the file carries, 0 where it carries none."""
+        e = self.effect(cause)
+        return float(dict(e.parameters).get(name, 0.0)) if e is not None else 0.0
+
+    def effect_range(self, causes: str | tuple[str, ...], name: str, value: float) -> tuple[float, float]:
+        """The range the file gives a parameter of one of `causes` (`range.NAME`), around `value`;
+        (value, value) where it gives none."""
+        causes = (causes,) if isinstance(causes, str) else causes
+        for e in self.effects:
+            if e.cause in causes:
+                for n, lo, hi in e.ranges:
+                    if n == name:
+                        return min(lo, value), max(hi, value)
+        return value, value
+
     def digest(self) -> str:
         """A short hash of the values (sha256 of `dumps`, sources left out): two runs with the same
         digest flew the same parameters."""
@@ -220,10 +242,7 @@ def _build(cls, table: dict, where: str, base=None):
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputError(f"{name}: expected a number, got {type(value).__name__} {_short(value)}")
         v = number(value)
-        if v is None or not meta["lo"] <= v <= meta["hi"]:
-            shown = f"{v:g}" if v is not None else _short(value)
-            raise InputError(f"{name}: {shown} {meta['unit']} is out of range "
-                             f"[{meta['lo']:g}, {meta['hi']:g}]")
+        check_range(name, value if v is None else v, meta, _short(value))
         value = v
         values[key] = value
     return dataclasses.replace(base, **values)

@@ -11,7 +11,7 @@ paper's propeller identification, sec. 4.1, Fig. 3), which `flightctl identify b
 Profiles, per motor, one motor at a time (the other three at the stop pulse):
 - staircase: for each P of --steps, ramp to it, wait --settle, then average the instruments over
   --hold; if the speed is still changing, average again, up to --step-timeout. One bench.csv row
-  `motor, P, thrust, omega, voltage, current` per step (SI, measured-data.md).
+  `motor, P, thrust, omega, voltage, current` per step (SI, docs/measured-data.md).
 - step: settle at P0, jump to P1, record the speed for --record s and fit a first-order response
   `omega(t) = w1 + (w0 - w1) exp(-(t - t0) / tau)` (the motor_dynamics cause); the two steady points
   are bench.csv rows too. `--write-params P.toml` writes the motors' mean tau as an

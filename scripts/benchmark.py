@@ -267,7 +267,8 @@ def _cpu(args: list[str]) -> float:
     import resource
     import subprocess
     import sys
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    from flightctl.blas import ONE_THREAD
+    env = {**os.environ, **ONE_THREAD}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run([sys.executable, *args], env=env, check=True, stdout=subprocess.DEVNULL)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -29,6 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+from flightctl.blas import ONE_THREAD  # noqa: E402
 from flightctl.errors import InputError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,7 +39,6 @@ STAMP = ("Measured by `python scripts/diagnose_speed.py --markdown` on {date}: {
          "`flightctl diagnose` past the reading, the two codes alternating in child processes.")
 HEADER = ("| log | CPU on the code of `--against` (s: median, smallest-largest) | on this code (s) | change | the two reports |",
           "|---|---|---|---|---|")
-ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
 def _inner(log: str, tables: str, out: str) -> None:

@@ -32,10 +32,11 @@ import threading
 from contextlib import contextmanager
 from typing import Callable, Iterable
 
+from flightctl.blas import ONE_THREAD   # BLAS, per worker
+
 HINT = ("one item at a time in this process; for the parallel engine (Dask): pip install '.[fleet]' in the "
         "flightctl checkout")
 
-ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}   # BLAS, per worker
 _address: str | None = None         # `use(address)`: an existing cluster's scheduler
 _engine: dict = {}                  # the client (and local cluster) kept for the command's life
 _hinted = [False]

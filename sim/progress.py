@@ -1,4 +1,6 @@
-"""One counter line on stderr for the long commands: `label[k/N] what  elapsed, time left`.
+"""The progress lines of the long work, on stderr: `Progress`, one counter line for the long commands
+and scripts (`label[k/N] what  elapsed, time left`); `Stages`, one line per stage of a command whose
+stages are few and uneven (`flightctl diagnose`).
 
 On a terminal the line is rewritten in place; into a file or a pipe (CI, `2> log`) each finished
 item is its own line, so that nothing is lost. Every line is flushed as it is written.
@@ -81,3 +83,33 @@ class Progress:
         if now - self._shown >= (UPDATE_S if self.tty else UPDATE_FILE_S):
             self._shown = now
             self._write(self._line(what, now), False)
+
+
+class Stages:
+    """Progress lines on stderr, one per stage, each with the time elapsed (`prefix` before it). On a
+    terminal they are live; otherwise (scripts, checks, `2> log`) they are held until the input is read
+    and accepted (`release`), then live, so that bad input is the only line on stderr, as the CLI
+    contract requires (docs/measured-data.md), and a long run still shows where it is."""
+
+    def __init__(self, quiet: bool = False, prefix: str = "", out: TextIO | None = None):
+        self.t0 = time.perf_counter()
+        self.quiet, self.prefix = quiet, prefix
+        self.out = out                                      # None: sys.stderr as it is at each line
+        self.held: list[str] | None = None if (out or sys.stderr).isatty() else []
+
+    def _say(self, line: str) -> None:
+        print(*([self.prefix] if self.prefix else []), line, file=self.out or sys.stderr, flush=True)
+
+    def __call__(self, *args) -> None:
+        if self.quiet:
+            return
+        line = f"[{time.perf_counter() - self.t0:6.1f} s] " + " ".join(map(str, args))
+        if self.held is None:
+            self._say(line)
+        else:
+            self.held.append(line)
+
+    def release(self) -> None:
+        for line in self.held or ():
+            self._say(line)
+        self.held = None

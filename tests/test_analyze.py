@@ -89,7 +89,7 @@ def test_effects_carry_their_terms_and_states_into_the_linearisation():
     assert plant.A.shape == (N_RIGID + 4, N_RIGID + 4)
     lag = np.linalg.eigvals(plant.A[N_RIGID:, N_RIGID:])
     assert lag == pytest.approx([-1 / tau] * 4, rel=1e-6)
-    # rotor_inflow (measured-data.md): f_i - k sqrt(f_i / B) (w_b + p y_i - q x_i), at hover f_i = B
+    # rotor_inflow (docs/measured-data.md): f_i - k sqrt(f_i / B) (w_b + p y_i - q x_i), at hover f_i = B
     assert plant.A[VZ, VZ] == pytest.approx(-4 * k / A.M, rel=1e-6)
     assert plant.A[P, P] == pytest.approx(-2 * k * A.l ** 2 / A.Jxx, rel=1e-6)
     # motor_dynamics: the yaw reaction -Jp sum s_i dOmega_i/dt acts at once on a command step, each

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from flightctl import cachedir
 from flightctl.cachedir import REFUSED, not_own_folder, own_folder
 from flightctl.control import spin_design
 from flightctl.params import load
@@ -61,7 +62,7 @@ def test_the_landing_gains_are_never_read_from_another_users_folder(tmp_path, mo
     monkeypatch.setenv("FLIGHTCTL_CACHE", str(planted))
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     monkeypatch.setattr(spin_design, "_MEMORY", {})
-    monkeypatch.setattr(spin_design, "_SAID", False)
+    monkeypatch.setattr(cachedir, "_SAID", set())
     s = spin_design.load(d)
     assert "forged" not in s and s["rates"][0] == spin_design.R_LO
     assert list((tmp_path / "xdg" / "flightctl").glob("spin-*.json"))

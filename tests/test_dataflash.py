@@ -3,7 +3,7 @@ ArduCopter log (tests/data/ardupilot, GPL-3.0-or-later) read with what its param
 be what it is not (a hexacopter, a plane) and refused by name; a real ArduCopter 3.3 flight that ends
 in a crash (log171.bin, CC BY-SA 3.0) read with its own field names, judged by diagnose without the
 crash, and a delay drawn at random and shifted into it found; and this project's simulated flights
-written as ArduCopter logs (tests/dataflash.py, read back through pymavlink) with the motor outputs,
+written as ArduCopter logs (sim/logs/dfwrite.py, read back through pymavlink) with the motor outputs,
 the frame and the ESC telemetry drawn at random: every sample comes back where the log put it."""
 from __future__ import annotations
 

@@ -131,7 +131,7 @@ def run_case(tmp: Path, cause: str, parameters: dict, seed: int, quick: bool = F
 
 
 # Two effects at once (tests/test_diagnose_chain.py, scripts/diagnose_pairs.py: no pytest here, the
-# script imports this module). The pairs are of the contract's causes (measured-data.md); an extension's
+# script imports this module). The pairs are of the contract's causes (docs/measured-data.md); an extension's
 # pairs are drawn in its own test (`partners`).
 TWINS = {frozenset(("motor_lag", "motor_dynamics"))}
 CONTRACT = tuple(c for c in CAUSES if c not in causes.EXTENSIONS)

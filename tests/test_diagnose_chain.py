@@ -1,4 +1,4 @@
-"""Every cause, not only the strongest (measured-data.md, "Every cause"): two effects hidden in the
+"""Every cause, not only the strongest (docs/measured-data.md, "Every cause"): two effects hidden in the
 simulated plant at once, a pair and their sizes drawn from a seeded generator, are both named and
 sized, and nothing else; the chain's entries are each fitted on top of the ones before it.
 

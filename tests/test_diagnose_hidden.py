@@ -25,7 +25,7 @@ def check(tmp_path, cause, seed, quick=False):
     assert report["cause"] == cause, (truth, report["cause"], report["parameters"], report["candidates"][:2])
     ok, tolerance = close_enough(cause, truth, report["parameters"])
     assert ok, f"{cause}: drawn {truth}, recovered {report['parameters']} (tolerance: {tolerance})"
-    # with one effect hidden the chain holds exactly it, with none nothing (measured-data.md, "Every cause")
+    # with one effect hidden the chain holds exactly it, with none nothing (docs/measured-data.md, "Every cause")
     assert [c["cause"] for c in report["causes"]] == ([] if cause == "none" else [cause]), report["causes"]
     if cause == "none":
         assert report["parameters"] == {}

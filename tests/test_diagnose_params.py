@@ -1,5 +1,5 @@
 """`flightctl diagnose --params P` carries the parameter file's `[[effect]]` tables into its base model
-(measured-data.md; docs/diagnose.md, "A base model with effects"): flown and diagnosed through the
+(docs/measured-data.md; docs/diagnose.md, "A base model with effects"): flown and diagnosed through the
 CLI, with sensor noise, on the shipped as-flown model (rotor_inflow, motor_dynamics, rotor_drag)."""
 from __future__ import annotations
 

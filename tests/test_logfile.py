@@ -84,7 +84,7 @@ def test_empty_required_cell(tmp_path):
 
 
 def test_an_empty_estimate_or_setpoint_is_a_missing_value(tmp_path):
-    """measured-data.md: empty cells are missing values; a log of another autopilot may have no
+    """docs/measured-data.md: empty cells are missing values; a log of another autopilot may have no
     angle setpoints or estimates. The measurements and commands stay required on every row."""
     p = write(tmp_path, [header(), row(0.0), row(0.01, roll="", alt_sp=""), row(0.02)])
     t = read_flight_log(p)

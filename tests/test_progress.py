@@ -83,3 +83,24 @@ def test_work_inside_an_item_is_reported_and_rate_limited_into_a_file():
     assert lines[-1].startswith("batch [0.8/2] table4  31 s elapsed")
     left = float(re.search(r"about (\d+) s left", lines[-1]).group(1))
     assert left == (2 - 31 * 0.025) / 0.025      # 0.025 a second
+
+
+def test_stages_are_held_off_a_terminal_until_released_then_live():
+    """`Stages` (flightctl diagnose's lines): into a file nothing is written before `release`, then
+    the held lines in order with the prefix, then each line as it comes; `quiet` writes nothing."""
+    from flightctl.sim.progress import Stages
+    out = io.StringIO()
+    s = Stages(prefix="diagnose:", out=out)
+    s("reading", "a.bin")
+    s("fitting")
+    assert out.getvalue() == ""
+    s.release()
+    s("done")
+    lines = out.getvalue().splitlines()
+    assert [line.split("] ", 1)[1] for line in lines] == ["reading a.bin", "fitting", "done"]
+    assert all(line.startswith("diagnose: [") and " s] " in line for line in lines)
+    quiet = io.StringIO()
+    q = Stages(quiet=True, out=quiet)
+    q("x")
+    q.release()
+    assert quiet.getvalue() == ""

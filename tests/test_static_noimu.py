@@ -8,7 +8,7 @@ logged height.
   on the clock of its GPS fixes' board time) reaches the static tier through `flightctl diagnose`, with the
   dynamic tier's refusal and the LOG_BITMASK advice, and its imported CSV gives the same findings;
 - a simulated flight with a weak motor drawn from a seeded generator, written as ArduCopter DataFlash
-  without IMU messages (tests/dataflash.py's `without`), has that motor named and sized through ATT's time
+  without IMU messages (sim/logs/dfwrite.py's `without`), has that motor named and sized through ATT's time
   base, as the same flight with its IMU does (tests/test_static_sim.py);
 - the contract: an IMU column empty on every row is read only with the `# imu:` line, and one empty on a
   few rows is bad input.

@@ -1,5 +1,5 @@
 """The static tier (docs/diagnose.md, "Static tier") on this project's simulated flights written as
-ArduCopter DataFlash at ArduPilot's default rates (IMU 25 Hz, RCOU, BAT and ATT 10 Hz; tests/dataflash.py,
+ArduCopter DataFlash at ArduPilot's default rates (IMU 25 Hz, RCOU, BAT and ATT 10 Hz; sim/logs/dfwrite.py,
 read back through pymavlink): the dynamic tier refuses them for their rate, the static tier answers, with
 effects drawn at random from seeded generators and not told to the diagnosis:
 

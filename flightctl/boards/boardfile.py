@@ -10,7 +10,7 @@ keys it names, a key neither gives takes the schema's default. Every problem is 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from importlib import resources
 
 from flightctl.boards import MIN_BATTERY_V, MIN_BATTERY_V_RANGE, BoardUnavailable
@@ -19,6 +19,7 @@ from flightctl.drivers.hcsr04 import HcSr04
 from flightctl.drivers.ina219 import Ina219
 from flightctl.drivers.mpu9250 import Mpu9250
 from flightctl.errors import InputError, number, read_toml
+from flightctl.schema import check_range, entry
 
 RESERVED_PINS = {2: "I2C SDA", 3: "I2C SCL", 7: "SPI CE1", 8: "SPI CE0", 9: "SPI MISO", 10: "SPI MOSI",
                  11: "SPI SCLK", 14: "UART TX", 15: "UART RX"}
@@ -30,8 +31,8 @@ MAX_US = ("us", 1000, 2200, "longest pulse; on-times are clamped to [stop_us, ma
 
 
 def key(unit: str, lo, hi, doc: str, default=dataclasses.MISSING):
-    """One schema entry (dataclass field metadata); no default: the shipped board file gives it."""
-    return field(default=default, metadata=dict(unit=unit, lo=lo, hi=hi, doc=doc))
+    """One schema entry (flightctl/schema.py); no default: the shipped board file gives it."""
+    return entry(default, unit, lo, hi, doc)
 
 
 @dataclass(frozen=True)
@@ -78,11 +79,8 @@ def _value(where: str, f: dataclasses.Field, value):
         if number(value) is None:
             raise InputError(f"{where}: expected a number, got {str(value)[:40]}")
         items = [value]
-    unit = f" {m['unit']}" if m["unit"] else ""
     for v in items:
-        if not m["lo"] <= v <= m["hi"]:
-            shown = f"{v:g}" if number(v) is not None else f"{str(v)[:37]}..."
-            raise InputError(f"{where}: {shown}{unit} is out of range [{m['lo']:g}, {m['hi']:g}]")
+        check_range(where, v, m)
     return tuple(value) if kind.startswith("tuple") else float(value) if kind == "float" else value
 
 

@@ -301,8 +301,8 @@ class HilClock:
     `spin_s` is the wall clock's busy-wait before each deadline (flightctl/clock.py). When the PC side
     runs on this machine (`hil demo`, or `hil serve` beside `run --board hil`: a pty or a loopback
     address), the clock only sleeps: the busy-wait is a third of the flight side's CPU time, taken
-    every period from the PC side that must answer (docs/hil.md: on 2 cores with one other CPU-bound
-    job, 0.38-0.43 -> 0.26-0.33 ms of CPU per tick, latency p99 3.8-7.6 -> 1.9-4.6 ms). The Pi flying
+    every period from the PC side that must answer (docs/hil.md, "The flight side's busy-wait"; the link's
+    latency as measured: its "hil latency" block). The Pi flying
     a PC's plant keeps the busy-wait and its deadline precision."""
 
     def __init__(self, link: HilLink, period: float, spin_s: float = SPIN_S):

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from math import radians, sqrt
 
-from flightctl.control.spin_design import effect_value, motor_time_constant
+from flightctl.control.spin_design import motor_time_constant
 from flightctl.hal import ImuSample
 from flightctl.params import Params
 
@@ -85,7 +85,7 @@ class MotorLossDetector:
         self.jx, self.jy = a.Jzz - a.Jyy, a.Jxx - a.Jzz
         # the roll and pitch damping of the rotors' airflow the file carries (rotor_inflow: 2 k l^2 of the
         # thrust changes and the hub moment, for four rotors at hover): torque the rotors gave, too
-        self.damp = 2.0 * effect_value(params, "rotor_inflow", "k") * a.l * a.l + effect_value(params, "rotor_inflow", "hub")
+        self.damp = 2.0 * params.effect_value("rotor_inflow", "k") * a.l * a.l + params.effect_value("rotor_inflow", "hub")
         self.l, self.il, self.M, self.iM = a.l, 1.0 / a.l, a.M, 1.0 / a.M
         self.fl = [0.0, 0.0, 0.0, 0.0]
         self.w = [0.0, 0.0, 0.0, 0.0]

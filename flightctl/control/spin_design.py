@@ -41,16 +41,12 @@ drag to settle it (gamma1 = gamma0 = 0), or an equilibrium beyond the gyro's ful
 from __future__ import annotations
 
 import hashlib
-import json
 import math
-import os
-import sys
-from pathlib import Path
 from typing import NamedTuple
 
-from flightctl.cachedir import REFUSED, own_folder
+from flightctl.blas import OneBlasThread
+from flightctl.cachedir import cached_json
 from flightctl.drivers import mpu9250_regs as reg
-from flightctl.errors import InputError, write_atomic
 from flightctl.params import Params
 
 GYRO_MAX = math.radians(32767.0 / reg.GYRO_LSB_PER_DPS[3])   # rad/s: the driver's +-2000 deg/s (34.9)
@@ -99,35 +95,14 @@ class Inputs(NamedTuple):
 def motor_time_constant(params: Params) -> float:
     """The motor time constant the parameter file carries (a `motor_dynamics` or `motor_lag` effect,
     as `flightctl bench --profile step` writes it), else 0."""
-    for e in params.effects:
-        if e.cause in MOTOR_CAUSES:
-            return float(dict(e.parameters)["tau"])
-    return 0.0
+    e = params.effect(MOTOR_CAUSES)
+    return float(dict(e.parameters)["tau"]) if e is not None else 0.0
 
 
 def esc_full_throttle(params: Params) -> float:
     """The ESC's full-throttle command P the file carries (`motor_dynamics`' `p_full`: eq. 26's thrust
     stops rising there), else 255, the end of its frame."""
-    return effect_value(params, "motor_dynamics", "p_full") or 255.0
-
-
-def effect_value(params: Params, cause: str, name: str) -> float:
-    """A parameter of an effect the parameter file carries, 0 where it carries none."""
-    for e in params.effects:
-        if e.cause == cause:
-            return float(dict(e.parameters).get(name, 0.0))
-    return 0.0
-
-
-def effect_range(params: Params, causes: tuple[str, ...], name: str, value: float) -> tuple[float, float]:
-    """The range the file gives a parameter of one of `causes` (`range.NAME`), around `value`; (value,
-    value) where it gives none."""
-    for e in params.effects:
-        if e.cause in causes:
-            for n, lo, hi in e.ranges:
-                if n == name:
-                    return min(lo, value), max(hi, value)
-    return value, value
+    return params.effect_value("motor_dynamics", "p_full") or 255.0
 
 
 def design_inputs(params: Params, tau_motor: float | None = None) -> Inputs:
@@ -139,14 +114,14 @@ def design_inputs(params: Params, tau_motor: float | None = None) -> Inputs:
     a = params.airframe
     tau = motor_time_constant(params) if tau_motor is None else tau_motor
     lo, hi = next(((lo, hi) for name, lo, hi in params.ranges if name == "Jp"), (a.Jp, a.Jp))
-    t_lo, t_hi = effect_range(params, MOTOR_CAUSES, "tau", tau) if tau_motor is None else (tau, tau)
+    t_lo, t_hi = params.effect_range(MOTOR_CAUSES, "tau", tau) if tau_motor is None else (tau, tau)
     if hi > a.Jp and t_hi > tau:
         t_hi = max(tau, t_hi * a.Jp / hi)
-    delay = effect_value(params, "actuation_delay", "delay")
-    d_lo, d_hi = effect_range(params, ("actuation_delay",), "delay", delay)
+    delay = params.effect_value("actuation_delay", "delay")
+    d_lo, d_hi = params.effect_range("actuation_delay", "delay", delay)
     return Inputs(SCHEMA, a.M, a.g, a.l, a.Jxx, a.Jyy, a.Jzz, a.Jp, a.c1, a.g1, a.g2, a.gamma1, a.dt,
-                  effect_value(params, "linear_yaw_drag", "gamma0"), effect_value(params, "rotor_inflow", "k"),
-                  effect_value(params, "rotor_inflow", "hub"), tau, lo, hi, t_lo, t_hi, delay, d_lo, d_hi,
+                  params.effect_value("linear_yaw_drag", "gamma0"), params.effect_value("rotor_inflow", "k"),
+                  params.effect_value("rotor_inflow", "hub"), tau, lo, hi, t_lo, t_hi, delay, d_lo, d_hi,
                   params.filters.tau_rate)
 
 
@@ -424,45 +399,6 @@ def robust_gains(d: Inputs, pair, r: float, frac: float, models=None) -> tuple[l
     return best
 
 
-_BLAS_NAMES = ("openblas", "scipy_openblas")   # + _set_num_threads, or + _set_num_threads64_ (64-bit ints)
-
-
-class OneBlasThread:
-    """Within it, OpenBLAS (numpy's and scipy's, found among the process' loaded libraries) runs one
-    thread. Its threads on the design's 5x5 problems cost more than the work: on a loaded 2-core machine
-    the schedule took 12 s of CPU with them and 0.7 s without (scripts/benchmark.py). Linux; elsewhere,
-    or without OpenBLAS, nothing changes."""
-
-    def __enter__(self):
-        import ctypes
-        import numpy  # noqa: F401  (their libraries loaded, to be found)
-        import scipy.linalg  # noqa: F401
-        self.restore = []
-        try:
-            with open("/proc/self/maps") as f:
-                paths = {line.split()[-1] for line in f if "openblas" in line.lower() and "/" in line}
-        except OSError:
-            return self
-        for path in paths:
-            try:
-                lib = ctypes.CDLL(path)
-            except OSError:
-                continue
-            for base in _BLAS_NAMES:
-                get = getattr(lib, base + "_get_num_threads", None) or getattr(lib, base + "_get_num_threads64_", None)
-                put = getattr(lib, base + "_set_num_threads", None) or getattr(lib, base + "_set_num_threads64_", None)
-                if get is not None and put is not None:
-                    self.restore.append((put, get()))
-                    put(1)
-                    break
-        return self
-
-    def __exit__(self, *exc):
-        for put, n in self.restore:
-            put(n)
-        return False
-
-
 def schedule(d: Inputs) -> dict:
     """{"rates", "momenta", "radius": {pair: [j][k]}, (pair as "i,j"): gains [j][k] (`gain_count`) over
     `grid`, in the pair's signs: pair 1-3 turns clockwise (its reaction +z, conventions.md), so it
@@ -492,27 +428,6 @@ def schedule(d: Inputs) -> dict:
     return out
 
 
-def cache_dir() -> Path | None:
-    """The first of FLIGHTCTL_CACHE, $XDG_CACHE_HOME/flightctl, ~/.cache/flightctl that is a folder only
-    this user can write (flightctl/cachedir.py: another user's could hold planted gains), made where
-    absent; None where none is (the schedule is then computed at each start). A folder passed over
-    as another user's is said once on stderr (one that cannot be made, no home, is no news)."""
-    global _SAID
-    given = os.environ.get("FLIGHTCTL_CACHE")
-    home = os.path.expanduser("~")
-    base = os.environ.get("XDG_CACHE_HOME") or (os.path.join(home, ".cache") if home != "~" else "")
-    candidates = ([Path(given)] if given else []) + ([Path(base) / "flightctl"] if base else [])
-    folder, passed = own_folder(candidates, "FLIGHTCTL_CACHE" if given else None)
-    if not _SAID and any(REFUSED in why for why in passed):
-        _SAID = True
-        where = f"it is kept in {folder}" if folder is not None else "it is computed at each start"
-        print(f"flightctl: the two-rotor landing's gain cache: {'; '.join(passed)}: {where}", file=sys.stderr)
-    return folder
-
-
-_SAID = False   # a cache folder passed over has been said
-
-
 _MEMORY: dict = {}
 
 
@@ -523,30 +438,12 @@ def key(d: tuple) -> str:
 
 
 def load(d: tuple) -> dict:
-    """`schedule(d)`, computed once: from this process' memory, else from the cache folder's
-    spin-KEY.json, else computed and written there (atomically; a folder that cannot be written is
-    no error: the schedule is then computed at each start)."""
+    """`schedule(d)`, computed once: from this process' memory, else from the user's cache folder's
+    spin-KEY.json (flightctl/cachedir.py), else computed (with one BLAS thread) and written there."""
     k = key(d)
-    if k in _MEMORY:
-        return _MEMORY[k]
-    folder = cache_dir()
-    path = folder / f"spin-{k}.json" if folder is not None else None
-    s = None
-    if path is not None:
-        try:
-            s = json.loads(path.read_text())
-            if s.get("inputs") != list(d):
-                s = None
-        except (OSError, ValueError):
-            s = None
-    if s is None:
-        with OneBlasThread():
-            s = schedule(d)
-        s["inputs"] = list(d)
-        if path is not None:
-            try:
-                write_atomic(path, json.dumps(s))
-            except (OSError, InputError):
-                pass
-    _MEMORY[k] = s
-    return s
+    if k not in _MEMORY:
+        def compute():
+            with OneBlasThread():
+                return schedule(d)
+        _MEMORY[k] = cached_json(f"spin-{k}.json", list(d), compute, "the two-rotor landing's gain cache")
+    return _MEMORY[k]

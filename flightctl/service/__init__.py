@@ -354,7 +354,7 @@ def main(argv: list[str] | None = None, devices: dict | None = None) -> int:
         log.error("not flying: %s", e)
         return EXIT_REFUSED
 
-    # The motor-loss gain schedule (control/spin_design.py: LQR solves, about 0.5 s of CPU, or read from its
+    # The motor-loss gain schedule (control/spin_design.py: LQR solves, README's speed table, or read from its
     # disk cache keyed by the parameters) is solved now:
     # before the board opens (a HIL link is live from then on, and its PC side gives up on a silent
     # flight side), before READY, never between a plan's arrival and its take-off.

@@ -1,4 +1,4 @@
-"""The causes: every candidate extension of measured-data.md, then the project's own (docs/diagnose.md,
+"""The causes: every candidate extension of docs/measured-data.md, then the project's own (docs/diagnose.md,
 "Causes beyond the contract"), one module each, holding side by side its plant effect (an `Effect` on
 the seam of `flightctl.sim.world.model`; a sensor effect acts on the simulated IMU) and its diagnose
 fit (a `Candidate` of `flightctl.sim.identify.diagnose.candidate`).
@@ -9,7 +9,7 @@ tests with `make`, and `flightctl diagnose` runs every candidate in this order.
 
 Adding a cause: a module here with its `Effect` and its `Candidate` (whose `effect` names it), one
 line in `_FITS` below, a row in docs/diagnose.md's table of the causes beyond the contract (after the
-contract's, whose table is measured-data.md's; tests/test_causes.py checks that the registry and the two
+contract's, whose table is docs/measured-data.md's; tests/test_causes.py checks that the registry and the two
 tables agree), a unit test of the effect and a hidden-effect case (tests/test_diagnose_cases.py).
 Importing the registry costs no scipy (the fits import it when they run): `flightctl sim` starts fast.
 """
@@ -29,7 +29,7 @@ from flightctl.sim.world.model import Effect, Parameter
 class Cause:
     name: str
     doc: str                           # one line: what the real vehicle does that the base model does not
-    parameters: dict[str, Parameter]   # name -> (unit, lo, hi), in the order of measured-data.md
+    parameters: dict[str, Parameter]   # name -> (unit, lo, hi), in the order of docs/measured-data.md
     effect: type[Effect]
     candidate: type[Candidate]
 
@@ -72,7 +72,7 @@ def make(cause: str, **parameters: float) -> Effect:
 
 
 def carried(params) -> tuple[Effect, ...]:
-    """The plant effects a parameter file carries (`[[effect]]` tables, measured-data.md)."""
+    """The plant effects a parameter file carries (`[[effect]]` tables, docs/measured-data.md)."""
     return tuple(make(e.cause, **dict(e.parameters)) for e in params.effects)
 
 

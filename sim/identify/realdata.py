@@ -78,7 +78,7 @@ def read_rcbenchmark(path: str | Path) -> Run:
 
 
 def convert(paths: list[str], out: str) -> list[str]:
-    """RCbenchmark files -> one bench.csv (measured-data.md), file i as motor i."""
+    """RCbenchmark files -> one bench.csv (docs/measured-data.md), file i as motor i."""
     if len(paths) > 4:
         raise InputError(f"at most 4 runs (motors 1-4), got {len(paths)}")
     runs = [read_rcbenchmark(p) for p in paths]

@@ -1,4 +1,4 @@
-"""Flight logs of other autopilots, read into this project's flight-log table (measured-data.md,
+"""Flight logs of other autopilots, read into this project's flight-log table (docs/measured-data.md,
 "Foreign logs"; docs/log-import.md): PX4's ULog through pyulog, ArduPilot's DataFlash through
 pymavlink's DFReader, and the blackbox of Betaflight, INDIflight and INAV through orangebox 0.4.0, all
 in the `logs` extra (orangebox is GPL-3.0: an optional extra only).
@@ -10,10 +10,12 @@ in the `logs` extra (orangebox is GPL-3.0: an optional extra only).
 """
 from __future__ import annotations
 
+import importlib
 import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -23,9 +25,9 @@ from flightctl.sim.identify.diagnose.data import all_running, motor_columns
 from flightctl.sim.logs.common import EXTRA as EXTRA_COLUMNS
 from flightctl.sim.logs.common import Imported, flight_text, parser_said, to_table
 
-FOREIGN_SUFFIXES = (".ulg", ".bbl", ".bfl", ".txt", ".bin", ".log")     # compared in lower case
 DATAFLASH_MAGIC = b"\xa3\x95\x80"        # a DataFlash file opens with its FMT message's definition
 ULOG_MAGIC = b"ULog\x01\x12\x35"        # ULog's file header (PX4's ULog file format), then its version byte
+BLACKBOX_MAGIC = b"H Product:Blackbox"   # a blackbox log's first header line (Betaflight's, INAV's)
 MIN_FLIGHT_S = 2.0                       # s with all four motors running: a log that holds a flight
 
 
@@ -46,44 +48,96 @@ class LogEntry:
         return self.table is not None and self.running_s >= MIN_FLIGHT_S
 
 
+@dataclass(frozen=True)
+class Reader:
+    """One log format: a row of READERS. `magic`: the bytes its file opens with, or a test of the file's
+    first 4096 bytes; `reader` ("module:function", imported when a log is read) gives a log's Imported
+    (or a str: the text of this project's own log) from the path, or with `split` ("module:function":
+    the file's bytes -> [(start, end)] of each log, several logs per file) from (path, the log's bytes,
+    start, the file's size, its name); `called` and `missing` say what a file named like it but
+    without its content is not, and lacks."""
+    name: str
+    what: str
+    suffixes: tuple[str, ...]            # compared in lower case
+    magic: bytes | Callable[[bytes], bool]
+    reader: str
+    split: str | None = None
+    options: tuple[tuple[str, object], ...] = ()      # keyword arguments of `reader`
+    called: str = ""
+    missing: str = ""
+
+    def matches(self, head: bytes) -> bool:
+        return head.startswith(self.magic) if isinstance(self.magic, bytes) else self.magic(head)
+
+    def read(self, *args):
+        return _resolve(self.reader)(*args, **dict(self.options))
+
+
+def _resolve(name: str):
+    module, _, function = name.partition(":")
+    return getattr(importlib.import_module(module), function)
+
+
+def _dataflash_text(head: bytes) -> bool:
+    from flightctl.sim.logs.dataflash import preamble
+    return preamble(head) is not None     # FMT lines, after a dump's few header lines
+
+
+# The log formats, tried in this order on the file's first bytes, whatever its name (adding one: its
+# reader module beside these and one row; docs/architecture.md, "Where to add").
+READERS = (
+    Reader("ulog", "PX4's ULog", (".ulg",), ULOG_MAGIC, "flightctl.sim.logs.ulog:read",
+           called="a ULog", missing="no ULog header"),
+    Reader("dataflash", "ArduPilot's DataFlash", (".bin",), DATAFLASH_MAGIC, "flightctl.sim.logs.dataflash:read",
+           called="an ArduPilot DataFlash log", missing="no FMT message at its start"),
+    Reader("blackbox", "the blackbox of Betaflight, INDIflight and INAV", (".bbl", ".bfl", ".txt"), BLACKBOX_MAGIC,
+           "flightctl.sim.logs.blackbox:read", split="flightctl.sim.logs.blackbox:split",
+           called="a blackbox log", missing="no 'H Product:Blackbox' header"),
+    Reader("dataflash-text", "ArduPilot's DataFlash as text", (".log", ".txt"), _dataflash_text,
+           "flightctl.sim.logs.dataflash:read", options=(("text", True),),
+           called="an ArduPilot DataFlash text dump", missing="no FMT lines"),
+)
+BY_NAME = {r.name: r for r in READERS}
+TEXT_SUFFIXES = (".txt", ".log")     # text of other formats and of this project's own logs: never refused by name
+FOREIGN_SUFFIXES = tuple(dict.fromkeys(s for r in READERS for s in r.suffixes))
+
+
+def known_formats() -> str:
+    """The formats READERS reads, each with its suffixes: for an error line."""
+    return ", ".join(f"{r.what} ({'/'.join(r.suffixes)})" for r in READERS)
+
+
 def kind(path: str) -> str | None:
-    """'ulog', 'blackbox', 'dataflash' or 'dataflash-text' by the file's content, whatever its name: its
-    magic bytes (ULOG_MAGIC, DATAFLASH_MAGIC, blackbox's 'H Product:Blackbox'; a text dump's FMT lines
-    after its few header lines); None for a file that is not another autopilot's log (this project's
-    CSV). InputError for a file whose suffix claims a binary log format its bytes do not have."""
+    """The name of the READERS row whose magic the file's first bytes have, whatever the file's name
+    ('ulog', 'dataflash', 'blackbox', 'dataflash-text'); None for a file that is not another autopilot's
+    log (this project's CSV). InputError for a file whose suffix claims a binary log format its bytes
+    do not have, naming the formats known."""
     suffix = Path(path).suffix.lower()
     head = read_bytes(path, 4096)         # a regular, readable file (errors.read_bytes), and its magic
-    if head.startswith(ULOG_MAGIC):
-        return "ulog"
-    if head.startswith(DATAFLASH_MAGIC):
-        return "dataflash"
-    if head.startswith(b"H Product:Blackbox"):
-        return "blackbox"
-    from flightctl.sim.logs.dataflash import preamble
-    if preamble(head) is not None:        # FMT lines, after a dump's few header lines
-        return "dataflash-text"
-    if suffix not in FOREIGN_SUFFIXES or suffix in (".txt", ".log"):
-        return None                       # a text file of this project's kind (measured-data.md)
+    for r in READERS:
+        if r.matches(head):
+            return r.name
+    claimed = next((r for r in READERS if suffix in r.suffixes), None)
+    if claimed is None or suffix in TEXT_SUFFIXES:
+        return None                       # a text file of this project's kind (docs/measured-data.md)
     if not head:
         raise InputError(f"{path}: empty file")
-    what = {".ulg": "a ULog (no ULog header)", ".bin": "an ArduPilot DataFlash log (no FMT message at its start)"}
-    raise InputError(f"{path}: not " + what.get(suffix, "a blackbox log (no 'H Product:Blackbox' header)"))
+    raise InputError(f"{path}: not {claimed.called} ({claimed.missing}); the formats read by their content, "
+                     f"whatever the file's name: {known_formats()}")
 
 
-def _kind(path: str) -> str:
+def _kind(path: str) -> Reader:
     k = kind(path)
     if k is None:
-        raise InputError(f"{path}: unknown log type {Path(path).suffix or '(no suffix)'}: PX4 .ulg, ArduPilot .bin, "
-                         "Betaflight/INAV .bbl/.bfl/.txt")
-    return k
+        raise InputError(f"{path}: unknown log type {Path(path).suffix or '(no suffix)'}: its content is none of "
+                         f"{known_formats()}")
+    return BY_NAME[k]
 
 
 def count_logs(path: str) -> int:
-    """How many logs the file holds (a ULog or DataFlash one, a blackbox file one or more)."""
-    if _kind(path) != "blackbox":
-        return 1
-    from flightctl.sim.logs import blackbox
-    return len(blackbox.split(read_bytes(path)))
+    """How many logs the file holds (one, or as its format's `split` finds them: a blackbox file one or more)."""
+    r = _kind(path)
+    return 1 if r.split is None else len(_resolve(r.split)(read_bytes(path)))
 
 
 def _guarded(name: str, fn):
@@ -125,22 +179,17 @@ def each_log(path: str, index: int | None = None, progress=None) -> list[LogEntr
     """Every log of `path` (or the one at `index`, from 1), each read or skipped on its own: a log
     that is empty, damaged or of a vehicle not read never takes the others with it. File-level problems
     (unreadable, unknown, an index that does not exist) raise InputError."""
-    k = _kind(path)
+    r = _kind(path)
     say = progress or (lambda *a: None)
-    if k != "blackbox":
+    if r.split is None:
         if index not in (None, 1):
             raise InputError(f"{path}: this log type holds one log: --index {index} does not exist")
-        if k == "ulog":
-            from flightctl.sim.logs import ulog
-            return [_entry(1, path, lambda: ulog.read(path), progress)]
-        from flightctl.sim.logs import dataflash
-        return [_entry(1, path, lambda: dataflash.read(path, text=k == "dataflash-text"), progress)]
-    from flightctl.sim.logs import blackbox
+        return [_entry(1, path, lambda: r.read(path), progress)]
     data = read_bytes(path)
-    spans = blackbox.split(data)
+    spans = _resolve(r.split)(data)
     n = len(spans)
     if n == 0:
-        raise InputError(f"{path}: no log in this blackbox file")
+        raise InputError(f"{path}: no log in this {r.name} file")
     if index is not None and not 1 <= index <= n:
         raise InputError(f"{path}: --index {index} does not exist (the file holds {n} log{'s' if n > 1 else ''})")
     out = []
@@ -148,7 +197,7 @@ def each_log(path: str, index: int | None = None, progress=None) -> list[LogEntr
         a, b = spans[i - 1]
         name = f"{path}#{i}" if n > 1 else path
         start = time.perf_counter()
-        entry = _entry(i, name, lambda: blackbox.read(path, data[a:b], a, len(data), name), progress)
+        entry = _entry(i, name, lambda: r.read(path, data[a:b], a, len(data), name), progress)
         if n > 1:
             say(f"log {i} of {n}: " + (entry.reason or f"{entry.seconds:.1f} s, motors running {entry.running_s:.1f} s")
                 + f" ({time.perf_counter() - start:.1f} s)")

@@ -1,12 +1,12 @@
 """What every foreign log becomes: streams on their own clocks, put on one time base (the gyro's; the
-attitude's in a log without one: `time_base`), and written as this project's flight log (measured-data.md)
+attitude's in a log without one: `time_base`), and written as this project's flight log (docs/measured-data.md)
 with the facts the diagnosis needs in `# key: value` lines (docs/log-import.md).
 
 A reader fills a `Imported`: each stream is its own sample times and values (SI, our frames already:
 the reader converts at its edge), the metadata, and notes. `flight_text` turns it into the flight-log
 text and `to_table` reads that text back with the project's one reader, so that a foreign log and the
 CSV that `flightctl log import` writes give the diagnosis the same table, number for number. A missing
-value is an empty cell in every column (measured-data.md).
+value is an empty cell in every column (docs/measured-data.md).
 """
 from __future__ import annotations
 
@@ -135,7 +135,7 @@ def rate_notes(imp: Imported, motors: str, how: str) -> None:
 def time_base(imp: Imported) -> Stream:
     """The stream whose samples are the rows: the gyro; in a log without one (`# imu: none ...`, the reason
     in the metadata: ArduCopter's LOG_BITMASK without IMU) the attitude, with the gyro and accelerometer
-    columns left empty (measured-data.md: missing values), which only diagnose's static tier reads."""
+    columns left empty (docs/measured-data.md: missing values), which only diagnose's static tier reads."""
     if "gyro" in imp.streams:
         return imp.streams["gyro"]
     if "imu" in imp.meta and "attitude" in imp.streams:
@@ -240,7 +240,7 @@ def _format(x: np.ndarray, fmt: str) -> list[str]:
 
 
 def flight_text(imp: Imported, progress=None) -> str:
-    """The flight log (measured-data.md) of an imported log, as text: one row per sample of its time base
+    """The flight log (docs/measured-data.md) of an imported log, as text: one row per sample of its time base
     (`time_base`: the gyro's, else the attitude's)."""
     base = time_base(imp)
     imu = "gyro" in imp.streams

@@ -2,7 +2,7 @@
 "Frames"): where each motor is and which way it spins, read from the firmware's own mixer.
 
 A layout is the motors in their output order: (x forward, y left) in arm lengths and the spin seen from
-above, +1 counter-clockwise (measured-data.md's s_i), the mixer's yaw factor beside it where the mixer
+above, +1 counter-clockwise (docs/measured-data.md's s_i), the mixer's yaw factor beside it where the mixer
 gives the motors unequal ones (ArduPilot's quad V: 0.7981 and 1). The `# rotors:` line a reader writes
 is `layout.rotors()`; the report names `layout.source`.
 
@@ -54,7 +54,7 @@ class Frame:
         return len(self.x)
 
     def rotors(self) -> str:
-        """The `# rotors:` line (measured-data.md): `x y spin` per motor, `;` between, in arm lengths."""
+        """The `# rotors:` line (docs/measured-data.md): `x y spin` per motor, `;` between, in arm lengths."""
         return "; ".join(f"{round(x, 4) + 0.0:.4f} {round(y, 4) + 0.0:.4f} {s:+.0f}"
                          for x, y, s in zip(self.x, self.y, self.spin))
 

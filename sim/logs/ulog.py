@@ -167,7 +167,7 @@ def _measurements(u, p: dict, imp: Imported) -> None:
         down = ds["orientation"] == DOWNWARD if "orientation" in ds else np.ones(len(ds["timestamp"]), bool)
         d = ds["current_distance"]
         lo, hi = ds.get("min_distance", np.zeros(d.size)), ds.get("max_distance", np.full(d.size, RANGE_MAX_M))
-        down &= (d > lo) & (d < np.minimum(hi, RANGE_MAX_M))      # out of range: no echo (measured-data.md: 0-10 m)
+        down &= (d > lo) & (d < np.minimum(hi, RANGE_MAX_M))      # out of range: no echo (docs/measured-data.md: 0-10 m)
         if down.any():
             imp.streams["range"] = Stream("distance_sensor (downward)", ds["timestamp"][down] * 1e-6,
                                           ds["current_distance"][None, down].astype(float))

@@ -33,7 +33,7 @@ SONAR_TRIGGER_PIN, SONAR_ECHO_PIN = 23, 24   # pins of the simulated GPIO
 def sim_board(params: Params, effects=(), noise=None, seed: int = 0, substeps: int | None = None,
               airframe=None) -> tuple[Hal, World]:
     """The Hal of the simulated quadcopter, and the simulated world (for its true values). The plant
-    carries the parameter file's effects (measured-data.md), then `effects` (`causes.combined`: an
+    carries the parameter file's effects (docs/measured-data.md), then `effects` (`causes.combined`: an
     effect of a cause the file carries replaces it)."""
     noise = vehicle_noise(noise if noise is not None else SensorNoise(), params.sensors)   # the file's [sensors]
     world = World(airframe or params.airframe, causes.combined(params, effects), noise, seed, substeps)

@@ -123,10 +123,10 @@ class Parameter(NamedTuple):
 
 
 class Effect:
-    """A candidate extension (measured-data.md): the plant side of one cause of
+    """A candidate extension (docs/measured-data.md): the plant side of one cause of
     `flightctl.sim.causes`, whose module also holds its diagnose fit. A subclass declares
 
-    - `cause`: its name in measured-data.md; `required`: {parameter name: Parameter(unit, lo, hi)}
+    - `cause`: its name in docs/measured-data.md; `required`: {parameter name: Parameter(unit, lo, hi)}
       (what diagnose fits and reports); `optional`: the same for parameters a parameter file may add
       (the effect's own default when absent); `range_scales`: a parameter whose plausible range
       ends where an airframe value's does (a time constant proportional to an inertia);

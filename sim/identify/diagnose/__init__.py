@@ -10,7 +10,7 @@ The method (docs/diagnose.md):
    difference between rows k and k+1 and with the accelerometer on row k+1. Measured and predicted
    channels go through the same zero-phase low-pass (their difference is filtered once), which
    takes out sensor noise without moving one against the other in time.
-2. **Candidates.** Each extension of measured-data.md changes the prediction; its parameters are
+2. **Candidates.** Each extension of docs/measured-data.md changes the prediction; its parameters are
    fitted on a 1-D grid refined by a bounded scalar search, or by weighted linear least squares.
 3. **Held-out score.** The airborne data are cut into `N_BLOCKS` contiguous blocks; for each block
    the parameters are fitted on the others and the block is predicted. `rmse_*` is the geometric

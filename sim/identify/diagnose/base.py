@@ -78,7 +78,7 @@ WHAT = ("h1 l / Jxx: roll", "h1 l / Jyy: pitch", "h1 g1 / Jzz: yaw", "h1 / M: sp
 
 class LayoutContradicted(InputError):
     """The log's data contradict its declared rotor layout, signs or scaling: the log is refused whole
-    (measured-data.md), the static tier too, whose motor shares are read through the same layout."""
+    (docs/measured-data.md), the static tier too, whose motor shares are read through the same layout."""
 
 
 def equivalent(h2: float, theta=None) -> Airframe:

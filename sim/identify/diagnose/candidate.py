@@ -53,7 +53,7 @@ class Candidate:
 
     A subclass sets
       `effect`    the `Effect` subclass of the plant that it fits: its `cause` names the candidate
-                  and its `required` names the parameters the fit reports (measured-data.md);
+                  and its `required` names the parameters the fit reports (docs/measured-data.md);
       `explains`  the variable that explains the residual, in words with its unit (report, figure);
     and implements, or inherits from `GridCandidate` or `AffineCandidate`,
       `run() -> Result`  the held-out `Score` (from `scoring.heldout`, whose fold function refits

@@ -1,4 +1,4 @@
-"""`flightctl diagnose`: name what the model gets wrong in flight logs (measured-data.md).
+"""`flightctl diagnose`: name what the model gets wrong in flight logs (docs/measured-data.md).
 
     flightctl diagnose FLIGHT.csv|F.ulg|F.bin|F.bbl|F.bfl|F.txt [...] [--index N] [--params PARAMS.toml]
                        --json REPORT.json [--validate OTHER ...] [--plot PREFIX] [--steps STEPS.png] [--quiet]
@@ -29,14 +29,13 @@ file, row or column; exit status 2, see flightctl.cli).
 """
 from __future__ import annotations
 
-import os
-
 # One BLAS thread, set before numpy is imported (here, at the command's entry point: flightctl.cli imports
 # nothing numerical before it), so that OpenBLAS starts no thread pool: its fits are small matrices, and on
 # a busy machine its threads spun for a quarter to two fifths of the user time (docs/diagnose.md, "Speed").
 # A process that had numpy loaded before (a test calling `main`) gets its pool set to one thread in `main`.
-for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_name] = "1"
+from flightctl.blas import OneBlasThread, one_thread_environment   # flightctl/blas.py: nothing numerical
+
+one_thread_environment()
 
 import argparse
 import json
@@ -48,9 +47,10 @@ from flightctl import params as paramfile
 from flightctl.errors import InputError, Parser, output_file, output_prefix, write_atomic
 from flightctl.logfile import read_flight_log
 from flightctl.sim import engine
+from flightctl.sim.progress import Stages
 from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
 from flightctl.sim.identify.diagnose import predict, report as diagnose_report, steps
-from flightctl.sim.identify.diagnose.verdict import diagnose, say, validate
+from flightctl.sim.identify.diagnose.verdict import diagnose, validate
 from flightctl.sim.identify.static import STATIC_COLUMNS, StaticOnly
 from flightctl.sim.logs import controller
 from flightctl.sim.identify.static.curve import declared as declared_curve
@@ -131,34 +131,7 @@ def _per_log(path: str, index: int | None) -> bool:
     return kind(path) is not None and count_logs(path) > 1
 
 
-class Progress:
-    """Progress lines on stderr, one per stage, each with the time elapsed. On a terminal they are
-    live; otherwise (scripts, checks, `2> log`) they are held until the logs are read and accepted
-    (`release`: the base model stands), then live, so that bad input is the only line on stderr, as
-    measured-data.md requires, and a long diagnosis still shows where it is."""
-
-    def __init__(self, quiet: bool = False):
-        self.t0 = time.perf_counter()
-        self.quiet = quiet
-        self.held: list[str] | None = None if sys.stderr.isatty() else []
-
-    def __call__(self, *args) -> None:
-        if self.quiet:
-            return
-        line = f"[{time.perf_counter() - self.t0:6.1f} s] " + " ".join(map(str, args))
-        if self.held is None:
-            say(line)
-        else:
-            self.held.append(line)
-
-    def release(self) -> None:
-        for line in self.held or ():
-            say(line)
-        self.held = None
-
-
 def main(argv: list[str]) -> int:
-    from flightctl.control.spin_design import OneBlasThread
     with OneBlasThread():
         return _main(argv)
 
@@ -178,7 +151,7 @@ def _main(argv: list[str]) -> int:
         raise InputError("name the flight logs to diagnose, or a folder of them with --corpus DIR")
     if args.json is None:
         raise InputError("--json REPORT.json is required (its keys: docs/diagnose.md)")
-    progress = Progress(args.quiet)
+    progress = Stages(args.quiet, prefix="diagnose:")
     t0 = time.perf_counter()
     params = paramfile.load(args.params)
     out_json = Path(args.json)

@@ -79,7 +79,7 @@ FILTER_KINDS = ("pt1", "pt2", "pt3", "biquad")
 class Layout:
     """Where the rotors are and how they spin: positions in the body frame (x forward, y left; m, or
     arm lengths when the log gives no length) and the spin seen from above, +1 counter-clockwise and
-    -1 clockwise (measured-data.md's s_i); a rotor's reaction torque on the body is -s_i tau_i."""
+    -1 clockwise (docs/measured-data.md's s_i); a rotor's reaction torque on the body is -s_i tau_i."""
     x: tuple[float, ...]
     y: tuple[float, ...]
     spin: tuple[float, ...]

@@ -2,7 +2,7 @@
 one identified from the flight of another vehicle), every candidate of the registry run on the data
 set and judged by its held-out gain, and the chain of causes: the strongest significant candidate is
 named and folded into the model, the others are refitted on top of it, until none is significant.
-The JSON report of measured-data.md (docs/diagnose.md, "Significance", "Every cause" and "A base
+The JSON report of docs/measured-data.md (docs/diagnose.md, "Significance", "Every cause" and "A base
 model with effects"; docs/real-flights.md)."""
 from __future__ import annotations
 
@@ -160,7 +160,7 @@ class Diagnosis:
         return r.cause, float(next(iter(r.parameters.values())))
 
     def report(self) -> dict:
-        """The JSON report: the keys of measured-data.md, then the project's extras."""
+        """The JSON report: the keys of docs/measured-data.md, then the project's extras."""
         base_rmse = self.base.score.rmse()
         ext_rmse = self.chain[0].score.rmse() if self.chain else base_rmse
         causes = []

@@ -1,4 +1,4 @@
-"""The static tier of `flightctl diagnose` (measured-data.md, "Tiers"; docs/diagnose.md, "Static tier"):
+"""The static tier of `flightctl diagnose` (docs/measured-data.md, "Tiers"; docs/diagnose.md, "Static tier"):
 what a flight logged at 5 Hz or more answers without following the vehicle's motion, for any log whose
 attitude, motor outputs and battery were logged (ArduPilot's default logging: IMU 25 Hz, RCOU 10 Hz).
 
@@ -20,7 +20,7 @@ from flightctl.sim.identify.static.curve import of_log, speed_curve
 from flightctl.sim.identify.static.hover import pattern, shares, speed_gains, throttle
 from flightctl.sim.identify.static.vibration import VIBE_COLUMNS, vibration
 
-STATIC_MIN_HZ = 5.0           # the attitude and the motor outputs at this rate or more (measured-data.md)
+STATIC_MIN_HZ = 5.0           # the attitude and the motor outputs at this rate or more (docs/measured-data.md)
 STATIC_COLUMNS = VIBE_COLUMNS  # the columns the static tier reads beside the contract's and `current`
 WHAT = ("the static tier: what the flight's hover and battery show at any rate of 5 Hz or more (hover throttle and "
         "thrust margin, each motor's share of the hover thrust and its drift, centre of mass against weak motor "
