@@ -120,16 +120,17 @@ def next_double(g) -> float:
 
 
 def standard_normal(g) -> float:
-    """`random_standard_normal` (NumPy's ziggurat) on the generator g."""
+    """`random_standard_normal` (NumPy's ziggurat) on the generator g. KI, WI and FI, NumPy's tables, are bound
+    where it is compiled (`compiled_normal`), hence the noqa."""
     while True:
         r = next64(g)
         idx = int(r & _FF)
         r = r >> _S8
         rabs = (r >> _S1) & _ABS
-        x = float(rabs) * WI[idx]
+        x = float(rabs) * WI[idx]  # noqa: F821
         if r & _ONE:
             x = -x
-        if rabs < KI[idx]:
+        if rabs < KI[idx]:  # noqa: F821
             return x
         if idx == 0:
             while True:
@@ -137,7 +138,7 @@ def standard_normal(g) -> float:
                 yy = -log1p(-next_double(g))
                 if yy + yy > xx * xx:
                     return -(ZIGGURAT_NOR_R + xx) if (rabs >> _S8) & _ONE else ZIGGURAT_NOR_R + xx
-        elif (FI[idx - 1] - FI[idx]) * next_double(g) + FI[idx] < exp(-0.5 * x * x):
+        elif (FI[idx - 1] - FI[idx]) * next_double(g) + FI[idx] < exp(-0.5 * x * x):  # noqa: F821
             return x
 
 
