@@ -136,6 +136,8 @@ BLOCKS = (
     Block("steps-table", "docs/steps.md", *marked("steps table"), SCRIPT + ("scripts/steps_table.py",), minutes=1),
     Block("tune-from-log", "docs/tune.md", *marked("tune from log"), SCRIPT + ("scripts/fromlog_cs110.py",),
           minutes=1.5),
+    Block("retune-study", "docs/tune.md", *marked("retune study"),
+          SCRIPT + ("scripts/retune_study.py", "--from", "docs/retune-study.json")),
     Block("steps-predicted", "docs/steps.md", *marked("steps predicted"), SCRIPT + ("scripts/steps_predicted.py",),
           minutes=2.5),
     analyze("analyze-base-table4", "analyze base table4", "--gains", "table4", "--estimator", "truth",

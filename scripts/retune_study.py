@@ -8,9 +8,10 @@ no crash, landed upright), holds (flies, and every attitude step rings and holds
 
     python scripts/retune_study.py [--vehicles 100] [--seed 43] [--hidden-share 0.5]
 
-The log given to `tune --from-log` is not the paper flight's: that flight's steps are all in its second half
-and its first half too short a stretch for the identification (`predict.halves` leaves the identification no
-stretch: it raised in DataSet before any check), so each hidden vehicle also flies, with Table 4,
+The log given to `tune --from-log` is not the paper flight's: that flight (86 s) has its roll and pitch steps
+from 8 s to 36 s and only yaw and the altitude after `predict.SPLIT` of its time (43 s), so its held-out half has
+no roll or pitch step to check the model on; and where Table 4 crashed early its first half has no stretch in the
+air (an uncaught ValueError in DataSet, now a refusal). So each hidden vehicle also flies, with Table 4,
 tests/data/plans/steps-both-halves.toml (roll and pitch steps in both halves, `PLAN`), and that log is the one
 tuned from, read as the CLI reads it (`diagnose.cli.read_logs`). The judged flights are the paper flight's.
 """

@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from flightctl.errors import InputError
 from flightctl.params import Airframe
 from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, yaw_drag
 from flightctl.sim.identify.diagnose.data import EDGE_S, FileData, Layout, stretches
@@ -130,6 +131,8 @@ class DataSet:
                         for f in files]
         # the stretches: (file index, start, stop) of input rows
         self.stretches = [(i, s0, s1) for i, f in enumerate(files) for s0, s1 in stretches(f.airborne)]
+        if not self.stretches:        # a log (or its half) that never flew long enough: a refusal, not a crash
+            raise InputError("no stretch in the air to identify from (the log, or the part of it used, never flew)")
         self.step = max(1, int(self.fs / (FLAT_PER_BAND * lowpass_hz)))
         self.fs_flat = self.fs / self.step                # the rate of the flat (kept) samples
         self.n = sum(len(range(s0, s1, self.step)) for _, s0, s1 in self.stretches)
