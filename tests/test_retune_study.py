@@ -8,8 +8,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
-
 from script import load
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,7 +31,6 @@ def test_the_table_counts_its_rows_and_the_hidden_effects_are_drawn_not_told():
     assert list(inspect.signature(fromlog.from_log).parameters)[:3] == ["table", "a", "targets"]
 
 
-@pytest.mark.slow
 def test_three_stored_vehicles_flown_again_give_their_rows():
     rows = STORED["rows"]
     flew = [r["vehicle"] for r in rows if r["table4"]["flies"]][:1]        # one whose log can be tuned from
