@@ -3,6 +3,7 @@ angular acceleration (the gyro's difference, a zero-phase 2nd-order Butterworth 
 regressed on the commanded torque through the log's layout (sum_i y_i P_i^2 for roll, -sum_i x_i P_i^2 for
 pitch: eq. 26 with h2 = 0, eq. 25's structure), the commands DELAY_S late, low-passed alike, with an
 intercept per block; over the airborne rows diagnose uses (`data.load_file`), cut into 8 contiguous blocks.
+The regression is `flightctl.sim.identify.diagnose.axischeck.regression` (its docstring: the method).
 Printed per axis: the slope's sign in each block, its R^2, and the block-jackknife t of the slope (the
 slope over the delete-one-block jackknife's standard error), beside the tool's t (the base model's
 effectiveness over its jackknife error, `base.identify`), or the tool's refusal.
@@ -23,55 +24,6 @@ DEFAULT = [FLIGHTS / "betaflight" / "LOG00037.BFL", FLIGHTS / "betaflight" / "bt
            ROOT / "tests" / "data" / "pid-analyzer" / "better_tune.BBL",
            ROOT / "tests" / "data" / "pid-analyzer" / "example_smooth_tune.BBL",
            ROOT / "tests" / "data" / "ardupilot" / "log171.bin"]
-LOWPASS_HZ = 12.0
-DELAY_S = 0.025
-BLOCKS = 8
-
-
-def regression(fd, axis: int, delay_s: float = DELAY_S, lowpass_hz: float = LOWPASS_HZ) -> dict:
-    """{slope, t, r2, signs} of the angular acceleration of `axis` (0 roll, 1 pitch) on its commanded
-    torque (module docstring), over the airborne rows of the FileData `fd`."""
-    from scipy import signal
-    from flightctl.sim.identify.diagnose.data import stretches
-    fs = 1.0 / float(np.median(np.diff(fd.t)))
-    sos = signal.butter(2, lowpass_hz, fs=fs, output="sos")
-    lay = fd.layout
-    arm = np.asarray(lay.y if axis == 0 else lay.x, float)[:, None] * (1.0 if axis == 0 else -1.0)
-    P = np.nan_to_num(fd.P[:4])
-    k = int(round(delay_s * fs))
-    Pd = np.concatenate([np.repeat(P[:, :1], k, axis=1), P[:, :P.shape[1] - k]], axis=1) if k else P
-    torque = (arm * Pd * Pd).sum(axis=0)
-    acc = np.zeros(fd.t.size)
-    acc[:-1] = np.diff(fd.gyro[axis]) / np.diff(fd.t)
-    ys, xs = [], []
-    for s0, s1 in stretches(fd.airborne):
-        if s1 - s0 < 30:
-            continue
-        ys.append(signal.sosfiltfilt(sos, acc[s0:s1]))
-        xs.append(signal.sosfiltfilt(sos, torque[s0:s1]))
-    y, x = np.concatenate(ys), np.concatenate(xs)
-    edges = np.linspace(0, y.size, BLOCKS + 1).round().astype(int)
-    blk = np.zeros(y.size, int)
-    for b in range(BLOCKS):
-        blk[edges[b]:edges[b + 1]] = b
-
-    def fit(keep):
-        m = np.isin(blk, np.flatnonzero(keep))
-        yy, xx, bb = y[m], x[m], blk[m]
-        # an intercept per block: each block's means removed
-        for b in np.unique(bb):
-            sel = bb == b
-            yy = np.where(sel, yy - yy[sel].mean(), yy)
-            xx = np.where(sel, xx - xx[sel].mean(), xx)
-        s = float(xx @ yy / (xx @ xx))
-        r2 = 1.0 - float(((yy - s * xx) ** 2).sum() / (yy @ yy))
-        return s, r2
-
-    slope, r2 = fit(np.ones(BLOCKS, bool))
-    jack = np.array([fit(np.arange(BLOCKS) != b)[0] for b in range(BLOCKS)])
-    sd = float(np.sqrt((BLOCKS - 1) / BLOCKS * ((jack - jack.mean()) ** 2).sum()))
-    signs = sum(fit(np.arange(BLOCKS) == b)[0] > 0 for b in range(BLOCKS))
-    return {"slope": slope, "t": slope / sd if sd > 0 else float("inf"), "r2": r2, "signs": int(signs)}
 
 
 def _tool(tab, a) -> tuple[dict | None, str]:
@@ -82,7 +34,7 @@ def _tool(tab, a) -> tuple[dict | None, str]:
     from flightctl.sim.identify.diagnose.verdict import _files
     try:
         files = _files([tab], a, [], lambda *_: None)
-        v, _ = identify(files, LOWPASS_HZ, lambda *_: None, rotor_speed_lag(files))
+        v, _ = identify(files, 12.0, lambda *_: None, rotor_speed_lag(files))
     except InputError as e:
         return None, str(e).split(": ", 1)[-1]
     rep = v.identification
@@ -92,7 +44,9 @@ def _tool(tab, a) -> tuple[dict | None, str]:
 def main(argv: list[str]) -> int:
     from flightctl import params as paramfile
     from flightctl.errors import InputError
+    from flightctl.sim.identify.diagnose.axischeck import regression
     from flightctl.sim.identify.diagnose.data import load_file
+    from flightctl.sim.identify.diagnose.dataset import N_BLOCKS
     from flightctl.sim.logs import read_foreign
     a = paramfile.load(None).airframe
     paths = [Path(p) for p in argv] or DEFAULT
@@ -113,9 +67,9 @@ def main(argv: list[str]) -> int:
                 continue
             tool, why = _tool(tab, a)
             for axis, label in enumerate(("roll", "pitch")):
-                r = regression(fd, axis)
+                r = regression([fd], axis)
                 t = "" if tool is None else f"{tool[label]:.1f}"
-                print(f"| {Path(tab.path).name} | {label} | {r['signs']} of {BLOCKS} | {r['r2']:.2f} | "
+                print(f"| {Path(tab.path).name} | {label} | {r['signs']} of {N_BLOCKS} | {r['r2']:.2f} | "
                       f"{r['t']:.1f} | {t} | {why[:160]} |", flush=True)
     return 0
 

@@ -39,6 +39,7 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.params import Airframe
 from flightctl.physics import G, thrust_from_command
+from flightctl.sim.identify.diagnose import axischeck
 from flightctl.sim.identify.diagnose.data import BARO_CLIMB_M, FileData, Layout
 from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, THRUST_CHANNELS, DataSet, Vehicle
 from flightctl.sim.identify.diagnose.rotorspeed import hover_gains
@@ -302,15 +303,18 @@ def _refuse(files: list[FileData], layout: Layout, theta: np.ndarray, sd: np.nda
             notes.append(f"{YAW_UNKNOWN} ({k_r:.3g} +- {k_r_sd:.2g}; the yaw data could not show even the smallest "
                          f"yaw effectiveness a quadrotor of this roll and pitch effectiveness has, {k_min:.2g})")
     if contradicted:
-        axes = " and ".join(w.split(" ", 1)[0] for w in contradicted)
-        raise LayoutContradicted(f"{paths}: the log's layout, signs or scaling contradict its data on {axes}: "
-                         f"{'; '.join(contradicted)}; no base model for causes")
+        names = [w.split(" ", 1)[0] for w in contradicted]
+        check = axischeck.said(files, names)
+        raise LayoutContradicted(f"{paths}: the log's layout, signs or scaling contradict its data on "
+                                 f"{' and '.join(names)}: {'; '.join(contradicted)}" + (f"; {check}" if check else "")
+                                 + "; no base model for causes")
     if unshown:
         axes = " and ".join(a for a, *_ in unshown)
         what = ", ".join(f"{a} t = {v / e:.1f}" for a, v, e, _ in unshown)
+        check = axischeck.said(files, [a for a, *_ in unshown])
         raise InputError(f"{paths}: this log does not identify the vehicle's {axes} effectiveness ({what}; "
-                         f"{T_BASE:g} needed, and the rotors fitted freely do not drive it either): {shown}; "
-                         "no base model for causes")
+                         f"{T_BASE:g} needed, and the rotors fitted freely do not drive it either"
+                         + (f"; {check}" if check else "") + f"): {shown}; no base model for causes")
     return layout, notes
 
 
