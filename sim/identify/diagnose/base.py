@@ -71,6 +71,8 @@ T_FREE = 3.5
 # has g1 / (2 l) = 0.040 (conventions.md). Taken at 0.01 (docs/real-flights.md).
 YAW_RATIO_MIN = 0.01
 YAW_UNKNOWN = "the yaw effectiveness is not identified from this log"
+NO_THRUST = ("the thrust's effectiveness is not answered: the log has no accelerometer (k_z = 1 is a unit, "
+             "not a measurement: the torques' effectiveness is per unit of it)")
 NAMES = ("k_p", "k_q", "k_r", "k_z", "gamma")
 UNITS = ("rad/s^2 per P^2 (arm)", "rad/s^2 per P^2 (arm)", "rad/s^2 per P^2", "m/s^2 per P^2", "1/rad")
 WHAT = ("h1 l / Jxx: roll", "h1 l / Jyy: pitch", "h1 g1 / Jzz: yaw", "h1 / M: specific force",
@@ -175,17 +177,24 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     sd = np.concatenate([[h2_sd], jackknife_sd(np.array([j[0] for j in jack]))])
     gains_sd = jackknife_sd(np.array([j[1] for j in jack]))
     com_sd = jackknife_sd(np.array([j[2] for j in jack]))
+    accel = any(f.accel for f in files)
     progress(f"base model identified from the flight: h2 = {h2:.1f}, "
-             + ", ".join(f"{n} = {v:.4g} +- {e:.2g}" for n, v, e in zip(NAMES, theta, sd[1:])))
+             + ", ".join(f"{n} = {v:.4g} +- {e:.2g}" if accel or n != "k_z" else "k_z not measured (no accelerometer)"
+                         for n, v, e in zip(NAMES, theta, sd[1:])))
     free_t = {c: _free_t(st, c, ds.block_counts, jackknife_sd) for c in (0, 1, 5)}
     thrust_source = "the motor commands, f = h1 (P - h2)^2 (eq. 26)"
-    measured = thrust_from_speeds(ds, speeds, jackknife_sd)
-    if measured is not None:
+    measured = thrust_from_speeds(ds, speeds, jackknife_sd) if accel else None
+    if not accel:
+        # no accelerometer: the specific force is not measured, so neither is h1 / M; the equivalent
+        # airframe is taken per unit of it (k_z = 1), which scales no torque channel (Jxx = k_z / k_p ...)
+        theta[3], sd[4] = 1.0, 0.0
+        thrust_source = NO_THRUST
+    elif measured is not None:
         theta[3], sd[4] = measured
         thrust_source = (f"the log's rotor speeds, f = c1 Omega^2 (eq. 27): acc_z on the sum of the squared speeds, "
                          f"times the speed-per-command slope squared ({speeds['slope']:.4g} rad/s per P unit)")
         progress(f"base model: the thrust effectiveness from the rotor speeds, k_z = {theta[3]:.4g} +- {sd[4]:.2g}")
-    layout, more = _refuse(files, layout, theta, sd[1:], free_t, _shown(ds, slow))
+    layout, more = _refuse(files, layout, theta, sd[1:], free_t, _shown(ds, slow), accel)
     notes += more
     hover = hover_gains(gains, com, layout)
     hover_sd = jackknife_sd(np.array([hover_gains(j[1], j[2], layout) for j in jack]))
@@ -206,6 +215,8 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     report.update({name: {"value": float(f"{v:.5g}"), "stderr": float(f"{e:.2g}"), "unit": u, "what": w}
                    for name, v, e, u, w in zip(NAMES, theta, sd[1:], UNITS, WHAT)})
     report["k_z"]["source"] = thrust_source
+    if not accel:
+        report["k_z"]["unanswered"] = True
     report["rotor_gain"] = {"value": [round(float(g), 4) for g in gains],
                             "stderr": [float(f"{e:.2g}") for e in gains_sd], "unit": "-",
                             "what": "each rotor's thrust and torque against the mean of the four (eq. 7's "
@@ -257,7 +268,7 @@ AXES = (("roll", 0, 0), ("pitch", 1, 1), ("thrust", 3, 5))      # (axis, its ind
 
 
 def _refuse(files: list[FileData], layout: Layout, theta: np.ndarray, sd: np.ndarray, free_t: dict,
-            shown: str) -> tuple[Layout, list[str]]:
+            shown: str, accel: bool = True) -> tuple[Layout, list[str]]:
     """The base model is a base for causes only if the data confirm the log's layout, signs and scaling:
     the effectiveness of roll, pitch and thrust (`theta`: NAMES order, `sd` their jackknife standard
     errors) positive and at least T_BASE standard errors from zero. Otherwise InputError, saying which:
@@ -269,11 +280,15 @@ def _refuse(files: list[FileData], layout: Layout, theta: np.ndarray, sd: np.nda
     only flips the sign of the yaw column; `theta` is changed in place). One that is then not significant
     is refused only if the log could have shown the smallest yaw effectiveness a quadrotor of this roll
     and pitch effectiveness has (YAW_RATIO_MIN, docs/real-flights.md): a log without yaw manoeuvres
-    cannot tell, and its yaw channel is then not a base for the causes that act on yaw.
+    cannot tell, and its yaw channel is then not a base for the causes that act on yaw. Without an
+    accelerometer (`accel` False) the thrust is not asked: it is named as unanswered (NO_THRUST).
     Returns (the layout, notes)."""
     paths = ", ".join(f.path for f in files)
     contradicted, unshown = [], []
+    notes = [] if accel else [NO_THRUST]
     for axis, k, c in AXES:
+        if axis == "thrust" and not accel:
+            continue
         v, e = theta[k], sd[k]
         if v >= T_BASE * e and v > 0:
             continue
@@ -285,7 +300,6 @@ def _refuse(files: list[FileData], layout: Layout, theta: np.ndarray, sd: np.nda
         else:
             unshown.append((axis, v, e, free_t[c]))
     k_r, k_r_sd = theta[2], sd[2]
-    notes = []
     if k_r < -2.0 * k_r_sd:
         layout = Layout(layout.x, layout.y, tuple(-s for s in layout.spin), layout.unit,
                         layout.source + "; spins reversed: the yaw data say so")
