@@ -106,13 +106,8 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     notes = []
     if any(f.layout != layout for f in files[1:]):
         notes.append("the logs declare different rotor layouts: the first one's is used")
-    ds = DataSet(files, Vehicle(equivalent(0.0), layout, (0.0, 0.0, 0.0), identified=True), lowpass_hz)
-    drag = []
-    for w in ds.wmid:                      # eq. 6 on r_dot: -r |r| per unit gamma
-        x = np.zeros((C, w.shape[1]))
-        x[2] = -w[2] * np.abs(w[2])
-        drag.append(x)
-    drag = ds.flat_filtered(drag)
+    ds = identification_set(files, lowpass_hz)
+    drag = yaw_drag_column(ds)
     allb = np.ones(N_BLOCKS, bool)
 
     def jackknife_sd(jack):
@@ -238,6 +233,21 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     report["coupling"] = {"value": list(coupling), "what": "eq. 7's a_p, a_q, a_r of a flat vehicle, Jzz = Jxx + Jyy"}
     return Vehicle(equivalent(h2, theta), layout, coupling, identified=True, identification=report,
                    gains=tuple(float(g) for g in gains)), notes
+
+
+def identification_set(files: list[FileData], lowpass_hz: float) -> DataSet:
+    """The data set the base model is identified on: the log's layout, unit effectiveness, no coupling."""
+    return DataSet(files, Vehicle(equivalent(0.0), files[0].layout, (0.0, 0.0, 0.0), identified=True), lowpass_hz)
+
+
+def yaw_drag_column(ds: DataSet) -> np.ndarray:
+    """Eq. 6 on r_dot, -r |r| per unit gamma, filtered as the data are (C, n)."""
+    drag = []
+    for w in ds.wmid:
+        x = np.zeros((C, w.shape[1]))
+        x[2] = -w[2] * np.abs(w[2])
+        drag.append(x)
+    return ds.flat_filtered(drag)
 
 
 def thrust_from_speeds(ds: DataSet, speeds: dict | None, jackknife_sd) -> tuple[float, float] | None:
@@ -388,25 +398,32 @@ def delayed_commands(ds: DataSet, delay: float) -> list[np.ndarray]:
 
 
 def _timing(ds: DataSet, drag: np.ndarray) -> float:
-    """The delay (s) of the commands at which a free curve per channel (each thrust channel linear in
-    the timed P^2 and P, a trim on each angular channel, the yaw drag) best predicts the flight, over
-    TIMING_DELAYS (0-300 ms). A vehicle whose motors lag 150 ms shows almost nothing of its effectiveness to a model
-    without it: identified at zero timing, its gains and signs would be noise."""
-    allb = np.ones(N_BLOCKS, bool)
-
-    def objective(delay):
-        Ps = delayed_commands(ds, delay)
-        U = ds.flat_filtered([ds.predict_file(i, ds.drive(P * P, P)).unit for i, P in enumerate(Ps)])
-        cols = []
-        for c in THRUST_CHANNELS:
-            for k in range(3 if c < 3 else 2):     # an angular channel's trim too (the rotor gains' part)
-                x = np.zeros((C, ds.n))
-                x[c] = U[k, c] if k < 2 else 1.0
-                cols.append(x)
-        return solve(linear_stats(ds, ds.measured, np.stack(cols + [drag], axis=-1)), allb, ds.block_counts)[0]
-
-    _, delay = min((objective(d), float(d)) for d in TIMING_DELAYS)
+    """The delay (s) of the commands at which a free curve per channel (`timing_objective`) best predicts
+    the flight, over TIMING_DELAYS (0-300 ms). A vehicle whose motors lag 150 ms shows almost nothing of its
+    effectiveness to a model without it: identified at zero timing, its gains and signs would be noise."""
+    _, delay = min((timing_objective(ds, drag, d), float(d)) for d in TIMING_DELAYS)
     return delay
+
+
+def timing_objective(ds: DataSet, drag: np.ndarray, delay: float, lag: float = 0.0) -> float:
+    """The fit's objective (sum_c log RSS_c, `scoring.solve`) of a free curve per channel (each thrust
+    channel linear in the timed P^2 and P, a trim on each angular channel, the yaw drag `drag`) on the
+    commands through a pure delay `delay` (s) and, if `lag` > 0, a first-order lag of `lag` s (the motor's,
+    `motor_lag.lag_held`, averaged over each period). scripts/timing_lag.py asks whether a flight prefers a
+    lag and a short delay to a long delay."""
+    from flightctl.sim.causes.motor_lag import lag_held
+    Ps = delayed_commands(ds, delay)
+    if lag > 0:
+        Ps = [lag_held(P, lag, ds.fs)[1] for P in Ps]
+    U = ds.flat_filtered([ds.predict_file(i, ds.drive(P * P, P)).unit for i, P in enumerate(Ps)])
+    cols = []
+    for c in THRUST_CHANNELS:
+        for k in range(3 if c < 3 else 2):     # an angular channel's trim too (the rotor gains' part)
+            x = np.zeros((C, ds.n))
+            x[c] = U[k, c] if k < 2 else 1.0
+            cols.append(x)
+    st = linear_stats(ds, ds.measured, np.stack(cols + [drag], axis=-1))
+    return solve(st, np.ones(N_BLOCKS, bool), ds.block_counts)[0]
 
 
 def _rotor_columns(ds: DataSet, Ps, h2: float, drag: np.ndarray) -> np.ndarray:
