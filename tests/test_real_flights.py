@@ -164,6 +164,11 @@ def test_a_log_that_hardly_moves_an_axis_gets_the_static_tier_and_is_told_it_doe
     why = _static_only(need(FLIGHTS / "betaflight" / "btfl_all.bbl"), tmp_path, "--index", "12")
     assert "does not identify the vehicle's pitch effectiveness" in why and "s in the air" in why, why
     assert "contradict" not in why
+    # the refusal says what an independent regression finds, and it agrees: no pitch in this flight
+    found = re.search(r"regression of the angular acceleration .* finds pitch t = (-?[\d.]+), the layout's sign in "
+                      r"(\d) of 8 blocks", why)
+    assert found, why
+    assert float(found[1]) < 2.0 and int(found[2]) < 8, why
 
 
 def test_a_take_off_that_never_left_the_ground_is_not_called_an_unlogged_motor(tmp_path, capsys):

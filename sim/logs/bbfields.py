@@ -172,7 +172,7 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
     reversed_ = h.get("yaw_motors_reversed", h.get("motor_direction_inverted"))
     mixer = "INAV" if kind == "inav" else "Betaflight"
     frame = frames.betaflight(len(motors), mixer, reversed_, imp.fail)
-    for need in ("time", "gyroADC[0]", "accSmooth[0]"):
+    for need in ("time", "gyroADC[0]"):
         if need not in col:
             imp.fail(f"no {need.split('[')[0]} field: {'the time' if need == 'time' else 'that sensor'} was not logged")
     t = a[:, col["time"]] * 1e-6
@@ -214,6 +214,11 @@ def imported(name: str, h: dict, names: list[str], a: np.ndarray, notes: list[st
     one_g = float(h.get("acc_1G", 2048) or 2048)
     if "accUnfiltered[0]" in col:
         acc, acc_source, acc_filter = field("accUnfiltered", 3), "accUnfiltered", "none"
+    elif "accSmooth[0]" not in col:
+        # the accelerometer switched off (Betaflight 3.x racers: `feature -ACC`): no acc fields at all; the
+        # columns stay empty and diagnose judges the gyro and the motors (data.NO_ACCELEROMETER)
+        acc, acc_source, acc_filter = field("accSmooth", 3), "none (no accSmooth field: the accelerometer off)", "none"
+        imp.notes.append("no accSmooth field: the accelerometer was switched off; its columns are empty")
     else:
         acc, acc_source = field("accSmooth", 3), "accSmooth"
         lpf = float(h.get("acc_lpf_hz", 0) or 0) / (1.0 if kind == "inav" else 100.0)   # Betaflight: centi-Hz

@@ -268,6 +268,9 @@ def flight_text(imp: Imported, progress=None) -> str:
     if "range" in imp.streams:
         cols["range"] = _new_samples(t, imp.streams["range"])
     needed = ("acc_x", "acc_y", "acc_z", "P1", "P2", "P3", "P4") if imu else ("P1", "P2", "P3", "P4", "roll", "pitch", "yaw")
+    if imu and "acc" in imp.streams and not np.isfinite(imp.streams["acc"].values).any():
+        needed = needed[3:]      # the reader found the accelerometer switched off (its note): judged on the gyro
+        imp.meta.setdefault("imu", "gyro only: no accelerometer logged (switched off on the vehicle)")
     for name in needed[:4]:
         if name not in cols or not np.isfinite(cols[name]).any():
             imp.fail(f"no {name} on the {what}'s time base")

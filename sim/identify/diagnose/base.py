@@ -39,6 +39,7 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.params import Airframe
 from flightctl.physics import G, thrust_from_command
+from flightctl.sim.identify.diagnose import axischeck
 from flightctl.sim.identify.diagnose.data import BARO_CLIMB_M, FileData, Layout
 from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, THRUST_CHANNELS, DataSet, Vehicle
 from flightctl.sim.identify.diagnose.rotorspeed import hover_gains
@@ -70,6 +71,8 @@ T_FREE = 3.5
 # has g1 / (2 l) = 0.040 (conventions.md). Taken at 0.01 (docs/real-flights.md).
 YAW_RATIO_MIN = 0.01
 YAW_UNKNOWN = "the yaw effectiveness is not identified from this log"
+NO_THRUST = ("the thrust's effectiveness is not answered: the log has no accelerometer (k_z = 1 is a unit, "
+             "not a measurement: the torques' effectiveness is per unit of it)")
 NAMES = ("k_p", "k_q", "k_r", "k_z", "gamma")
 UNITS = ("rad/s^2 per P^2 (arm)", "rad/s^2 per P^2 (arm)", "rad/s^2 per P^2", "m/s^2 per P^2", "1/rad")
 WHAT = ("h1 l / Jxx: roll", "h1 l / Jyy: pitch", "h1 g1 / Jzz: yaw", "h1 / M: specific force",
@@ -103,13 +106,8 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     notes = []
     if any(f.layout != layout for f in files[1:]):
         notes.append("the logs declare different rotor layouts: the first one's is used")
-    ds = DataSet(files, Vehicle(equivalent(0.0), layout, (0.0, 0.0, 0.0), identified=True), lowpass_hz)
-    drag = []
-    for w in ds.wmid:                      # eq. 6 on r_dot: -r |r| per unit gamma
-        x = np.zeros((C, w.shape[1]))
-        x[2] = -w[2] * np.abs(w[2])
-        drag.append(x)
-    drag = ds.flat_filtered(drag)
+    ds = identification_set(files, lowpass_hz)
+    drag = yaw_drag_column(ds)
     allb = np.ones(N_BLOCKS, bool)
 
     def jackknife_sd(jack):
@@ -174,17 +172,24 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     sd = np.concatenate([[h2_sd], jackknife_sd(np.array([j[0] for j in jack]))])
     gains_sd = jackknife_sd(np.array([j[1] for j in jack]))
     com_sd = jackknife_sd(np.array([j[2] for j in jack]))
+    accel = any(f.accel for f in files)
     progress(f"base model identified from the flight: h2 = {h2:.1f}, "
-             + ", ".join(f"{n} = {v:.4g} +- {e:.2g}" for n, v, e in zip(NAMES, theta, sd[1:])))
+             + ", ".join(f"{n} = {v:.4g} +- {e:.2g}" if accel or n != "k_z" else "k_z not measured (no accelerometer)"
+                         for n, v, e in zip(NAMES, theta, sd[1:])))
     free_t = {c: _free_t(st, c, ds.block_counts, jackknife_sd) for c in (0, 1, 5)}
     thrust_source = "the motor commands, f = h1 (P - h2)^2 (eq. 26)"
-    measured = thrust_from_speeds(ds, speeds, jackknife_sd)
-    if measured is not None:
+    measured = thrust_from_speeds(ds, speeds, jackknife_sd) if accel else None
+    if not accel:
+        # no accelerometer: the specific force is not measured, so neither is h1 / M; the equivalent
+        # airframe is taken per unit of it (k_z = 1), which scales no torque channel (Jxx = k_z / k_p ...)
+        theta[3], sd[4] = 1.0, 0.0
+        thrust_source = NO_THRUST
+    elif measured is not None:
         theta[3], sd[4] = measured
         thrust_source = (f"the log's rotor speeds, f = c1 Omega^2 (eq. 27): acc_z on the sum of the squared speeds, "
                          f"times the speed-per-command slope squared ({speeds['slope']:.4g} rad/s per P unit)")
         progress(f"base model: the thrust effectiveness from the rotor speeds, k_z = {theta[3]:.4g} +- {sd[4]:.2g}")
-    layout, more = _refuse(files, layout, theta, sd[1:], free_t, _shown(ds, slow))
+    layout, more = _refuse(files, layout, theta, sd[1:], free_t, _shown(ds, slow), accel)
     notes += more
     hover = hover_gains(gains, com, layout)
     hover_sd = jackknife_sd(np.array([hover_gains(j[1], j[2], layout) for j in jack]))
@@ -205,6 +210,8 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     report.update({name: {"value": float(f"{v:.5g}"), "stderr": float(f"{e:.2g}"), "unit": u, "what": w}
                    for name, v, e, u, w in zip(NAMES, theta, sd[1:], UNITS, WHAT)})
     report["k_z"]["source"] = thrust_source
+    if not accel:
+        report["k_z"]["unanswered"] = True
     report["rotor_gain"] = {"value": [round(float(g), 4) for g in gains],
                             "stderr": [float(f"{e:.2g}") for e in gains_sd], "unit": "-",
                             "what": "each rotor's thrust and torque against the mean of the four (eq. 7's "
@@ -226,6 +233,21 @@ def identify(files: list[FileData], lowpass_hz: float, progress, speeds: dict | 
     report["coupling"] = {"value": list(coupling), "what": "eq. 7's a_p, a_q, a_r of a flat vehicle, Jzz = Jxx + Jyy"}
     return Vehicle(equivalent(h2, theta), layout, coupling, identified=True, identification=report,
                    gains=tuple(float(g) for g in gains)), notes
+
+
+def identification_set(files: list[FileData], lowpass_hz: float) -> DataSet:
+    """The data set the base model is identified on: the log's layout, unit effectiveness, no coupling."""
+    return DataSet(files, Vehicle(equivalent(0.0), files[0].layout, (0.0, 0.0, 0.0), identified=True), lowpass_hz)
+
+
+def yaw_drag_column(ds: DataSet) -> np.ndarray:
+    """Eq. 6 on r_dot, -r |r| per unit gamma, filtered as the data are (C, n)."""
+    drag = []
+    for w in ds.wmid:
+        x = np.zeros((C, w.shape[1]))
+        x[2] = -w[2] * np.abs(w[2])
+        drag.append(x)
+    return ds.flat_filtered(drag)
 
 
 def thrust_from_speeds(ds: DataSet, speeds: dict | None, jackknife_sd) -> tuple[float, float] | None:
@@ -256,7 +278,7 @@ AXES = (("roll", 0, 0), ("pitch", 1, 1), ("thrust", 3, 5))      # (axis, its ind
 
 
 def _refuse(files: list[FileData], layout: Layout, theta: np.ndarray, sd: np.ndarray, free_t: dict,
-            shown: str) -> tuple[Layout, list[str]]:
+            shown: str, accel: bool = True) -> tuple[Layout, list[str]]:
     """The base model is a base for causes only if the data confirm the log's layout, signs and scaling:
     the effectiveness of roll, pitch and thrust (`theta`: NAMES order, `sd` their jackknife standard
     errors) positive and at least T_BASE standard errors from zero. Otherwise InputError, saying which:
@@ -268,11 +290,15 @@ def _refuse(files: list[FileData], layout: Layout, theta: np.ndarray, sd: np.nda
     only flips the sign of the yaw column; `theta` is changed in place). One that is then not significant
     is refused only if the log could have shown the smallest yaw effectiveness a quadrotor of this roll
     and pitch effectiveness has (YAW_RATIO_MIN, docs/real-flights.md): a log without yaw manoeuvres
-    cannot tell, and its yaw channel is then not a base for the causes that act on yaw.
+    cannot tell, and its yaw channel is then not a base for the causes that act on yaw. Without an
+    accelerometer (`accel` False) the thrust is not asked: it is named as unanswered (NO_THRUST).
     Returns (the layout, notes)."""
     paths = ", ".join(f.path for f in files)
     contradicted, unshown = [], []
+    notes = [] if accel else [NO_THRUST]
     for axis, k, c in AXES:
+        if axis == "thrust" and not accel:
+            continue
         v, e = theta[k], sd[k]
         if v >= T_BASE * e and v > 0:
             continue
@@ -284,7 +310,6 @@ def _refuse(files: list[FileData], layout: Layout, theta: np.ndarray, sd: np.nda
         else:
             unshown.append((axis, v, e, free_t[c]))
     k_r, k_r_sd = theta[2], sd[2]
-    notes = []
     if k_r < -2.0 * k_r_sd:
         layout = Layout(layout.x, layout.y, tuple(-s for s in layout.spin), layout.unit,
                         layout.source + "; spins reversed: the yaw data say so")
@@ -302,15 +327,18 @@ def _refuse(files: list[FileData], layout: Layout, theta: np.ndarray, sd: np.nda
             notes.append(f"{YAW_UNKNOWN} ({k_r:.3g} +- {k_r_sd:.2g}; the yaw data could not show even the smallest "
                          f"yaw effectiveness a quadrotor of this roll and pitch effectiveness has, {k_min:.2g})")
     if contradicted:
-        axes = " and ".join(w.split(" ", 1)[0] for w in contradicted)
-        raise LayoutContradicted(f"{paths}: the log's layout, signs or scaling contradict its data on {axes}: "
-                         f"{'; '.join(contradicted)}; no base model for causes")
+        names = [w.split(" ", 1)[0] for w in contradicted]
+        check = axischeck.said(files, names)
+        raise LayoutContradicted(f"{paths}: the log's layout, signs or scaling contradict its data on "
+                                 f"{' and '.join(names)}: {'; '.join(contradicted)}" + (f"; {check}" if check else "")
+                                 + "; no base model for causes")
     if unshown:
         axes = " and ".join(a for a, *_ in unshown)
         what = ", ".join(f"{a} t = {v / e:.1f}" for a, v, e, _ in unshown)
+        check = axischeck.said(files, [a for a, *_ in unshown])
         raise InputError(f"{paths}: this log does not identify the vehicle's {axes} effectiveness ({what}; "
-                         f"{T_BASE:g} needed, and the rotors fitted freely do not drive it either): {shown}; "
-                         "no base model for causes")
+                         f"{T_BASE:g} needed, and the rotors fitted freely do not drive it either"
+                         + (f"; {check}" if check else "") + f"): {shown}; no base model for causes")
     return layout, notes
 
 
@@ -370,25 +398,32 @@ def delayed_commands(ds: DataSet, delay: float) -> list[np.ndarray]:
 
 
 def _timing(ds: DataSet, drag: np.ndarray) -> float:
-    """The delay (s) of the commands at which a free curve per channel (each thrust channel linear in
-    the timed P^2 and P, a trim on each angular channel, the yaw drag) best predicts the flight, over
-    TIMING_DELAYS (0-300 ms). A vehicle whose motors lag 150 ms shows almost nothing of its effectiveness to a model
-    without it: identified at zero timing, its gains and signs would be noise."""
-    allb = np.ones(N_BLOCKS, bool)
-
-    def objective(delay):
-        Ps = delayed_commands(ds, delay)
-        U = ds.flat_filtered([ds.predict_file(i, ds.drive(P * P, P)).unit for i, P in enumerate(Ps)])
-        cols = []
-        for c in THRUST_CHANNELS:
-            for k in range(3 if c < 3 else 2):     # an angular channel's trim too (the rotor gains' part)
-                x = np.zeros((C, ds.n))
-                x[c] = U[k, c] if k < 2 else 1.0
-                cols.append(x)
-        return solve(linear_stats(ds, ds.measured, np.stack(cols + [drag], axis=-1)), allb, ds.block_counts)[0]
-
-    _, delay = min((objective(d), float(d)) for d in TIMING_DELAYS)
+    """The delay (s) of the commands at which a free curve per channel (`timing_objective`) best predicts
+    the flight, over TIMING_DELAYS (0-300 ms). A vehicle whose motors lag 150 ms shows almost nothing of its
+    effectiveness to a model without it: identified at zero timing, its gains and signs would be noise."""
+    _, delay = min((timing_objective(ds, drag, d), float(d)) for d in TIMING_DELAYS)
     return delay
+
+
+def timing_objective(ds: DataSet, drag: np.ndarray, delay: float, lag: float = 0.0) -> float:
+    """The fit's objective (sum_c log RSS_c, `scoring.solve`) of a free curve per channel (each thrust
+    channel linear in the timed P^2 and P, a trim on each angular channel, the yaw drag `drag`) on the
+    commands through a pure delay `delay` (s) and, if `lag` > 0, a first-order lag of `lag` s (the motor's,
+    `motor_lag.lag_held`, averaged over each period). scripts/timing_lag.py asks whether a flight prefers a
+    lag and a short delay to a long delay."""
+    from flightctl.sim.causes.motor_lag import lag_held
+    Ps = delayed_commands(ds, delay)
+    if lag > 0:
+        Ps = [lag_held(P, lag, ds.fs)[1] for P in Ps]
+    U = ds.flat_filtered([ds.predict_file(i, ds.drive(P * P, P)).unit for i, P in enumerate(Ps)])
+    cols = []
+    for c in THRUST_CHANNELS:
+        for k in range(3 if c < 3 else 2):     # an angular channel's trim too (the rotor gains' part)
+            x = np.zeros((C, ds.n))
+            x[c] = U[k, c] if k < 2 else 1.0
+            cols.append(x)
+    st = linear_stats(ds, ds.measured, np.stack(cols + [drag], axis=-1))
+    return solve(st, np.ones(N_BLOCKS, bool), ds.block_counts)[0]
 
 
 def _rotor_columns(ds: DataSet, Ps, h2: float, drag: np.ndarray) -> np.ndarray:

@@ -123,6 +123,9 @@ def _base(r: dict) -> str:
     axes = []
     for name, axis in (("k_p", "roll"), ("k_q", "pitch"), ("k_r", "yaw"), ("k_z", "thrust")):
         v, e = b[name]["value"], b[name]["stderr"]
+        if b[name].get("unanswered"):
+            axes.append(f"{axis}: no accelerometer")
+            continue
         axes.append(f"{axis} {v / e:.0f}" if e > 0 else f"{axis} {v:.3g}")
     extra = "; spins reversed by the data" if "spins reversed" in b["layout"]["source"] else ""
     gains = r.get("rotor_gain_check")

@@ -153,6 +153,7 @@ class FileData:
     imu: bool = True                  # False: no gyro or accelerometer logged (`# imu: none ...`; NaN above)
     rates: np.ndarray | None = None   # (3, n) body rates: the gyro, or without one the attitude's (`attitude_rates`)
     height: np.ndarray | None = None  # (n,) a logged height above its level at rest (any source), NaN where unknown
+    accel: bool = True                # False: no accelerometer (its columns absent, NaN or all zero: `has_accelerometer`)
 
 
 def attitude_rates(t: np.ndarray, att: np.ndarray) -> np.ndarray:
@@ -260,9 +261,10 @@ def _check_columns(table: Table, P: np.ndarray, low: float, what: str) -> None:
     if ran < MIN_AIRBORNE_S:
         table.fail(f"too short to judge: its motors ran for {ran:.2g} s ({what}), idle for the rest of its {span:.2g} s; "
                    f"at least {MIN_AIRBORNE_S:g} s of airborne data is needed")
+    absent = () if has_accelerometer(np.vstack([table[c] for c in IMU_COLUMNS[3:]])) else IMU_COLUMNS[3:]
     for name in IMU_COLUMNS:
         x = table[name]
-        if np.ptp(x) == 0:
+        if np.ptp(x) == 0 and name not in absent:     # (no accelerometer at all is judged on the gyro)
             table.fail(f"{x[0]:g} on every row: a dead or unlogged sensor cannot be judged", column=name)
     running = P > low
     for i in np.flatnonzero(~running.any(axis=1)):
@@ -494,6 +496,19 @@ def _cells(table: Table) -> int | None:
     return n if 1 <= n <= 24 else None
 
 
+def has_accelerometer(acc: np.ndarray) -> bool:
+    """Whether a log's accelerometer columns (3, n) hold a measurement: a Betaflight 3.x racer with the
+    accelerometer switched off (`feature -ACC`) logs none, or zeros; a working one never reads exactly zero
+    on all three axes throughout (gravity alone is 9.8 m/s^2)."""
+    return bool(np.nan_to_num(acc).any())
+
+
+NO_ACCELEROMETER = ("no accelerometer in the log (its columns absent or zero: switched off on the vehicle): the dynamic "
+                    "tier is judged on the gyro and the motors (roll, pitch and yaw effectiveness, the timing, the "
+                    "steps); what needs the specific force is not answered (the thrust's effectiveness, the hover's "
+                    "share of the full thrust, the drag on the accelerometer, the battery's sag on the thrust)")
+
+
 def load_file(table: Table, a: Airframe) -> FileData:
     """The arrays of one flight log (already read and checked by `flightctl.logfile`). A log of this
     project's vehicle has the paper's + layout with the arm of `a`; a foreign one (`# vehicle:
@@ -505,6 +520,10 @@ def load_file(table: Table, a: Airframe) -> FileData:
     acc = np.vstack([table[c] for c in ("acc_x", "acc_y", "acc_z")])
     notes = [f"damaged: {table.meta['damaged']}"] if table.meta.get("damaged") else []   # (a reader's `# damaged:`)
     foreign = table.meta.get("vehicle") == "foreign"
+    accel = has_accelerometer(acc)
+    if not accel:
+        acc = np.zeros_like(acc)
+        notes.append(NO_ACCELEROMETER)
     gyro_filter, acc_filter = (parse_filters(table.meta.get(k, "none"), lambda w, k=k: table.fail(f"# {k}: {w}"))
                                for k in ("gyro_filter", "acc_filter"))
     if foreign:
@@ -515,17 +534,18 @@ def load_file(table: Table, a: Airframe) -> FileData:
         on = motors_on(P, a)
     # at rest before the first take-off: the initial tilt
     first_on = int(np.argmax(on)) if on.any() else n
-    if foreign and not np.isnan(acc).all():
+    if foreign and accel:
         acc = _accelerometer_frame(table, t, gyro, acc, first_on, notes)
     still = slice(0, first_on)
     imu = not np.isnan(gyro).all()
     if not imu:        # no IMU (`# imu: none`): the attitude the autopilot logged, its rates for the gyro's
         Rm, rates = _logged_attitude(table)
-    elif first_on >= 20:
+    elif first_on >= 20 and accel:
         # the gyro is calibrated by contract (bias removed): only the initial tilt is taken here
         R0 = _tilt_rotation(acc[:, still].mean(axis=1))
     else:
-        notes.append("no rest before the motors start: initial tilt taken as zero")
+        notes.append("no rest before the motors start: initial tilt taken as zero" if accel
+                     else "no accelerometer: the initial tilt taken as zero")
         R0 = np.eye(3)
     if imu:   # attitude: the gyro integrated from the first motor start (at rest before it: R0)
         rates = gyro
@@ -559,7 +579,7 @@ def load_file(table: Table, a: Airframe) -> FileData:
         if (i1 - i0) * dt_nom >= MIN_STRETCH_S:
             keep[i0:i1] = True
     return FileData(table.path, t, P, gyro, acc, bv, z, Rm, keep, on, layout, foreign, gyro_filter, acc_filter,
-                    omega, _cells(table), notes, baro, imu, rates, height)
+                    omega, _cells(table), notes, baro, imu, rates, height, accel)
 
 
 def _logged_attitude(table: Table) -> tuple[np.ndarray, np.ndarray]:

@@ -268,9 +268,14 @@ class DataSet:
 
     def _sense(self, i, x):
         """What the sensors show of model-side (..., C, n) arrays of file i: the log's declared gyro
-        and accelerometer filters, causal, over the whole file (the rows that are not all zero)."""
+        and accelerometer filters, causal, over the whole file (the rows that are not all zero). A log
+        without an accelerometer (`FileData.accel`) shows nothing of the model's accelerometer channels:
+        they are zero, as its measurement is, so no fit or score is moved by them."""
         from scipy import signal
         gyro, acc = self._sensor[i]
+        if not self.files[i].accel and x.shape[-2] == C:
+            x = np.array(x, dtype=float)
+            x[..., ACC, :] = 0.0
         if gyro is None and acc is None:
             return x
         x = np.array(x, dtype=float)

@@ -154,7 +154,10 @@ def heldout_linear(ds: DataSet, e: np.ndarray, A: np.ndarray | None, st: LinearS
 
 
 def geomean(x):
-    return float(np.exp(np.mean(np.log(x))))
+    """The geometric mean of the channels' RMSE; a channel whose RMSE is exactly zero is one the log does
+    not measure (no accelerometer: `DataSet._sense`), left out."""
+    x = np.asarray(x, float)
+    return float(np.exp(np.mean(np.log(x[x > 0])))) if (x > 0).any() else 0.0
 
 
 @dataclass
@@ -205,15 +208,16 @@ def significance(score: Score, base: Score, fs: float) -> Significance:
     its mean over the windows in standard errors; when the candidate predicts no better than the
     base model, t is about N(0, 1) or below, and T_CRIT = 3 is a one-sided 0.1 % level. Each
     channel is also tested alone, on windows of DM_CHANNEL_WINDOW_S. `fs`: samples per second."""
-    ratio = score.rss / base.rss                       # (B, C)
+    measured = base.rss.sum(axis=0) > 0               # (C,): the channels the log measures (geomean)
+    ratio = score.rss[:, measured] / base.rss[:, measured]     # (B, C measured)
     block_gain = 1.0 - np.exp(0.5 * np.log(ratio).mean(axis=1))
     gain = 1.0 - geomean(score.rmse()) / geomean(base.rmse())
-    channel_gain = 1.0 - score.rmse() / base.rmse()
+    channel_gain = np.where(measured, 1.0 - score.rmse() / np.where(measured, base.rmse(), 1.0), 0.0)
     out = Significance(gain, block_gain, 0.0, channel_gain, np.zeros(C))
     windows = _windows(base, score, fs, DM_WINDOW_S)
     if windows is not None:
         w, m = windows
-        out.t_stat = _t(w.mean(axis=0), m)
+        out.t_stat = _t(w[measured].mean(axis=0), m)
     windows = _windows(base, score, fs, DM_CHANNEL_WINDOW_S)
     if windows is not None:
         w, m = windows
