@@ -76,13 +76,69 @@ def test_a_px4_quadrotor_on_uavcan_has_its_motors_and_rotor_speeds_found():
     assert t.meta["battery_cells"] == "6"
 
 
+def _six_escs(u):
+    """esc_status_log.ulg made a hexacopter (MAV_TYPE 13, PX4's CA_ROTOR0..5 of a hexa X): outputs 5 and 6
+    and ESCs 4 and 5 are given the first two motors' at another scale each, so that a sixth motor read from
+    the wrong column shows."""
+    u.initial_parameters["MAV_TYPE"] = 13
+    u.initial_parameters["CA_ROTOR_COUNT"] = 6
+    for i, deg in enumerate((90, -90, -30, 150, 30, -150)):     # FRD positions at 0.3 m, spins alternating
+        u.initial_parameters[f"CA_ROTOR{i}_PX"] = 0.3 * math.cos(math.radians(deg))
+        u.initial_parameters[f"CA_ROTOR{i}_PY"] = 0.3 * math.sin(math.radians(deg))
+        u.initial_parameters[f"CA_ROTOR{i}_KM"] = 0.05 * (-1) ** i
+    for d in u.data_list:
+        if d.name == "actuator_outputs" and d.multi_id == 1:
+            d.data["output[4]"] = (d.data["output[0]"] * 0.97).astype(d.data["output[4]"].dtype)
+            d.data["output[5]"] = (d.data["output[1]"] * 0.94).astype(d.data["output[5]"].dtype)
+            d.data["noutputs"] = np.maximum(d.data["noutputs"], 6).astype(d.data["noutputs"].dtype)
+        if d.name == "esc_status":
+            d.data["esc[4].esc_rpm"] = (d.data["esc[0].esc_rpm"] * 1.1).astype(d.data["esc[4].esc_rpm"].dtype)
+            d.data["esc[5].esc_rpm"] = (d.data["esc[1].esc_rpm"] * 0.8).astype(d.data["esc[5].esc_rpm"].dtype)
+            d.data["esc_count"] = np.full_like(d.data["esc_count"], 6)
+
+
+def test_a_px4_hexacopters_six_escs_are_read_as_omega1_to_omega6(tmp_path):
+    """PX4's esc_status for N motors (issue 45): the six ESCs' esc_rpm are omega1..omega6 in the motors'
+    order, each from its own ESC (the scales 1.1 and 0.8 given to ESCs 4 and 5 come back on omega5, omega6)."""
+    (t,) = read_foreign(str(_edited_from(tmp_path, "esc_status_log.ulg", "hexa_escs.ulg", _six_escs)))
+    assert "esc[0,1,2,3,4,5].esc_rpm" in t.meta["omega_source"] and "motors 1-6" in t.meta["omega_source"]
+    assert "omega7" not in t.columns
+    P = np.vstack([t[f"P{i}"] for i in range(1, 7)])
+    w = np.vstack([t[f"omega{i}"] for i in range(1, 7)])
+    flying = (P[:4] > 60).all(axis=0) & np.isfinite(w).all(axis=0) & (w[:2] > 50).all(axis=0)
+    assert flying.mean() > 0.5
+    assert np.median(w[4, flying] / w[0, flying]) == pytest.approx(1.1, abs=0.01)
+    assert np.median(w[5, flying] / w[1, flying]) == pytest.approx(0.8, abs=0.01)
+    assert np.nanmedian(w[:4, flying]) * 60 / (2 * math.pi) == pytest.approx(2300, rel=0.25)   # the real ESCs'
+    # outputs 5 and 6 are motors 5 and 6 (UAVCAN's 0-8191 on 0-255: a scale is kept)
+    assert np.median(P[4, flying] / P[0, flying]) == pytest.approx(0.97, abs=0.01)
+    assert np.median(P[5, flying] / P[1, flying]) == pytest.approx(0.94, abs=0.01)
+
+
+def test_a_hexacopters_figure_draws_its_six_motors(tmp_path):
+    """sim/logs/figure.py draws every motor's command and rotor speed, not P1-P4 only (issue 45)."""
+    pytest.importorskip("matplotlib")
+    from flightctl.sim.logs import read_figure
+    (t,) = read_foreign(str(_edited_from(tmp_path, "esc_status_log.ulg", "hexa_escs.ulg", _six_escs)))
+    fig = read_figure(t)
+    commands, speeds = fig.axes[1], fig.axes[-1]
+    assert [ln.get_label() for ln in commands.lines] == [f"P{i}" for i in range(1, 7)]
+    assert [ln.get_label() for ln in speeds.lines] == [f"omega{i}" for i in range(1, 7)]
+    assert np.nanmax(speeds.lines[4].get_ydata()) == pytest.approx(1.1 * np.nanmax(speeds.lines[0].get_ydata()), rel=0.02)
+
+
 def test_a_px4_log_with_zero_rotor_speeds_says_so():
     (t,) = read_foreign(str(need(PX4 / "roboto-test.ulg")))
     assert "esc_status rpm are all zero" in t.meta["import_notes"] and "omega1" not in t.columns
 
 
 def _edited(tmp_path, name, change):
-    u = pyulog.ULog(str(need(PX4 / "quadrotor_local.ulg")))
+    return _edited_from(tmp_path, "quadrotor_local.ulg", name, change)
+
+
+def _edited_from(tmp_path, source, name, change):
+    """A real ULog of PX4/ changed by `change` and written by pyulog."""
+    u = pyulog.ULog(str(need(PX4 / source)))
     change(u)
     out = tmp_path / name
     u.write_ulog(str(out))

@@ -11,16 +11,17 @@ import re
 import numpy as np
 
 from flightctl.logfile import Table
+from flightctl.sim.identify.diagnose.data import MAX_ROTORS   # P1..PN and omega1..omegaN, as many as the log's motors
 from flightctl.sim.logs.common import GAP_PERIODS   # a line breaks across a gap in the rows as a stream's does
 from flightctl.sim.plots import empty_panel, figure, legend
 
 STREAM = re.compile(r"(.+?) rate_hz=([\d.]+) samples=(\d+) gaps=(\d+) longest_gap_s=([\d.]+)")
-STRIPS = (("commands P (0-255)", ("P1", "P2", "P3", "P4")),
+STRIPS = (("commands P (0-255)", tuple(f"P{i}" for i in range(1, MAX_ROTORS + 1))),
           ("gyro, setpoint dashed (rad/s)", ("gyro_x", "gyro_y", "gyro_z")),
           ("specific force (m/s^2)", ("acc_x", "acc_y", "acc_z")),
           ("battery (V, A)", ("battery_v", "current")),
           ("height (m; baro from its first reading)", ("height", "alt", "range")),
-          ("rotor speed (rad/s)", ("omega1", "omega2", "omega3", "omega4")))
+          ("rotor speed (rad/s)", tuple(f"omega{i}" for i in range(1, MAX_ROTORS + 1))))
 
 
 def streams(table: Table) -> list[tuple[str, float, int, int, float]]:
@@ -80,7 +81,7 @@ def read_figure(table: Table):
         if shown:
             legend(ax, fontsize=7)
         else:
-            empty_panel(ax, f"not in this log: {', '.join(names)}")
+            empty_panel(ax, f"not in this log: {', '.join(names[:4])}{'..' if len(names) > 4 else ''}")
         ax.set_ylabel(label, fontsize=8)
         ax.tick_params(labelsize=7)
     axes[-1].set_xlabel("time since the log's first row [s]")
