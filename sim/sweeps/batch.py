@@ -168,7 +168,7 @@ class _Vehicles:
             raw.append(random_bits(r, spare))
         self.uni = uniforms_of(b"".join(raw), n, spare)
         self.cs[:], self.cc[:] = [d[0] for d in dies], [d[1] for d in dies]
-        has = kept == kept
+        has = ~np.isnan(kept)                      # the vehicles whose gauss kept a second number
         self.w[has, fl.W_GAUSS], self.w[has, fl.W_HAS_GAUSS] = kept[has], 1.0
         vibration_constants(self.cc.T, vehicle_noise(noise, p.sensors), p.airframe)
         self.cc[:, template["registered"]] = template["values"]
