@@ -1,6 +1,6 @@
 """What a lithium-polymer pack's voltage can be: one definition for the loop's and the pre-arm's check
 of each reading (flightctl/loop.py, flightctl/service) and the simulator's fits of a pack
-(sim/causes/battery_sag.py, sim/identify/static/battery.py).
+(sim/causes/battery_sag.py, sim/diagnose/static/battery.py).
 
 A reading outside what any pack of the vehicle's cell count can give is no reading of the pack: the
 power monitor, its wiring or its bus is faulty (or the pack is not the one the vehicle was set up for),

@@ -21,7 +21,9 @@ import sys
 from pathlib import Path
 from typing import Callable
 
-from flightctl.errors import InputError, write_atomic
+from flightctl.errors import InputError
+
+from flightctl.files import write_atomic
 
 
 REFUSED = ": refused, another user could have planted its contents"   # the end of a reason that is a refusal

@@ -24,8 +24,8 @@ EXIT_INTERRUPTED = 130          # 128 + SIGINT, what a shell reports for a comma
 COMMANDS = {
     "sim": ("flightctl.sim.cli", "fly the onboard control code against the simulated quadcopter"),
     "identify": ("flightctl.sim.identify.cli", "fit the paper's models to bench, yaw-drag, pendulum or rotor data; real-data report"),
-    "diagnose": ("flightctl.sim.identify.diagnose.cli", "name what the model gets wrong in flight logs"),
-    "run": ("flightctl.service", "the onboard service: fly on the quadcopter (or --board sim)"),
+    "diagnose": ("flightctl.sim.diagnose.cli", "name what the model gets wrong in flight logs"),
+    "run": ("flightctl.service.run", "the onboard service: fly on the quadcopter (or --board sim)"),
     "bench": ("flightctl.hil.bench", "spin one motor at a time for identification"),
     "hil": ("flightctl.hil.cli", "hardware-in-the-loop: the PC side (serve), or both ends on one machine (demo)"),
     "analyze": ("flightctl.sim.analysis.cli", "linear analysis of each loop about hover: margins, damping, steps"),

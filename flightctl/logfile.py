@@ -20,7 +20,9 @@ from typing import IO
 
 import numpy as np
 
-from flightctl.errors import NUMBER_CHARS, InputError, output_room, parse_number, read_text, temporary_beside
+from flightctl.errors import NUMBER_CHARS, InputError, parse_number
+
+from flightctl.files import output_room, read_text, temporary_beside
 
 FLIGHT_COLUMNS = ("t", "P1", "P2", "P3", "P4", "gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z",
                   "range", "battery_v", "roll", "pitch", "yaw", "alt",
@@ -223,7 +225,7 @@ _FLIGHT_RANGES = ([(f"P{i}", (0.0, 255.0), "the command range 0-255") for i in r
                      ("range", (0.0, 10.0), "the rangefinder's range (0 to 10 m)")])
 
 
-# A flight log's size at most, to check its disk for room before a flight (flightctl.errors.output_room):
+# A flight log's size at most, to check its disk for room before a flight (flightctl.files.output_room):
 # a cell is at most 13 bytes with its comma (FlightLogWriter's formats: '%.6g' gives at most 12
 # characters, "-1.23457e-05"; '%.6f' of a time under 1000 s 10), a row one cell per column, one row a
 # loop period; the `# key: value` head (the parameter file, the board's lines) is under 64 kB.

@@ -23,7 +23,9 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from flightctl.errors import InputError, number, read_text, read_toml, write_atomic
+from flightctl.errors import InputError, number
+
+from flightctl.files import read_text, read_toml, write_atomic
 from flightctl.schema import check_range, entry
 
 

@@ -47,7 +47,8 @@ from pathlib import Path
 from flightctl import __version__
 from flightctl.cli import interrupted
 from flightctl.boards import Board, BoardOptions, BoardUnavailable, check_options, described, open_board
-from flightctl.errors import InputError, Parser, output_file, seed, write_atomic
+from flightctl.errors import InputError, Parser, seed
+from flightctl.files import output_file, write_atomic
 from flightctl.hal import PWM_RANGE
 from flightctl.hil import instruments as ins
 from flightctl.logfile import BENCH_COLUMNS

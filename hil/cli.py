@@ -33,14 +33,15 @@ from flightctl.cli import EXIT_INTERRUPTED, ctrl_c_sets
 from flightctl.comms import link as lk
 from flightctl.boards import BoardOptions, BoardUnavailable, open_board
 from flightctl.control.spin import SpinController
-from flightctl.errors import InputError, Parser, output_file, seed, write_atomic
+from flightctl.errors import InputError, Parser, seed
+from flightctl.files import output_file, write_atomic
 from flightctl.hal import ArmingRefused
 from flightctl.loop import FlightLoop
 from flightctl.params import load
 from flightctl.plans.plan import Move, Plan
 from flightctl.plans import TAKEOFF
 from flightctl.safety import LEFT_GROUND_ALT
-from flightctl.service import CALIBRATE_RANGE_S, prearm
+from flightctl.service.run import CALIBRATE_RANGE_S, prearm
 from flightctl.hil.serve import Cut, HilPlant, serve
 
 MODES = ("lockstep", "free")

@@ -203,7 +203,7 @@ def write_vehicle(result: dict, path: Path = VEHICLE) -> None:
     values at the passing draw nearest the posterior's median, each value's source saying so."""
     import dataclasses
 
-    from flightctl.errors import write_atomic
+    from flightctl.files import write_atomic
     from flightctl.params import EffectSpec, dumps, load
     from flightctl.sim.sweeps import montecarlo
     a = analyse(result)
@@ -266,7 +266,7 @@ def main(argv=None) -> int:
             print(render(result))
         return 0
     result = run(args.n, args.n_off, args.seed, args.workers)
-    from flightctl.errors import write_atomic
+    from flightctl.files import write_atomic
     write_atomic(args.json, json.dumps(result) + "\n")
     write_or_exit(args.doc or DOC, *DOC_MARKS, render(result))
     write_or_exit(args.readme or README, *README_MARKS, facts(result))

@@ -3,7 +3,7 @@ angular acceleration (the gyro's difference, a zero-phase 2nd-order Butterworth 
 regressed on the commanded torque through the log's layout (sum_i y_i P_i^2 for roll, -sum_i x_i P_i^2 for
 pitch: eq. 26 with h2 = 0, eq. 25's structure), the commands DELAY_S late, low-passed alike, with an
 intercept per block; over the airborne rows diagnose uses (`data.load_file`), cut into 8 contiguous blocks.
-The regression is `flightctl.sim.identify.diagnose.axischeck.regression` (its docstring: the method).
+The regression is `flightctl.sim.diagnose.axischeck.regression` (its docstring: the method).
 Printed per axis: the slope's sign in each block, its R^2, and the block-jackknife t of the slope (the
 slope over the delete-one-block jackknife's standard error), beside the tool's t (the base model's
 effectiveness over its jackknife error, `base.identify`), or the tool's refusal.
@@ -29,9 +29,9 @@ DEFAULT = [FLIGHTS / "betaflight" / "LOG00037.BFL", FLIGHTS / "betaflight" / "bt
 def _tool(tab, a) -> tuple[dict | None, str]:
     """The tool's (t per axis, or None) and its refusal ('' when it identified)."""
     from flightctl.errors import InputError
-    from flightctl.sim.identify.diagnose.base import identify
-    from flightctl.sim.identify.diagnose.rotorspeed import rotor_speed_lag
-    from flightctl.sim.identify.diagnose.verdict import _files
+    from flightctl.sim.diagnose.basemodel import identify
+    from flightctl.sim.diagnose.rotorspeed import rotor_speed_lag
+    from flightctl.sim.diagnose.verdict import _files
     try:
         files = _files([tab], a, [], lambda *_: None)
         v, _ = identify(files, 12.0, lambda *_: None, rotor_speed_lag(files))
@@ -44,9 +44,9 @@ def _tool(tab, a) -> tuple[dict | None, str]:
 def main(argv: list[str]) -> int:
     from flightctl import params as paramfile
     from flightctl.errors import InputError
-    from flightctl.sim.identify.diagnose.axischeck import regression
-    from flightctl.sim.identify.diagnose.data import load_file
-    from flightctl.sim.identify.diagnose.dataset import N_BLOCKS
+    from flightctl.sim.diagnose.axischeck import regression
+    from flightctl.sim.diagnose.data import load_file
+    from flightctl.sim.diagnose.dataset import N_BLOCKS
     from flightctl.sim.logs import read_foreign
     a = paramfile.load(None).airframe
     paths = [Path(p) for p in argv] or DEFAULT

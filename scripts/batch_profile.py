@@ -43,7 +43,9 @@ import time
 
 import numpy as np
 
-from flightctl.errors import InputError, output_file, write_atomic
+from flightctl.errors import InputError
+
+from flightctl.files import output_file, write_atomic
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
@@ -88,8 +90,8 @@ def _flight(n: int, seconds: float):
 
 def _phase_loops():
     """The phases' compiled loops: each calls one compiled copy the batch's loop inlines, REPS times per vehicle."""
-    from flightctl.sim.sweeps import flight as fl
-    from flightctl.sim.sweeps import onboard as ob
+    from flightctl.sim.sweeps import twin_loop as fl
+    from flightctl.sim.sweeps import twin_controller as ob
     from flightctl.sim.sweeps import pcg64
     from flightctl.sim.world import compiled, imu
     cc = compiled.compiled_copy
@@ -184,7 +186,7 @@ def controller_loop(E, KC, W, dt, reps):
 
 def _inner(n: int, seconds: float, out: str, batch_only: bool = False) -> None:
     from flightctl.sim.sweeps import batch
-    from flightctl.sim.sweeps import flight as fl
+    from flightctl.sim.sweeps import twin_loop as fl
     params, plan, draws = _flight(n, seconds)
     run = fl.compiled_fly()
     kept = {}
@@ -340,7 +342,7 @@ def cpu_seconds(n: int, seconds: float, workers: int) -> tuple[float, float, int
     are ended after it, so that an idle cluster takes nothing from a one-worker batch measured next."""
     from flightctl.sim import engine
     from flightctl.sim.sweeps import batch
-    from flightctl.sim.sweeps import flight as fl
+    from flightctl.sim.sweeps import twin_loop as fl
     params, plan, draws = _flight(n, seconds)
     fl.compiled_fly()
     batch.simulate(params, plan, 2 * workers, {k: v[:2 * workers] for k, v in draws.items()}, until=0.01,

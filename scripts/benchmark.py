@@ -145,7 +145,7 @@ def batch_rate(n: int = 10000, seconds: float = 1.0, workers: int = 1) -> tuple[
     them (the chip, the sonar, the controller's compiled copy) from power-on through the calibration's
     2 s on the floor and `seconds` of the take-off; the set-up of every vehicle included."""
     from flightctl.sim.sweeps.batch import simulate
-    from flightctl.sim.sweeps.flight import compiled_fly
+    from flightctl.sim.sweeps.twin_loop import compiled_fly
     from flightctl.sim.sweeps.montecarlo import draw
     from flightctl.sim.flights.scenarios import SCENARIOS
     params = load("paper-as-flown")
@@ -280,7 +280,7 @@ def diagnose_cost(logs: list[Path]) -> tuple[float, float]:
     jointly) in child processes on one core."""
     out = Path(tempfile.mkdtemp()) / "report.json"
     names = [str(p) for p in logs]
-    read = _cpu(["-c", "import sys; from flightctl.sim.identify.diagnose.cli import read_logs; "
+    read = _cpu(["-c", "import sys; from flightctl.sim.diagnose.cli import read_logs; "
                        "read_logs(sys.argv[1:], None, lambda *a: None)", *names])
     total = _cpu(["-m", "flightctl.cli", "diagnose", *names, "--json", str(out), "--quiet"])
     return read, total
@@ -350,7 +350,7 @@ def fleet_rate(workers: int, logs: int = 6) -> float:
     import sys
     from flightctl.cli import main as cli
     from flightctl.sim import engine
-    from flightctl.sim.identify.diagnose.corpus import corpus
+    from flightctl.sim.diagnose.corpus import corpus
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from test_diagnose_cases import quick_plan
     tmp = Path(tempfile.mkdtemp())

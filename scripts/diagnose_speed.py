@@ -46,7 +46,7 @@ def _inner(log: str, tables: str, out: str) -> None:
     import contextlib
     import io
     import time
-    from flightctl.sim.identify.diagnose import cli
+    from flightctl.sim.diagnose import cli
     with open(tables, "rb") as f:
         kept = pickle.load(f)
     cli.read_logs = lambda paths, index, progress: kept if paths == [log] else []
@@ -86,7 +86,7 @@ def differences(a, b, where: str = "") -> list[str]:
 
 def compare(log: Path, rev_path: str, rounds: int) -> dict:
     """Both codes' CPU seconds over `rounds` alternating rounds on one log, and their reports' differences."""
-    from flightctl.sim.identify.diagnose.cli import read_logs
+    from flightctl.sim.diagnose.cli import read_logs
     with tempfile.TemporaryDirectory() as tmp:
         tables = os.path.join(tmp, "tables.pkl")
         with open(tables, "wb") as f:

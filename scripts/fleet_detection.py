@@ -4,12 +4,12 @@ one on a healthy vehicle (issue 46, item 1; docs/fleet.md, "How often it finds a
     python scripts/fleet_detection.py [--trials 30] [--seed 46] [--doc docs/fleet.md]
 
 1. Calibrate the rows' draw on flown and diagnosed flights: three vehicles of six 22 s flights each
-   (sim/flights/fleet.py, ArduCopter DataFlash at the default rates), one motor of one vehicle at
+   (sim/sweeps/fleet_flown.py, ArduCopter DataFlash at the default rates), one motor of one vehicle at
    CAL_SCALE of its thrust from a drawn flight on, `flightctl diagnose --corpus` run on them as a user runs
    it; from its results table, the motor shares' standard errors (their log's mean and spread), the spread
    between flights of the healthy vehicles (the no-change fit's tau, trends.py, the median over their
    shares) and the weak motor's scale read back from its share's ratio (report.share_scale).
-2. Draw fleets of three vehicles of 5, 10, 20 and 40 flights' rows (sim/flights/fleet_rows.py: the shares
+2. Draw fleets of three vehicles of 5, 10, 20 and 40 flights' rows (sim/sweeps/fleet_drawn.py: the shares
    with their standard errors, drawn as the calibration found them; flying them all would take hours),
    one vehicle's motor losing 5, 10 or 20 % of its thrust from a drawn flight on, or none (the null rows),
    `trials` fleets a cell, and build the fleet report of each (report.build: the grouping, the test, Holm's
@@ -41,10 +41,10 @@ NOISIER = 10.0
 
 def calibrate(seed: int) -> dict:
     """The rows' noise (fleet_rows.Noise) from flown and diagnosed flights, and the weak motor read back."""
-    from flightctl.sim.flights.fleet import simulate_fleet
-    from flightctl.sim.flights.fleet_rows import Noise
-    from flightctl.sim.identify.fleet.report import build, share_scale
-    from flightctl.sim.identify.fleet.trends import Fit
+    from flightctl.sim.sweeps.fleet_flown import simulate_fleet
+    from flightctl.sim.sweeps.fleet_drawn import Noise
+    from flightctl.sim.diagnose.fleet.report import build, share_scale
+    from flightctl.sim.diagnose.fleet.trends import Fit
     with tempfile.TemporaryDirectory() as tmp:
         truth = simulate_fleet(Path(tmp) / "logs", np.random.default_rng(seed), vehicles=3, flights=6, seconds=22.0,
                                aging=False, weak_scale=(CAL_SCALE, CAL_SCALE))
@@ -73,8 +73,8 @@ def calibrate(seed: int) -> dict:
 
 
 def measure(trials: int, seed: int) -> dict:
-    from flightctl.sim.flights.fleet_rows import Noise, draw_fleet, judge
-    from flightctl.sim.identify.fleet.report import build
+    from flightctl.sim.sweeps.fleet_drawn import Noise, draw_fleet, judge
+    from flightctl.sim.diagnose.fleet.report import build
     cal = calibrate(seed)
     n0 = cal["noise"]
     levels = {"as flown": n0, f"{NOISIER:g} x": Noise(n0.se_log_mean + math.log(NOISIER), n0.se_log_sd, NOISIER * n0.tau)}
@@ -93,14 +93,14 @@ def measure(trials: int, seed: int) -> dict:
 
 def markdown(m: dict) -> str:
     from flightctl.sim.docs import table
-    from flightctl.sim.identify.fleet.trends import ALPHA
+    from flightctl.sim.diagnose.fleet.trends import ALPHA
     cal, n0 = m["cal"], m["cal"]["noise"]
     pct = lambda k, n: f"{100 * k / n:.3g} % ({k}/{n})"
-    lines = [f"Calibrated on {cal['flights']} flown and diagnosed 22 s flights (sim/flights/fleet.py, ArduCopter DataFlash "
+    lines = [f"Calibrated on {cal['flights']} flown and diagnosed 22 s flights (sim/sweeps/fleet_flown.py, ArduCopter DataFlash "
              f"at the default rates): a share's standard error {100 * math.exp(n0.se_log_mean):.3g} % (log spread "
              f"{n0.se_log_sd:.2f}), the spread between a healthy vehicle's flights {100 * n0.tau:.2g} %, a motor drawn "
              f"at {cal['scale']:g} of its thrust read back from its share as {cal['read']:.3f}. Each cell: "
-             f"{m['trials']} fleets of {VEHICLES} vehicles' drawn rows (sim/flights/fleet_rows.py), the fleet report "
+             f"{m['trials']} fleets of {VEHICLES} vehicles' drawn rows (sim/sweeps/fleet_drawn.py), the fleet report "
              f"built on each; found: the vehicle and motor named, the onset within a flight; false: a motor named on "
              f"a healthy vehicle (the stated rate: {100 * ALPHA:g} % of fleets with no change).", ""]
     rows = []

@@ -1,6 +1,6 @@
 """The fleet's scale, measured (issue 38, item 5; docs/fleet.md, "Scale"): `flightctl diagnose --corpus`
 run as a user runs it (its own process, the engine's local Dask cluster) on a simulated fleet's logs
-(sim/flights/fleet.py: ArduCopter DataFlash at ArduPilot's default rates, 22 s flights, each its own
+(sim/sweeps/fleet_flown.py: ArduCopter DataFlash at ArduPilot's default rates, 22 s flights, each its own
 seed), timed by the wall clock, its workers' memory read from the kernel.
 
     python scripts/fleet_scale.py [--logs 1000] [--sample 100] [--doc docs/fleet.md]
@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 BEGIN, END = "<!-- fleet-scale:begin -->", "<!-- fleet-scale:end -->"
-FLIGHT_S = 22.0                 # each simulated flight, from arming (sim/flights/fleet.py's shortest plan)
+FLIGHT_S = 22.0                 # each simulated flight, from arming (sim/sweeps/fleet_flown.py's shortest plan)
 CLUSTERS = ((1, 2), (1, 8), (4, 8), (16, 8))      # (machines, cores each) for the estimate
 
 
@@ -128,7 +128,7 @@ def corpus_run(folder: Path, workers: int, out: Path) -> dict:
 
 def simulate(folder: Path, logs: int, seed: int) -> float:
     """`logs` short flights (40 a vehicle) into `folder`; the seconds it took."""
-    from flightctl.sim.flights.fleet import simulate_fleet
+    from flightctl.sim.sweeps.fleet_flown import simulate_fleet
     start = time.perf_counter()
     vehicles = math.ceil(logs / 40)
     simulate_fleet(folder, np.random.default_rng(seed), vehicles=vehicles, flights=40, seconds=FLIGHT_S,

@@ -36,7 +36,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from flightctl.errors import InputError, output_file, write_atomic
+from flightctl.errors import InputError
+
+from flightctl.files import output_file, write_atomic
 
 BEGIN, END = "<!-- late loops: begin (written by `python scripts/loop_lateness.py flights`) -->", "<!-- late loops: end -->"
 QUANTILES = 101                     # 0, 1, ..., 100 %

@@ -69,8 +69,8 @@ def study(n: int, seed: int, share: float, progress=print, only=None) -> dict:
     from flightctl import params as paramfile
     from flightctl.plans.plan import read_plan_file
     from flightctl.sim.flights.scenarios import scenario
-    from flightctl.sim.identify.diagnose import steps
-    from flightctl.sim.identify.diagnose.cli import read_logs
+    from flightctl.sim.diagnose import steps
+    from flightctl.sim.diagnose.cli import read_logs
     from flightctl.params import TABLE4, TABLE6
     from flightctl.sim import causes
     from flightctl.sim.flights.run import fly

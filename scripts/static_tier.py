@@ -18,9 +18,9 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.params import Airframe
 from flightctl.sim.docs import marked, publish, table
-from flightctl.sim.identify.diagnose.data import MIN_STRETCH_S, load_file
-from flightctl.sim.identify.static import static_tier
-from flightctl.sim.identify.diagnose.corpus import find_logs
+from flightctl.sim.diagnose.data import MIN_STRETCH_S, load_file
+from flightctl.sim.diagnose.static import static_tier
+from flightctl.sim.diagnose.corpus import find_logs
 from flightctl.sim.logs import each_log, reason
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -77,7 +77,7 @@ def _sim(a, predict, controller) -> list[list[str]]:
 def main(argv: list[str]) -> int:
     from flightctl import params as paramfile
     from flightctl.sim.docs import table
-    from flightctl.sim.identify.diagnose import predict
+    from flightctl.sim.diagnose import predict
     from flightctl.sim.logs import controller, read_foreign
     a = paramfile.load(None).airframe
     out = []

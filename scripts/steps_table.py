@@ -1,6 +1,6 @@
 """The measured step responses of this project's `excite` flight (simulated, its attitude loop) and of the
 shipped real logs (docs/steps.md): one row per log, loop and axis,
-the numbers of `flightctl diagnose`'s `steps` (sim/identify/diagnose/steps.py) or the reason the log
+the numbers of `flightctl diagnose`'s `steps` (sim/diagnose/steps.py) or the reason the log
 cannot show one; `--out PNG` draws the figure of the logs that show one.
 
     python scripts/steps_table.py [--out docs/steps.png]
@@ -54,7 +54,7 @@ def main(argv: list[str]) -> int:
     p.add_argument("--out", help="the figure (PNG) of the logs that show a step")
     args = p.parse_args(argv)
     from flightctl.sim.docs import table
-    from flightctl.sim.identify.diagnose import steps
+    from flightctl.sim.diagnose import steps
     from flightctl.sim.logs import read_foreign
     import tempfile
     from flightctl.cli import main as flightctl

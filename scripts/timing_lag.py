@@ -1,5 +1,5 @@
 """Does a flight prefer a first-order motor lag and a short delay to the long pure delay the base model is
-identified at (issue 42; base.py `_timing`, `timing_objective`)? Per log: the best pure delay on the 0-60 ms
+identified at (issue 42; basemodel.py `_timing`, `timing_objective`)? Per log: the best pure delay on the 0-60 ms
 part of the identification's grid, and the best (lag, delay) pair on a grid of lags 5-40 ms and delays 0-35 ms,
 with the objective's difference (sum over the channels of log RSS: 0.01 is a 1 % smaller residual on one
 channel). Default logs: those of the docs block steps-predicted.
@@ -25,9 +25,9 @@ SHORT = np.arange(0.0, 0.0351, 0.0025)
 
 def main(argv: list[str]) -> int:
     from flightctl import params as paramfile
-    from flightctl.sim.identify.diagnose.base import identification_set, timing_objective, yaw_drag_column
-    from flightctl.sim.identify.diagnose.dataset import LOWPASS_HZ
-    from flightctl.sim.identify.diagnose.verdict import _files
+    from flightctl.sim.diagnose.basemodel import identification_set, timing_objective, yaw_drag_column
+    from flightctl.sim.diagnose.dataset import LOWPASS_HZ
+    from flightctl.sim.diagnose.verdict import _files
     from flightctl.sim.logs import read_foreign
     a = paramfile.load(None).airframe
     print("| log | best pure delay (ms) | best lag + delay (ms) | objective: pure minus lag + delay |")

@@ -22,7 +22,8 @@ from pathlib import Path
 
 from flightctl.cli import EXIT_INTERRUPTED, ctrl_c_sets
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError, Parser, output_dir, output_file, seed, write_atomic
+from flightctl.errors import InputError, Parser, seed
+from flightctl.files import output_dir, output_file, write_atomic
 from flightctl.logfile import FLIGHT_COLUMNS, MAG_COLUMNS, log_room
 from flightctl.params import GAIN_SETS, shipped
 from flightctl.sim import causes, engine
@@ -31,6 +32,7 @@ from flightctl.sim.world.board import SIM_CALIBRATE_S, TRUTH_COLUMNS
 from flightctl.sim.flights.metrics import LEGEND, SETTLE_AFTER_S, SETTLED_DEG, hold_metrics, settled_errors, step_metrics
 from flightctl.plans import load_plan
 from flightctl.sim.flights.scenarios import SCENARIOS, scenario
+from flightctl.sim.flights.run import gains_label
 
 
 def parser() -> argparse.ArgumentParser:
@@ -89,14 +91,6 @@ def speed(ratio: float) -> str:
 def _finite(v: float) -> float | None:
     """JSON has no infinity or NaN: a step never settled, or a value not measured, is null."""
     return v if math.isfinite(v) else None
-
-
-def gains_label(args, params) -> str:
-    """The gain set flown, as the announcement and the JSON name it."""
-    if args.gains:
-        return args.gains
-    file_gains = any(name.startswith(("kp_", "ki_", "kd_")) for name, _ in params.sources)
-    return f"the [gains] of {params.origin}" if file_gains else "table6"
 
 
 def run_json(args, params) -> dict:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from flightctl.errors import read_text, write_atomic
+from flightctl.files import read_text, write_atomic
 
 
 def marked(name: str) -> tuple[str, str]:

@@ -62,7 +62,7 @@ def png(fig: Figure, dpi: int = DPI) -> bytes:
 
 def save(fig: Figure, path: str | Path, dpi: int = DPI) -> None:
     """The figure as a PNG, written whole (a reader never sees half an image)."""
-    from flightctl.errors import write_atomic
+    from flightctl.files import write_atomic
     write_atomic(path, png(fig, dpi))
 
 

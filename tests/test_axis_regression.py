@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from flightctl import params as paramfile
-from flightctl.sim.identify.diagnose.axischeck import regression
-from flightctl.sim.identify.diagnose.data import load_file
+from flightctl.sim.diagnose.axischeck import regression
+from flightctl.sim.diagnose.data import load_file
 from flightctl.sim.logs import read_foreign
 from real import FLIGHTS, need
 

@@ -1,4 +1,4 @@
-"""The batched simulator (sim/sweeps/batch.py, flight.py, onboard.py) against the single one: its copy
+"""The batched simulator (sim/sweeps/batch.py, twin_loop.py, twin_controller.py) against the single one: its copy
 of the onboard controller gives the onboard controller's PWM counts count for count, and a vehicle it
 flies is the vehicle `flightctl sim` flies with the same draw and seed, to the bit, take-off to
 landing; its Monte Carlo judges each draw as the full path's does."""
@@ -19,7 +19,7 @@ from flightctl.params import Filters, Gains, Params, load
 from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import SCENARIOS
 from flightctl.sim.sweeps import montecarlo
-from flightctl.sim.sweeps import onboard
+from flightctl.sim.sweeps import twin_controller
 from flightctl.sim.sweeps.batch import WIDE, simulate, uniforms
 from flightctl.sim.sweeps.montecarlo import draw, drawn_params
 from flightctl.sim.world import compiled
@@ -42,9 +42,9 @@ def _random_params(rng, n: int) -> list[Params]:
 def _copy():
     """The controller's functions as the batch runs them: compiled where numba is, else plain."""
     if compiled.enabled():
-        return types.SimpleNamespace(**onboard.compiled_functions(compiled.compiled_copy))
-    return types.SimpleNamespace(step=onboard.step, on_range=onboard.on_range, set_reference=onboard.set_reference,
-                                 arm=onboard.arm, landing_start=onboard.landing_start)
+        return types.SimpleNamespace(**twin_controller.compiled_functions(compiled.compiled_copy))
+    return types.SimpleNamespace(step=twin_controller.step, on_range=twin_controller.on_range, set_reference=twin_controller.set_reference,
+                                 arm=twin_controller.arm, landing_start=twin_controller.landing_start)
 
 
 @pytest.mark.parametrize("structure", ["flight", "paper"])
@@ -61,9 +61,9 @@ def test_the_batch_controller_gives_the_onboard_counts(structure):
     same = 0
     for p in params:
         c = FlightController(p, structure=structure)
-        e = np.zeros(onboard.N_E)
-        e[onboard.ALT_T] = -1.0
-        k = np.array(onboard.constants(p, structure))
+        e = np.zeros(twin_controller.N_E)
+        e[twin_controller.ALT_T] = -1.0
+        k = np.array(twin_controller.constants(p, structure))
         counts = np.zeros(4, dtype=np.int64)
         bias = (float(rng.normal(0, 0.02)), float(rng.normal(0, 0.02)), float(rng.uniform(-3, 3)))
         c.est.set_reference(bias[:2], bias[2], True)
@@ -73,7 +73,7 @@ def test_the_batch_controller_gives_the_onboard_counts(structure):
             t = i * dt
             if i == 300:                     # lift-off: the in-flight correction from here on
                 c.est.in_flight = True
-                e[onboard.IN_FLIGHT] = 1.0
+                e[twin_controller.IN_FLIGHT] = 1.0
                 s.ax, s.ay, s.az = 0.1, -0.2, 9.7
                 c.arm(s)
                 fn.arm(e, s.az)
@@ -98,8 +98,8 @@ def test_the_batch_controller_gives_the_onboard_counts(structure):
             expected = c.step(s, dt, *sp)
             fn.step(e, k, *gyro, *acc, *mag, True, dt, *sp, counts)
             assert counts.tolist() == expected, (i, counts, expected)
-            assert (e[onboard.ROLL], e[onboard.PITCH], e[onboard.YAW]) == (c.est.roll, c.est.pitch, c.est.yaw)
-            assert (e[onboard.UZ], e[onboard.VZ]) == (c.uz, c.vert.z)
+            assert (e[twin_controller.ROLL], e[twin_controller.PITCH], e[twin_controller.YAW]) == (c.est.roll, c.est.pitch, c.est.yaw)
+            assert (e[twin_controller.UZ], e[twin_controller.VZ]) == (c.uz, c.vert.z)
             same += 1
         assert c.landing.integral != 0.0 and c.est.yaw != 0.0     # the landing and the magnetometer did act
     assert same == n * steps
@@ -124,7 +124,7 @@ def test_the_batchs_uniforms_are_the_mersenne_twisters_random_calls():
 def test_a_batch_vehicle_flies_the_full_paths_flight():
     """Two draws of paper-as-flown's ranges, each with its seed: the batch's record of the true and
     estimated attitude is the full onboard path's log, to the bit, and its outcome is the same; its wide
-    record (sim/flights/fleet.py's logs) is the log's commands, IMU sample and altitude estimate."""
+    record (sim/sweeps/fleet_flown.py's logs) is the log's commands, IMU sample and altitude estimate."""
     params = load("paper-as-flown")
     sc = SCENARIOS["step_roll"]()
     draws = draw(params, 2, seed=8)

@@ -15,7 +15,7 @@ from flightctl.battery import READING_CELL_V, implausible
 from flightctl.cli import main
 from flightctl.battery import CELLS
 from flightctl.params import load
-from flightctl.service import prearm
+from flightctl.service.run import prearm
 from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import SCENARIOS
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from flightctl.sim import causes
-from flightctl.sim.identify.diagnose.candidate import Candidate
+from flightctl.sim.diagnose.candidate import Candidate
 from flightctl.sim.world.model import Effect
 from real import need
 

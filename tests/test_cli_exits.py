@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 
 from flightctl.cli import main
-from flightctl.errors import InputError, write_atomic
+from flightctl.errors import InputError
+from flightctl.files import write_atomic
 from flightctl.logfile import MAG_COLUMNS, read_flight_log
 from flightctl.sim.world.board import TRUTH_COLUMNS
 

@@ -17,8 +17,8 @@ from flightctl.logfile import read_flight_log
 from flightctl.params import load
 from flightctl.sim.causes.ground_effect import GE_MAX_Z
 from flightctl.sim.causes.rotor_inflow import climb_speed
-from flightctl.sim.identify.diagnose.data import load_file
-from flightctl.sim.identify.diagnose.dataset import DataSet, Vehicle
+from flightctl.sim.diagnose.data import load_file
+from flightctl.sim.diagnose.dataset import DataSet, Vehicle
 
 from test_diagnose_cases import draw
 

@@ -18,7 +18,7 @@ import pytest
 from flightctl.cli import main
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe
-from flightctl.sim.identify.diagnose.data import load_file
+from flightctl.sim.diagnose.data import load_file
 from flightctl.sim.logs import each_log, read_foreign
 from flightctl.sim.logs.dfwrite import DataFlash, text_log
 from real import delay_fit, delayed, rows_and_header, write as write_csv
@@ -340,7 +340,7 @@ def test_taken_as_flight_the_crash_hides_the_vehicle_from_diagnose(tmp_path, cap
     """Without the specific-force test (data.CONTACT_ACC_Z at minus infinity) the 14 s on its back are
     airborne, and the base model's roll and pitch effectiveness are no longer told from zero: the
     dynamic tier refuses, and the report is the static tier's, which says why."""
-    from flightctl.sim.identify.diagnose import data
+    from flightctl.sim.diagnose import data
     monkeypatch.setattr(data, "CONTACT_ACC_Z", -np.inf)
     assert main(["diagnose", str(CRASH), "--json", str(tmp_path / "r.json"), "--quiet"]) == 0
     rep = json.loads((tmp_path / "r.json").read_text())     # the dynamic tier refused; the static tier answers
@@ -515,7 +515,7 @@ def test_the_corpus_headline_counts_airborne_multirotor_flights_only(tmp_path):
     """A corpus of the real ArduCopter 3.3 flight, it edited into a plane and into a helicopter (FRAME_CLASS
     6), and the real 4.6 log on the ground: the headline counts one airborne multirotor flight, the two
     others as logs of another vehicle, not counted, and the ground log as holding no flight."""
-    from flightctl.sim.identify.diagnose.corpus import corpus, headline
+    from flightctl.sim.diagnose.corpus import corpus, headline
     folder = tmp_path / "c"
     folder.mkdir()
     (folder / "flight.bin").write_bytes((EXAMPLES / "log171.bin").read_bytes())

@@ -76,9 +76,9 @@ def acc_z_terms(log: str, truth: dict) -> tuple[np.ndarray, np.ndarray]:
     """The filtered change of the predicted acc_z of `motor_lag` and of `rotor_inflow` at the drawn sizes."""
     from flightctl.params import load
     from flightctl.sim.causes import CAUSES
-    from flightctl.sim.identify.diagnose.cli import read_logs
-    from flightctl.sim.identify.diagnose.data import load_file
-    from flightctl.sim.identify.diagnose.dataset import CHANNELS, LOWPASS_HZ, DataSet, Vehicle
+    from flightctl.sim.diagnose.cli import read_logs
+    from flightctl.sim.diagnose.data import load_file
+    from flightctl.sim.diagnose.dataset import CHANNELS, LOWPASS_HZ, DataSet, Vehicle
     a = load(None).airframe
     f = load_file(read_logs([log], None, lambda *_: None)[0], a)
     ds = DataSet([f], Vehicle.known(a, f.layout), LOWPASS_HZ)

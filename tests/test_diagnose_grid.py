@@ -15,11 +15,11 @@ from flightctl.logfile import read_flight_log
 from flightctl.params import load
 from flightctl.sim.causes import CAUSES
 from flightctl.sim.causes.rotor_drag import N_NUISANCE
-from flightctl.sim.identify.diagnose.base import equivalent
-from flightctl.sim.identify.diagnose.candidate import COARSE_STRIDE
-from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS, load_file
-from flightctl.sim.identify.diagnose.dataset import N_BLOCKS, DataSet, Vehicle
-from flightctl.sim.identify.diagnose.scoring import linear_stats, solve
+from flightctl.sim.diagnose.basemodel import equivalent
+from flightctl.sim.diagnose.candidate import COARSE_STRIDE
+from flightctl.sim.diagnose.data import FOREIGN_COLUMNS, load_file
+from flightctl.sim.diagnose.dataset import N_BLOCKS, DataSet, Vehicle
+from flightctl.sim.diagnose.scoring import linear_stats, solve
 from real import FLIGHTS, need
 
 

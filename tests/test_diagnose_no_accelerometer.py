@@ -11,10 +11,10 @@ import pytest
 
 from flightctl import params as paramfile
 from flightctl.logfile import read_flight_log
-from flightctl.sim.identify.diagnose.base import NO_THRUST, identify
-from flightctl.sim.identify.diagnose.data import NO_ACCELEROMETER
-from flightctl.sim.identify.diagnose.rotorspeed import rotor_speed_lag
-from flightctl.sim.identify.diagnose.verdict import _files, diagnose
+from flightctl.sim.diagnose.basemodel import NO_THRUST, identify
+from flightctl.sim.diagnose.data import NO_ACCELEROMETER
+from flightctl.sim.diagnose.rotorspeed import rotor_speed_lag
+from flightctl.sim.diagnose.verdict import _files, diagnose
 from flightctl.sim.logs import bbfields, read_foreign
 from flightctl.sim.logs.common import flight_text
 from real import FLIGHTS, need

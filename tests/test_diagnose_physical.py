@@ -13,10 +13,10 @@ from flightctl.cli import main
 from flightctl.logfile import read_flight_log
 from flightctl.params import load
 from flightctl.sim.causes import CAUSES
-from flightctl.sim.identify.diagnose.base import equivalent
-from flightctl.sim.identify.diagnose.candidate import MAX_TIMING_S, Result
-from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS, load_file
-from flightctl.sim.identify.diagnose.dataset import DataSet, Vehicle
+from flightctl.sim.diagnose.basemodel import equivalent
+from flightctl.sim.diagnose.candidate import MAX_TIMING_S, Result
+from flightctl.sim.diagnose.data import FOREIGN_COLUMNS, load_file
+from flightctl.sim.diagnose.dataset import DataSet, Vehicle
 from real import FLIGHTS, need
 from test_diagnose_cases import draw
 from test_diagnose_vehicle import fly, rewrite

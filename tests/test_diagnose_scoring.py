@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.dataset import CHANNELS, N_BLOCKS
-from flightctl.sim.identify.diagnose.scoring import (MIN_CHANNEL_GAIN, MIN_GAIN, T_CHANNEL, T_CRIT, Score,
+from flightctl.sim.diagnose.dataset import CHANNELS, N_BLOCKS
+from flightctl.sim.diagnose.scoring import (MIN_CHANNEL_GAIN, MIN_GAIN, T_CHANNEL, T_CRIT, Score,
                                                      significance)
 
 FS = 450.0

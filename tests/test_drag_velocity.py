@@ -15,8 +15,8 @@ from flightctl.cli import main
 from flightctl.logfile import read_flight_log
 from flightctl.params import load
 from flightctl.sim.causes import CAUSES
-from flightctl.sim.identify.diagnose.data import load_file
-from flightctl.sim.identify.diagnose.dataset import DataSet, Vehicle
+from flightctl.sim.diagnose.data import load_file
+from flightctl.sim.diagnose.dataset import DataSet, Vehicle
 from test_diagnose_cases import close_enough, draw, quick_plan
 
 

@@ -18,7 +18,7 @@ import pytest
 
 pytest.importorskip("distributed")
 
-from flightctl.sim.identify.diagnose.corpus import CRASH_ENV  # noqa: E402
+from flightctl.sim.diagnose.corpus import CRASH_ENV  # noqa: E402
 from script import load  # noqa: E402
 
 descendants = load("fleet_scale").descendants      # the processes under a pid (from /proc)
@@ -246,8 +246,8 @@ def test_a_scheduler_that_does_not_answer_is_one_line_and_nothing_written(corpus
 def test_a_results_row_of_other_code_is_not_reused(tmp_path, monkeypatch):
     """A row is reused only by the code that wrote it: the same log judged by other readers or another
     diagnosis (another digest of their sources) is diagnosed again, not read back."""
-    from flightctl.sim.identify.diagnose import results as res
-    from flightctl.sim.identify.diagnose.corpus import Row
+    from flightctl.sim.diagnose import results as res
+    from flightctl.sim.diagnose.corpus import Row
     log = tmp_path / "a.csv"
     log.write_text("t,P1\n0,1\n")
     table = res.Results(tmp_path / "r.results.jsonl")
@@ -263,7 +263,7 @@ def test_a_results_row_of_other_code_is_not_reused(tmp_path, monkeypatch):
 def test_a_corpus_with_a_results_table_holds_no_report_in_memory_and_its_json_reads_them_back(corpus, tmp_path):
     """Each finished log's report goes to the results table's folder and leaves the row (a corpus of
     thousands is not held until the end); the table's cells and `--json`'s reports are still the logs'."""
-    from flightctl.sim.identify.diagnose.corpus import corpus as run_corpus, corpus_json, table
+    from flightctl.sim.diagnose.corpus import corpus as run_corpus, corpus_json, table
     rows = run_corpus(corpus, 2, results=tmp_path / "r.jsonl")
     diagnosed = [r for r in rows if r.status == "diagnosed"]
     assert diagnosed and all(r.report is None and Path(r.report_file).is_file() for r in diagnosed)

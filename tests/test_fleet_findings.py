@@ -1,10 +1,10 @@
-"""The fleet report sees what each log sees (issue 46): on small simulated fleets (sim/flights/fleet.py:
+"""The fleet report sees what each log sees (issue 46): on small simulated fleets (sim/sweeps/fleet_flown.py:
 three vehicles, ten or five flights each, ArduCopter DataFlash at the default rates), one motor of one
 vehicle weakened to about 0.8 of its thrust from a flight in the middle on, which vehicle, motor and
 flight drawn from a seeded generator and never told to the command (`flightctl diagnose --corpus DIR
 --fleet REPORT`, its own process): ten flights name the vehicle, the motor and the onset flight by the
 trend test; five flights name them from the logs' own findings at least. On drawn rows (sim/flights/
-fleet_rows.py, the noise drawn too), the test names a motor on no more fleets without a change than its
+fleet_drawn.py, the noise drawn too), the test names a motor on no more fleets without a change than its
 stated rate allows, and its p-value goes below what any permutation of ten flights can give. A report's
 lines never contradict their own numbers (a rate it says a log lacks, which the log has)."""
 from __future__ import annotations
@@ -20,10 +20,10 @@ from scipy import stats
 
 pytest.importorskip("pymavlink")
 
-from flightctl.sim.flights.fleet import simulate_fleet  # noqa: E402
-from flightctl.sim.flights.fleet_rows import Noise, draw_fleet, judge  # noqa: E402
-from flightctl.sim.identify.fleet.report import build  # noqa: E402
-from flightctl.sim.identify.fleet.trends import ALPHA, test as change_test  # noqa: E402
+from flightctl.sim.sweeps.fleet_flown import simulate_fleet  # noqa: E402
+from flightctl.sim.sweeps.fleet_drawn import Noise, draw_fleet, judge  # noqa: E402
+from flightctl.sim.diagnose.fleet.report import build  # noqa: E402
+from flightctl.sim.diagnose.fleet.trends import ALPHA, test as change_test  # noqa: E402
 from test_fleet_report import diagnose  # noqa: E402  (the command as a user runs it)
 
 WEAK = (0.78, 0.82)          # "about 0.8"
@@ -190,7 +190,7 @@ def test_a_header_only_log_goes_with_its_files_other_logs():
     """A file of many blackbox logs is one flight controller's flash: a log refused before its header was
     read (header only, as in betaflight/btfl_all.bbl) is the vehicle its file's other logs name, not its
     folder's; a log alone in its file without an identity stays its folder's."""
-    from flightctl.sim.identify.fleet.grouping import group
+    from flightctl.sim.diagnose.fleet.grouping import group
     named = {"vehicle_id": "AIKO AIKONF7 / Gecko", "vehicle_id_source": "the blackbox header's Craft name"}
     rows = [{"log": "bf/all.bbl #1", "path": "/d/bf/all.bbl", "index": 1, "status": "diagnosed", "meta": named},
             {"log": "bf/all.bbl #2", "path": "/d/bf/all.bbl", "index": 2, "status": "refused", "meta": {},

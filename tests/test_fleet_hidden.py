@@ -1,4 +1,4 @@
-"""The fleet report finds what changed across flights, hidden in a simulated fleet (sim/flights/fleet.py:
+"""The fleet report finds what changed across flights, hidden in a simulated fleet (sim/sweeps/fleet_flown.py:
 four vehicles, forty 30 s flights each, flown by the batched simulator and written as ArduCopter DataFlash
 at ArduPilot's default rates, in one folder under numbered names that say nothing of the vehicle or the
 order). The generator draws, from a seeded generator, which vehicle's motor weakens (which motor, to what
@@ -19,7 +19,7 @@ import pytest
 
 pytest.importorskip("pymavlink")
 
-from flightctl.sim.flights.fleet import simulate_fleet  # noqa: E402
+from flightctl.sim.sweeps.fleet_flown import simulate_fleet  # noqa: E402
 from test_fleet_report import diagnose  # noqa: E402  (the command as a user runs it)
 
 SEED = 3801

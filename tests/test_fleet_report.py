@@ -1,4 +1,4 @@
-"""The fleet report (`flightctl diagnose --corpus DIR --fleet REPORT`, sim/identify/fleet/) on real logs:
+"""The fleet report (`flightctl diagnose --corpus DIR --fleet REPORT`, sim/diagnose/fleet/) on real logs:
 three of indiflight's blackbox logs (../shared/data/real/flights/indiflight, one board model, MATEK H743,
 no craft name), under names whose order is not their flights': a board's name alone is no vehicle (issue
 45), so they are the vehicle of their folder, the report saying the board, in the order of their `Log
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from flightctl.cli import main
-from flightctl.sim.identify.fleet.trends import correct, test as change_test
+from flightctl.sim.diagnose.fleet.trends import correct, test as change_test
 from real import INDIFLIGHT, need
 
 # the three shortest of the six logs, renamed so that the names' order is the reverse of the flights'
@@ -134,12 +134,12 @@ def test_the_change_test_finds_a_drawn_step_and_names_nothing_on_series_without_
 
 @pytest.mark.parametrize("fmt", ["dataflash", "ulog"])
 def test_the_simulated_fleet_writes_the_vehicle_and_the_start_as_its_autopilot_does(tmp_path, fmt):
-    """sim/flights/fleet.py's logs read back (sim/logs/identity.py) with the board the generator drew and
+    """sim/sweeps/fleet_flown.py's logs read back (sim/logs/identity.py) with the board the generator drew and
     each flight's start time, as the readers take them from a real log of that autopilot."""
     import datetime as dt
     pytest.importorskip("pymavlink" if fmt == "dataflash" else "pyulog")
-    from flightctl.sim.flights.fleet import simulate_fleet
-    from flightctl.sim.identify.diagnose.cli import read_logs
+    from flightctl.sim.sweeps.fleet_flown import simulate_fleet
+    from flightctl.sim.diagnose.cli import read_logs
     truth = simulate_fleet(tmp_path, np.random.default_rng(3803), vehicles=1, flights=2, seconds=22.0, weak=False,
                            aging=False, fmt=fmt)
     v = truth["vehicles"][0]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from flightctl.errors import InputError
-from flightctl.sim.identify.diagnose.data import Layout
+from flightctl.sim.diagnose.data import Layout
 from flightctl.sim.logs import frames
 
 

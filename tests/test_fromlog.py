@@ -10,8 +10,8 @@ import pytest
 
 from flightctl import params as paramfile
 from flightctl.logfile import Table
-from flightctl.sim.identify.diagnose import predict, steps
-from flightctl.sim.identify.diagnose.dataset import sensor_filters
+from flightctl.sim.diagnose import predict, steps
+from flightctl.sim.diagnose.dataset import sensor_filters
 from flightctl.sim.logs import controller as ctl
 from flightctl.sim.sweeps import fromlog
 from test_predict import _Df
@@ -32,13 +32,13 @@ def _controller(raw=BF_RAW) -> dict:
 
 
 class Truth:
-    """A vehicle in base.py's form (p_dot = k_p sum y_i (P_i - h2)^2 ...), its commands delayed `delay` rows,
+    """A vehicle in basemodel.py's form (p_dot = k_p sum y_i (P_i - h2)^2 ...), its commands delayed `delay` rows,
     flown by Betaflight 3.1's rate PID (predict.py's loop) on a setpoint of stick holds; the log it writes."""
 
     def __init__(self, rng):
         self.k = {"x": rng.uniform(0.004, 0.009), "y": rng.uniform(0.004, 0.009), "z": rng.uniform(0.0003, 0.0008)}
         self.h2, self.k_z = -40.0, 1.6e-4
-        self.delay = int(rng.choice([10, 16, 20]))          # rows at 2 kHz: 5, 8 or 10 ms (on base.py's grid)
+        self.delay = int(rng.choice([10, 16, 20]))          # rows at 2 kHz: 5, 8 or 10 ms (on basemodel.py's grid)
         lay = np.array([[float(v) for v in r.split()] for r in ROTORS.split(";")])
         self.x, self.y, self.s = lay[:, 0], lay[:, 1], lay[:, 2]
         self.mix = {"x": self.y / np.abs(self.y).max(), "y": -self.x / np.abs(self.x).max(), "z": -self.s}

@@ -20,7 +20,7 @@ from flightctl.logfile import FLIGHT_COLUMNS, read_flight_log
 from flightctl.params import Airframe
 from flightctl.boards.pi import load_board
 from flightctl.plans.plan import read_plan_file
-from flightctl.sim.identify.diagnose.data import load_file
+from flightctl.sim.diagnose.data import load_file
 from flightctl.sim.identify.realdata import RCB
 from test_identify_errors import HEADER, PENDULUM, ROTOR, bench_rows, yaw_rows
 

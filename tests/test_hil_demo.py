@@ -106,7 +106,7 @@ def test_a_slow_motor_loss_schedule_is_solved_before_the_link_opens(tmp_path, mo
 
 def test_the_service_solves_the_schedule_before_it_opens_the_board(tmp_path, monkeypatch):
     """`run --board hil`: the board's opening starts the link; the schedule is already solved."""
-    import flightctl.service as service
+    import flightctl.service.run as service
     from flightctl.boards import BoardUnavailable
     calls = []
     _slow_schedule(monkeypatch, 0.0, calls, tmp_path / "cache")

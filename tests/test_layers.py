@@ -68,6 +68,61 @@ def test_the_import_check_sees_lazy_relative_and_aliased_imports():
     assert (9, "flightctl.boards") in found and not upward("flightctl.simulate")
 
 
+# The simulator's own floors (docs/architecture.md, "The simulator's floors"), bottom first: a module imports
+# from its own floor and the floors below, never above, at any depth (lazy imports too).
+SIM_FLOORS = (("progress", "plots", "checkout", "docs", "engine"),   # the tools every floor uses
+              ("world",),                                             # the plant, the simulated devices, the board
+              ("causes",),                                            # the effects of the model, one module each
+              ("world.board",),                                       # the simulated board: the world with its effects
+              ("logs", "identify"),                                   # other autopilots' logs read; the bench fits
+              ("diagnose",),                                          # a log's model identified and judged
+              ("flights",),                                           # one flight and its metrics
+              ("analysis",),                                          # the linearised loops
+              ("sweeps",),                                            # many flights at once: the batch, tune, Monte Carlo
+              ("cli", "paramscli"))                                   # the commands
+# The seams crossed upward by design, each named with its reason:
+SEAMS = {
+    # sim/world/compiled.py compiles the causes' own wrench functions into the plant's step (one source each)
+    ("world.compiled", "causes"),
+    # a cause module holds its diagnose Candidate beside its Effect: the candidate contract and what it fits on
+    ("causes", "diagnose.candidate"), ("causes", "diagnose.data"), ("causes", "diagnose.dataset"),
+    ("causes", "diagnose.scoring"), ("causes", "diagnose.rotorspeed"),
+}
+
+
+def sim_floor(name: str) -> int | None:
+    """The floor of a module (dotted, below flightctl.sim): its longest entry in SIM_FLOORS."""
+    best = None
+    for i, floor in enumerate(SIM_FLOORS):
+        for entry in floor:
+            if (name == entry or name.startswith(entry + ".")) and (best is None or len(entry) > len(best[1])):
+                best = (i, entry)
+    return None if best is None else best[0]
+
+
+def sim_up_imports() -> list[str]:
+    bad = []
+    for path in sorted((ROOT / "sim").rglob("*.py")):
+        rel = path.relative_to(ROOT / "sim").with_suffix("")
+        here = ".".join(p for p in rel.parts if p != "__init__")
+        for line, module in imported_modules(path):
+            if not module.startswith("flightctl.sim."):
+                continue
+            there = module.removeprefix("flightctl.sim.")
+            a, b = sim_floor(here), sim_floor(there)
+            assert a is not None and b is not None, (here, there)
+            if b > a and not any(here.startswith(s) and there.startswith(t) for s, t in SEAMS):
+                bad.append(f"sim/{rel}.py:{line}: {here} (floor {a}) imports {there} (floor {b})")
+    return bad
+
+
+def test_the_simulators_floors_import_downward_only():
+    assert {p.name.removesuffix(".py") for p in (ROOT / "sim").iterdir()
+            if p.name != "__init__.py" and (p.suffix == ".py" or (p / "__init__.py").exists())} == \
+        {n for floor in SIM_FLOORS for n in floor if "." not in n}, "a folder or module of sim/ on no floor"
+    assert sim_up_imports() == []
+
+
 def package_folders() -> set[str]:
     names = set()
     for folder, name in PACKAGE_ROOTS.items():

@@ -147,7 +147,7 @@ def test_a_log_is_known_by_its_content_not_its_name(tmp_path):
     """A ULog named `.ulog`, a DataFlash log named `.dat` and a blackbox log named `.log` are read as
     what their bytes are (their magic), the same tables as under their own names; a folder's other
     files are named, with why they were not read, never skipped silently."""
-    from flightctl.sim.identify.diagnose.corpus import NOT_A_LOG, find_logs
+    from flightctl.sim.diagnose.corpus import NOT_A_LOG, find_logs
     dataflash = Path(__file__).parent / "data" / "ardupilot" / "backend_log_80k.bin"
     cases = ((need(FLIGHTS / "px4" / "roboto-test.ulg"), "flight.ulog"), (dataflash, "flight.dat"),
              (need(INDIFLIGHT / "LOG00259.BFL"), "flight.log"))
@@ -202,7 +202,7 @@ def test_a_byte_identical_copy_is_counted_once_and_named(tmp_path):
     """The same real log under two names (a copy kept beside its original, as public log folders hold)
     is one flight: the corpus diagnoses the first and lists the copy as a duplicate of it, and the
     headline counts it once, saying so."""
-    from flightctl.sim.identify.diagnose.corpus import _jobs, find_logs, headline
+    from flightctl.sim.diagnose.corpus import _jobs, find_logs, headline
     folder = tmp_path / "corpus"
     (folder / "b").mkdir(parents=True)
     data = need(FLIGHTS / "px4" / "roboto-test.ulg").read_bytes()

@@ -13,7 +13,7 @@ import pytest
 from flightctl.cli import main
 from flightctl.logfile import read_flight_log
 from flightctl.params import Params
-from flightctl.sim.identify.diagnose import loops, predict
+from flightctl.sim.diagnose import loops, predict
 from flightctl.sim.logs import controller, frames
 
 
@@ -88,7 +88,7 @@ def _sample_by_sample(b, k, p, chain_hz, n):
     omega[i + 1] = omega[i] + b T u[i - k]; the rate loop's target and error low-passes, FF, D on the (filtered)
     error or on the raw gyro; the attitude loop on the estimator's angle (the filtered gyro summed)."""
     from test_predict import _Df
-    from flightctl.sim.identify.diagnose.dataset import sensor_filters
+    from flightctl.sim.diagnose.dataset import sensor_filters
     fs = p["loop_hz"]
     T = 1.0 / fs
     f = lambda kind, hz: _Df(sensor_filters(((kind, hz),), fs)) if hz else (lambda x: x)

@@ -22,7 +22,7 @@ from flightctl.drivers.pwm_sysfs import SysfsPwmEsc
 from flightctl.errors import InputError
 from flightctl.hal import ImuSample
 from flightctl.params import load
-from flightctl.service import main
+from flightctl.service.run import main
 from flightctl.sim.world.devices import SensorNoise, World
 from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.world.power import SimIna219, SimSMBus

@@ -16,7 +16,7 @@ from fakes.quad import FakeQuad
 from flightctl.logfile import read_flight_log
 from flightctl.params import load
 from flightctl.safety import CRASH_TOUCHDOWN_SPEED
-from flightctl.service import main
+from flightctl.service.run import main
 
 PLAN = ('name = "hop"\nduration = 5.0\n[[move]]\nt = 0.0\nchannel = "alt"\nvalue = 0.5\nramp = 1.5\n'
         '[[move]]\nt = 3.0\nchannel = "alt"\nvalue = 0.0\nramp = 2.0\n')

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flightctl.sim.identify.diagnose import predict, steps
-from flightctl.sim.identify.diagnose.dataset import sensor_filters
+from flightctl.sim.diagnose import predict, steps
+from flightctl.sim.diagnose.dataset import sensor_filters
 
 
 class _Df:

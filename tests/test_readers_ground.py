@@ -10,7 +10,7 @@ import pytest
 from flightctl.cli import main
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe
-from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS, IMU_COLUMNS, REST_S, SMOOTH_S, all_running, load_file
+from flightctl.sim.diagnose.data import FOREIGN_COLUMNS, IMU_COLUMNS, REST_S, SMOOTH_S, all_running, load_file
 from real import FLIGHTS, need, rows_and_header, write
 
 pytest.importorskip("pyulog")
@@ -144,7 +144,7 @@ def test_the_landing_detector_is_weighed_against_the_airborne_rows(tmp_path):
     log171.bin they agree; with the detector's flag rewritten to 'landed' over a window of the hover (its
     start and length drawn from a seeded generator) the disagreement is said, sized to the window less
     the detector's lag at either end (data.LANDED_LAG_S)."""
-    from flightctl.sim.identify.diagnose.data import LANDED_LAG_S
+    from flightctl.sim.diagnose.data import LANDED_LAG_S
     from flightctl.sim.logs import each_log
     from pathlib import Path
     for path in (FLIGHTS / "px4" / "quadrotor_local.ulg", Path(__file__).parent / "data" / "ardupilot" / "log171.bin"):

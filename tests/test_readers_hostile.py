@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from flightctl.cli import main
-from flightctl.errors import InputError, read_text
+from flightctl.errors import InputError
+from flightctl.files import read_text
 from flightctl.logfile import read_flight_log
 from flightctl.boards.pi import load_board
 from flightctl.plans.plan import read_plan_file
@@ -246,7 +247,7 @@ def test_diagnose_all_zero_accelerometer_is_judged_on_its_gyro(tmp_path, capsys,
         _rewrite(flight if c == "acc_x" else log, log, _set(c, "0"))
     # An accelerometer that reads zero is no accelerometer (issue 42 part 2): the flight is judged on its
     # gyro and its motors, and the report says the accelerometer's questions are unanswered.
-    from flightctl.sim.identify.diagnose.data import NO_ACCELEROMETER
+    from flightctl.sim.diagnose.data import NO_ACCELEROMETER
     out = tmp_path / "o.json"
     assert main(["diagnose", str(log), "--json", str(out), "--quiet"]) == 0
     rep = json.loads(out.read_text())

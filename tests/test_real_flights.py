@@ -74,7 +74,7 @@ def test_the_imported_csv_gives_the_same_diagnosis_as_the_foreign_log(flight):
 
 def _doc_table() -> list[str]:
     """The rows of docs/real-flights.md's corpus table."""
-    from flightctl.sim.identify.diagnose.corpus import TABLE_BEGIN, TABLE_END
+    from flightctl.sim.diagnose.corpus import TABLE_BEGIN, TABLE_END
     doc = (Path(__file__).resolve().parents[1] / "docs" / "real-flights.md").read_text()
     return doc.split(TABLE_BEGIN, 1)[1].split(TABLE_END, 1)[0].strip().splitlines()
 
@@ -82,7 +82,7 @@ def _doc_table() -> list[str]:
 def _corpus(folders, tmp_path) -> list[str]:
     out = tmp_path / "table.md"
     assert main(["diagnose", "--corpus", *map(str, folders), "--table", str(out), "--quiet"]) == 0
-    from flightctl.sim.identify.diagnose.corpus import TABLE_BEGIN, TABLE_END
+    from flightctl.sim.diagnose.corpus import TABLE_BEGIN, TABLE_END
     return out.read_text().split(TABLE_BEGIN, 1)[1].split(TABLE_END, 1)[0].strip().splitlines()
 
 

@@ -1,4 +1,4 @@
-"""What a pattern of the rotors' thrusts in hover is (sim/identify/diagnose/rotorspeed.py,
+"""What a pattern of the rotors' thrusts in hover is (sim/diagnose/rotorspeed.py,
 `rotor_gain_check`): a yaw trim (the pair of one spin pushing harder, a pattern of the spins) is told
 from a centre of mass off the middle (a pattern of the positions) and from a weak motor, with and without
 the log's rotor speeds. The pattern, its size and the layout are drawn from a seeded generator."""
@@ -10,8 +10,8 @@ import random
 import numpy as np
 import pytest
 
-from flightctl.sim.identify.diagnose.data import Layout
-from flightctl.sim.identify.diagnose.rotorspeed import rotor_gain_check, trim_pattern
+from flightctl.sim.diagnose.data import Layout
+from flightctl.sim.diagnose.rotorspeed import rotor_gain_check, trim_pattern
 
 RNG = random.Random(171)
 SD = [0.01] * 4

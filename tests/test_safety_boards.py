@@ -23,7 +23,7 @@ from flightctl.hal import ArmingRefused
 from flightctl.loop import FlightLoop
 from flightctl.params import load
 from flightctl.plans.plan import Move, Plan
-from flightctl.service import Service
+from flightctl.service.run import Service
 
 PARAMS = load(None)
 BOARDS = ["pi", "pi5"]

@@ -16,7 +16,7 @@ from flightctl.params import load
 from flightctl.boards.pi import open_pi_board
 from flightctl.plans.plan import Move, Plan
 from flightctl.service.sdnotify import Notifier
-from flightctl.service import Service
+from flightctl.service.run import Service
 from flightctl.sim.world.board import SIM_CALIBRATE_S, TRUTH_COLUMNS, open_board, sim_board, truth_row
 from flightctl.boards import BoardOptions
 from flightctl.sim.world.devices import SensorNoise, World

@@ -19,7 +19,7 @@ from fakes.sysfs_pwm import RP1_PWM0, FakePwmSysfs
 from flightctl.boards import detect
 from flightctl.drivers.pulses import EscError
 from flightctl.drivers.pwm_sysfs import SysfsPwmEsc
-from flightctl.service import main
+from flightctl.service.run import main
 
 TESTS = Path(__file__).resolve().parent
 STOP_NS, FLIGHT = 1_000_000, 34000

@@ -104,7 +104,7 @@ def test_the_disarmed_service_notices_a_foreign_wave_puts_the_stop_pulse_back_an
     import threading
     from types import SimpleNamespace
 
-    from flightctl.service import Service
+    from flightctl.service.run import Service
     ctx = running()
     with ctx as (fake, pi):
         esc = PigpioEsc(pi, PINS)

@@ -17,7 +17,7 @@ from fakes.pigpiod import running
 from flightctl.cli import main as cli
 from flightctl.drivers.esc import EscError
 from flightctl.params import load
-from flightctl.service import EXIT_ERROR, EXIT_REFUSED, device_error, main, prearm
+from flightctl.service.run import EXIT_ERROR, EXIT_REFUSED, device_error, main, prearm
 from flightctl.service.queue import PlanQueue
 from flightctl.sim.world.devices import SensorNoise, World
 from flightctl.sim.world.imu import SimMpu9250
@@ -61,7 +61,7 @@ def _chips():
 def test_pigpiod_gone_is_one_line_and_exit_1(tmp_path, caplog, monkeypatch):
     """The real pigpio client on a fake pigpiod that vanishes once the board is open: the pre-arm
     checks' first ESC command finds no daemon."""
-    import flightctl.service as service
+    import flightctl.service.run as service
     from flightctl.boards.pi import open_pi_board
     params, world = _chips()
     ctx = running()

@@ -21,7 +21,7 @@ from flightctl.drivers.esc import PigpioEsc
 from flightctl.errors import InputError
 from flightctl.logfile import MAG_COLUMNS, read_flight_log
 from flightctl.plans import load_plan
-from flightctl.service import TeardownLog, main
+from flightctl.service.run import TeardownLog, main
 from flightctl.sim.world.board import TRUTH_COLUMNS
 from without import PI_LIBRARIES, run_without
 

@@ -25,7 +25,7 @@ def test_a_commits_package_is_what_git_holds(tmp_path):
     revision = load("revision")
     rev = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD~1"], capture_output=True, text=True).stdout.strip()
     folder = revision.package(rev, str(tmp_path))
-    for path, inside in (("sim/identify/diagnose/dataset.py", "flightctl/sim/identify/diagnose/dataset.py"),
+    for path, inside in (("sim/diagnose/dataset.py", "flightctl/sim/diagnose/dataset.py"),
                          ("flightctl/params.py", "flightctl/params.py"), ("hil/__init__.py", "flightctl/hil/__init__.py")):
         held = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:{path}"], capture_output=True).stdout
         assert (tmp_path / inside).read_bytes() == held

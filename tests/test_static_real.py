@@ -32,9 +32,9 @@ import pytest
 from flightctl.cli import main
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe
-from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS, load_file
-from flightctl.sim.identify.static import STATIC_COLUMNS, static_tier
-from flightctl.sim.identify.static.curve import parse
+from flightctl.sim.diagnose.data import FOREIGN_COLUMNS, load_file
+from flightctl.sim.diagnose.static import STATIC_COLUMNS, static_tier
+from flightctl.sim.diagnose.static.curve import parse
 from real import FLIGHTS, need, rows_and_header, write
 
 LOGS = {"LOG00037": "betaflight/LOG00037.BFL", "LOG00230": "indiflight/LOG00230.BFL",
@@ -95,7 +95,7 @@ def speed_line(meta, names, rows):
         return None
     import tempfile
     from pathlib import Path
-    from flightctl.sim.identify.static.curve import speed_curve
+    from flightctl.sim.diagnose.static.curve import speed_curve
     with tempfile.TemporaryDirectory() as d:
         table = read_flight_log(write(meta, names, rows, Path(d) / "line.csv"), extra=FOREIGN_COLUMNS)
         return speed_curve([load_file(table, Airframe())])
@@ -373,7 +373,7 @@ def test_a_weak_motor_masked_by_a_centre_of_mass_is_named_by_its_speed_per_comma
     thrust's, unchanged), and the centre of mass moved away from it by what brings its hover share back to
     the mean's (0.8-1.2 of it, drawn): its hover gain says nothing, its speed per command names it and its
     size, against the untouched log's own."""
-    from flightctl.sim.identify.static.curve import Curve
+    from flightctl.sim.diagnose.static.curve import Curve
     rng = np.random.default_rng(4800 + seed)
     motor, scale = int(rng.integers(1, 5)), float(rng.uniform(0.75, 0.90))
     meta, names, rows = imported("LOG00230", tmp, rng)

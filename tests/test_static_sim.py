@@ -26,8 +26,8 @@ import pytest
 from flightctl.cli import main
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe
-from flightctl.sim.flights import fleet
-from flightctl.sim.flights.fleet import AP_FROM_SIM, LOG_BITMASK, PWM
+from flightctl.sim.sweeps import fleet_flown
+from flightctl.sim.sweeps.fleet_flown import AP_FROM_SIM, LOG_BITMASK, PWM
 from flightctl.sim.world.power import SimBattery, power_of_commands
 from flightctl.sim.logs.dfwrite import DataFlash
 
@@ -42,8 +42,8 @@ def current(log) -> np.ndarray:
 
 
 def vibe(log) -> np.ndarray:
-    """(3, n) ArduPilot's VIBE of the logged accelerometer (sim/flights/fleet.py's)."""
-    return fleet.vibe(np.vstack([log[c] for c in ("acc_x", "acc_y", "acc_z")]), A.loop_hz)
+    """(3, n) ArduPilot's VIBE of the logged accelerometer (sim/sweeps/fleet_flown.py's)."""
+    return fleet_flown.vibe(np.vstack([log[c] for c in ("acc_x", "acc_y", "acc_z")]), A.loop_hz)
 
 
 def arducopter(log, path, r_hidden: float = 0.0, clips=None, baro=None, imu: bool = True):
@@ -215,8 +215,8 @@ def test_a_thrust_curve_that_is_not_one_is_refused_in_one_line_before_any_work(t
 def test_the_projects_own_log_reads_the_same_hover_through_eq_26(tmp, untouched):
     """The simulator's own CSV (this project's vehicle: eq. 26 with the airframe's h2, the paper's + layout)
     at its 450 Hz gives the hover and shares the default-rate ArduCopter log of the same flight gives."""
-    from flightctl.sim.identify.diagnose.data import load_file
-    from flightctl.sim.identify.static import static_tier
+    from flightctl.sim.diagnose.data import load_file
+    from flightctl.sim.diagnose.static import static_tier
     log, rep = untouched
     st = static_tier([log], [load_file(log, A)], A)
     assert st["thrust_curve"].startswith("eq. 26 with the airframe's h2")

@@ -1,4 +1,4 @@
-"""The measured step response (sim/identify/diagnose/steps.py, docs/steps.md): a known discrete rate loop
+"""The measured step response (sim/diagnose/steps.py, docs/steps.md): a known discrete rate loop
 whose delay, natural frequency and damping are drawn from a seeded generator, driven by a stick-like
 setpoint, is recovered within stated tolerances; a hover without stick input, a response the setpoint
 does not drive and a log without a setpoint get the gate's reason; real Betaflight and PX4 logs get
@@ -17,7 +17,7 @@ from scipy import signal
 
 from flightctl.cli import main
 from flightctl.logfile import Table
-from flightctl.sim.identify.diagnose import steps
+from flightctl.sim.diagnose import steps
 from real import FLIGHTS, need
 
 DATA = Path(__file__).parent / "data"

@@ -13,10 +13,10 @@ import pytest
 from flightctl.errors import InputError
 from flightctl.logfile import read_flight_log
 from flightctl.params import Airframe
-from flightctl.sim.identify.diagnose.base import T_BASE, identify
-from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS, load_file
-from flightctl.sim.identify.diagnose.dataset import LOWPASS_HZ
-from flightctl.sim.identify.diagnose.rotorspeed import rotor_speed_lag
+from flightctl.sim.diagnose.basemodel import T_BASE, identify
+from flightctl.sim.diagnose.data import FOREIGN_COLUMNS, load_file
+from flightctl.sim.diagnose.dataset import LOWPASS_HZ
+from flightctl.sim.diagnose.rotorspeed import rotor_speed_lag
 from flightctl.cli import main
 from real import INDIFLIGHT, need, rows_and_header, write
 

@@ -215,7 +215,7 @@ def test_an_imported_log_comes_back_whole_through_the_ulog(tmp_path, log):
 def test_diagnose_reads_its_own_ulog_as_the_csv(exported, tmp_path):
     """diagnose's reading of the exported ULog is the CSV's table (the project's vehicle, not another
     one's: no `# vehicle: foreign`), so both give one diagnosis."""
-    from flightctl.sim.identify.diagnose.cli import read_logs
+    from flightctl.sim.diagnose.cli import read_logs
     csv_path = Path(exported[0].path)
     assert cli(["log", "export", str(csv_path), str(tmp_path / "f.ulg")]) == 0
     (a,) = read_logs([str(csv_path)], None, lambda *m: None)

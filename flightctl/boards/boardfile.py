@@ -18,7 +18,8 @@ from flightctl.drivers import pulses
 from flightctl.drivers.hcsr04 import HcSr04
 from flightctl.drivers.ina219 import Ina219
 from flightctl.drivers.mpu9250 import Mpu9250
-from flightctl.errors import InputError, number, read_toml
+from flightctl.errors import InputError, number
+from flightctl.files import read_toml
 from flightctl.schema import check_range, entry
 
 RESERVED_PINS = {2: "I2C SDA", 3: "I2C SCL", 7: "SPI CE1", 8: "SPI CE0", 9: "SPI MISO", 10: "SPI MOSI",

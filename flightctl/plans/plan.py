@@ -24,7 +24,9 @@ from dataclasses import dataclass
 from math import cos, inf, pi
 from pathlib import Path
 
-from flightctl.errors import InputError, number, read_toml
+from flightctl.errors import InputError, number
+
+from flightctl.files import read_toml
 
 CHANNELS = ("roll", "pitch", "yaw", "alt")
 MAX_PLAN_S = 3600.0

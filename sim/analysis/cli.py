@@ -22,8 +22,9 @@ import numpy as np
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import ESTIMATORS
-from flightctl.errors import InputError, Parser, output_file, output_prefix, write_atomic
-from flightctl.sim.cli import gains_label
+from flightctl.errors import InputError, Parser
+from flightctl.files import output_file, output_prefix, write_atomic
+from flightctl.sim.flights.run import gains_label
 from flightctl.params import GAIN_SETS, Params
 from flightctl.plans import HOVER_ALT
 from flightctl.sim import causes

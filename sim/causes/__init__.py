@@ -1,7 +1,7 @@
 """The causes: every candidate extension of docs/measured-data.md, then the project's own (docs/diagnose.md,
 "Causes beyond the contract"), one module each, holding side by side its plant effect (an `Effect` on
 the seam of `flightctl.sim.world.model`; a sensor effect acts on the simulated IMU) and its diagnose
-fit (a `Candidate` of `flightctl.sim.identify.diagnose.candidate`).
+fit (a `Candidate` of `flightctl.sim.diagnose.candidate`).
 
 `CAUSES` maps each name to its `Cause`: the effect class, the candidate class, the parameters with
 their units, and a one-line description. `flightctl sim --effect` builds effects with `parse`, the
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from flightctl.errors import InputError
 from flightctl.sim.causes import (actuation_delay, battery_sag, com_offset, ground_effect, gyro_lag, linear_yaw_drag,
                                   motor_dynamics, motor_lag, motor_weak, rotor_drag, rotor_inflow)
-from flightctl.sim.identify.diagnose.candidate import Candidate
+from flightctl.sim.diagnose.candidate import Candidate
 from flightctl.sim.world.model import Effect, Parameter
 
 

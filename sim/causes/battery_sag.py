@@ -6,7 +6,7 @@ import math
 import numpy as np
 
 from flightctl.battery import CELL_V
-from flightctl.sim.identify.diagnose.candidate import AffineCandidate
+from flightctl.sim.diagnose.candidate import AffineCandidate
 from flightctl.sim.world.model import Effect, Parameter
 
 SAG_MIN_SPAN = 0.01      # battery_sag needs the voltage to vary by 1 % (5th to 95th percentile)

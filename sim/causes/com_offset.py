@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.candidate import AffineCandidate
-from flightctl.sim.identify.diagnose.data import Layout
-from flightctl.sim.identify.diagnose.dataset import C
+from flightctl.sim.diagnose.candidate import AffineCandidate
+from flightctl.sim.diagnose.data import Layout
+from flightctl.sim.diagnose.dataset import C
 from flightctl.sim.world.model import Effect, Parameter
 
 

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.candidate import GridCandidate
-from flightctl.sim.identify.diagnose.dataset import C
+from flightctl.sim.diagnose.candidate import GridCandidate
+from flightctl.sim.diagnose.dataset import C
 from flightctl.sim.world.model import Z, Effect, Parameter
 
 GE_MAX_Z = 0.6           # m: ground effect is judged only with airborne time below this

@@ -24,9 +24,9 @@ import copy
 import math
 
 from flightctl.sim.causes.motor_lag import MotorLagFit
-from flightctl.sim.identify.diagnose.candidate import (MAX_TIMING_S, GridCandidate, timing_not_physical,
+from flightctl.sim.diagnose.candidate import (MAX_TIMING_S, GridCandidate, timing_not_physical,
                                                        too_short_to_time)
-from flightctl.sim.identify.diagnose.dataset import Change
+from flightctl.sim.diagnose.dataset import Change
 from flightctl.sim.world.model import Effect, Parameter
 
 

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.candidate import AffineCandidate
-from flightctl.sim.identify.diagnose.dataset import C
+from flightctl.sim.diagnose.candidate import AffineCandidate
+from flightctl.sim.diagnose.dataset import C
 from flightctl.sim.world.model import R, Effect, Parameter
 
 YAW_MIN_RATE = 0.2       # rad/s: linear_yaw_drag needs yaw rates at least this (95th percentile)

@@ -26,8 +26,8 @@ import numpy as np
 
 from flightctl.physics import rotor_speed, thrust_from_command, thrust_from_speed
 from flightctl.sim.causes.motor_lag import MotorLagFit, lag_held
-from flightctl.sim.identify.diagnose.candidate import TIMING_CHECK, GridCandidate, timing_not_physical, too_short_to_time
-from flightctl.sim.identify.diagnose.dataset import C, Change
+from flightctl.sim.diagnose.candidate import TIMING_CHECK, GridCandidate, timing_not_physical, too_short_to_time
+from flightctl.sim.diagnose.dataset import C, Change
 from flightctl.sim.world.model import Effect, Parameter
 
 SPIN = (-1.0, 1.0, -1.0, 1.0)   # s_i: +1 counter-clockwise seen from above (motors 2, 4), -1 clockwise

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.candidate import (MAX_TIMING_S, TIMING_CHECK, GridCandidate, timing_not_physical,
+from flightctl.sim.diagnose.candidate import (MAX_TIMING_S, TIMING_CHECK, GridCandidate, timing_not_physical,
                                                        too_short_to_time)
 from flightctl.sim.world.model import Effect, Parameter
 

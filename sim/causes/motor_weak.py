@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 
 from flightctl.errors import InputError
-from flightctl.sim.identify.diagnose.candidate import AffineCandidate, Result, columns_of
-from flightctl.sim.identify.diagnose.dataset import N_BLOCKS, Change
-from flightctl.sim.identify.diagnose.scoring import fitted, heldout, linear_stats, solve
+from flightctl.sim.diagnose.candidate import AffineCandidate, Result, columns_of
+from flightctl.sim.diagnose.dataset import N_BLOCKS, Change
+from flightctl.sim.diagnose.scoring import fitted, heldout, linear_stats, solve
 from flightctl.sim.world.model import Effect, Parameter
 
 
@@ -104,7 +104,7 @@ class MotorWeakFit(AffineCandidate):
                       fitted(e, designs[m], th), explains=self.explains, folds=folds)
 
     def physical(self, result):
-        from flightctl.sim.identify.diagnose.rotorspeed import CURVE_TOL, GAIN_TOL   # it imports the causes
+        from flightctl.sim.diagnose.rotorspeed import CURVE_TOL, GAIN_TOL   # it imports the causes
         m, s = int(result.parameters["motor"]), result.parameters["scale"]
         if not SCALE_RANGE[0] <= s <= SCALE_RANGE[1]:
             return f"motor {m} at {s:.2f} of its modelled thrust is outside {SCALE_RANGE[0]:g}-{SCALE_RANGE[1]:g}"

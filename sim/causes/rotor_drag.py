@@ -26,10 +26,10 @@ import math
 import numpy as np
 
 from flightctl.sim.causes.rotor_inflow import airflow, airflow_root
-from flightctl.sim.identify.diagnose.candidate import GridCandidate, Result
-from flightctl.sim.identify.diagnose.data import stretches
-from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, Change
-from flightctl.sim.identify.diagnose.scoring import linear_stats, solve
+from flightctl.sim.diagnose.candidate import GridCandidate, Result
+from flightctl.sim.diagnose.data import stretches
+from flightctl.sim.diagnose.dataset import C, N_BLOCKS, Change
+from flightctl.sim.diagnose.scoring import linear_stats, solve
 from flightctl.sim.world.model import R, Effect, Parameter
 
 

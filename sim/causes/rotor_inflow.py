@@ -48,8 +48,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.candidate import AffineCandidate
-from flightctl.sim.identify.diagnose.dataset import C
+from flightctl.sim.diagnose.candidate import AffineCandidate
+from flightctl.sim.diagnose.dataset import C
 from flightctl.sim.world.model import P, Q, Effect, Parameter, body_torques
 
 

@@ -138,3 +138,11 @@ def fly(scenario: Scenario, params: Params, log_path: str | Path, effects=(), no
     table = log.table()
     outcome, crashed, flew = judge(result, table, touchdowns, params.airframe.g)
     return Flight(scenario, table, result, touchdowns, 0.0, log.dropped, outcome, crashed, flew)
+
+
+def gains_label(args, params) -> str:
+    """The gain set flown, as the announcement and the JSON name it."""
+    if args.gains:
+        return args.gains
+    file_gains = any(name.startswith(("kp_", "ki_", "kd_")) for name, _ in params.sources)
+    return f"the [gains] of {params.origin}" if file_gains else "table6"

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from flightctl import params as paramfile
-from flightctl.errors import InputError, Parser, output_file, read_toml, write_atomic
+from flightctl.errors import InputError, Parser
+from flightctl.files import output_file, read_toml, write_atomic
 from flightctl.logfile import BENCH_COLUMNS, PENDULUM_COLUMNS, YAW_DRAG_COLUMNS, read_table
 from flightctl.sim.identify import inertia, propeller, yaw_drag
 from flightctl.sim.identify.fits import FitError, Identified, check_result

@@ -14,7 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from flightctl.errors import InputError, output_dir, write_atomic
+from flightctl.errors import InputError
+
+from flightctl.files import output_dir, write_atomic
 from flightctl.logfile import BENCH_COLUMNS, read_table
 from flightctl.params import Airframe
 from flightctl.physics import G

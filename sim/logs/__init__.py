@@ -19,9 +19,11 @@ from typing import Callable
 
 import numpy as np
 
-from flightctl.errors import InputError, read_bytes
+from flightctl.errors import InputError
+
+from flightctl.files import read_bytes
 from flightctl.logfile import Table
-from flightctl.sim.identify.diagnose.data import all_running, motor_columns
+from flightctl.sim.logs.columns import all_running, motor_columns
 from flightctl.sim.logs.common import EXTRA as EXTRA_COLUMNS
 from flightctl.sim.logs.common import Imported, flight_text, parser_said, to_table
 
@@ -113,7 +115,7 @@ def kind(path: str) -> str | None:
     log (this project's CSV). InputError for a file whose suffix claims a binary log format its bytes
     do not have, naming the formats known."""
     suffix = Path(path).suffix.lower()
-    head = read_bytes(path, 4096)         # a regular, readable file (errors.read_bytes), and its magic
+    head = read_bytes(path, 4096)         # a regular, readable file (files.read_bytes), and its magic
     for r in READERS:
         if r.matches(head):
             return r.name

@@ -20,8 +20,8 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import FLIGHT_COLUMNS, FlightLogWriter, Table, read_flight_log
-from flightctl.sim.identify.diagnose.data import MOTOR_COLUMNS, OMEGA_COLUMNS, all_running   # all motors above 1 % of their range
-from flightctl.sim.identify.diagnose.dataset import DYNAMIC_MIN_HZ   # what diagnose needs to time and to follow
+from flightctl.sim.logs.columns import MOTOR_COLUMNS, OMEGA_COLUMNS, all_running   # all motors above 1 % of their range
+from flightctl.sim.logs.columns import DYNAMIC_MIN_HZ   # what diagnose needs to time and to follow
 
 AXES = ("x", "y", "z")
 # Extra columns (docs/log-import.md has each one's source and unit): the measurements the diagnosis

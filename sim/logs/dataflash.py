@@ -26,7 +26,8 @@ import tempfile
 import numpy as np
 
 from flightctl.sim.logs import controller
-from flightctl.errors import InputError, read_bytes
+from flightctl.errors import InputError
+from flightctl.files import read_bytes
 from flightctl.sim.logs import arducopter3, frames, identity
 from flightctl.sim.logs.dfarming import MOTOR_FUNCTION, armed as _armed
 from flightctl.sim.logs.common import (CELL_FULL_V, DEG, FRD, MIN_ROWS, Imported, Stream, command_p, parser_said,

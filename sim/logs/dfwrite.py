@@ -1,7 +1,7 @@
 """A DataFlash (`.bin`) writer: ArduPilot's log format as pymavlink's DFReader reads it (each message
 0xA3 0x95, its type, its fields packed little-endian; FMT messages define the types), so that a flight
 of this project's simulator can be written as an ArduCopter log and read back (the tests, and the
-simulated fleet of sim/flights/fleet.py). The field layouts are ArduPilot's own (its LogStructure.h);
+simulated fleet of sim/sweeps/fleet_flown.py). The field layouts are ArduPilot's own (its LogStructure.h);
 GPS as ArduPilot 4.x logs it: GMS the GPS time of week (ms), GWk the GPS week, Lat/Lng 1e-7 degrees."""
 from __future__ import annotations
 

@@ -33,7 +33,7 @@ PWM_MAIN_FUNC1..4 = 101..104 with PWM_MAIN_MIN/MAX the pulse of P = 0 and 255. T
 file is flattened (`kp_z` is `gains.kp_z`) into float parameters named as PX4 allows (at most 16
 characters: `FC_` and the section's letter, `FC_G_KP_Z`; a longer name keeps its first 12 characters
 and a 3-character hash), and the `flightctl_params` information message lists `SHORT=full.name` for
-each. A log whose header has `# vehicle_id:` and `# start_utc:` (sim/flights/fleet.py) gets them as
+each. A log whose header has `# vehicle_id:` and `# start_utc:` (sim/sweeps/fleet_flown.py) gets them as
 PX4 has them: the `sys_uuid` information message, and vehicle_gps_position's `time_utc_usec` once a
 second. The information messages `sys_name` flightctl, `flightctl_columns` (the CSV's columns),
 `flightctl_meta` (its `# key: value` lines, JSON) and `flightctl_t0_us` make it flightctl's own.
@@ -52,7 +52,8 @@ from pathlib import Path
 import numpy as np
 
 from flightctl import __version__
-from flightctl.errors import InputError, Parser, output_file, write_atomic
+from flightctl.errors import InputError, Parser
+from flightctl.files import output_file, write_atomic
 from flightctl.comms.frames import euler_ned, pulse_us, quaternion, vector_ned
 from flightctl.logfile import FLIGHT_COLUMNS, MAG_COLUMNS, read_flight_log
 from flightctl.params import Airframe, Gains, from_dict
@@ -215,7 +216,7 @@ def export(csv_path: str | Path, ulg_path: str | Path, px4_only: bool = False) -
     """Write the ULog file; returns the number of samples per topic. `px4_only`: PX4's topics alone,
     without what makes the file flightctl's own (the flightctl_log topic, the flightctl_columns,
     flightctl_meta and flightctl_t0_us information messages), so that it reads as another vehicle's
-    PX4 log (sim/flights/fleet.py's simulated PX4 vehicles)."""
+    PX4 log (sim/sweeps/fleet_flown.py's simulated PX4 vehicles)."""
     from flightctl.sim.logs.common import EXTRA
     log = read_flight_log(csv_path, extra=TRUTH + EXTRA)
     meta = log.meta

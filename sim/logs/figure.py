@@ -11,7 +11,7 @@ import re
 import numpy as np
 
 from flightctl.logfile import Table
-from flightctl.sim.identify.diagnose.data import MAX_ROTORS   # P1..PN and omega1..omegaN, as many as the log's motors
+from flightctl.sim.logs.columns import MAX_ROTORS   # P1..PN and omega1..omegaN, as many as the log's motors
 from flightctl.sim.logs.common import GAP_PERIODS   # a line breaks across a gap in the rows as a stream's does
 from flightctl.sim.plots import empty_panel, figure, legend
 

@@ -1,6 +1,6 @@
 """Which vehicle a log is of, and when its flight started, as each autopilot writes them: the readers
 put them in the log's header (`vehicle_id`, `start_utc`, each with its `_source`), and the fleet
-report (sim/identify/fleet/) groups and orders the logs by them.
+report (sim/diagnose/fleet/) groups and orders the logs by them.
 
 - ArduPilot (DataFlash): the board's name and its three 32-bit unique-ID words in a MSG line at boot
   (`Pixhawk4 0047002B 34385105 36363539` in tests/data/ardupilot/backend_log_80k.bin; AP_BoardConfig

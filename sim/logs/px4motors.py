@@ -15,7 +15,7 @@ import re
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.data import MAX_ROTORS, MIN_ROTORS
+from flightctl.sim.logs.columns import MAX_ROTORS, MIN_ROTORS
 from flightctl.sim.logs import frames
 from flightctl.sim.logs.common import Imported, Stream, command_p
 

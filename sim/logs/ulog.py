@@ -19,7 +19,9 @@ from collections import Counter
 
 import numpy as np
 
-from flightctl.errors import InputError, read_bytes
+from flightctl.errors import InputError
+
+from flightctl.files import read_bytes
 from flightctl.sim.logs import controller
 from flightctl.sim.logs import identity
 from flightctl.sim.logs.common import (FRD, Imported, Stream, euler_from_frd_ned, log_text, parser_said,

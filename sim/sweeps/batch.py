@@ -1,8 +1,8 @@
 """N vehicles at once, each flown as `flightctl sim` flies it: from power-on, the calibration on the floor,
 arming, the take-off, the plan, the landing, through the compiled per-vehicle loop of
-sim/sweeps/flight.py (the plant of sim/world/compiled.py, the chip of sim/world/imu.py, the sonar and
+sim/sweeps/twin_loop.py (the plant of sim/world/compiled.py, the chip of sim/world/imu.py, the sonar and
 the power monitor's draws, the onboard loop's rules, and the onboard controller's compiled copy,
-sim/sweeps/onboard.py). For Monte Carlo over the model's ranges and for robust tuning.
+sim/sweeps/twin_controller.py). For Monte Carlo over the model's ranges and for robust tuning.
 
 A vehicle here is the vehicle the full onboard path flies with the same draw and seed: the same
 airframe and effects (the draws), the same chip die and the same random numbers (`_Vehicles`: its
@@ -26,8 +26,8 @@ import numpy as np
 from flightctl.params import Gains, Params
 from flightctl.sim import engine
 from flightctl.plans.plan import Plan
-from flightctl.sim.sweeps import flight as fl
-from flightctl.sim.sweeps import onboard as ob
+from flightctl.sim.sweeps import twin_loop as fl
+from flightctl.sim.sweeps import twin_controller as ob
 from flightctl.sim.world.board import SIM_CALIBRATE_S
 
 GROUP = 256          # vehicles whose arrays are set up and flown together

@@ -2,7 +2,7 @@
 --max-change 2 --draws 48 --seed 0] [--out LINES] [--json R.json]`: gains from a flight log (docs/tune.md, "Gains
 from a log").
 
-1. **The vehicle and its controller.** The base model diagnose identifies (`predict.base_model`, base.py) on
+1. **The vehicle and its controller.** The base model diagnose identifies (`predict.base_model`, basemodel.py) on
    the log's first `predict.SPLIT` of time, and the firmware's rate controller as the log gives it
    (sim/logs/controller.py, `predict.loop_parts`).
 2. **The check.** That model flying the logged controller predicts each rate axis's step on the rest of the
@@ -12,7 +12,7 @@ from a log").
    to; no gains are recommended for it. Every axis refused: exit 1.
 3. **The plausible models.** The identification's own uncertainty, drawn (`DRAWS` models, `--seed`): the
    axis's effectiveness k (k_p, k_q, k_r), h2 and each rotor's gain each from a normal with its jackknife
-   standard error (base.py), truncated to the physical side (k > 0, h2 below the median command); the commands'
+   standard error (basemodel.py), truncated to the physical side (k > 0, h2 below the median command); the commands'
    timing uniform over the identification's grid step either side of the value found (base.TIMING_DELAYS: the
    search's resolution, the only figure of its uncertainty the identification gives, or its `stderr` where it
    has one). Each draw's effectiveness b is predict.py's linearisation (`predict.effectiveness`) of the drawn
@@ -52,8 +52,8 @@ import types
 import numpy as np
 
 from flightctl.errors import InputError
-from flightctl.sim.identify.diagnose import predict, steps
-from flightctl.sim.identify.diagnose.base import TIMING_DELAYS
+from flightctl.sim.diagnose import predict, steps
+from flightctl.sim.diagnose.basemodel import TIMING_DELAYS
 from flightctl.sim.logs import controller as ctl
 
 DRAWS = 48                  # plausible models drawn per axis
@@ -438,8 +438,8 @@ def main(args, a) -> int:
     refused (the check failed, or no gains meet the targets)."""
     import sys
 
-    from flightctl.errors import write_atomic
-    from flightctl.sim.identify.diagnose.cli import read_logs
+    from flightctl.files import write_atomic
+    from flightctl.sim.diagnose.cli import read_logs
     t0 = time.process_time()
     say = (lambda m: print(f"tune --from-log: {m}", file=sys.stderr)) if not args.quiet else (lambda m: None)
 

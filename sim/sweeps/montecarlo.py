@@ -280,7 +280,7 @@ def plot(result: dict, path: str | Path) -> None:
 
 
 def write_json(result: dict, path: str | Path) -> None:
-    from flightctl.errors import write_atomic
+    from flightctl.files import write_atomic
     write_atomic(path, json.dumps(result, indent=1) + "\n")
 
 

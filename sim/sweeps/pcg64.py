@@ -1,5 +1,5 @@
 """NumPy's `Generator(PCG64(seed)).standard_normal()`, number for number, on a generator's state held in
-four uint64 words (the batched simulator's chips, sim/sweeps/flight.py `normals`), so that the compiled
+four uint64 words (the batched simulator's chips, sim/sweeps/twin_loop.py `normals`), so that the compiled
 loop draws its normals without numba's Generator objects: a typed list of them cost 12 us a vehicle to
 make (each one unboxed through its ctypes interface), and each draw called NumPy's bit generator
 through a function pointer.

@@ -44,7 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
-from flightctl.errors import InputError, Parser, output_file, seed, write_atomic
+from flightctl.errors import InputError, Parser, seed
+
+from flightctl.files import output_file, write_atomic
 from flightctl.params import TABLE4, TABLE6, Gains, dumps
 from flightctl.sim import engine
 from flightctl.sim.sweeps import fromlog

@@ -89,7 +89,7 @@ def source_digest() -> str:
     compiled_files = [Path(flightctl.physics.__file__), Path(flightctl.drivers.mpu9250_regs.__file__)]
     compiled_files += [here / name for name in ("model.py", "compiled.py", "imu.py")]
     compiled_files += [here.parent / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
-    compiled_files += [here.parent / "sweeps" / f"{name}.py" for name in ("onboard", "flight", "pcg64")]
+    compiled_files += [here.parent / "sweeps" / f"{name}.py" for name in ("twin_controller", "twin_loop", "pcg64")]
     compiled_files += [Path(sys.modules["flightctl"].__file__).parent / name for name in (
         "control/estimator.py", "control/mixer.py", "control/landing.py", "control/controller.py", "loop.py",
         "safety.py", "drivers/hcsr04.py")]
@@ -160,7 +160,7 @@ def layout(model):
 
 def layout_rows(model, n: int):
     """`layout` of a model whose parameters (its airframe's, its effects') may be (n,) arrays, one value
-    per vehicle (the batched simulator, sim/sweeps/flight.py): q as (n, len(q)), a row per vehicle."""
+    per vehicle (the batched simulator, sim/sweeps/twin_loop.py): q as (n, len(q)), a row per vehicle."""
     laid = _layout(model)
     if laid is None:
         return None

@@ -65,7 +65,7 @@ def floor_spin(r: float, dt: float, brake: float) -> tuple[float, float]:
 
 def time_weighted(before: float, now: float, frac: float) -> float:
     """One command over a period whose first `frac` holds `before` and the rest `now`: their average
-    weighted by time (the batched simulator's compiled loop, sim/sweeps/flight.py, takes it too)."""
+    weighted by time (the batched simulator's compiled loop, sim/sweeps/twin_loop.py, takes it too)."""
     return before * frac + now * (1.0 - frac)
 
 

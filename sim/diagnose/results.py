@@ -7,7 +7,7 @@ judged it (`code`: a digest of the readers' and the diagnosis' sources), so that
 version of flightctl is diagnosed again rather than reused. It holds the key figures
 (status, the refusal's or failure's line, the seconds airborne, the causes named, what was read: the
 vehicle's identity and the flight's start among it; the figures the fleet report follows across flights,
-sim/identify/fleet/figures.py, each with its standard error) and
+sim/diagnose/fleet/followed.py, each with its standard error) and
 the path of the log's whole report, a JSON file of its own in the folder beside the table
 (`R.reports/`). A log whose worker died (it crashed the process: sim/engine.py's `WorkerDied`) is a
 row too, status "failed", its reason "worker died: ...": the run goes on, and a run started again
@@ -21,7 +21,7 @@ import os
 import time
 from pathlib import Path
 
-from flightctl.sim.identify.fleet.figures import figures
+from flightctl.sim.diagnose.fleet.followed import figures
 
 META = ("craft", "firmware", "format", "rate_hz", "motor_rate_hz", "omega_source", "battery_cells", "vehicle_id",
         "vehicle_id_source", "board", "start_utc", "start_source")
@@ -43,7 +43,7 @@ def code_digest() -> str:
     h = hashlib.sha256()
     for sub in ("logs", "identify", "causes"):
         for f in sorted((root / sub).rglob("*.py")):
-            if f.parent.name == "fleet" and f.name != "figures.py":    # the fleet report reads rows, makes none
+            if f.parent.name == "fleet" and f.name != "followed.py":    # the fleet report reads rows, makes none
                 continue
             h.update(f.relative_to(root).as_posix().encode())
             h.update(f.read_bytes())

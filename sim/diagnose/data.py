@@ -13,6 +13,8 @@ import numpy as np
 from flightctl.logfile import IMU_COLUMNS, Table
 from flightctl.params import Airframe
 from flightctl.physics import G, thrust_from_command
+from flightctl.sim.logs.columns import (FOREIGN_COLUMNS, IDLE_P, MAX_ROTORS, MIN_ROTORS, MOTOR_COLUMNS, OMEGA_COLUMNS,
+                                        all_running, motor_columns)
 from flightctl.sim.world.model import rotation
 
 MIN_AIRBORNE_S = 1.0     # s of airborne data needed in total to judge anything
@@ -21,10 +23,9 @@ EDGE_S = 0.1             # s trimmed at both ends of each airborne stretch
 MIN_STRETCH_S = 0.5      # s: shorter airborne stretches are dropped
 RANGE_GAP_S = 0.25       # s: a range older than this does not give the altitude
 MOTOR_ON_MARGIN = 1.0    # P units above the dead zone h2 for a motor to count as running
-# Logs of other vehicles (docs/real-flights.md): the command is the ESC's range mapped onto 0-255, so a
-# motor runs above 1 % of it; without a height above the ground, airborne needs the mean command at
-# least THROTTLE_SHARE of its median while all four run (a vehicle on the ground idles far below it).
-IDLE_P = 2.55
+# Logs of other vehicles (docs/real-flights.md): a motor runs above IDLE_P (sim/logs/columns.py); without a
+# height above the ground, airborne needs the mean command at least THROTTLE_SHARE of its median while all
+# four run (a vehicle on the ground idles far below it).
 THROTTLE_SHARE = 0.5
 # Without a height, the take-off and the landing: a vehicle can leave the ground only when its thrust is
 # near its weight (in ground effect, 1 / (1 - (R / 4z)^2) <= 4/3 at z >= R/2, it needs 3/4 of it), which
@@ -68,10 +69,6 @@ BARO_CLIMB_M = 0.5
 # (default 1.0 s, its parameter reference), ArduCopter's LAND_DETECTOR_TRIGGER_SEC (1.0 s, ArduCopter/config.h)
 LANDED_LAG_S = 1.0
 HEIGHT_SOURCES = ("mocap", "rangefinder")   # heights good to a few cm: they also give the airborne test
-MIN_ROTORS, MAX_ROTORS = 4, 12      # the static tier's layouts (sim/logs/frames.py); the dynamic tier's model is the quad's
-MOTOR_COLUMNS = tuple(f"P{i}" for i in range(5, MAX_ROTORS + 1))   # motors 5.. beside the contract's P1-P4
-OMEGA_COLUMNS = tuple(f"omega{i}" for i in range(1, MAX_ROTORS + 1))   # each motor's measured speed (rad/s)
-FOREIGN_COLUMNS = ("height", "current", "landed") + OMEGA_COLUMNS + MOTOR_COLUMNS
 FILTER_KINDS = ("pt1", "pt2", "pt3", "biquad")
 
 
@@ -215,22 +212,6 @@ def _tilt_rotation(acc_mean):
     phi, theta = math.atan2(ay, az), math.atan2(-ax, math.hypot(ay, az))
     cf, sf, ct, st = math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta)
     return np.array([[ct, st * sf, st * cf], [0.0, cf, -sf], [-st, ct * sf, ct * cf]])
-
-
-def motor_columns(table) -> tuple[str, ...]:
-    """The commands' columns: the contract's P1-P4 and, for a vehicle of more motors, P5.. in order while
-    they hold a command (MOTOR_COLUMNS; the `# rotors:` line says how many there are)."""
-    out = [f"P{i}" for i in range(1, 5)]
-    for c in MOTOR_COLUMNS:
-        if c not in table or not np.isfinite(table[c]).any():
-            break
-        out.append(c)
-    return tuple(out)
-
-
-def all_running(P: np.ndarray) -> np.ndarray:
-    """(n,) bool: the rows of a foreign log's commands P (N, n) where all its motors run (above IDLE_P)."""
-    return (P > IDLE_P).all(axis=0)
 
 
 def stretches(mask):

@@ -1,5 +1,5 @@
 """The figures of one log that the fleet report follows across flights, taken from its diagnosis (the
-static tier, sim/identify/static/, and the dynamic tier where it ran), each with its standard error:
+static tier, sim/diagnose/static/, and the dynamic tier where it ran), each with its standard error:
 
 - `share_1`..`share_4`: each motor's share of the hover thrust (the four's mean is 1; static/hover.py,
   block-jackknife errors);

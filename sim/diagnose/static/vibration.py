@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flightctl.sim.identify.static.blocks import Blocks, moving_mean
+from flightctl.sim.diagnose.static.blocks import Blocks, moving_mean
 
 VIBE_COLUMNS = ("vibe_x", "vibe_y", "vibe_z", "clip")
 ACCEPTABLE, PROBLEM = 30.0, 60.0     # m/s^2: ArduPilot's guidance (the module's docstring)

@@ -17,7 +17,7 @@ Each loop period, in the order of `flightctl.loop.FlightLoop` against the simula
   (`HcSr04.trigger`: not while an echo is under way) and its result (`HcSr04`: 2 cm to 4 m, else NaN);
 - on the floor before arming, the calibration (section 4.4.4: `Calibration.add`), then `apply` and
   `arm`; after it the plan's setpoints, the echo to the altitude task, the controller
-  (sim/sweeps/onboard.py, the onboard one's compiled copy), the crash check on the estimate
+  (sim/sweeps/twin_controller.py, the onboard one's compiled copy), the crash check on the estimate
   (flightctl/safety.py CRASH_TILT), the altitude lost (descend on the accelerometer), the plan's own
   landing (touchdown on the sonar) or the loop's (`FlightLoop._land`: level, descend at LAND_SPEED,
   the accelerometer confirms the floor), the plan's end; the motors take the counts while flying.
@@ -44,7 +44,7 @@ from flightctl.drivers import mpu9250_regs as reg
 from flightctl.drivers.hcsr04 import MAX_RANGE_M, MIN_RANGE_M, US_PER_M, WATCHDOG_MS
 from flightctl.loop import LAND_LEVEL_S, LAND_SLACK_S, LAND_SPEED, LOST_ALT_S, MAX_BAD_IMU_FRAMES, TOUCHDOWN_ALT, TOUCHDOWN_S
 from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
-from flightctl.sim.sweeps import onboard as ob
+from flightctl.sim.sweeps import twin_controller as ob
 from flightctl.sim.world.devices import EARTH_FIELD_T, NoisePool, SimGpio
 from flightctl.sim.world.imu import (_BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, _C_PERIOD, AMBIENT_C, SimMpu9250,
                                     _i16, chip_frame, normals_per_read)
@@ -96,7 +96,7 @@ RUNNING, ENDED, CRASH, IMU_BAD, NO_TOUCHDOWN, NEVER_LEFT, DIVERGED = range(7)
  T_ARM, TEMP_LO, TEMP_HI, POWER_EVERY, SONAR_EVERY, N_WORLD) = range(19)
 # rows of the judged record: the true roll, pitch and yaw (wrapped), and the estimate's
 N_REC = 6
-# a wide record (a log's columns, sim/flights/fleet.py) adds: the commands P1..P4 the motors took, the
+# a wide record (a log's columns, sim/sweeps/fleet_flown.py) adds: the commands P1..P4 the motors took, the
 # sample (acc_x..z, gyro_x..z: the driver's, less the calibration's gyro bias), the altitude estimate
 N_WIDE = N_REC + 11
 
@@ -396,7 +396,7 @@ def normals(gen, w, e, at: int, count: int) -> None:
 def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI, SP, REC, k, jump, i0: int, n: int,
         i_arm: int, rec0: int) -> None:
     """Loop periods i0 + 1 .. i0 + n of every vehicle (rows of the arrays): X the plants' states, W the
-    world's and loop's (`w`), E and KC the controllers' (sim/sweeps/onboard.py), Q the plants' constants
+    world's and loop's (`w`), E and KC the controllers' (sim/sweeps/twin_controller.py), Q the plants' constants
     (sim/world/compiled.py `layout_rows`), RING and NRING, FRAC the delayed commands, WORDS, CS, CC the
     chips' burst words (`put_word`), state and constants, GEN their generators (`chip_generators`), UNI the Mersenne
     Twisters' uniforms, SP the plan's setpoints per period from i0 + 1, REC the judged record (rows
@@ -567,7 +567,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI, SP, R
                 break
 
 
-# the onboard controller's functions (sim/sweeps/onboard.py), bound to their compiled copies by `compiled_fly`
+# the onboard controller's functions (sim/sweeps/twin_controller.py), bound to their compiled copies by `compiled_fly`
 ob_step, ob_on_range, ob_heading, ob_set_reference, ob_arm, ob_landing_start = (
     ob.step, ob.on_range, ob.heading_from_mag, ob.set_reference, ob.arm, ob.landing_start)
 

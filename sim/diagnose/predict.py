@@ -11,14 +11,14 @@ the filters' difference equations, the vehicle's rate as the loop samples it (th
 period, integrated: omega[n + 1] = omega[n] + b T u[n] behind the delay):
 
     vehicle   omega = G u,  G = b exp(-s tau) T z^-1 / (1 - z^-1)
-              b: the base model linearised at the flight's median command Pm (base.py's channels,
+              b: the base model linearised at the flight's median command Pm (basemodel.py's channels,
               p_dot = k_p sum_i g_i y_i (P_i - h2)^2, and likewise q_dot, r_dot):
               b = 2 R k_axis sum_i g_i c_i m_i (Pm - h2), c_i the model's lever (y_i, -x_i, -s_i of the
               identified layout), m_i the mixer's coefficient of the rotor (Betaflight's quad X,
               src/main/flight/mixer.c:74-78 of v3.1.5: +-1, the declared layout's y_i / max|y|, -x_i / max|x|,
               -s_i), R the motor range in P units a full share moves (mixer.c:526: motorOutputMin +
               motorOutputRange (mix + throttle); the reader's P = 255 (motor - min) / (max - min): R = 255);
-              tau the commands' timing the identification found (base.py `_timing`)
+              tau the commands' timing the identification found (basemodel.py `_timing`)
     gyro      y_f = F_g omega, F_g the firmware's gyro low-pass (the reader's chain, dataset.sensor_filters)
     PID       u = (Kp Fp + Ki T / (1 - z^-1)) (r - y_f) + Kd Fd (1 - z^-1) / T (c r - y_f)
               (Betaflight 3.1.5 flight/pid.c:245-289: P and I on the error, D on c r - y with c =
@@ -49,11 +49,11 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import Table
-from flightctl.sim.identify.diagnose import loops, steps
-from flightctl.sim.identify.diagnose.base import YAW_UNKNOWN, identify, yaw_identified
-from flightctl.sim.identify.diagnose.data import load_file, parse_filters
-from flightctl.sim.identify.diagnose.dataset import DYNAMIC_MIN_HZ, LOWPASS_HZ, sensor_filters
-from flightctl.sim.identify.diagnose.rotorspeed import rotor_speed_lag
+from flightctl.sim.diagnose import loops, steps
+from flightctl.sim.diagnose.basemodel import YAW_UNKNOWN, identify, yaw_identified
+from flightctl.sim.diagnose.data import load_file, parse_filters
+from flightctl.sim.diagnose.dataset import DYNAMIC_MIN_HZ, LOWPASS_HZ, sensor_filters
+from flightctl.sim.diagnose.rotorspeed import rotor_speed_lag
 from flightctl.sim.logs.bbfields import version
 
 SPLIT = 0.5                 # identified on the rows before this share of the log's time, checked on the rest
@@ -284,7 +284,7 @@ def predict(model, ctrl: dict, checked: Table, identified_on: str, checked_on: s
             out[axis] = {**head, "why": f"no measured step on the rows checked: {e['why']}"}
             continue
         if axis == "z" and not yaw_identified(vehicle):
-            out[axis] = {**head, "why": f"{YAW_UNKNOWN} (base.py): no yaw loop to close"}
+            out[axis] = {**head, "why": f"{YAW_UNKNOWN} (basemodel.py): no yaw loop to close"}
             continue
         parts, missing = loop_parts(ctrl, checked.meta, axis, declared)
         if parts is None:

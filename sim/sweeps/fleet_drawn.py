@@ -1,7 +1,7 @@
 """A fleet's per-flight rows drawn without flying: the motor shares (with their standard errors) of each
-flight as `flightctl diagnose --corpus` writes them into the results table (sim/identify/fleet/figures.py),
+flight as `flightctl diagnose --corpus` writes them into the results table (sim/diagnose/fleet/followed.py),
 for measuring the fleet report's change test over many fleets (scripts/fleet_detection.py) at a cost a
-flown fleet (sim/flights/fleet.py) cannot have.
+flown fleet (sim/sweeps/fleet_flown.py) cannot have.
 
 The draw is the flown fleet's, row for row: each vehicle's motors differ as simulate_fleet's do (one motor
 off by up to MOTOR_SPREAD of its thrust); on the changed vehicle, one drawn motor gives `1 - size` of its
@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flightctl.sim.flights.fleet import EPOCH_UTC, MOTOR_SPREAD, onset_margin
-from flightctl.sim.identify.fleet.figures import SERIES
+from flightctl.sim.sweeps.fleet_flown import EPOCH_UTC, MOTOR_SPREAD, onset_margin
+from flightctl.sim.diagnose.fleet.followed import SERIES
 
 
 @dataclass(frozen=True)

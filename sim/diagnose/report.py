@@ -7,10 +7,10 @@ import math
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.candidate import Result
-from flightctl.sim.identify.diagnose.dataset import CHANNELS, UNITS, C
-from flightctl.sim.identify.diagnose.verdict import Diagnosis
-from flightctl.sim.identify.static import static_text, text as static_section
+from flightctl.sim.diagnose.candidate import Result
+from flightctl.sim.diagnose.dataset import CHANNELS, UNITS, C
+from flightctl.sim.diagnose.verdict import Diagnosis
+from flightctl.sim.diagnose.static import static_text, text as static_section
 
 LB_LAGS = 10          # Ljung-Box lags, on the residual decimated to the low-pass bandwidth
 XCORR_MAX_S = 0.25    # cross-correlations are searched over lags within +-this

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.data import BARO_CLIMB_M
-from flightctl.sim.identify.static.battery import battery
-from flightctl.sim.identify.static.blocks import MIN_HOVER_S, Blocks, body_z_force, hover_mask
-from flightctl.sim.identify.static.curve import of_log, speed_curve
-from flightctl.sim.identify.static.hover import pattern, shares, speed_gains, throttle
-from flightctl.sim.identify.static.vibration import VIBE_COLUMNS, vibration
+from flightctl.sim.diagnose.data import BARO_CLIMB_M
+from flightctl.sim.diagnose.static.battery import battery
+from flightctl.sim.diagnose.static.blocks import MIN_HOVER_S, Blocks, body_z_force, hover_mask
+from flightctl.sim.diagnose.static.curve import of_log, speed_curve
+from flightctl.sim.diagnose.static.hover import pattern, shares, speed_gains, throttle
+from flightctl.sim.diagnose.static.vibration import VIBE_COLUMNS, vibration
 
 STATIC_MIN_HZ = 5.0           # the attitude and the motor outputs at this rate or more (docs/measured-data.md)
 STATIC_COLUMNS = VIBE_COLUMNS  # the columns the static tier reads beside the contract's and `current`

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flightctl.logfile import Table
-from flightctl.sim.identify.diagnose.data import all_running
+from flightctl.sim.diagnose.data import all_running
 
 DEG = math.pi / 180.0
 SEGMENT_S = 2.0              # PTstepcalc.m's 2 s segments; flight_review's SEGMENT_S

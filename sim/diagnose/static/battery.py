@@ -18,8 +18,8 @@ import math
 import numpy as np
 
 from flightctl.battery import CELL_V as E_CELL   # a lithium-polymer cell, discharged to charged
-from flightctl.sim.identify.diagnose.data import FileData, all_running
-from flightctl.sim.identify.static.blocks import moving_mean
+from flightctl.sim.diagnose.data import FileData, all_running
+from flightctl.sim.diagnose.static.blocks import moving_mean
 
 R_CELL = (0.0003, 0.1)      # ohm per cell: a new high-rate LiPo's 1-3 mOhm to a worn one's tens, and its leads
 R_T = 3.0                   # R named when above this many of its standard errors

@@ -19,8 +19,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from flightctl.sim.identify.fleet.grouping import Vehicle, group
-from flightctl.sim.identify.fleet.trends import ALPHA, DRAWS, LR_SET, MIN_FLIGHTS, Change, Fit, calibrate, correct
+from flightctl.sim.diagnose.fleet.grouping import Vehicle, group
+from flightctl.sim.diagnose.fleet.trends import ALPHA, DRAWS, LR_SET, MIN_FLIGHTS, Change, Fit, calibrate, correct
 
 HINGED = ("battery_ohm", "vibration")       # may rise gradually: step and hinge both tried
 MOST_CELLS = 14
@@ -43,7 +43,7 @@ def _series(v: Vehicle, name: str) -> tuple[list[int], list[float], list[float |
 
 def _check(name: str, c: Change, v: Vehicle) -> tuple[bool, str]:
     from flightctl.sim.causes.motor_weak import SCALE_RANGE
-    from flightctl.sim.identify.static.battery import R_CELL
+    from flightctl.sim.diagnose.static.battery import R_CELL
     if name.startswith("share_"):
         scale = share_scale(c.after / c.before) if c.before > 0 and c.after > 0 else float("inf")
         ok = SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]
@@ -65,7 +65,7 @@ FINDINGS = (("motors", ("share_1", "share_2", "share_3", "share_4")), ("battery"
 
 def share_scale(ratio: float) -> float:
     """A motor's thrust for its command after a change against before, from its share's ratio after to
-    before, its three siblings unchanged: the shares are of the commands' thrusts, mean one (figures.py), and
+    before, its three siblings unchanged: the shares are of the commands' thrusts, mean one (followed.py), and
     a motor giving k of its thrust is commanded 1/k of it, so its share goes from 1 to (1/k) / ((1/k + 3) / 4)
     = 4 / (1 + 3 k): k = (4 / ratio - 1) / 3."""
     return (4.0 / ratio - 1.0) / 3.0
@@ -104,7 +104,7 @@ def build(rows: list[dict], mapping: dict[str, str] | None = None, draws: int = 
                      "errors and a spread between flights, the largest likelihood ratio over the split points; per finding "
                      "(a vehicle's four motor shares are one), the largest of its series', its p-value from series drawn "
                      "from the no-change fit with the flights' own errors and spread (a parametric bootstrap); Holm's "
-                     "correction over every finding of the fleet (sim/identify/fleet/trends.py)",
+                     "correction over every finding of the fleet (sim/diagnose/fleet/trends.py)",
            "vehicles": [], "changes": [], "per_log": []}
     for vi, v in enumerate(vehicles):
         series, tests = {}, {}
@@ -303,8 +303,8 @@ def markdown(rep: dict) -> str:
 
 def write(rep: dict, folder: Path) -> None:
     """fleet.md, fleet.json and a figure per vehicle into `folder` (made)."""
-    from flightctl.errors import write_atomic
-    from flightctl.sim.identify.fleet.figure import draw
+    from flightctl.files import write_atomic
+    from flightctl.sim.diagnose.fleet.drawing import draw
     folder.mkdir(parents=True, exist_ok=True)
     write_atomic(folder / "fleet.json", json.dumps(rep, indent=1, allow_nan=False) + "\n")
     write_atomic(folder / "fleet.md", markdown(rep))

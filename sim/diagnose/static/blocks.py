@@ -1,5 +1,5 @@
 """The hover segments of a flight and their blocks: the rows where the vehicle holds itself (airborne by
-`flightctl.sim.identify.diagnose.data`'s mask, all four motors running and none at full command, body
+`flightctl.sim.diagnose.data`'s mask, all four motors running and none at full command, body
 rates and specific force near rest), cut into contiguous blocks of equal length over the flight, for
 block-jackknife standard errors (a statistic of the block means, recomputed with each block left out:
 the rows of one block are correlated, the blocks nearly not) and for the drift of a block statistic over
@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.data import FileData, all_running
+from flightctl.sim.diagnose.data import FileData, all_running
 
 G = 9.80665
 HOVER_RATE = 0.5        # rad/s: body rates below this (a quadrotor holding its attitude)

@@ -1,6 +1,6 @@
 """`--fleet REPORT` and `--vehicles MAP.csv` of `flightctl diagnose --corpus`: checked before any log is
 read (a bad flag is one line and exit 2, nothing written), and the report made at the run's end from the
-results table's rows of the corpus' logs (sim/identify/diagnose/results.py), so that a run resumed from
+results table's rows of the corpus' logs (sim/diagnose/results.py), so that a run resumed from
 the table gives the report of the whole corpus."""
 from __future__ import annotations
 
@@ -8,12 +8,14 @@ import json
 import sys
 from pathlib import Path
 
-from flightctl.errors import InputError, output_dir
+from flightctl.errors import InputError
+
+from flightctl.files import output_dir
 
 
 def check(args, folders: list[Path], find_logs, jobs) -> tuple[Path | None, dict | None]:
     """(the report's folder, the mapping log -> vehicle) of the flags, or InputError."""
-    from flightctl.sim.identify.fleet.grouping import check_map, read_map
+    from flightctl.sim.diagnose.fleet.grouping import check_map, read_map
     fleet = getattr(args, "fleet", None)
     vehicles = getattr(args, "vehicles", None)
     if vehicles and not fleet:
@@ -39,7 +41,7 @@ def check(args, folders: list[Path], find_logs, jobs) -> tuple[Path | None, dict
 def table_rows(rows, results: Path) -> list[dict]:
     """The results table's rows of the corpus' logs `rows` (corpus Rows), in their order; a log the table
     does not hold (refused before it was read) keeps its place with its status and no figures."""
-    from flightctl.sim.identify.diagnose.results import Results
+    from flightctl.sim.diagnose.results import Results
     table = Results(results)
     done = table.done()
     out = []
@@ -52,7 +54,7 @@ def table_rows(rows, results: Path) -> list[dict]:
 
 def report(rows, results: Path, folder: Path, mapping: dict | None, quiet: bool) -> dict:
     """The fleet report of the run's rows, written into `folder`; returned."""
-    from flightctl.sim.identify.fleet.report import build, write
+    from flightctl.sim.diagnose.fleet.report import build, write
     rep = build(table_rows(rows, results), mapping)
     write(rep, folder)
     if not quiet:

@@ -6,7 +6,7 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import Table
-from flightctl.sim.identify.diagnose.dataset import DYNAMIC_MIN_HZ
+from flightctl.sim.diagnose.dataset import DYNAMIC_MIN_HZ
 
 
 def motor_rate(tables: list[Table]) -> float | None:

@@ -7,7 +7,7 @@ The channels (docs/diagnose.md, "What is predicted"): row k pairs the command he
 k+1 with the gyro difference k -> k+1 (angular acceleration) and the accelerometer on row k+1.
 
 The base model is a `Vehicle`: this project's airframe with its known parameters, or, for a log of
-another vehicle, the one `flightctl.sim.identify.diagnose.base` identifies from the flight (an
+another vehicle, the one `flightctl.sim.diagnose.basemodel` identifies from the flight (an
 equivalent airframe per unit mass and inertia whose effectiveness on each channel is refitted on the
 training blocks of every fold: the `free` columns of a prediction).
 """
@@ -22,7 +22,8 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.params import Airframe
 from flightctl.physics import rotor_speed, rotor_torque, thrust_from_command, yaw_drag
-from flightctl.sim.identify.diagnose.data import EDGE_S, FileData, Layout, stretches
+from flightctl.sim.diagnose.data import EDGE_S, FileData, Layout, stretches
+from flightctl.sim.logs.columns import DYNAMIC_MIN_HZ, MOTION_HZ
 
 CHANNELS = ("p_dot", "q_dot", "r_dot", "acc_x", "acc_y", "acc_z")
 UNITS = ("rad/s^2", "rad/s^2", "rad/s^2", "m/s^2", "m/s^2", "m/s^2")
@@ -31,11 +32,11 @@ C = len(CHANNELS)
 GYRO, ACC = slice(0, 3), slice(3, 6)
 THRUST_CHANNELS = (0, 1, 2, 5)   # the channels the rotors' thrust drives (roll, pitch, yaw torque; thrust)
 
-LOWPASS_HZ = 12.0        # zero-phase low-pass applied to every residual (2nd-order Butterworth, twice)
+LOWPASS_HZ = MOTION_HZ   # zero-phase low-pass applied to every residual (2nd-order Butterworth, twice)
 # A lag or a delay of tens of milliseconds shows only in commands logged at several times the low-pass
-# bandwidth; a log whose motor outputs are slower is judged for its static effects only, low-passed at a
-# quarter of its motor rate; one whose gyro and accelerometer are slower is not judged (verdict.py).
-DYNAMIC_MIN_HZ = 4.0 * LOWPASS_HZ
+# bandwidth (DYNAMIC_MIN_HZ, sim/logs/columns.py); a log whose motor outputs are slower is judged for its
+# static effects only, low-passed at a quarter of its motor rate; one whose gyro and accelerometer are
+# slower is not judged (verdict.py).
 # After the low-pass the channels are kept at FLAT_PER_BAND times its bandwidth (every `step`-th row):
 # the filter's response there is (1/8)^4 = 2.4e-4 of the pass band's, so nothing is aliased, and the
 # fits, scores and tests see the same signal at a tenth of the samples of a 1 kHz log.

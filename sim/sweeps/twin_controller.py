@@ -3,7 +3,7 @@
 eq. 35 included), the four `Pid`s of eq. 24, the `Mixer` of eq. 25 with eq. 26 inverted to PWM
 counts, and the `Vertical` estimate and the `Landing` of flightctl/control/landing.py, written as
 plain functions on one vehicle's state array `e` and constants `k`, so that numba compiles them
-(sim/world/compiled.py `compiled_copy`) into the batch's per-vehicle loop (sim/sweeps/flight.py).
+(sim/world/compiled.py `compiled_copy`) into the batch's per-vehicle loop (sim/sweeps/twin_loop.py).
 
 A copy, because the onboard code stays plain Python on floats (it runs on the Pi, without numba),
 where numba compiles functions, not objects. The copy is checked, not trusted:

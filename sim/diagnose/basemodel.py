@@ -39,11 +39,11 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.params import Airframe
 from flightctl.physics import G, thrust_from_command
-from flightctl.sim.identify.diagnose import axischeck
-from flightctl.sim.identify.diagnose.data import BARO_CLIMB_M, FileData, Layout
-from flightctl.sim.identify.diagnose.dataset import C, N_BLOCKS, THRUST_CHANNELS, DataSet, Vehicle
-from flightctl.sim.identify.diagnose.rotorspeed import hover_gains
-from flightctl.sim.identify.diagnose.scoring import linear_stats, reparametrized, solve
+from flightctl.sim.diagnose import axischeck
+from flightctl.sim.diagnose.data import BARO_CLIMB_M, FileData, Layout
+from flightctl.sim.diagnose.dataset import C, N_BLOCKS, THRUST_CHANNELS, DataSet, Vehicle
+from flightctl.sim.diagnose.rotorspeed import hover_gains
+from flightctl.sim.diagnose.scoring import linear_stats, reparametrized, solve
 
 H2_LOW = -1000.0   # P units: far below the idle, the curve is nearly linear in P over the flight
 # The timings at which the base model may be identified (`_timing`): the candidates' 0-300 ms. A pure

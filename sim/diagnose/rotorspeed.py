@@ -23,8 +23,8 @@ import numpy as np
 
 from flightctl.sim.causes.actuation_delay import shift
 from flightctl.sim.causes.motor_lag import lag_held
-from flightctl.sim.identify.diagnose.candidate import MAX_TIMING_S
-from flightctl.sim.identify.diagnose.data import FileData, Layout
+from flightctl.sim.diagnose.candidate import MAX_TIMING_S
+from flightctl.sim.diagnose.data import FileData, Layout
 
 TAUS = np.concatenate([[0.0], np.geomspace(0.002, MAX_TIMING_S, 30)])   # s: the coarse grid of the lag
 DELAYS = np.arange(0.0, MAX_TIMING_S + 1e-9, 0.004)                      # s: ... and of the delay

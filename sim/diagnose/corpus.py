@@ -8,7 +8,7 @@ Each log is read (`flightctl.sim.logs.count_logs`, then each log on its own as `
 this project's CSV)
 and diagnosed on the engine (sim/engine.py: Dask's workers, at most the machine's cores, one BLAS thread
 each; a log that kills its worker is that log's failure), each row written to the results table as
-it finishes (`--results`, sim/identify/diagnose/results.py; a run started again skips the logs in it); a log that
+it finishes (`--results`, sim/diagnose/results.py; a run started again skips the logs in it); a log that
 cannot be read, never flew, or whose data contradict its layout is that log's refusal, with its one
 line. The rows are a function of the logs and the code only: sorted by path and index, paths relative
 to DIR. `--table` writes the table between OUT.md's markers (`TABLE_BEGIN`, `TABLE_END`) when it has
@@ -22,9 +22,11 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from flightctl.errors import InputError, output_file, output_room, write_atomic
-from flightctl.sim.identify.static import summary
-from flightctl.sim.identify.diagnose.results import default_path
+from flightctl.errors import InputError
+
+from flightctl.files import output_file, output_room, write_atomic
+from flightctl.sim.diagnose.static import summary
+from flightctl.sim.diagnose.results import default_path
 from flightctl.sim.logs.frames import NOT_MULTIROTOR
 
 TABLE_BEGIN = "<!-- diagnose --corpus table: begin -->"
@@ -163,7 +165,7 @@ def _jobs(folder: Path, files: list[Path], name: str = "") -> tuple[list[Row], l
     """(rows to diagnose, one per log, and rows already refused: files that cannot be read); each log
     named by its path under `folder`, after `name/` when given."""
     from flightctl.sim.logs import count_logs, reason
-    from flightctl.sim.identify.diagnose.results import sha256
+    from flightctl.sim.diagnose.results import sha256
     todo, refused, seen = [], [], {}
     for p in files:
         rel = (f"{name}/" if name else "") + p.relative_to(folder).as_posix()
@@ -194,10 +196,10 @@ def run_one(row: Row) -> Row:
     """Read and diagnose one log, quietly: the row with its report, or its refusal."""
     from flightctl.params import load
     from flightctl.sim.logs import reason
-    from flightctl.sim.identify.diagnose.cli import read_logs
-    from flightctl.sim.identify.diagnose import steps
+    from flightctl.sim.diagnose.cli import read_logs
+    from flightctl.sim.diagnose import steps
     from flightctl.sim.logs import controller
-    from flightctl.sim.identify.diagnose.verdict import diagnose
+    from flightctl.sim.diagnose.verdict import diagnose
     quiet = lambda *a: None   # noqa: E731
     if os.environ.get(CRASH_ENV) == Path(row.path).name:    # tests/test_fleet.py: a log that kills its worker
         os._exit(3)
@@ -217,7 +219,7 @@ def run_one(row: Row) -> Row:
     return row
 
 
-# A refusal that says the log holds no flight (data.py, verdict.py, base.py and the readers word them so):
+# A refusal that says the log holds no flight (data.py, verdict.py, basemodel.py and the readers word them so):
 # such a log is not counted among the airborne flights of the corpus' headline.
 NO_FLIGHT = ("header only", "never armed", "too short to judge", "may never have left the ground")
 
@@ -274,7 +276,7 @@ def corpus(folders: Path | list[Path], jobs: int | None = None, progress=None,
            results: Path | None = None) -> list[Row]:
     """Every log under the folders diagnosed or refused, rows sorted by path and index, on the engine
     (sim/engine.py); with several folders each row's log is named from its folder's name on. `results`:
-    the results table (sim/identify/diagnose/results.py), each log's row written as it finishes; the
+    the results table (sim/diagnose/results.py), each log's row written as it finishes; the
     logs already in it are not diagnosed again."""
     folders = [folders] if isinstance(folders, Path) else list(folders)
     todo, rows = [], []
@@ -293,7 +295,7 @@ def corpus(folders: Path | list[Path], jobs: int | None = None, progress=None,
         todo += t
         rows += r
     from flightctl.sim import engine
-    from flightctl.sim.identify.diagnose.results import Results
+    from flightctl.sim.diagnose.results import Results
     table_ = Results(results) if results is not None else None
     if table_ is not None:
         done = table_.done()
@@ -348,7 +350,7 @@ def main(args) -> int:
     for path, flag, suffix in ((out_table, "--table", ".md"), (out_json, "--json", ".json")):
         if path is not None:
             output_file(path, flag, suffix)
-    from flightctl.sim.identify.fleet import cli as fleet
+    from flightctl.sim.diagnose.fleet import cli as fleet
     fleet_dir, mapping = fleet.check(args, [Path(c) for c in args.corpus], find_logs, _jobs)
     # the results table: --results, else beside --json, else in the fleet report's folder (a table alone,
     # such as docs/'s, keeps none)

@@ -1,5 +1,5 @@
 """The logs of a corpus grouped by vehicle and put in flight order, from the rows of the results table
-(sim/identify/diagnose/results.py), so that the fleet report is rebuilt from the table alone.
+(sim/diagnose/results.py), so that the fleet report is rebuilt from the table alone.
 
 Which vehicle, first that applies: the user's mapping (`--vehicles MAP.csv`, rows `log,vehicle`: the
 log as the corpus names it, its path, or its file name); the vehicle's identity in the log's header

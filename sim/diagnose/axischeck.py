@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.data import FileData, stretches
-from flightctl.sim.identify.diagnose.dataset import LOWPASS_HZ, N_BLOCKS
+from flightctl.sim.diagnose.data import FileData, stretches
+from flightctl.sim.diagnose.dataset import LOWPASS_HZ, N_BLOCKS
 
 DELAY_S = 0.025       # s: the issue's; the motors' lag and the loop's delay of a small quad are 10-30 ms
 MIN_ROWS = 30         # rows: a shorter stretch is left out (the filter's transient would be all of it)

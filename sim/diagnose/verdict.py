@@ -18,16 +18,16 @@ from flightctl.logfile import Table
 from flightctl.params import Airframe, EffectSpec
 from flightctl.sim.causes import CAUSES, make
 from flightctl.sim.causes.battery_sag import pack_range
-from flightctl.sim.identify.diagnose.base import YAW_UNKNOWN, LayoutContradicted, identify, yaw_identified
-from flightctl.sim.identify.diagnose.rates import faster, motor_rate, sensor_rate
-from flightctl.sim.identify.diagnose.candidate import Result, columns_of
-from flightctl.sim.identify.diagnose.data import MIN_AIRBORNE_S, MIN_STRETCH_S, Layout, load_file
-from flightctl.sim.identify.diagnose.dataset import (CHANNELS, DYNAMIC_MIN_HZ, LOWPASS_HZ, N_BLOCKS, OFFSET, UNITS, Change,
+from flightctl.sim.diagnose.basemodel import YAW_UNKNOWN, LayoutContradicted, identify, yaw_identified
+from flightctl.sim.diagnose.rates import faster, motor_rate, sensor_rate
+from flightctl.sim.diagnose.candidate import Result, columns_of
+from flightctl.sim.diagnose.data import MIN_AIRBORNE_S, MIN_STRETCH_S, Layout, load_file
+from flightctl.sim.diagnose.dataset import (CHANNELS, DYNAMIC_MIN_HZ, LOWPASS_HZ, N_BLOCKS, OFFSET, UNITS, Change,
                                                      DataSet, Vehicle)
-from flightctl.sim.identify.diagnose.rotorspeed import rotor_gain_check, rotor_speed_lag, timing_agreement
-from flightctl.sim.identify.diagnose.scoring import (DM_CHANNEL_WINDOW_S, DM_WINDOW_S, MIN_CHANNEL_GAIN, MIN_GAIN,
+from flightctl.sim.diagnose.rotorspeed import rotor_gain_check, rotor_speed_lag, timing_agreement
+from flightctl.sim.diagnose.scoring import (DM_CHANNEL_WINDOW_S, DM_WINDOW_S, MIN_CHANNEL_GAIN, MIN_GAIN,
                                                      T_CHANNEL, T_CRIT, geomean, heldout_linear, significance)
-from flightctl.sim.identify.static import StaticOnly, static_tier, tier_why
+from flightctl.sim.diagnose.static import StaticOnly, static_tier, tier_why
 
 # Causes that are one physical effect modelled two ways: once one is in the chain the other is not tried.
 TWINS = {"motor_lag": "motor_dynamics", "motor_dynamics": "motor_lag"}
@@ -94,7 +94,7 @@ class Diagnosis:
     rotor_speed_check: dict | None = None
     rotor_gain_check: dict | None = None
     validation: dict | None = field(default=None)
-    static: dict | None = None       # the static tier's findings (flightctl.sim.identify.static), None if not reached
+    static: dict | None = None       # the static tier's findings (flightctl.sim.diagnose.static), None if not reached
 
     # the first round is the contract's top level: the strongest cause and every candidate
     @property

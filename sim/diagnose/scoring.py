@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.dataset import C, CHANNELS, N_BLOCKS, OFFSET, DataSet
+from flightctl.sim.diagnose.dataset import C, CHANNELS, N_BLOCKS, OFFSET, DataSet
 
 MIN_GAIN = 0.01          # effect-size floor on the held-out gain (docs/diagnose.md)
 T_CRIT = 3.0             # Diebold-Mariano t on the held-out loss differential (docs/diagnose.md)

@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flightctl.sim.identify.diagnose.dataset import N_BLOCKS, Change, DataSet
-from flightctl.sim.identify.diagnose.scoring import (Score, Significance, fitted, heldout, heldout_linear,
+from flightctl.sim.diagnose.dataset import N_BLOCKS, Change, DataSet
+from flightctl.sim.diagnose.scoring import (Score, Significance, fitted, heldout, heldout_linear,
                                                      linear_stats, solve)
 from flightctl.sim.world.model import Effect
 

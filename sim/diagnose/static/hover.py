@@ -27,11 +27,11 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from flightctl.sim.identify.diagnose.data import FileData, Layout
-from flightctl.sim.identify.diagnose.rotorspeed import (GAIN_TOL, rotor_gain_check,
+from flightctl.sim.diagnose.data import FileData, Layout
+from flightctl.sim.diagnose.rotorspeed import (GAIN_TOL, rotor_gain_check,
                                                         trim_pattern, yaw_trim_of_gains)
-from flightctl.sim.identify.static.blocks import G, Blocks, drift
-from flightctl.sim.identify.static.curve import P_FULL, Curve, SpeedCurve
+from flightctl.sim.diagnose.static.blocks import G, Blocks, drift
+from flightctl.sim.diagnose.static.curve import P_FULL, Curve, SpeedCurve
 
 P_FIT = 0.01            # a hypothesis fits when its chi-square's upper tail is at least this
 DRIFT_TOL = 0.02        # a share's change over the flight worth naming (and 3 standard errors)

@@ -44,16 +44,17 @@ import time
 from pathlib import Path
 
 from flightctl import params as paramfile
-from flightctl.errors import InputError, Parser, output_file, output_prefix, write_atomic
+from flightctl.errors import InputError, Parser
+from flightctl.files import output_file, output_prefix, write_atomic
 from flightctl.logfile import read_flight_log
 from flightctl.sim import engine
 from flightctl.sim.progress import Stages
-from flightctl.sim.identify.diagnose.data import FOREIGN_COLUMNS
-from flightctl.sim.identify.diagnose import predict, report as diagnose_report, steps
-from flightctl.sim.identify.diagnose.verdict import diagnose, validate
-from flightctl.sim.identify.static import STATIC_COLUMNS, StaticOnly
+from flightctl.sim.diagnose.data import FOREIGN_COLUMNS
+from flightctl.sim.diagnose import predict, report as diagnose_report, steps
+from flightctl.sim.diagnose.verdict import diagnose, validate
+from flightctl.sim.diagnose.static import STATIC_COLUMNS, StaticOnly
 from flightctl.sim.logs import controller
-from flightctl.sim.identify.static.curve import declared as declared_curve
+from flightctl.sim.diagnose.static.curve import declared as declared_curve
 
 MIN_LOG_S = 2.0   # a log shorter than this cannot hold a take-off and a flight: too short to judge
 
@@ -141,7 +142,7 @@ def _main(argv: list[str]) -> int:
     if args.corpus is not None and args.steps:
         raise InputError("--steps: the figure is of the logs named; with --corpus each log's `steps` is in --json")
     if args.corpus is not None:
-        from flightctl.sim.identify.diagnose.corpus import main as corpus
+        from flightctl.sim.diagnose.corpus import main as corpus
         engine.use(args.scheduler, args.quiet)
         return corpus(args)
     for flag in ("fleet", "vehicles"):
