@@ -10,7 +10,7 @@ it, or reads its JSON, and renders them.
 
 Each draw is judged from its stored per-flight figures (sim/sweeps/judge.py: `verdict`, `bounded`), so a
 change of the judgement re-judges the committed JSON without flying it again (`--from`), and writes its
-verdicts back. tests/test_as_flown_doc.py checks that the docs hold what this renders from that JSON.
+verdicts back. tests/sim/sweeps/test_as_flown_doc.py checks that the docs hold what this renders from that JSON.
 """
 from __future__ import annotations
 
@@ -116,7 +116,7 @@ def _path(result: dict) -> str:
     """Which simulator flew the draws, as the docs say it."""
     if "simulator" in result:
         return ("the batched simulator (`--batch`: sim/sweeps/batch.py, each draw flown as the full onboard path "
-                "flies it, draw for draw: tests/test_batch.py)")
+                "flies it, draw for draw: tests/sim/sweeps/test_batch.py)")
     return "the full onboard path"
 
 

@@ -6,7 +6,7 @@ sim/sweeps/evidence.py), each term's Bayes factor, and the posterior's parameter
         fly the prior's draws and each model without one term (and with each candidate), write
         docs/as-flown-posterior.json, flightctl/vehicles/paper-posterior.toml and the docs blocks
     python scripts/as_flown_posterior.py --from docs/as-flown-posterior.json [--doc DOC] [--readme README]
-        render the blocks from a run's JSON (scripts/docs.py; tests/test_docs.py checks them)
+        render the blocks from a run's JSON (scripts/docs.py; tests/project/test_docs.py checks them)
 
 Everything the blocks say is computed here from the JSON's per-draw values and verdicts (the prior's
 run) and the other models' counts: the shares with their Monte Carlo errors, the marginals, the held-out

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path[:0] = [str(ROOT / "tests"), str(ROOT / "tests" / "onboard")]   # helpers/ and tests/onboard/test_cli_bad_args.py
 from test_cli_bad_args import FOREIGN, flight_log  # noqa: E402  (the tests' own flight log and foreign log)
 
 

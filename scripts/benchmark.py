@@ -6,7 +6,7 @@ state-dependent), and what one control-loop iteration costs, decode to PWM count
     python scripts/benchmark.py [--repeat N] [--markdown]
 
 `--markdown` prints the README's block (scripts/docs.py writes it there): the date and the machine,
-then one row per figure. The figures are this machine's on that day: tests/test_docs.py checks the
+then one row per figure. The figures are this machine's on that day: tests/project/test_docs.py checks the
 block's form, never its numbers.
 
 The iteration is timed on the onboard code only (the fastest of many short runs): `Mpu9250.read` decoding a 22-byte burst (from a
@@ -343,7 +343,7 @@ def diagnose_rows() -> list[tuple[str, str, str]]:
 def fleet_rate(workers: int, logs: int = 6) -> float:
     """Logs per hour of `flightctl diagnose --corpus` on `workers` of the engine's local workers
     (sim/engine.py, Dask; in this process without it): `logs` simulated 21 s flights (the tests' quick
-    plan, tests/test_diagnose_cases.py, each its own seed), diagnosed end to end, the engine's start
+    plan, tests/sim/diagnose/test_diagnose_cases.py, each its own seed), diagnosed end to end, the engine's start
     and each worker's imports included (docs/fleet.md)."""
     import contextlib
     import io
@@ -351,7 +351,7 @@ def fleet_rate(workers: int, logs: int = 6) -> float:
     from flightctl.cli import main as cli
     from flightctl.sim import engine
     from flightctl.sim.diagnose.corpus import corpus
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "tests" / s) for s in ("", "sim/diagnose")]
     from test_diagnose_cases import quick_plan
     tmp = Path(tempfile.mkdtemp())
     folder = tmp / "logs"

@@ -1,5 +1,5 @@
 """Two effects hidden at once, many times (docs/diagnose.md, "Every cause"): pairs drawn exactly as
-tests/test_diagnose_chain.py draws them (one seeded generator per pair, seeds FIRST, FIRST+1, ...),
+tests/sim/diagnose/test_diagnose_chain.py draws them (one seeded generator per pair, seeds FIRST, FIRST+1, ...),
 each flown on the tests' quick plan with `flightctl sim --effect` twice and diagnosed from the log
 alone. Prints, per pair, what was hidden and what the chain named, then the totals; `--doc` writes
 the summary between the markers of docs/diagnose.md.
@@ -23,7 +23,7 @@ from flightctl.sim import engine
 from flightctl.sim.progress import Progress
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))       # the tests' drawing and tolerances: one definition
+sys.path[:0] = [str(ROOT / "tests"), str(ROOT / "tests" / "sim" / "diagnose")]   # the tests' drawing and tolerances: one definition
 
 BEGIN, END = marked("diagnose_pairs")
 

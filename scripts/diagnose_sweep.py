@@ -1,6 +1,6 @@
 """One effect hidden at a time, every cause and none, three seeds each (docs/diagnose.md, "Results"):
-the flights of the slow hidden-effect test (`pytest tests/test_diagnose_hidden.py -m slow`), drawn,
-flown and diagnosed exactly as it does (its seeds, tests/test_diagnose_cases.py's drawing, the 48 s
+the flights of the slow hidden-effect test (`pytest tests/sim/diagnose/test_diagnose_hidden.py -m slow`), drawn,
+flown and diagnosed exactly as it does (its seeds, tests/sim/diagnose/test_diagnose_cases.py's drawing, the 48 s
 `excite` plan, `flightctl sim --effect` then `flightctl diagnose` on the log alone). Prints a row per
 flight (what was hidden, what was named and recovered, the held-out gain, the runner-up and what it
 did to `acc_z`), then the totals and how much of its tolerance each cause used; `--doc` writes them
@@ -23,14 +23,14 @@ import numpy as np
 from flightctl.sim.docs import marked, publish
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))       # the tests' drawing and tolerances: one definition
+sys.path[:0] = [str(ROOT / "tests"), str(ROOT / "tests" / "sim" / "diagnose")]   # the tests' drawing and tolerances: one definition
 sys.path.insert(0, str(ROOT / "scripts"))
 
 BEGIN, END = marked("diagnose_sweep")
 
 
 def cases(seeds: int) -> list[tuple[str, int]]:
-    """(cause, seed) as tests/test_diagnose_hidden.py's slow test numbers them."""
+    """(cause, seed) as tests/sim/diagnose/test_diagnose_hidden.py's slow test numbers them."""
     from test_diagnose_cases import CAUSES
     every = ("none",) + CAUSES
     return [(cause, 100 + 10 * s + every.index(cause)) for s in range(seeds) for cause in every]

@@ -20,7 +20,7 @@ reads and replaces them), never by hand. A block is one of:
   its numbers.
 A figure is a PNG its command draws; checked against a fresh drawing (the same size, at most 1 % of
 its pixels different: the fonts of another machine's matplotlib move a few).
-tests/test_docs.py re-runs every block and figure (the long ones under `-m slow`) and fails when
+tests/project/test_docs.py re-runs every block and figure (the long ones under `-m slow`) and fails when
 one differs. Prose around a block states no number of its own (docs/analyze.md, docs/diagnose.md).
 """
 from __future__ import annotations

@@ -6,7 +6,7 @@ the Monte Carlo's ranges its stored bias follows (docs/as-flown-mc.json, no flig
 
     python scripts/estimator_bias.py [--seeds 4] [--doc docs/as-flown.md]
 
-tests/test_estimator_bias.py holds the two causes it finds on short flights.
+tests/sim/flights/test_estimator_bias.py holds the two causes it finds on short flights.
 """
 from __future__ import annotations
 

@@ -18,7 +18,7 @@ seed), timed by the wall clock, its workers' memory read from the kernel.
   a task): 10,000 logs take the start-up plus the larger of the workers' share and the serial part.
   Memory: C workers' peak a machine, and the command's, on a line through its two 2-worker peaks.
 
-The figures are this machine's on the day; the block says when and where (tests/test_docs.py checks
+The figures are this machine's on the day; the block says when and where (tests/project/test_docs.py checks
 the block's form, never its numbers)."""
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ def peak_kib(pid: int) -> int:
 
 
 def descendants(pid: int) -> list[int]:
-    """The processes under `pid`: its children, theirs, ... (from /proc's parent links; tests/test_fleet.py
+    """The processes under `pid`: its children, theirs, ... (from /proc's parent links; tests/sim/diagnose/fleet/test_fleet.py
     uses it too)."""
     parent = {}
     for entry in Path("/proc").iterdir():

@@ -3,7 +3,7 @@ and Table 6 (retuned on the vehicle), each flown (a) with perfect state feedback
 full onboard path (SPI decode, filters, 45 Hz ultrasonic), with both estimator structures, on the
 paper's base model and on the as-flown model (`--params paper-as-flown`, docs/as-flown.md). Prints
 the Markdown table of the README (step metrics of the true responses, figures 13-16);
-tests/test_readme_table.py checks that the README holds what this prints.
+tests/project/test_readme_table.py checks that the README holds what this prints.
 
     python scripts/paper_comparison.py [--out DIR]
 """

@@ -2,7 +2,7 @@
 invisible on GitHub) that a command writes, never a hand. One definition of finding and replacing a
 block, for every writer (`flightctl sim faults --doc`, `flightctl identify real-data`, the scripts/);
 scripts/docs.py knows every block and the command that writes it, rewrites them all, and
-tests/test_docs.py re-runs them.
+tests/project/test_docs.py re-runs them.
 """
 from __future__ import annotations
 

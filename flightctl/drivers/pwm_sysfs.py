@@ -208,7 +208,7 @@ class SysfsPwmEsc:
     def _take(self, i: int, fds: dict[str, int]) -> None:
         """From the state the channel's last user left to the stop pulse at our period, each write a state
         the kernel accepts. pwm-rp1 has no .get_state and unexport does not reset a channel, so it keeps
-        its last user's period, duty cycle, enable and polarity (tests/fakes/sysfs_pwm.py, from the
+        its last user's period, duty cycle, enable and polarity (tests/helpers/fakes/sysfs_pwm.py, from the
         Raspberry Pi kernel's sysfs.c, core.c and pwm-rp1.c). 6.6 refuses any state with period 0 or
         duty_cycle > period, enabled or not; from 6.11 an invalid state may follow an invalid one, and
         which states count as invalid was inverted until the fix in 6.16 (and its stable backports): 6.11

@@ -4,7 +4,7 @@ the simulator), `flightctl sim NAME` and the excitation flights of `flightctl di
 Take-offs and ordinary altitude changes follow smooth ramps, as a pilot would fly them; the steps of
 figures 13-16 are true steps, as the paper commanded them. The simulator measures the response to
 every step of a plan (`flightctl.sim.flights.scenarios`). Adding a plan: a function returning a `Plan` and
-one line in `PLANS`; tests/test_plan.py holds every named plan to the plan-file limits.
+one line in `PLANS`; tests/onboard/test_plan.py holds every named plan to the plan-file limits.
 """
 from __future__ import annotations
 
@@ -66,14 +66,14 @@ def excite() -> Plan:
     yaw drag), a climb to 2 m, a fast descent to 0.8 m, a shorter one back to 0.25 m and to the floor
     (thrust changes: battery sag, ground effect again). The descent from 2 m is fast on purpose (its
     setpoint peaks at 0.9 m/s: the vertical speed and thrust changes the inflow and ground-effect fits
-    need; a slow descent lets diagnose confuse the two, tests/test_diagnose_hidden.py -m slow), and it
+    need; a slow descent lets diagnose confuse the two, tests/sim/diagnose/test_diagnose_hidden.py -m slow), and it
     ends at 0.8 m, not at 0.25 m, because of what follows it. Table 6's altitude loop on the base model
     is lightly damped (eq. 24 on M z'' = 4 u_z: zeta = 4 kd_z / (2 sqrt(4 kp_z M)) = 0.07, an 80 %
     overshoot): it lags a fast descent and then undershoots its end by about the vehicle's speed over
     the loop's natural frequency, 0.4-0.5 m, so that a single descent to 0.25 m touched the floor at
     1.2 m/s (a crash: `flightctl sim excite` exited 1, issue 49). From 0.8 m that undershoot clears the
     floor, and the 0.55 m left are flown at half the speed; it lands on the base model with Table 6 or
-    Table 4 and on the as-flown model (tests/test_sil.py holds it above the floor until it lands)."""
+    Table 4 and on the as-flown model (tests/sim/test_sil.py holds it above the floor until it lands)."""
     moves = ([Move(0.0, "alt", 0.25, 2.0), Move(6.0, "alt", 1.2, 3.0)]
              + _steps("roll", [(10, 4), (12, -4), (14, 0)]) + _steps("pitch", [(16, 4), (18, -4), (20, 0)])
              + _steps("yaw", [(22, 60), (27, -60), (32, 0)])

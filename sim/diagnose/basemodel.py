@@ -52,7 +52,7 @@ TIMING_DELAYS = np.concatenate([np.arange(0.0, 0.1, 0.005), np.arange(0.1, 0.300
 # A base model for causes: each axis' effectiveness at least T_BASE jackknife standard errors above zero
 # (8 blocks: t with 7 degrees of freedom, one-sided 4 %). A log scrambled on purpose gives a negative
 # effectiveness or one within a standard error of zero on the axis it scrambles (t below 1.1 in
-# tests/test_diagnose_real_hidden.py); the INDIflight throws, whose blocks hold a throw and a hover, give
+# tests/sim/diagnose/test_diagnose_real_hidden.py); the INDIflight throws, whose blocks hold a throw and a hover, give
 # 2.3-2.9 on pitch and 3 needlessly refused three of six.
 T_BASE = 2.0
 # An axis whose effectiveness is not significant: do the rotors drive it at all? Each rotor's thrust fitted

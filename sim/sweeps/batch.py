@@ -7,7 +7,7 @@ sim/sweeps/twin_controller.py). For Monte Carlo over the model's ranges and for 
 A vehicle here is the vehicle the full onboard path flies with the same draw and seed: the same
 airframe and effects (the draws), the same chip die and the same random numbers (`_Vehicles`: its
 `World.rng` and `NoisePool` streams reproduced), so that its flight is the full path's to rounding
-(tests/test_batch.py). This module sets the vehicles up and runs `flight.fly` over them, period chunk
+(tests/sim/sweeps/test_batch.py). This module sets the vehicles up and runs `flight.fly` over them, period chunk
 by period chunk (a few hundred vehicles at a time, so that their arrays stay small), and judges each
 flight as sim/flights/run.py's `judge` does (flightctl/safety.py's crash rules).
 """
@@ -189,7 +189,7 @@ class _Vehicles:
 
 def uniforms(r: random.Random, k: int) -> np.ndarray:
     """The next k numbers of `r.random()`, at once (`uniforms_of`); r's state moves on as k calls of
-    `random()` move it (tests/test_batch.py)."""
+    `random()` move it (tests/sim/sweeps/test_batch.py)."""
     return uniforms_of(random_bits(r, k), 1, k)[0]
 
 

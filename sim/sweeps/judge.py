@@ -11,7 +11,7 @@ step to the next step:
   step's last second (what the paper's figures show: they plot the vehicle's own estimate), apart
   from the estimator's bias there, the mean of the true angle less the estimate; the true held error
   is their sum. Both gain sets share the bias, so a band on the true error judges the estimator, not
-  the gains. Its cause in a held bank (tests/test_estimator_bias.py, docs/as-flown.md): the
+  the gains. Its cause in a held bank (tests/sim/flights/test_estimator_bias.py, docs/as-flown.md): the
   accelerometer reads the bank's tilt only as the rotor drag builds up over M/k, and the in-flight
   correction pulls the estimate towards it, about 2 phi (M/k) (1 - exp(-t k/M)) / tau_tilt_air:
   0.5 degree at the momentum drag, 1.3 at the range's weak end, for a 5 degree bank held 5 s; on top

@@ -15,7 +15,7 @@ through a function pointer.
 
 Words: (state's high, low, inc's high, low), from `np.random.PCG64(seed).state` (`seeded`), the
 seeding NumPy's (SeedSequence). Compiled only: the plain batch keeps NumPy's generators
-(tests/test_batch.py checks these against them).
+(tests/sim/sweeps/test_batch.py checks these against them).
 """
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ plain functions on one vehicle's state array `e` and constants `k`, so that numb
 
 A copy, because the onboard code stays plain Python on floats (it runs on the Pi, without numba),
 where numba compiles functions, not objects. The copy is checked, not trusted:
-tests/test_batch.py feeds the onboard controller and this one the same IMU samples, echoes and
+tests/sim/sweeps/test_batch.py feeds the onboard controller and this one the same IMU samples, echoes and
 setpoints, on the ground, in flight and landing, for vehicles with their own gains and filters: the
 same PWM counts, count for count, and the same estimates. The equations it shares as plain functions
 (eq. 26 inverted, the heading of eq. 32, eq. 30-31) are the onboard ones, compiled.

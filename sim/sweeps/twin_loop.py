@@ -25,7 +25,7 @@ Each loop period, in the order of `flightctl.loop.FlightLoop` against the simula
 Random numbers: each vehicle's chip draws its normals from the same generator, in the same order, as
 the single simulator's `NoisePool` of the same seed (`normals`, in the loop), and its sonar and power monitor from
 the same Mersenne Twister as its `World.rng` (`uniforms`, Python's `random.gauss` on them): a vehicle
-flown here with seed s is the vehicle `flightctl sim` flies with seed s (tests/test_batch.py).
+flown here with seed s is the vehicle `flightctl sim` flies with seed s (tests/sim/sweeps/test_batch.py).
 Left out: the motor-loss detector (a healthy vehicle), a low battery or a reading no pack gives
 (flightctl/battery.py), the stalls and the log's and
 ground station's events.

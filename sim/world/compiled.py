@@ -121,7 +121,7 @@ def compiled_copy(fn, allocates: bool = False, **dependencies):
     Every copy is inlined where it is called (numba's `forceinline`: LLVM's `alwaysinline`), so that a
     call passes no arrays as their seven words each and no status through memory: a quarter of the
     batch's time without it. Inlining moves no arithmetic (no fast-math: LLVM neither reassociates
-    nor contracts), so the results are the plain function's to the bit (tests/test_compiled.py)."""
+    nor contracts), so the results are the plain function's to the bit (tests/sim/world/test_compiled.py)."""
     if not enabled():
         return None
     import numba

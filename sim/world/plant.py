@@ -30,7 +30,7 @@ CONTACT_S = 0.02   # s: the landing gear's stopping time at a touchdown
 FEET_MU = 0.5
 # RK4 steps per loop period (per segment): one. The fastest poles of the models, 1/tau = 50 1/s for
 # 20 ms motors and the bank loops' 10-30 rad/s, are 0.11 and under 0.07 of dt = 2.2 ms, where RK4's
-# error is (lambda h)^5 / 120, under 1e-7 per step (tests/test_model.py: 1 against 20 substeps).
+# error is (lambda h)^5 / 120, under 1e-7 per step (tests/sim/world/test_model.py: 1 against 20 substeps).
 SUBSTEPS = 1
 
 
@@ -143,7 +143,7 @@ class Plant:
         """From now on each command acts from the moment it is issued (plus the actuation delay) rather
         than from its period's start: a late tick's command then acts late (`advance_part`). With every
         command issued on its period's start the flight is the same, bit for bit (the inputs are the
-        same sums: tests/test_lateness.py)."""
+        same sums: tests/sim/world/test_lateness.py)."""
         # (issue period, the delay's fraction plus the issue's within its period, the command): the
         # queue's commands, issued one a period before this one, and the last command, issued now
         p, q = self.periods, self._queue

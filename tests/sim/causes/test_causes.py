@@ -1,0 +1,105 @@
+"""The registry of causes (flightctl.sim.causes) against the contract's table of causes in
+measured-data.md, followed by the project's own extensions, each in the table of docs/diagnose.md
+("Causes beyond the contract"): the same names in the same order and the same parameter names (with
+their units), and each cause's effect and diagnose candidate consistent with each other."""
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from flightctl.sim import causes
+from flightctl.sim.diagnose.candidate import Candidate
+from flightctl.sim.world.model import Effect
+from helpers.real import need
+from helpers.paths import ROOT
+
+SPEC = ROOT.parent / "shared" / "spec" / "measured-data.md"
+DOC = ROOT / "docs" / "diagnose.md"
+
+
+def _unit(text: str) -> str:
+    return text.replace("·", " ").replace("–", "-").strip()
+
+
+def cause_table(text: str, heading: str) -> dict[str, dict[str, str | None]]:
+    """{cause: {parameter: unit or None}} from the first table under the `## heading...` section:
+    its first cell the cause, its last the parameters."""
+    section = text.split(f"## {heading}", 1)[1].split("\n## ", 1)[0]
+    rows = section.split("|---|---|---|", 1)[1].strip().splitlines()   # the body, after the header
+    table = {}
+    for line in rows:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        name = cells[0].strip("`")
+        params = {}
+        # groups like "`dx`, `dy` (m)", "`tau` (s)", "`motor` (1–4), `scale`"
+        for group in re.finditer(r"((?:`\w+`(?:,\s*)?)+)\s*(?:\(([^)]*)\))?", cells[-1]):
+            for p in re.findall(r"`(\w+)`", group.group(1)):
+                params[p] = _unit(group.group(2)) if group.group(2) else None
+        table[name] = params
+    return table
+
+
+def spec_table() -> dict[str, dict[str, str | None]]:
+    """The contract's causes, from the table 'Candidate extensions: names and parameters'."""
+    return cause_table(need(SPEC).read_text(encoding="utf-8"), "Candidate extensions")   # a missing contract fails in CI
+
+
+def extension_table() -> dict[str, dict[str, str | None]]:
+    """The project's own causes, from docs/diagnose.md's table 'Causes beyond the contract'."""
+    return cause_table(DOC.read_text(encoding="utf-8"), "Causes beyond the contract")
+
+
+def all_causes() -> dict[str, dict[str, str | None]]:
+    return {**{c: p for c, p in spec_table().items() if c != "none"}, **extension_table()}
+
+
+def test_the_spec_table_is_read():
+    table = spec_table()
+    assert table["none"] == {}
+    assert table["com_offset"] == {"dx": "m", "dy": "m"}
+    assert table["motor_weak"] == {"motor": "1-4", "scale": None}
+
+
+def test_the_extension_table_is_read_and_extends_the_contract():
+    ext, spec = extension_table(), spec_table()
+    assert ext and ext["gyro_lag"] == {"tau": "s"}
+    assert not set(ext) & set(spec), "a cause of the contract is not an extension"
+
+
+def test_registry_has_the_causes_of_the_contract_in_its_order_then_the_extensions():
+    assert list(causes.CAUSES) == list(all_causes())
+    assert causes.EXTENSIONS == tuple(extension_table())
+
+
+def test_registry_parameters_and_units_match_the_tables():
+    table = all_causes()
+    for name, cause in causes.CAUSES.items():
+        assert list(cause.parameters) == list(table[name]), name
+        for p, unit in table[name].items():
+            if unit is not None:
+                assert cause.parameters[p].unit == unit, (name, p)
+
+
+def test_each_cause_pairs_its_effect_and_its_candidate():
+    for name, cause in causes.CAUSES.items():
+        assert issubclass(cause.effect, Effect) and issubclass(cause.candidate, Candidate)
+        assert cause.effect.cause == name and cause.candidate.effect is cause.effect
+        assert cause.doc and "\n" not in cause.doc and cause.doc.endswith(".")
+        for p in cause.parameters.values():
+            assert p.lo <= p.hi
+
+
+def test_make_builds_each_effect_within_its_ranges_and_refuses_outside():
+    from flightctl.errors import InputError
+    for name, cause in causes.CAUSES.items():
+        mid = {p: (s.lo + s.hi) / 2 if name != "motor_weak" or p != "motor" else 2.0
+               for p, s in cause.parameters.items()}
+        e = causes.make(name, **mid)
+        assert type(e) is cause.effect and e.parameters == mid
+        assert causes.parse(repr(e)).parameters == pytest.approx(mid)
+        p, s = next(iter(cause.parameters.items()))
+        with pytest.raises(InputError, match="out of range"):
+            causes.make(name, **{**mid, p: s.hi + 1.0})
