@@ -202,7 +202,7 @@ def test_the_start_timeout_covers_the_boot_waits_of_the_pi5_board():
     exit 3, which the unit does not restart (no overlay: restarting will not help)."""
     from flightctl.boards.pi5 import GPIO_WAIT_S
     from flightctl.drivers.pwm_sysfs import CHIP_WAIT_S, DEADMAN_START_S, EXPORT_WAIT_S
-    from flightctl.service import EXIT_REFUSED
+    from flightctl.service.run import EXIT_REFUSED
 
     waits = CHIP_WAIT_S + 4 * EXPORT_WAIT_S + DEADMAN_START_S + GPIO_WAIT_S
     u = unit_entries(UNIT)
