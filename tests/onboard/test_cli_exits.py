@@ -132,7 +132,7 @@ def test_a_full_disk_leaves_whole_rows_marked_partial(tmp_path):
 
 
 def test_an_output_that_cannot_be_written_whole_leaves_nothing(tmp_path):
-    r = on_a_full_disk(50, "from flightctl.errors import InputError, write_atomic\n"
+    r = on_a_full_disk(50, "from flightctl.errors import InputError\nfrom flightctl.files import write_atomic\n"
                            "try:\n    write_atomic('s.json', 'x' * 100)\nexcept InputError as e:\n    print(e)\n", tmp_path)
     assert "s.json: cannot write" in r.stdout, r.stderr
     assert list(tmp_path.iterdir()) == []                          # neither the file nor its temporary name
