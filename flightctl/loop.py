@@ -3,8 +3,9 @@
     clock tick -> Imu.read (SPI bytes -> SI) -> estimator -> PIDs -> mixer -> eq. 26 inverted
     -> Motors.write(counts) -> log row; the altitude task runs on rangefinder echoes (~45 Hz).
 
-Lifecycle: calibrate sitting still (motors stopped), arm (the motors refuse for a named reason),
-fly the plan, disarm on touchdown. The log starts at arming (its gyro columns are calibrated). Checks, each with a named reason: IMU frames going bad, a crash
+Lifecycle, as the loop's phases (`PHASES`, docs/architecture.md): `ground` (calibrate sitting still,
+motors stopped; then arm, or the motors refuse for a named reason), `flying` (the plan), `landing`
+(the loop's own, `_land`), `on two rotors` (a motor lost), `done` (disarmed on touchdown). The log starts at arming (its gyro columns are calibrated). Checks, each with a named reason: IMU frames going bad, a crash
 (flightctl/safety.py: tilt past 60 degrees), a low battery (land), a battery reading no pack can give
 (flightctl/battery.py: not armed; in the air, land), the altitude lost (land on the accelerometer).
 The motors are cut in the air only for a crash, bad IMU frames or a stop request (SIGTERM, the kill

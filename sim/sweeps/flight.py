@@ -15,7 +15,8 @@ Each loop period, in the order of `flightctl.loop.FlightLoop` against the simula
 - the power monitor every tenth of a second (its random numbers only: the battery of a flight of
   minutes stays far above the low-battery landing), the sonar's trigger every tenth period
   (`HcSr04.trigger`: not while an echo is under way) and its result (`HcSr04`: 2 cm to 4 m, else NaN);
-- on the floor before arming, the calibration (section 4.4.4: `Calibration.add`), then `apply` and
+- then the loop's phase (w[W_PHASE], flightctl/loop.py's PHASES), each a function named as the loop's
+  method: on the floor before arming, the calibration (section 4.4.4: `Calibration.add`), then `apply` and
   `arm`; after it the plan's setpoints, the echo to the altitude task, the controller
   (sim/sweeps/onboard.py, the onboard one's compiled copy), the crash check on the estimate
   (flightctl/safety.py CRASH_TILT), the altitude lost (descend on the accelerometer), the plan's own
