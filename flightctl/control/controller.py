@@ -1,8 +1,10 @@
-"""The flight controller: estimator, four PIDs (eq. 24) and the mixer (eq. 25-26). No I/O: the loop
-feeds it IMU samples, echoes and setpoints and sends the PWM counts it leaves in `counts`."""
+"""The flight controller: estimator, four PIDs (eq. 24) and the mixer (eq. 25-26), and after a lost
+motor the two-rotor controller (control/spin.py) on the landing's thrust. No I/O: the loop feeds it IMU
+samples, echoes and setpoints and sends the PWM counts it leaves in `counts`."""
 from __future__ import annotations
 
-from math import cos
+from math import cos, pi
+from typing import TYPE_CHECKING
 
 from flightctl.control.estimator import AttitudeEstimator
 from flightctl.control.landing import Landing, Vertical
@@ -12,16 +14,21 @@ from flightctl.hal import ImuSample
 from flightctl.params import Params
 from flightctl.safety import LEFT_GROUND_ALT
 
+if TYPE_CHECKING:
+    from flightctl.control.spin import SpinController
+
 MAX_CORRECT_DT = 0.05   # s: the vertical estimate's correction after a gap in the echoes, at most
+TWO_PI = 2.0 * pi
 
 
 class FlightController:
     __slots__ = ("est", "mixer", "pid_z", "pid_roll", "pid_pitch", "pid_yaw", "counts",
-                 "uz", "alt", "alt_prev", "alt_sp", "alt_t", "sonar_period", "vert", "landing", "landing_on")
+                 "uz", "alt", "alt_prev", "alt_sp", "alt_t", "sonar_period", "vert", "landing", "landing_on",
+                 "B", "spin")
 
     def __init__(self, params: Params, estimator=None, structure: str = "flight"):
         a, g = params.airframe, params.gains
-        B = a.B  # Table 3: every u within [-B, B]
+        B = self.B = a.B  # Table 3: every u within [-B, B]
         self.est = estimator if estimator is not None else AttitudeEstimator(params.filters, structure)
         self.mixer = Mixer(a)
         self.pid_z = Pid(g.kp_z, g.ki_z, g.kd_z, B)
@@ -32,6 +39,7 @@ class FlightController:
         self.sonar_period = 1.0 / a.sonar_hz
         self.vert = Vertical()
         self.landing = Landing(a.M)
+        self.spin = None        # the two-rotor controller, once a motor is lost (`start_two_rotors`)
         self.reset()
 
     def reset(self) -> None:
@@ -45,8 +53,14 @@ class FlightController:
         self.landing_on = False
 
     def arm(self, s: ImuSample) -> None:
-        """At arming, on the floor: the vertical estimate starts at rest at z = 0."""
+        """At arming, on the floor: the vertical estimate starts at rest at z = 0; the estimator is in
+        flight from now on (its in-flight tilt correction)."""
         self.vert.reset(s.ax, s.ay, s.az)
+        self.est.in_flight = True
+
+    def touchdown(self) -> None:
+        """On the floor after the flight, the motors stopped: the estimator's ground filter again."""
+        self.est.in_flight = False
 
     def land(self, speed: float) -> None:
         """From now on u_z comes from the landing (flightctl/control/landing.py), not the altitude
@@ -93,3 +107,23 @@ class FlightController:
                        self.pid_yaw.update(yaw_sp, est.yaw, est.dyaw, dt),
                        roll, pitch, self.counts)
         return self.counts
+
+    def start_two_rotors(self, spin: SpinController, lost: int) -> None:
+        """Motor `lost` (1..4) is gone: from now on `step_two_rotors` flies the pair of the other arm
+        (`spin`, built at start-up: its gains come from a disk cache) from the attitude now and the
+        thrusts the mixer commanded last; the loop's landing (`land`) gives the thrust."""
+        est = self.est
+        spin.start(lost, est.roll, est.pitch, est.yaw, self.mixer.f)
+        self.spin = spin
+
+    def step_two_rotors(self, s: ImuSample, dt: float) -> list[int]:
+        """One loop on two rotors: the landing's thrust per motor (control/landing.py) as the pair's
+        total, the attitude the spin controller integrates in place of the estimator's (yaw given up:
+        the spin's, wrapped), the vertical estimate on it; the pair's counts."""
+        spin, vert, est = self.spin, self.vert, self.est
+        counts = spin.step(s, dt, 4.0 * (self.B + self.landing.step(vert, dt)))
+        est.roll, est.pitch = roll, pitch = spin.tilt()
+        est.yaw = (spin.yaw + pi) % TWO_PI - pi
+        vert.predict(s.ax, s.ay, s.az, roll, pitch, dt)
+        self.alt = vert.z
+        return counts

@@ -78,9 +78,15 @@ def set_reference(e, roll_bias: float, pitch_bias: float, yaw_bias: float, use_m
 
 
 def arm(e, az: float) -> None:
-    """`FlightController.arm`: `Vertical.reset` on the floor."""
+    """`FlightController.arm`: `Vertical.reset` on the floor; the estimator in flight."""
     e[VZ] = e[VV] = e[VA] = 0.0
     e[VB] = az - G
+    e[IN_FLIGHT] = 1.0
+
+
+def touchdown(e) -> None:
+    """`FlightController.touchdown`: the estimator's ground filter again."""
+    e[IN_FLIGHT] = 0.0
 
 
 def pid(e, k, at: int, setpoint: float, y: float, dy: float, dt: float, angle: bool) -> float:
@@ -264,4 +270,5 @@ def compiled_functions(cc):
             "on_range": cc(on_range, pid=pid_c, estimate_trig=trig),
             "tilt": cc(estimator.tilt_from_accel),
             "heading": heading, "set_reference": cc(set_reference), "arm": cc(arm),
+            "touchdown": cc(touchdown),
             "landing_start": cc(landing_start)}

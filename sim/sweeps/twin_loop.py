@@ -15,7 +15,8 @@ Each loop period, in the order of `flightctl.loop.FlightLoop` against the simula
 - the power monitor every tenth of a second (its random numbers only: the battery of a flight of
   minutes stays far above the low-battery landing), the sonar's trigger every tenth period
   (`HcSr04.trigger`: not while an echo is under way) and its result (`HcSr04`: 2 cm to 4 m, else NaN);
-- on the floor before arming, the calibration (section 4.4.4: `Calibration.add`), then `apply` and
+- then the loop's phase (w[W_PHASE], flightctl/loop.py's PHASES), each a function named as the loop's
+  method: on the floor before arming, the calibration (section 4.4.4: `Calibration.add`), then `apply` and
   `arm`; after it the plan's setpoints, the echo to the altitude task, the controller
   (sim/sweeps/twin_controller.py, the onboard one's compiled copy), the crash check on the estimate
   (flightctl/safety.py CRASH_TILT), the altitude lost (descend on the accelerometer), the plan's own
@@ -42,7 +43,7 @@ import numpy as np
 from flightctl.control.estimator import tilt_from_accel
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.drivers.hcsr04 import MAX_RANGE_M, MIN_RANGE_M, US_PER_M, WATCHDOG_MS
-from flightctl.loop import LAND_LEVEL_S, LAND_SLACK_S, LAND_SPEED, LOST_ALT_S, MAX_BAD_IMU_FRAMES, TOUCHDOWN_ALT, TOUCHDOWN_S
+from flightctl.loop import PHASES, LAND_LEVEL_S, LAND_SLACK_S, LAND_SPEED, LOST_ALT_S, MAX_BAD_IMU_FRAMES, TOUCHDOWN_ALT, TOUCHDOWN_S
 from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
 from flightctl.sim.sweeps import twin_controller as ob
 from flightctl.sim.world.devices import EARTH_FIELD_T, NoisePool, SimGpio
@@ -78,16 +79,18 @@ AK_LSB = 1.0 / reg.AK_TESLA_PER_LSB
 # chip's position in its `NoisePool` block.
 (W_GROUND, W_T_STOP, W_VZ_STOP, W_NEXT, W_HEAD, W_T_LAST, W_KDT, W_READS, W_MAG, W_GOOD, W_PREV, W_HAS_GOOD,
  W_HAS_PREV, W_BAD, W_S, W_WAITING, W_RISE_T, W_FALL_T, W_RISE, W_LAST_EDGE, W_TRIGGER, W_RESULT, W_HAS_RESULT,
- W_U, W_GAUSS, W_HAS_GAUSS, W_ARMED, W_FLYING, W_LANDING, W_BLIND, W_LAST_ECHO, W_T_TOUCH, W_MAX_ALT, W_CAL,
- W_CAL_N, W_CAL_MAG, W_GYRO_BIAS, W_LAND_T, W_LAND_SP, W_LAND_RAMP, W_DURATION, W_REASON, W_DONE, W_TILT,
- W_TOUCHDOWN, W_Z_MAX, W_Z_END, W_ROWS, W_UAPP, W_CMD, W_LIFT, W_LIFT_AT, W_STILL, W_FSTILL, W_FW, W_POOL,
- N_W) = \
-    (0, 1, 2, 3, 7, 8, 9, 10, 11, 14, 21, 28, 29, 30, 31, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53,
-     54, 55, 56, 57, 58, 65, 66, 67, 70, 71, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 88, 96, 97, 101, 102, 103, 111,
-     112)
+ W_U, W_GAUSS, W_HAS_GAUSS, W_PHASE, W_BLIND, W_LAST_ECHO, W_T_TOUCH, W_MAX_ALT, W_CAL, W_CAL_N, W_CAL_MAG,
+ W_GYRO_BIAS, W_LAND_T, W_LAND_SP, W_LAND_RAMP, W_DURATION, W_REASON, W_DONE, W_TILT, W_TOUCHDOWN, W_Z_MAX,
+ W_Z_END, W_ROWS, W_UAPP, W_CMD, W_LIFT, W_LIFT_AT, W_STILL, W_FSTILL, W_FW, W_POOL, N_W) = \
+    (0, 1, 2, 3, 7, 8, 9, 10, 11, 14, 21, 28, 29, 30, 31, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52,
+     53, 54, 55, 56, 63, 64, 65, 68, 69, 73, 74, 75, 76, 77, 78, 79, 80, 81, 82, 86, 94, 95, 99, 100, 101,
+     109, 110)
 # why the loop stopped (w[W_REASON]): still flying, the plan's end (landed or not), a crash by the estimate,
 # the IMU's frames bad, no touchdown by the landing's end, never left the ground, the plant diverged
 RUNNING, ENDED, CRASH, IMU_BAD, NO_TOUCHDOWN, NEVER_LEFT, DIVERGED = range(7)
+# the loop's phase (w[W_PHASE]): flightctl/loop.py's PHASES by their index (TWO_ROTORS is never met here:
+# the twin flies no motor loss)
+GROUND, FLYING, LANDING, TWO_ROTORS, DONE = (float(j) for j in range(len(PHASES)))
 # k: the world's constants shared by the vehicles: g, M (the plant's), the sonar's jitter (us) and dropout,
 # the magnetometer's noise (T), the driver's m/s^2 and rad/s per LSB, the die's warming (degC, s), the
 # plan lands, its duration, the power monitor's gaussian draws per read, the loop's dt, t_arm, the
@@ -341,7 +344,7 @@ def land(w, e, sp, t_plan: float, alt: float) -> None:
     """`FlightLoop._land` at plan time t_plan: the landing's thrust from now on; roll and pitch back to
     level over LAND_LEVEL_S, the altitude's ramp to 0 at LAND_SPEED (the log's setpoint), a new end."""
     ob_landing_start(e, LAND_SPEED)
-    w[W_LANDING] = 1.0
+    w[W_PHASE] = LANDING
     w[W_LAND_T] = t_plan
     for j in range(4):
         w[W_LAND_SP + j] = sp[j]
@@ -433,143 +436,202 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI, SP, R
                 w[W_REASON], w[W_DONE] = DIVERGED, 1.0
                 break
             sonar_edges(w, t)
-            normals(gen, w, e9, 0, nn)
-            if i % MAG_EVERY == 1 % MAG_EVERY:      # read i's magnetometer sample (`chip_read`)
-                normals(gen, w, e9, nn, 3)
-            if chip_read(x, w, q, codes, burst, cs, cc, e9, 0, nn, jump, k, t, held[step], temp[step], gains[step], wk):
-                w[W_BAD] = 0.0
-            else:
-                w[W_BAD] += 1.0
-                if w[W_BAD] > MAX_BAD_IMU_FRAMES:
-                    w[W_REASON], w[W_DONE] = IMU_BAD, 1.0
-                    break
-            if power[step]:                                  # the power monitor's read
-                for _ in range(int(k[INA_DRAWS])):
-                    gauss(w, uni, 0.0, 1.0)
-            if sonar[step]:
-                sonar_trigger(w, x, uni, k, t)
+            if not sense(x, w, q, codes, burst, cs, cc, e9, nn, jump, k, t, held[step], temp[step], gains[step], wk,
+                         gen, uni, i, power[step], sonar[step]):
+                w[W_REASON], w[W_DONE] = IMU_BAD, 1.0
+                break
             has_echo = w[W_HAS_RESULT] != 0.0
             echo = w[W_RESULT]
             w[W_HAS_RESULT] = 0.0
-            s = W_S
-            ax, ay, az, gx, gy, gz, mx, my, mz = w[s], w[s + 1], w[s + 2], w[s + 3], w[s + 4], w[s + 5], w[s + 6], \
-                w[s + 7], w[s + 8]
-            finished = False
-            write = False
-            sp = (0.0, 0.0, 0.0, 0.0)
-            if w[W_ARMED] == 0.0:
-                roll, pitch = tilt_from_accel(ax, ay, az)  # `Calibration.add` (eq. 30-31)
-                c = W_CAL
-                w[c] += gx
-                w[c + 1] += gy
-                w[c + 2] += gz
-                w[c + 3] += roll
-                w[c + 4] += pitch
-                h = ob_heading(mx, my, mz, roll, pitch)
-                w[W_CAL_MAG] += 1.0
-                w[c + 5] += cos(h)
-                w[c + 6] += sin(h)
-                w[W_CAL_N] += 1.0
-                if i >= i_arm:                               # `Calibration.apply`, `FlightController.arm`
-                    nc = w[W_CAL_N]
-                    w[W_GYRO_BIAS], w[W_GYRO_BIAS + 1], w[W_GYRO_BIAS + 2] = w[c] / nc, w[c + 1] / nc, w[c + 2] / nc
-                    ob_set_reference(e, w[c + 3] / nc, w[c + 4] / nc, atan2(w[c + 6], w[c + 5]), True)
-                    ob_arm(e, az)
-                    w[W_ARMED] = w[W_FLYING] = e[ob.IN_FLIGHT] = 1.0
-                    w[W_LAST_ECHO] = t
-                    w[W_DURATION] = k[DURATION]
+            write = finished = False
+            if w[W_PHASE] == GROUND:
+                calibrate_and_arm(w, e, i >= i_arm, t, k)
             else:
                 tp = t - t_arm
-                if w[W_LANDING] != 0.0:
-                    sp = (landing_setpoint(w, tp, 0), landing_setpoint(w, tp, 1), landing_setpoint(w, tp, 2),
-                          landing_setpoint(w, tp, 3))
-                else:
-                    sp = (SP[step, 0], SP[step, 1], SP[step, 2], SP[step, 3])
-                flying = w[W_FLYING] != 0.0
-                if has_echo:
-                    if echo == echo:
-                        w[W_LAST_ECHO] = t
-                    if flying:
-                        ob_on_range(e, kc, echo, t)
-                if flying:
-                    ob_step(e, kc, gx, gy, gz, ax, ay, az, mx, my, mz, True, dt, sp[0], sp[1], sp[2], sp[3], cnt)
-                    if not (abs(e[ob.ROLL]) <= CRASH_TILT and abs(e[ob.PITCH]) <= CRASH_TILT):
-                        w[W_REASON], w[W_DONE] = CRASH, 1.0
-                        break
-                    alt = e[ob.ALT]
-                    if alt > w[W_MAX_ALT]:
-                        w[W_MAX_ALT] = alt
-                    if w[W_BLIND] == 0.0 and t - w[W_LAST_ECHO] > LOST_ALT_S and alt > TOUCHDOWN_ALT:
-                        w[W_BLIND] = 1.0
-                        if w[W_LANDING] == 0.0:
-                            land(w, e, sp, tp, e[ob.VZ])
-                    if w[W_LANDING] != 0.0:
-                        touched = e[ob.L_LANDED] != 0.0
-                    else:
-                        if sp[3] <= 0.0 and alt < TOUCHDOWN_ALT and k[LANDS] != 0.0:
-                            if w[W_T_TOUCH] < 0.0:
-                                w[W_T_TOUCH] = t
-                        else:
-                            w[W_T_TOUCH] = -1.0
-                        touched = w[W_T_TOUCH] >= 0.0 and t - w[W_T_TOUCH] > TOUCHDOWN_S
-                    write = True
-                    if touched:
-                        w[W_FLYING] = e[ob.IN_FLIGHT] = 0.0
-                        for j in range(4):
-                            w[W_NEXT + j] = 0.0               # `SimMotors.stop`
-                        write = False
-                        finished = w[W_LANDING] != 0.0
-                else:
-                    ob_step(e, kc, gx, gy, gz, ax, ay, az, mx, my, mz, True, dt, 0.0, 0.0, e[ob.YAW], 0.0, cnt)
-                if tp >= w[W_DURATION]:
-                    if w[W_FLYING] == 0.0:
-                        w[W_REASON], w[W_DONE] = ENDED, 1.0
-                        break
-                    if w[W_LANDING] != 0.0:
-                        w[W_REASON], w[W_DONE] = NO_TOUCHDOWN, 1.0
-                        break
-                    if w[W_MAX_ALT] < LEFT_GROUND_ALT:
-                        for j in range(4):
-                            w[W_NEXT + j] = 0.0
-                        w[W_REASON], w[W_DONE] = NEVER_LEFT, 1.0
-                        break
-                    if w[W_T_TOUCH] < 0.0:
-                        land(w, e, sp, tp, e[ob.ALT])
-            if write and w[W_FLYING] != 0.0:                   # `SimMotors.write`
+                sp = setpoint(w, SP, step, tp)
+                why, write, finished = armed(w, e, kc, k, sp, t, tp, has_echo, echo, dt, cnt)
+                if why == RUNNING:            # (the loop skips it on a touchdown that ends the flight: here
+                    why = plan_end(w, e, sp, tp)  # that period's row is left out when the plan's time is up)
+                if why != RUNNING:
+                    w[W_REASON], w[W_DONE] = why, 1.0
+                    break
+            if write and w[W_PHASE] != DONE:                 # `SimMotors.write`
                 for j in range(4):
                     w[W_NEXT + j] = cnt[j] * (255.0 / 40000.0)
-            if w[W_ARMED] != 0.0:                            # the log's row: the judge's figures
-                tilt = abs(x[PHI]) if abs(x[PHI]) > abs(x[THETA]) else abs(x[THETA])
-                if not tilt <= w[W_TILT]:
-                    w[W_TILT] = tilt if tilt == tilt else inf
-                if x[Z] > w[W_Z_MAX]:
-                    w[W_Z_MAX] = x[Z]
-                w[W_Z_END] = x[Z]
-                row = i - rec0
-                if 0 <= row < REC.shape[1]:
-                    REC[v, row, 0], REC[v, row, 1] = x[PHI], x[THETA]
-                    REC[v, row, 2] = (x[PSI] + pi) % TWOPI - pi
-                    REC[v, row, 3], REC[v, row, 4], REC[v, row, 5] = e[ob.ROLL], e[ob.PITCH], e[ob.YAW]
-                    if REC.shape[2] == N_WIDE:
-                        for j in range(4):
-                            REC[v, row, N_REC + j] = w[W_NEXT + j]
-                        for j in range(6):
-                            REC[v, row, N_REC + 4 + j] = w[W_S + j]
-                        REC[v, row, N_REC + 10] = e[ob.ALT]
-                w[W_ROWS] += 1.0
-            if finished or (w[W_ARMED] != 0.0 and w[W_FLYING] == 0.0 and w[W_GROUND] != 0.0):
+            if w[W_PHASE] != GROUND:                         # the log's row: the judge's figures
+                row(x, w, e, REC, v, i - rec0)
+            if finished or (w[W_PHASE] == DONE and w[W_GROUND] != 0.0):
                 # the loop's own landing ends the flight; after the plan's, nothing moves on the floor
                 # to the plan's end but the estimate: the judged record holds the last row
-                for row in range(max(i - rec0 + 1, 0), REC.shape[1]):
+                for r in range(max(i - rec0 + 1, 0), REC.shape[1]):
                     for j in range(N_REC):
-                        REC[v, row, j] = REC[v, row - 1, j] if row > 0 else nan
+                        REC[v, r, j] = REC[v, r - 1, j] if r > 0 else nan
                 w[W_REASON], w[W_DONE] = ENDED, 1.0
                 break
 
 
+def sense(x, w, q, codes, burst, cs, cc, e9, nn: int, jump, k, t: float, held: float, temp: float, gains, wk, gen,
+          uni, i: int, power_now: bool, sonar_now: bool) -> bool:
+    """`FlightLoop._sense`: the chip's frame (its normals, the magnetometer's every MAG_EVERY reads;
+    a refused one holds the last sample; False: more than MAX_BAD_IMU_FRAMES in a row), the power
+    monitor's read (its random numbers only), the sonar's trigger."""
+    normals(gen, w, e9, 0, nn)
+    if i % MAG_EVERY == 1 % MAG_EVERY:      # read i's magnetometer sample (`chip_read`)
+        normals(gen, w, e9, nn, 3)
+    if chip_read(x, w, q, codes, burst, cs, cc, e9, 0, nn, jump, k, t, held, temp, gains, wk):
+        w[W_BAD] = 0.0
+    else:
+        w[W_BAD] += 1.0
+        if w[W_BAD] > MAX_BAD_IMU_FRAMES:
+            return False
+    if power_now:                                    # the power monitor's read
+        for _ in range(int(k[INA_DRAWS])):
+            gauss(w, uni, 0.0, 1.0)
+    if sonar_now:
+        sonar_trigger(w, x, uni, k, t)
+    return True
+
+
+def calibrate_and_arm(w, e, arm: bool, t: float, k) -> None:
+    """`FlightLoop._ground`: `Calibration.add` (section 4.4.4, eq. 30-31); at the arming period `apply`
+    and `FlightController.arm`, into FLYING."""
+    s = W_S
+    ax, ay, az, gx, gy, gz, mx, my, mz = w[s], w[s + 1], w[s + 2], w[s + 3], w[s + 4], w[s + 5], w[s + 6], \
+        w[s + 7], w[s + 8]
+    roll, pitch = tilt_from_accel(ax, ay, az)
+    c = W_CAL
+    w[c] += gx
+    w[c + 1] += gy
+    w[c + 2] += gz
+    w[c + 3] += roll
+    w[c + 4] += pitch
+    h = ob_heading(mx, my, mz, roll, pitch)
+    w[W_CAL_MAG] += 1.0
+    w[c + 5] += cos(h)
+    w[c + 6] += sin(h)
+    w[W_CAL_N] += 1.0
+    if arm:
+        nc = w[W_CAL_N]
+        w[W_GYRO_BIAS], w[W_GYRO_BIAS + 1], w[W_GYRO_BIAS + 2] = w[c] / nc, w[c + 1] / nc, w[c + 2] / nc
+        ob_set_reference(e, w[c + 3] / nc, w[c + 4] / nc, atan2(w[c + 6], w[c + 5]), True)
+        ob_arm(e, az)
+        w[W_PHASE] = FLYING
+        w[W_LAST_ECHO] = t
+        w[W_DURATION] = k[DURATION]
+
+
+def setpoint(w, SP, step: int, tp: float) -> tuple:
+    """`FlightLoop._setpoint`: the plan's setpoints at plan time tp, or the loop's landing plan's."""
+    if w[W_PHASE] == LANDING:
+        return (landing_setpoint(w, tp, 0), landing_setpoint(w, tp, 1), landing_setpoint(w, tp, 2),
+                landing_setpoint(w, tp, 3))
+    return (SP[step, 0], SP[step, 1], SP[step, 2], SP[step, 3])
+
+
+def armed(w, e, kc, k, sp, t: float, tp: float, has_echo: bool, echo: float, dt: float, cnt) -> tuple:
+    """`FlightLoop._armed`: the echo to the altitude task; in the air the controller (its counts in
+    cnt), the checks and the touchdown, on the floor after the flight the estimate alone. (why the
+    loop stops or RUNNING, the motors take cnt, the flight ends after this period's row)."""
+    s = W_S
+    ax, ay, az, gx, gy, gz, mx, my, mz = w[s], w[s + 1], w[s + 2], w[s + 3], w[s + 4], w[s + 5], w[s + 6], \
+        w[s + 7], w[s + 8]
+    in_air = w[W_PHASE] != DONE
+    if has_echo:
+        if echo == echo:
+            w[W_LAST_ECHO] = t
+        if in_air:
+            ob_on_range(e, kc, echo, t)
+    if not in_air:
+        ob_step(e, kc, gx, gy, gz, ax, ay, az, mx, my, mz, True, dt, 0.0, 0.0, e[ob.YAW], 0.0, cnt)
+        return RUNNING, False, False
+    ob_step(e, kc, gx, gy, gz, ax, ay, az, mx, my, mz, True, dt, sp[0], sp[1], sp[2], sp[3], cnt)
+    if not checks(w, e, sp, t, tp):
+        return CRASH, False, False
+    return touchdown(w, e, k, sp, t, tp)
+
+
+def checks(w, e, sp, t: float, tp: float) -> bool:
+    """`FlightLoop._checks` that a healthy vehicle meets: the crash (False), the highest altitude, the
+    altitude lost (descend on the accelerometer: `land`)."""
+    if not (abs(e[ob.ROLL]) <= CRASH_TILT and abs(e[ob.PITCH]) <= CRASH_TILT):
+        return False
+    alt = e[ob.ALT]
+    if alt > w[W_MAX_ALT]:
+        w[W_MAX_ALT] = alt
+    if w[W_BLIND] == 0.0 and t - w[W_LAST_ECHO] > LOST_ALT_S and alt > TOUCHDOWN_ALT:
+        w[W_BLIND] = 1.0
+        if w[W_PHASE] == FLYING:
+            land(w, e, sp, tp, e[ob.VZ])
+    return True
+
+
+def touchdown(w, e, k, sp, t: float, tp: float) -> tuple:
+    """`FlightLoop._touchdown`: in the loop's own landing the accelerometer confirms the floor, in the
+    plan's the sonar reads it for TOUCHDOWN_S; then the motors stop (DONE). (RUNNING, the motors take
+    the counts, the flight ends after this row: the loop's own landing)."""
+    if w[W_PHASE] != FLYING:
+        touched = e[ob.L_LANDED] != 0.0
+    else:
+        if sp[3] <= 0.0 and e[ob.ALT] < TOUCHDOWN_ALT and k[LANDS] != 0.0:
+            if w[W_T_TOUCH] < 0.0:
+                w[W_T_TOUCH] = t
+        else:
+            w[W_T_TOUCH] = -1.0
+        touched = w[W_T_TOUCH] >= 0.0 and t - w[W_T_TOUCH] > TOUCHDOWN_S
+    if not touched:
+        return RUNNING, True, False
+    own = w[W_PHASE] != FLYING
+    w[W_PHASE] = DONE
+    ob_touchdown(e)
+    for j in range(4):
+        w[W_NEXT + j] = 0.0               # `SimMotors.stop`
+    return RUNNING, False, own
+
+
+def plan_end(w, e, sp, tp: float) -> float:
+    """`FlightLoop._plan_end`: the plan's time up, on the floor the flight ended, in the loop's landing
+    no touchdown, never off the floor (the motors stopped), or in the air the loop's landing begins."""
+    if tp < w[W_DURATION]:
+        return RUNNING
+    if w[W_PHASE] == DONE:
+        return ENDED
+    if w[W_PHASE] != FLYING:
+        return NO_TOUCHDOWN
+    if w[W_MAX_ALT] < LEFT_GROUND_ALT:
+        for j in range(4):
+            w[W_NEXT + j] = 0.0
+        return NEVER_LEFT
+    if w[W_T_TOUCH] < 0.0:
+        land(w, e, sp, tp, e[ob.ALT])
+    return RUNNING
+
+
+def row(x, w, e, REC, v: int, r: int) -> None:
+    """`FlightLoop._row` as the judge reads it: the largest true tilt, the highest and last true
+    altitude, the log's rows; the judged record's row r (true and estimated attitude, wide: the
+    commands, the sample, the altitude estimate)."""
+    tilt = abs(x[PHI]) if abs(x[PHI]) > abs(x[THETA]) else abs(x[THETA])
+    if not tilt <= w[W_TILT]:
+        w[W_TILT] = tilt if tilt == tilt else inf
+    if x[Z] > w[W_Z_MAX]:
+        w[W_Z_MAX] = x[Z]
+    w[W_Z_END] = x[Z]
+    if 0 <= r < REC.shape[1]:
+        REC[v, r, 0], REC[v, r, 1] = x[PHI], x[THETA]
+        REC[v, r, 2] = (x[PSI] + pi) % TWOPI - pi
+        REC[v, r, 3], REC[v, r, 4], REC[v, r, 5] = e[ob.ROLL], e[ob.PITCH], e[ob.YAW]
+        if REC.shape[2] == N_WIDE:
+            for j in range(4):
+                REC[v, r, N_REC + j] = w[W_NEXT + j]
+            for j in range(6):
+                REC[v, r, N_REC + 4 + j] = w[W_S + j]
+            REC[v, r, N_REC + 10] = e[ob.ALT]
+    w[W_ROWS] += 1.0
+
+
 # the onboard controller's functions (sim/sweeps/twin_controller.py), bound to their compiled copies by `compiled_fly`
-ob_step, ob_on_range, ob_heading, ob_set_reference, ob_arm, ob_landing_start = (
-    ob.step, ob.on_range, ob.heading_from_mag, ob.set_reference, ob.arm, ob.landing_start)
+ob_step, ob_on_range, ob_heading, ob_set_reference, ob_arm, ob_touchdown, ob_landing_start = (
+    ob.step, ob.on_range, ob.heading_from_mag, ob.set_reference, ob.arm, ob.touchdown, ob.landing_start)
 
 
 @functools.cache
@@ -586,15 +648,19 @@ def compiled_fly():
     g = cc(gauss, uniform=u)
     at = plant["forces"]
     held = cc(held_command)
-    return cc(fly, allocates=True, work=plant["work"], normals=cc(normals, standard_normal=pcg64.compiled_normal(cc)),
-              normals_per_read=cc(imu.normals_per_read),
+    landed = cc(land, ob_landing_start=o["landing_start"])
+    read = cc(chip_read, forces=at, held_command=held, chip_words=imu.chip_frame_compiled(put_word),
+              rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],
+              i16=cc(i16, _i16=cc(imu._i16)))
+    sensed = cc(sense, normals=cc(normals, standard_normal=pcg64.compiled_normal(cc)), chip_read=read, gauss=g,
+                sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g))
+    flown = cc(armed, ob_step=o["step"], ob_on_range=o["on_range"], checks=cc(checks, land=landed),
+               touchdown=cc(touchdown, ob_touchdown=o["touchdown"]))
+    return cc(fly, allocates=True, work=plant["work"], normals_per_read=cc(imu.normals_per_read),
               plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held,
                               time_weighted=cc(time_weighted), floor_spin=cc(floor_spin), floor_brake=cc(floor_brake)),
-              sonar_edges=cc(sonar_edges), sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g), gauss=g,
-              chip_read=cc(chip_read, forces=at, held_command=held, chip_words=imu.chip_frame_compiled(put_word),
-                           rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],
-                           i16=cc(i16, _i16=cc(imu._i16))),
-              land=cc(land, ob_landing_start=o["landing_start"]), landing_setpoint=cc(landing_setpoint),
-              ob_step=o["step"], ob_on_range=o["on_range"], tilt_from_accel=o["tilt"], ob_heading=o["heading"],
-              ob_set_reference=o["set_reference"], ob_arm=o["arm"])
-
+              sonar_edges=cc(sonar_edges), sense=sensed,
+              calibrate_and_arm=cc(calibrate_and_arm, tilt_from_accel=o["tilt"], ob_heading=o["heading"],
+                                   ob_set_reference=o["set_reference"], ob_arm=o["arm"]),
+              setpoint=cc(setpoint, landing_setpoint=cc(landing_setpoint)), armed=flown,
+              plan_end=cc(plan_end, land=landed), row=cc(row))
