@@ -58,7 +58,7 @@ OMEGA_TOP = 1.25         # ... to this much of the pair's summed speed in hover
 RATE_SCALE, AXIS_SCALE = 1.0, 0.2    # rad/s, -: the LQR's acceptable body rate and tilt of n
 EPS_DAMPING = 0.05       # 1/s
 ROBUST_JP = 4            # rotor inertias across the file's range at which each candidate is judged
-SCHEMA = 3               # bump when the design changes: the disk cache's key includes it
+SCHEMA = 4               # bump when the design changes: the disk cache's key includes it
 PAIRS = ((0, 2), (1, 3))
 MOTOR_CAUSES = ("motor_dynamics", "motor_lag")
 
