@@ -46,6 +46,7 @@ from typing import NamedTuple
 
 from flightctl.blas import OneBlasThread
 from flightctl.cachedir import cached_json
+from flightctl.control.hold import delayed, split_delay
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.params import Params
 
@@ -57,7 +58,7 @@ OMEGA_TOP = 1.25         # ... to this much of the pair's summed speed in hover
 RATE_SCALE, AXIS_SCALE = 1.0, 0.2    # rad/s, -: the LQR's acceptable body rate and tilt of n
 EPS_DAMPING = 0.05       # 1/s
 ROBUST_JP = 4            # rotor inertias across the file's range at which each candidate is judged
-SCHEMA = 3               # bump when the design changes: the disk cache's key includes it
+SCHEMA = 4               # bump when the design changes: the disk cache's key includes it
 PAIRS = ((0, 2), (1, 3))
 MOTOR_CAUSES = ("motor_dynamics", "motor_lag")
 
@@ -184,34 +185,12 @@ def pair_model(d: Inputs, pair: tuple[int, int], r: float, H: float):
     return A5, B5
 
 
-def split_delay(delay: float, dt: float) -> tuple[int, float]:
-    """The delay as m whole loops and a fraction delta of one: delay = m dt + delta, 0 <= delta < dt."""
-    m = int(delay / dt + 1e-9)
-    return m, max(0.0, delay - m * dt)
-
-
 def discrete(A, B, dt: float, delay: float = 0.0):
-    """(Phi, Ga, Gb, m): the model held over dt (zero-order hold) with its input `delay` s late
-    (Astrom and Wittenmark, Computer-Controlled Systems, sec. 2.3): x_{k+1} = Phi x_k + Ga u_{k-m-1}
-    + Gb u_{k-m}, with delay = m dt + delta; the input changes delta into the period."""
+    """(Phi, Ga, Gb, m): the model held over dt (zero-order hold) with its input `delay` s late:
+    x_{k+1} = Phi x_k + Ga u_{k-m-1} + Gb u_{k-m}, with delay = m dt + delta (flightctl/control/hold.py)."""
     import numpy as np
-    from scipy.linalg import expm
-    n = A.shape[0]
-    m, delta = split_delay(delay, dt)
-
-    def hold(t):                  # (e^{A t}, int_0^t e^{A s} ds B)
-        E = np.zeros((n + 1, n + 1))
-        E[:n, :n], E[:n, n:] = A * t, B * t
-        E = expm(E)
-        return E[:n, :n], E[:n, n:]
-    Phi_late, Gb = hold(dt - delta)
-    if delta > 0.0:
-        Phi_early, G_early = hold(delta)
-        Ga = Phi_late @ G_early
-        Phi = Phi_late @ Phi_early
-    else:
-        Ga, Phi = np.zeros_like(Gb), Phi_late
-    return Phi, Ga, Gb, m
+    Phi_I, Ga, Gb, m = delayed(A, B, dt, delay)
+    return np.eye(A.shape[0]) + Phi_I, Ga, Gb, m
 
 
 def augmented(held, slots: int):

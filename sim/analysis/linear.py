@@ -20,11 +20,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm, schur, svd
+from scipy.linalg import schur, svd
 from scipy.optimize import root
 
 from flightctl.control.controller import FlightController
 from flightctl.control.estimator import Calibration
+from flightctl.control.hold import delayed
 from flightctl.errors import InputError
 from flightctl.hal import ImuSample
 from flightctl.params import Params
@@ -137,29 +138,13 @@ def sampled(A, B, C, D, T: float, delay: float = 0.0):
     With delay = m T + d (0 <= d < T): x_(k+1) = Phi(T) x_k + Phi(T - d) Gamma(d) u_(k-m-1)
     + Gamma(T - d) u_(k-m), and y_k = C x_k + D u_(k-m-1). The last m + 1 commands are states."""
     n, ni = B.shape
-    m = int(math.floor(delay / T + 1e-9))
-    d = max(delay - m * T, 0.0)
-    if d < 1e-12 * T:
-        d = 0.0
-
-    def zoh(t):
-        """(Phi(t) - I, Gamma(t)) with Phi(t) = e^(A t), Gamma(t) = int_0^t e^(A s) ds B; Phi - I as
-        A Psi(t), Psi = int_0^t e^(A s) ds, so that it does not lose its digits to the identity."""
-        M = np.zeros((2 * n + ni, 2 * n + ni))
-        M[:n, :n], M[:n, n:2 * n], M[:n, 2 * n:] = A, np.eye(n), B
-        E = expm(M * t)
-        Psi, Gam = E[:n, n:2 * n], E[:n, 2 * n:]
-        return A @ Psi, Gam
-
+    Phi_I, Gam_a, Gam_b, m = delayed(A, B, T, delay)     # flightctl/control/hold.py
     slots = m + 1
     N = n + ni * slots
 
     def slot(j):   # the command u_(k-1-j)
         return slice(n + ni * j, n + ni * (j + 1))
 
-    Phi_I, _ = zoh(T)
-    Phi_b_I, Gam_b = zoh(T - d)
-    Gam_a = (np.eye(n) + Phi_b_I) @ zoh(d)[1]
     Ad, Bd = np.zeros((N, N)), np.zeros((N, ni))   # the delta form: (x_(k+1) - x_k) / T
     Ad[:n, :n] = Phi_I / T
     Ad[:n, slot(m)] += Gam_a / T

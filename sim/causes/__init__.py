@@ -7,8 +7,14 @@ fit (a `Candidate` of `flightctl.sim.diagnose.candidate`).
 their units, and a one-line description. `flightctl sim --effect` builds effects with `parse`, the
 tests with `make`, and `flightctl diagnose` runs every candidate in this order.
 
+Each module declares everything the rest reads of its cause: on its `Candidate`, its `twin` (the same
+effect modelled another way), whether it `times_actuation` and its `lookalikes` (diagnose/verdict.py's
+chain reads them through `twin`, `times_actuation` and `lookalikes` below); on its `Effect`, whether the
+compiled plant carries it (`compiled`, its `compiled_hook` and `compiled_q`: sim/world/compiled.py reads
+them).
+
 Adding a cause: a module here with its `Effect` and its `Candidate` (whose `effect` names it), one
-line in `_FITS` below, a row in docs/diagnose.md's table of the causes beyond the contract (after the
+line in `_FITS` below (or `register` for one defined elsewhere), a row in docs/diagnose.md's table of the causes beyond the contract (after the
 contract's, whose table is docs/measured-data.md's; tests/sim/causes/test_causes.py checks that the registry and the two
 tables agree), a unit test of the effect and a hidden-effect case (tests/sim/diagnose/test_diagnose_cases.py).
 Importing the registry costs no scipy (the fits import it when they run): `flightctl sim` starts fast.
@@ -49,6 +55,30 @@ _EXTENSION_FITS = (gyro_lag.GyroLagFit,)
 
 CAUSES: dict[str, Cause] = {c.name: c for c in map(Cause.of, _FITS + _EXTENSION_FITS)}
 EXTENSIONS: tuple[str, ...] = tuple(f.effect.cause for f in _EXTENSION_FITS)
+
+
+def register(candidate: type[Candidate]) -> Cause:
+    """Add the cause of `candidate` (its `effect` names it) to `CAUSES`, after the others."""
+    cause = Cause.of(candidate)
+    if cause.name in CAUSES:
+        raise ValueError(f"cause {cause.name!r} is registered already")
+    CAUSES[cause.name] = cause
+    return cause
+
+
+def twin(cause: str) -> str | None:
+    """The cause that is the same physical effect as `cause` modelled another way, or None."""
+    return CAUSES[cause].candidate.twin if cause in CAUSES else None
+
+
+def times_actuation(cause: str) -> bool:
+    """Whether `cause` times the actuation (a lag or a delay of the rotors)."""
+    return cause in CAUSES and CAUSES[cause].candidate.times_actuation
+
+
+def lookalikes(cause: str) -> tuple[str, ...]:
+    """The causes that `cause` may be swapped with once the others are in the model, in their order."""
+    return CAUSES[cause].candidate.lookalikes if cause in CAUSES else ()
 
 
 def make(cause: str, **parameters: float) -> Effect:

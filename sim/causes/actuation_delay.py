@@ -15,6 +15,7 @@ class ActuationDelay(Effect):
     """Each thrust follows its command after a pure delay (the plant delays the input)."""
     cause = "actuation_delay"
     required = {"delay": Parameter("s", 0.0, 1.0)}
+    compiled = True     # the plant delays the input (`delay`): no wrench hook
 
     @property
     def delay(self):
@@ -50,6 +51,7 @@ class ActuationDelayFit(GridCandidate):
     grid = np.concatenate([np.arange(0.0, 0.05, 0.0025), np.arange(0.05, 0.1, 0.005),
                            np.arange(0.1, MAX_TIMING_S + 1e-9, 0.01)])
     physical_check = TIMING_CHECK
+    times_actuation, lookalikes = True, ("gyro_lag",)
     cached = True     # its change is the base model's thrusts changed: no carried term enters it
 
     def thrusts(self, parameters):

@@ -40,6 +40,7 @@ class GyroLag(Effect):
     """The logged gyro lags the body rates through a first-order low-pass the log does not declare."""
     cause, uses_gyro = "gyro_lag", True
     required = {"tau": Parameter("s", 0.0, 1.0)}
+    compiled = True     # it acts on the simulated IMU, not the plant
 
     def attach(self, airframe, offset):
         super().attach(airframe, offset)
@@ -92,6 +93,9 @@ class GyroLagFit(GridCandidate):
     explains = "angular acceleration the model predicts from the commands (rad/s^2)"
     grid = MotorLagFit.grid
     physical_check = GYRO_LAG_CHECK
+    # a lag or a delay of the rotors makes the gyro follow the commands late alike; only the rotors' lag
+    # the accelerometer's z too (docs/diagnose.md, "Two lags at once")
+    lookalikes = ("actuation_delay", "motor_lag", "motor_dynamics")
 
     def delta(self, tau):
         ds = self.ds

@@ -28,7 +28,7 @@ from flightctl.physics import rotor_speed, thrust_from_command, thrust_from_spee
 from flightctl.sim.causes.motor_lag import MotorLagFit, lag_held
 from flightctl.sim.diagnose.candidate import TIMING_CHECK, GridCandidate, timing_not_physical, too_short_to_time
 from flightctl.sim.diagnose.dataset import C, Change
-from flightctl.sim.world.model import Effect, Parameter
+from flightctl.sim.world.model import N_RIGID, Effect, Parameter
 
 SPIN = (-1.0, 1.0, -1.0, 1.0)   # s_i: +1 counter-clockwise seen from above (motors 2, 4), -1 clockwise
 FULL_P = 255.0                  # `p_full`'s default: eq. 26 to the end of the ESC's frame (no ceiling)
@@ -66,7 +66,14 @@ class MotorDynamics(Effect):
     # the rotor's speed changes at J dOmega/dt = the motor's torque less the drag's: at a given torque
     # both time constants are proportional to the rotor inertia, so their slowest plausible value is
     range_scales = {"tau": "Jp", "tau_down": "Jp"}
+    compiled, compiled_hook = True, "reaction"
     _spin_up = 0.0   # sum s_i dOmega_i/dt of the last `rotor` call, for `wrench` (rad/s^2)
+
+    def compiled_q(self):
+        if self.offset != N_RIGID:      # the compiled plant keeps the rotors' speeds right after the body's
+            return None
+        p = self.parameters
+        return {"tau": p["tau"], "tau_down": p.get("tau_down", p["tau"]), "p_full": p.get("p_full", FULL_P)}
 
     def initial_states(self, f_cmd):
         return [rotor_speed(f, self.a.c1) for f in f_cmd]
@@ -108,6 +115,7 @@ class MotorDynamicsFit(GridCandidate):
     explains = "rotor spin-up sum s_i dOmega_i/dt (rad/s^2)"
     grid = MotorLagFit.grid
     physical_check = TIMING_CHECK
+    twin, times_actuation, lookalikes = "motor_lag", True, ("gyro_lag",)
     cached = True     # its change is the base model's thrusts changed: no carried term enters it
 
     def _speeds(self, i, tau):

@@ -47,6 +47,7 @@ class MotorLagFit(GridCandidate):
     explains = "rate of change of the commanded total |thrust differences| (N/s)"
     grid = np.concatenate([[0.0], np.geomspace(0.002, MAX_TIMING_S, 40)])
     physical_check = TIMING_CHECK
+    twin, times_actuation, lookalikes = "motor_dynamics", True, ("gyro_lag",)
     cached = True     # its change is the base model's thrusts changed: no carried term enters it
 
     def thrusts(self, parameters):

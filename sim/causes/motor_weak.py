@@ -14,6 +14,10 @@ class MotorWeak(Effect):
     """One motor gives a fraction `scale` of its modelled thrust and torque."""
     cause, uses_scale = "motor_weak", True
     required = {"motor": Parameter("1-4", 1, 4), "scale": Parameter("1", 0.0, 2.0)}
+    compiled = True     # a scale of one rotor: no wrench hook
+
+    def compiled_q(self):
+        return {"weak": self._i, "scale": self.parameters["scale"]}
 
     def __init__(self, **parameters):
         super().__init__(**parameters)

@@ -49,6 +49,10 @@ class RotorDrag(Effect):
     cause, uses_wrench = "rotor_drag", True
     required = {"k": Parameter("N s/m", 0.0, 20.0)}
     optional = {"yaw": Parameter("N m s/rad", 0.0, 10.0)}
+    compiled, compiled_hook = True, "drag"
+
+    def compiled_q(self):
+        return {"k_drag": self.parameters["k"], "yaw": self.parameters.get("yaw", 0.0)}
 
     def attach(self, airframe, offset):
         super().attach(airframe, offset)

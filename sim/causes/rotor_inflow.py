@@ -97,10 +97,14 @@ class RotorInflow(Effect):
     cause, uses_wrench = "rotor_inflow", True
     required = {"k": Parameter("N s/m", 0.0, 5.0)}
     optional = {"hub": Parameter("N m s/rad", 0.0, 1.0)}
+    compiled, compiled_hook = True, "inflow"
 
     def attach(self, airframe, offset):
         super().attach(airframe, offset)
         self._B = airframe.M * airframe.g / 4.0
+
+    def compiled_q(self):
+        return {"k_in": self.parameters["k"], "hub": self.parameters.get("hub", 0.0), "B": self._B}
 
     def wrench(self, t, x, f, vb, force, torque):
         B = self._B

@@ -93,6 +93,13 @@ class Candidate:
     physical_check = ""      # what size is physical, and its source (docs/diagnose.md, "Physical checks")
     needs_yaw = False        # it is told from the others by the yaw channel alone: not judged on a vehicle
                              # whose yaw effectiveness the log cannot identify (base.yaw_identified)
+    # the chain of causes (diagnose/verdict.py) reads these: `twin`, the cause that is the same physical
+    # effect modelled another way (once one is in the chain the other is not tried); `times_actuation`, it
+    # times the actuation (the gyro's timing of the report); `lookalikes`, the causes it is swapped with
+    # once the others are in the model (`verdict._swap`), tried in this order
+    twin: str | None = None
+    times_actuation = False
+    lookalikes: tuple[str, ...] = ()
 
     def __init__(self, ds: DataSet):
         self.ds = ds

@@ -16,7 +16,7 @@ import numpy as np
 from flightctl.errors import InputError
 from flightctl.logfile import Table
 from flightctl.params import Airframe, EffectSpec
-from flightctl.sim.causes import CAUSES, make
+from flightctl.sim.causes import CAUSES, lookalikes, make, times_actuation, twin
 from flightctl.sim.causes.battery_sag import pack_range
 from flightctl.sim.diagnose.basemodel import YAW_UNKNOWN, LayoutContradicted, identify, yaw_identified
 from flightctl.sim.diagnose.rates import faster, motor_rate, sensor_rate
@@ -29,14 +29,11 @@ from flightctl.sim.diagnose.scoring import (DM_CHANNEL_WINDOW_S, DM_WINDOW_S, MI
                                                      T_CHANNEL, T_CRIT, geomean, heldout_linear, significance)
 from flightctl.sim.diagnose.static import StaticOnly, static_tier, tier_why
 
-# Causes that are one physical effect modelled two ways: once one is in the chain the other is not tried.
-TWINS = {"motor_lag": "motor_dynamics", "motor_dynamics": "motor_lag"}
-TIMING = ("actuation_delay", "motor_lag", "motor_dynamics")     # the causes that time the actuation
-# A lag of the gyro and a lag or a delay of the rotors make the gyro follow the commands late alike; only
-# the rotors' lag the accelerometer's z too. Which one a chain names is settled with its other causes in
-# the model (`_swap`): beside an unmodelled cause that also moves acc_z, that channel can mislead the first
-# round (docs/diagnose.md, "Two lags at once").
-LOOKALIKES = {"gyro_lag": TIMING, **{c: ("gyro_lag",) for c in TIMING}}
+# Each cause's module declares its twin (one physical effect modelled two ways: once one is in the chain
+# the other is not tried), whether it times the actuation, and its look-alikes: which one of a cause and
+# its look-alike a chain names is settled with its other causes in the model (`_swap`): beside an
+# unmodelled cause that also moves acc_z, that channel can mislead the first round (docs/diagnose.md,
+# "Two lags at once"). `sim.causes.twin`, `times_actuation` and `lookalikes` read those declarations.
 
 METRIC = ("geometric mean over 6 channels of the held-out RMSE of the one-loop-period equation error: "
           "angular acceleration p, q, r (rad/s^2, differenced gyro) and specific force x, y, z (m/s^2, "
@@ -151,9 +148,9 @@ class Diagnosis:
         """(cause, s): the timing the gyro gives: the chain's timing cause, else the timing candidate
         with the best held-out gain."""
         for c, r in self.final.items():
-            if c in TIMING:
+            if times_actuation(c):
                 return c, float(next(iter(r.parameters.values())))
-        timing = [r for r in self.results if r.cause in TIMING]
+        timing = [r for r in self.results if times_actuation(r.cause)]
         if not timing:
             return None
         r = max(timing, key=lambda r: r.gain)
@@ -411,7 +408,7 @@ def diagnose(tables: list[Table], a: Airframe, progress=say, effects: tuple[Effe
         if r is None:
             break
         progress(f"cause {len(rounds)}: {r.cause} {r.parameters}, held-out gain {r.gain:.3f}; folded into the model")
-        skip |= {r.cause, TWINS.get(r.cause, r.cause)}
+        skip |= {r.cause, twin(r.cause) or r.cause}
         ds = _folded(first, [(r.named.cause, r.named.parameters) for r in rounds])
     final = _backfit(first, [(r.named.cause, r.named.parameters) for r in rounds if r.named is not None],
                      notes, progress, alone={r.cause: r for r in rounds[0].results})
@@ -496,7 +493,7 @@ def _refit(ds0: DataSet, chain: list[tuple[str, dict]], passes: int) -> tuple[li
 
 def _swap(ds0: DataSet, chain: list[tuple[str, dict]], results: list[Result], tried: set, notes: list[str],
           progress) -> list[tuple[str, dict]] | None:
-    """The chain with one cause replaced by a look-alike (`LOOKALIKES`) that, refitted jointly with the
+    """The chain with one cause replaced by a look-alike (its module's `lookalikes`) that, refitted jointly with the
     others, predicts the held-out data better (the metric: the geometric mean over the channels of the
     held-out RMSE, the cause refitted per fold on top of the others) and is named there (significant,
     physical); None if no look-alike does. The first round judged each look-alike on the base model
@@ -506,10 +503,10 @@ def _swap(ds0: DataSet, chain: list[tuple[str, dict]], results: list[Result], tr
     causes = {c for c, _ in chain}
     for i, (cause, _) in enumerate(chain):
         best, swapped = results[i], None
-        for alt in LOOKALIKES.get(cause, ()):
+        for alt in lookalikes(cause):
             trial = chain[:i] + [(alt, {})] + chain[i + 1:]
             key = tuple(c for c, _ in trial)
-            if alt in causes or TWINS.get(alt) in causes or key in tried:
+            if alt in causes or twin(alt) in causes or key in tried:
                 continue
             tried.add(key)
             trial[i] = (alt, _on_top(ds0, trial, i).parameters)
@@ -540,7 +537,7 @@ def _rechain(ds0: DataSet, first: Round, final: dict[str, Result], static_only: 
         rnd.named = next(r for r in rnd.results if r.cause == cause)
         rnd.significant.setdefault(cause, final[cause].significance.named_by())
         rounds.append(rnd)
-        skip |= {cause, TWINS.get(cause, cause)}
+        skip |= {cause, twin(cause) or cause}
         chain.append((cause, rnd.named.parameters))
         ds = _folded(ds0, chain)
     last, _ = _round(ds, skip, static_only, notes, progress, f"[cause {len(final) + 1}] ")

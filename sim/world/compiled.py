@@ -139,21 +139,32 @@ def rebound(fn, **dependencies):
     return copy
 
 
-# The effects the compiled plant carries, by their wrench hooks' codes (`layout`); a model with any other
-# effect integrates in plain Python (Plant._rk4). `gyro_lag` acts on the simulated IMU, not the plant.
+# The effects the compiled plant carries are those whose class says so (`Effect.compiled`, in each cause's
+# module), by their wrench hooks' codes (`layout`, from the effect's `compiled_hook`); a model with any
+# other effect integrates in plain Python (Plant._rk4).
 INFLOW, REACTION, DRAG = 1, 2, 3
-COMPILED_CAUSES = ("rotor_inflow", "motor_dynamics", "rotor_drag", "actuation_delay", "gyro_lag", "motor_weak")
+HOOKS = {"inflow": INFLOW, "reaction": REACTION, "drag": DRAG}
 # q: the parameters of `stage`, by index
 # (_ROOT: sqrt(c1 / B), a rotor's `airflow_root` per rad/s of its speed; _WEAK, _SCALE: motor_weak's
 # rotor, 0-3, -1 without one, and its scale; _P_FULL: the ESC's full throttle, motor_dynamics' `p_full`)
 _C1, _G1, _G2, _L, _TAU, _DOWN, _K_IN, _B, _HUB, _K_DRAG, _YAW, _H1, _H2, _JP, _ROOT, _WEAK, _SCALE, _P_FULL, _RIGID = \
     range(19)
+# the names by which an effect's `compiled_q` gives its entries of q
+Q_NAMES = {"tau": _TAU, "tau_down": _DOWN, "k_in": _K_IN, "B": _B, "hub": _HUB, "k_drag": _K_DRAG, "yaw": _YAW,
+           "weak": _WEAK, "scale": _SCALE, "p_full": _P_FULL}
 N_OUT = 18   # `period`'s output: the fields of `Forces` (f, tau, force, torque, w) one after another
+
+
+def __getattr__(name):
+    if name == "COMPILED_CAUSES":     # read at each use: a cause registered later is in it
+        from flightctl.sim.causes import CAUSES
+        return tuple(n for n, c in CAUSES.items() if c.effect.compiled)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def layout(model):
     """(the wrench codes in the model's order, the parameters q) of a model whose effects the compiled
-    plant carries (COMPILED_CAUSES, each at most once; the base model has none), else None."""
+    plant carries (`Effect.compiled`, each at most once; the base model has none), else None."""
     laid = _layout(model)
     return None if laid is None else (laid[0], np.array(laid[1], dtype=float))
 
@@ -170,8 +181,7 @@ def layout_rows(model, n: int):
 def _layout(model):
     """(codes, q as a list of values) of `layout`."""
     causes = [e.cause for e in model.effects]
-    if (len(set(causes)) < len(causes)
-            or not set(causes) <= set(COMPILED_CAUSES)):
+    if len(set(causes)) < len(causes) or not all(e.compiled for e in model.effects):
         return None
     a = model.a
     B = a.M * a.g / 4.0
@@ -179,20 +189,13 @@ def _layout(model):
          FULL_P]
     codes = []
     for e in model.effects:
-        p = e.parameters
-        if e.cause == "rotor_inflow":
-            q[_K_IN], q[_HUB], q[_B] = p["k"], p.get("hub", 0.0), e._B
-            codes.append(INFLOW)
-        elif e.cause == "motor_dynamics":
-            if e.offset != N_RIGID:
-                return None
-            q[_TAU], q[_DOWN], q[_P_FULL] = p["tau"], p.get("tau_down", p["tau"]), p.get("p_full", FULL_P)
-            codes.append(REACTION)
-        elif e.cause == "rotor_drag":
-            q[_K_DRAG], q[_YAW] = p["k"], p.get("yaw", 0.0)
-            codes.append(DRAG)
-        elif e.cause == "motor_weak":       # a scale hook: no wrench code
-            q[_WEAK], q[_SCALE] = e._i, p["scale"]
+        entries = e.compiled_q()
+        if entries is None:
+            return None
+        for name, v in entries.items():
+            q[Q_NAMES[name]] = v
+        if e.compiled_hook is not None:
+            codes.append(HOOKS[e.compiled_hook])
     return np.array(codes, dtype=np.int64), q + list(model.rigid_constants)
 
 

@@ -164,10 +164,18 @@ class Effect:
     delay = 0.0
     uses_rotor = uses_scale = uses_wrench = uses_gyro = False
     state_dependent = False   # its `scale` reads the state (the model then cannot cache the forces)
+    # the compiled plant (sim/world/compiled.py): `compiled`, it carries this effect; `compiled_hook`, the
+    # name of its wrench hook there (None: none, a scale or a delay read elsewhere); `compiled_q()`, its
+    # entries of the compiled parameters q by name (None: this instance cannot be compiled)
+    compiled = False
+    compiled_hook: str | None = None
     a: Airframe | None = None
 
     def __init__(self, **parameters: float):
         self.parameters = dict(parameters)
+
+    def compiled_q(self) -> dict[str, float] | None:
+        return {}
 
     def attach(self, airframe: Airframe, offset: int) -> None:
         self.a, self.offset = airframe, offset

@@ -103,3 +103,66 @@ def test_make_builds_each_effect_within_its_ranges_and_refuses_outside():
         p, s = next(iter(cause.parameters.items()))
         with pytest.raises(InputError, match="out of range"):
             causes.make(name, **{**mid, p: s.hi + 1.0})
+
+
+def test_a_cause_declared_in_one_module_is_seen_by_the_chain_and_the_compiled_plant():
+    """A cause defined here, in one place, with its twin, timing, look-alikes and compiled wrench drawn at
+    random: once registered, diagnose's chain (verdict.py) and the compiled plant (compiled.py) answer
+    from its declarations, and without it they no longer know it."""
+    import numpy as np
+    from flightctl.params import Airframe
+    from flightctl.sim.diagnose import verdict
+    from flightctl.sim.diagnose.candidate import GridCandidate
+    from flightctl.sim.world import compiled
+    from flightctl.sim.world.model import Model, Parameter
+
+    rng = np.random.default_rng(4701)
+    others = list(causes.CAUSES)
+    partner = str(rng.choice(others))
+    alikes = tuple(str(c) for c in rng.choice(others, size=2, replace=False))
+    timing = bool(rng.integers(2))
+    k, hook = float(rng.uniform(0.1, 5.0)), str(rng.choice(["drag", "inflow"]))
+    q_name = {"drag": "k_drag", "inflow": "k_in"}[hook]
+
+    class Sticky(Effect):
+        """A drag the test invents."""
+        cause = "sticky_test_cause"
+        required = {"k": Parameter("N s/m", 0.0, 10.0)}
+        compiled, compiled_hook = True, hook
+
+        def compiled_q(self):
+            return {q_name: self.parameters["k"], "B": 1.0}
+
+    class StickyFit(GridCandidate):
+        effect = Sticky
+        twin, times_actuation, lookalikes = partner, timing, alikes
+
+    assert "sticky_test_cause" not in compiled.COMPILED_CAUSES
+    assert verdict.twin("sticky_test_cause") is None
+    causes.register(StickyFit)
+    try:
+        assert verdict.twin("sticky_test_cause") == partner
+        assert verdict.times_actuation("sticky_test_cause") is timing
+        assert verdict.lookalikes("sticky_test_cause") == alikes
+        assert "sticky_test_cause" in compiled.COMPILED_CAUSES
+        codes, q = compiled.layout(Model(Airframe(), (Sticky(k=k),)))
+        assert codes.tolist() == [compiled.HOOKS[hook]]
+        assert q[compiled.Q_NAMES[q_name]] == k
+        assert causes.make("sticky_test_cause", k=k).parameters == {"k": k}
+        with pytest.raises(ValueError):
+            causes.register(StickyFit)
+    finally:
+        del causes.CAUSES["sticky_test_cause"]
+    assert verdict.twin("sticky_test_cause") is None and verdict.lookalikes("sticky_test_cause") == ()
+    assert "sticky_test_cause" not in compiled.COMPILED_CAUSES
+
+
+def test_the_declarations_of_the_causes_are_consistent():
+    """Twins name each other, look-alikes are mutual, and every cause declared is registered."""
+    for name in causes.CAUSES:
+        t = causes.twin(name)
+        if t is not None:
+            assert t in causes.CAUSES and causes.twin(t) == name, name
+        for alt in causes.lookalikes(name):
+            assert alt in causes.CAUSES and name in causes.lookalikes(alt), (name, alt)
+    assert any(causes.times_actuation(c) for c in causes.CAUSES)
