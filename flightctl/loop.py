@@ -5,12 +5,14 @@
 
 Lifecycle, as the loop's phases (`PHASES`, docs/architecture.md): `ground` (calibrate sitting still,
 motors stopped; then arm, or the motors refuse for a named reason), `flying` (the plan), `landing`
-(the loop's own, `_land`), `on two rotors` (a motor lost), `done` (disarmed on touchdown). The log starts at arming (its gyro columns are calibrated). Checks, each with a named reason: IMU frames going bad, a crash
+(the loop's own, `_land`), `on two rotors` (a motor lost), `done` (disarmed on touchdown). The log starts at arming
+(its gyro columns are calibrated). Checks, each with a named reason: IMU frames going bad, a crash
 (flightctl/safety.py: tilt past 60 degrees), a low battery (land), a battery reading no pack can give
 (flightctl/battery.py: not armed; in the air, land), the altitude lost (land on the accelerometer).
 The motors are cut in the air only for a crash, bad IMU frames or a stop request (SIGTERM, the kill
 command); every ordinary event lands under control (`_land`: level, descend at LAND_SPEED on the
-vertical estimate, feel for the floor, stop when the accelerometer confirms it: control/landing.py): the plan ending in the air (a landing move after `duration` included), the log writer
+vertical estimate, feel for the floor, stop when the accelerometer confirms it: control/landing.py): the plan ending
+in the air (a landing move after `duration` included), the log writer
 failing (a full disk; the writer drops rows, never stops the loop), a failed watchdog ping (the notify
 socket lost: systemd would kill the process), a plan that fails or gives a non-finite setpoint.
 Event times are seconds since arming, the log's `t`. Whatever ends the loop - the plan, a stop

@@ -379,7 +379,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--settle", type=float, default=SETTLE_S, help=f"seconds at each P before averaging (0 to {MAX_SETTLE_S:g})")
     p.add_argument("--hold", type=float, default=HOLD_S, help=f"seconds of averaging at each P (at most {MAX_HOLD_S:g})")
     p.add_argument("--step", default=STEP, help=f"step profile: P0,P1 (default {STEP})")
-    p.add_argument("--record", type=float, default=RECORD_S, help=f"step profile: seconds recorded after the jump (at most {MAX_RECORD_S:g})")
+    p.add_argument("--record", type=float, default=RECORD_S, 
+                   help=f"step profile: seconds recorded after the jump (at most {MAX_RECORD_S:g})")
     p.add_argument("--max", type=float, default=MAX_P, help=f"largest P allowed (default {MAX_P:g})")
     p.add_argument("--max-rpm", type=float, help="speed limit of the propeller (default and most: APC's, from its diameter)")
     p.add_argument("--step-timeout", type=float, default=STEP_TIMEOUT_S,

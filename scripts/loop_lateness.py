@@ -199,7 +199,8 @@ def markdown(res: dict) -> str:
         d = load(name)
         s = d.source
         where = (f"measured {s['date'][:10]}: {s['load']}; {s['machine']}; {s['late_ticks']} of {s['ticks']} ticks"
-                 if "measured" in s else f"derived from the paper's observed {PAPER_HZ[0]:.0f}-{PAPER_HZ[1]:.0f} Hz: {s['derived'].split(': ', 1)[1]}; "
+                 if "measured" in s else f"derived from the paper's observed {PAPER_HZ[0]:.0f}-{PAPER_HZ[1]:.0f} Hz: "
+                 f"{s['derived'].split(': ', 1)[1]}; "
                  f"{100 * s['share_range'][0]:.1f}-{100 * s['share_range'][1]:.1f} % over that range, its middle here")
         q = d.quantiles_s
         lines.append(f"| {name} | {where} | {100 * d.share:.2f} % | {1e3 * statistics.median(q):.2f} / "
@@ -208,7 +209,8 @@ def markdown(res: dict) -> str:
               f"{max(r['seed'] for r in res['paper']) + 1} seeds (`flightctl sim paper --params paper-as-flown "
               "[--gains table4] --fault loop_late:dist=NAME[,rate=R],at=0`): landed, crashed (tilted past the crash "
               "tilt, or hit the floor too fast: flightctl/safety.py), overruns the loop counted "
-              "(of its iterations), the stalls it saw (ticks after missed ones; the first ten named in its events), and of the flights that landed "
+              "(of its iterations), the stalls it saw (ticks after missed ones; the first ten named in its events), "
+              "and of the flights that landed "
               "the median of the worst held error of a bank and of a turn as the vehicle's estimate saw it (the paper's "
               "real flights: within 1 and 3 degrees) and of the banks' worst ringing (sim/sweeps/judge.py):", "",
               "| condition | gains | landed | crashed | overruns | stalls | bank held error | turn held error | bank ringing |",

@@ -74,7 +74,8 @@ def loss(plan: str, params, spec: str, plant: dict | None = None, seed: int = 0,
     return {"outcome": fl.outcome, "ms": None if named is None else 1e3 * (named[0] - at),
             "what": "" if named is None else named[1], "tilt": float(tilt[after].max()),
             "touchdown": max((abs(v) for _, v in fl.touchdowns), default=math.nan),
-            "drift": float(drift.max()), "r0": float(L["gyro_z"][i0]), "z0": float(L["true_z"][i0]), "spin": float(np.abs(L["gyro_z"][air]).max()) if air.any() else 0.0,
+            "drift": float(drift.max()), "r0": float(L["gyro_z"][i0]), "z0": float(L["true_z"][i0]),
+            "spin": float(np.abs(L["gyro_z"][air]).max()) if air.any() else 0.0,
             "flight": fl, "at": at}
 
 
@@ -259,7 +260,8 @@ def markdown(m: dict, figure: str) -> str:
         lines.append(f"| {what} | {_row(r)} | {r['spin']:.1f} |")
     lines += ["", "**Partial losses** (hover, motor 2 giving a share of its commanded thrust from 8 s; each gain "
               "set on a model it flies; the loop's answer by the rule above):", "",
-              "| model | gains | share given | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) | the loop's words |",
+              "| model | gains | share given | outcome | named after (ms) | largest tilt (deg) | touchdown (m/s) | drift (m) "
+              "| the loop's words |",
               "|---|---|---|---|---|---|---|---|---|"]
     for name, gains, share, r in m["partial"]:
         words = r["what"].split(":")[0] if r["what"] else "-"
@@ -288,7 +290,8 @@ def markdown(m: dict, figure: str) -> str:
               f"{1e3 * d.delay_lo:.1f} to {1e3 * d.delay_hi:.1f} ms), pair 1-3, at "
               f"spin rates r (in the pair's direction) and the pair's rotor speed as a share of its hover one. Below 1 "
               f"the loop is stable. At r = 0 the axis along the pair is not turned (1: marginal; -: no gain solves "
-              f"there, the nearest point's stand in): the spin must build.", "", "| rotor speed | " + " | ".join(f"r = {rates[k]:g}" for k in show) + " |",
+              f"there, the nearest point's stand in): the spin must build.", "",
+              "| rotor speed | " + " | ".join(f"r = {rates[k]:g}" for k in show) + " |",
               "|---" * (len(show) + 1) + "|"]
     for j, row in enumerate(s["radius"]["0,2"]):
         share = sd.OMEGA_TOP * j / sd.OMEGA_STEPS

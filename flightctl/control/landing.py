@@ -15,11 +15,13 @@ it, since a hard touchdown's jolt clips at the chip's full scale and its integra
 
 `Landing` holds a vertical speed of -speed with a PI loop around the hover thrust the altitude PID
 had learned (its integral), as thrust per motor (N, the unit of eq. 25's u_z). Below TOUCH_ALT, or
-when the descent stops (the floor met above the estimate's zero), it lowers the thrust steadily and watches the accelerometer: on the floor the floor carries the weight
+when the descent stops (the floor met above the estimate's zero), it lowers the thrust steadily and watches the
+accelerometer: on the floor the floor carries the weight
 and the vertical acceleration stays near 0 however low the thrust; in the air a thrust below the
 hover thrust accelerates the vehicle down in proportion. A thrust below LANDED_THRUST of the hover
 thrust with the acceleration within LANDED_ACCEL of 0 for LANDED_S is a touchdown (`landed`); a
-vehicle still in the air (the acceleration past FALLING_ACCEL down, or FALLING_SPEED gained down since the feel began) goes back to the descent
+vehicle still in the air (the acceleration past FALLING_ACCEL down, or FALLING_SPEED gained down since the feel
+began) goes back to the descent
 with its altitude estimate raised, and tries again lower.
 """
 from __future__ import annotations

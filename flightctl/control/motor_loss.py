@@ -3,14 +3,16 @@ the gyro, the accelerometer and the thrusts it commanded one loop earlier (the m
 motor time constant the parameter file carries, if any). Eq. 7 turned around gives the roll and pitch
 torques the body felt, `J dw/dt + w x (J w + Jp Omega z_b)` (the gyro differenced), and the specific
 force along z_b the collective thrust; what the commanded thrusts predict (the "+" layout, eq. 25; the
-rotors' speeds, eq. 27, following them through the motor time constant) is subtracted, both low-passed over FILTER_S (two EMAs of half of it: the rotors' vibration lines and the
+rotors' speeds, eq. 27, following them through the motor time constant) is subtracted, both low-passed over FILTER_S
+(two EMAs of half of it: the rotors' vibration lines and the
 gyro's noise, differenced, kept out), and their slow parts (BIAS_S: a centre of mass off the
 middle, a battery that sags, a weak motor) are taken away. A stopped rotor (or a lost propeller) i
 leaves its whole thrust missing: the torque residual points along its arm and the collective one is
 down by its thrust; a weak one (a failing ESC, a chipped propeller) leaves part of it missing. The
 smaller of the two, as a fraction of the thrust motor i was asked for, is its missing share. Above
 THRESHOLD for LOOPS loops of calm flight it names motor i at once; above WEAK for WEAK_LOOPS loops
-(calm when the count began) it names motor i too, each with the share it misses, and `flown_on_four` decides what the loop does with it. A rotor lag the model lacks, in a manoeuvre, looks like a missing thrust in the torque
+(calm when the count began) it names motor i too, each with the share it misses, and `flown_on_four` decides what the
+loop does with it. A rotor lag the model lacks, in a manoeuvre, looks like a missing thrust in the torque
 for tens of milliseconds, but not in the collective (the two sides of an axis change in opposite
 directions); and the count only starts in calm flight (the body rates, low-passed, below CALM): a
 vehicle already tumbling is not read as a lost rotor. It looks at any height: a vehicle resting on
@@ -67,7 +69,8 @@ class MotorLossDetector:
     `accept()`: the loop flies on with that motor (a weak one): its missing thrust becomes part of
     the residuals' slow part."""
     __slots__ = ("km", "kf", "kb", "kc", "fl", "sx", "sy", "sz", "rx", "ry", "rz", "bx", "by", "bz", "calm", "count",
-                 "strong", "missing", "fast", "seen", "damp", "hold", "floor", "jolt_loops", "p", "q", "half", "quiet", "ic1", "c1", "w", "Jxx", "Jyy", "Jp", "jx",
+                 "strong", "missing", "fast", "seen", "damp", "hold", "floor", "jolt_loops", "p", "q", "half", "quiet", "ic1",
+                 "c1", "w", "Jxx", "Jyy", "Jp", "jx",
                  "jy", "l", "iM", "M", "il")
 
     def __init__(self, params: Params, tau_motor: float | None = None):

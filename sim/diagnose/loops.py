@@ -19,7 +19,8 @@ of PX4-Autopilot, ardupilot and inav are over the fetch limit, read through the 
   mixer files' normalisation is not read: named.
 - ArduPilot: libraries/AP_Motors/AP_MotorsMatrix.cpp (normalise_rpy_factors: the roll, pitch and yaw
   factors scaled to a largest magnitude of 0.5, alike in the file's old and current versions in the index;
-  output_armed_stabilizing, read at 0001fe6: thrust_i = throttle + roll_in roll_factor_i + ...), then AP_MotorsMulticopter's thrust-to-actuator linearisation (MOT_THST_EXPO e:
+  output_armed_stabilizing, read at 0001fe6: thrust_i = throttle + roll_in roll_factor_i + ...), then
+  AP_MotorsMulticopter's thrust-to-actuator linearisation (MOT_THST_EXPO e:
   thrust = (1 - e) a + e a^2, so da/dthrust = 1 / (1 - e + 2 e a)) and the spin range (P / 255 = MOT_SPIN_MIN
   + (MOT_SPIN_MAX - MOT_SPIN_MIN) a over the reader's MOT_PWM_MIN..MAX): R = 255 (SPIN_MAX - SPIN_MIN) /
   (1 - e + 2 e a) at the flight's median command. The PIDs (AC_PID::update_all): the target through FLTT,

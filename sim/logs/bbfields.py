@@ -305,7 +305,8 @@ def _rotor_speeds(imp, h, a, col, t, field, debug, kind):
         source = f"debug[0..3] (debug_mode DSHOT_RPM_TELEMETRY, eRPM / 100), motor_poles {poles:g}"
     elif kind != "inav" and debug == RPM_FILTER and "debug[3]" in col:
         w = field("debug", 4) * 2.0 * math.pi
-        source = f"debug[0..3] (debug_mode RPM_FILTER: rotation in Hz after a pt1 at rpm_notch_lpf {h.get('rpm_notch_lpf', h.get('rpm_filter_lpf_hz', '?'))} Hz)"
+        lpf = h.get('rpm_notch_lpf', h.get('rpm_filter_lpf_hz', '?'))
+        source = f"debug[0..3] (debug_mode RPM_FILTER: rotation in Hz after a pt1 at rpm_notch_lpf {lpf} Hz)"
         pole_note = ""
     else:
         return

@@ -77,7 +77,8 @@ class Stream:
 class Imported:
     """A foreign log read: streams by column group, metadata, notes. Required streams: `gyro` (3, n,
     rad/s), `acc` (3, n, m/s^2), `motors` (N, n, P on 0-255: the `# rotors:` line's N); optional: `battery_v`, `current`,
-    `height`, `range`, `alt`, `landed` (1 landed: the autopilot's landing detector, held), `omega` (one per motor, rad/s), `attitude` (3: roll, pitch, yaw), `gyro_f` (3),
+    `height`, `range`, `alt`, `landed` (1 landed: the autopilot's landing detector, held), `omega` (one per motor,
+    rad/s), `attitude` (3: roll, pitch, yaw), `gyro_f` (3),
     `setpoint` (3, rad/s), `attitude_sp` (3: the attitude setpoint's roll, pitch, yaw), `rc` (4), `pid` (12:
     P, I, D, F terms on x, y, z)."""
     path: str

@@ -305,7 +305,8 @@ def forces(x, cmd, codes, q, wk):
 
 def stage(x, xo, cmd, codes, q, xdot, do, ground):
     """`Model.f` of a model laid out by `layout` at the state x[xo:xo + n]: `rotors`, `aggregate` and
-    `rigid_derivative`, into xdot[do:do + n] (xdot: `work`, whose attitude it remembers); on the floor (`ground`) the rotor states' only (the rigid
+    `rigid_derivative`, into xdot[do:do + n] (xdot: `work`, whose attitude it remembers); on the floor (`ground`) the
+    rotor states' only (the rigid
     body's stay put, and nothing of it enters the rotors' rates)."""
     if ground:
         if q[_TAU] > 0.0:

@@ -10,7 +10,8 @@ would take two. Time is counted
 in integers, loop periods, and computed from them (`t = n dt` plus the offset within one), never
 summed: after n periods it is `n dt` whatever the substep count, so that the loop sees the same clock
 at 1 and at 20 substeps. A loop tick that comes late (sim/world/lateness.py) splits its period in two
-(`advance_part`, then `advance`), each command acting from the moment it was issued (`issue_times`). The floor: the vehicle rests on z = 0 until its thrust lifts it, and
+(`advance_part`, then `advance`), each command acting from the moment it was issued (`issue_times`). The floor: the
+vehicle rests on z = 0 until its thrust lifts it, and
 a touchdown stops it (level, at rest), recording the touchdown speed; a yaw spin it lands with (a
 two-rotor landing's 25 rad/s, flightctl/control/spin.py) is braked by its feet's friction on the
 floor (`floor_spin`), not stopped at once. The floor's stopping force is

@@ -4,7 +4,8 @@ Tolerances come from the linearised loops. With perfect state feedback a channel
 system: roll, J_xx phi'' = 2 l (k_p e - k_d phi'), so w_n^2 = 2 l k_p / J_xx and 2 zeta w_n = 2 l k_d / J_xx;
 yaw, J_zz psi'' = 4 g1 (k_p e - k_d psi') (eq. 25 puts +-u_psi on every rotor, eq. 28 turns it into
 g1 u_psi of torque each); altitude, M z'' = 4 (k_p e - k_d z'). Overshoot exp(-pi zeta / sqrt(1 - zeta^2))
-and the 10-90 % rise time, both from the exact step response of the second-order system. What the linear model leaves out at these step sizes: sin(5 deg) ~ 5 deg (0.1 %),
+and the 10-90 % rise time, both from the exact step response of the second-order system. What the linear model leaves
+out at these step sizes: sin(5 deg) ~ 5 deg (0.1 %),
 the 450 Hz zero-order hold (a phase lag of w dt / 2 < 2 deg), the Table 3 limits (not reached),
 the gyroscopic and yaw-drag terms (below 1 % of the control torque). Hence 3 percentage points on
 overshoot and 5 % plus one loop period (the log's time resolution) on rise time.

@@ -275,7 +275,8 @@ def markdown(rep: dict) -> str:
         L.append("Nothing changed on any vehicle beyond what the flights' own scatter explains, and no log names a cause.")
     L += ["", "## What the logs name on their own", ""]
     if rep["per_log"]:
-        L += ["| vehicle | what | flights that name it (of those diagnosed) | first (log, flight) | its figures there | beside the trend test |",
+        L += ["| vehicle | what | flights that name it (of those diagnosed) | first (log, flight) | its figures there "
+              "| beside the trend test |",
               "|---|---|---|---|---|---|"]
         L += [_per_log_row(p) for p in rep["per_log"]]
     else:

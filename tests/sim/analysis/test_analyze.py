@@ -17,7 +17,8 @@ Hence 1.5 percentage points on overshoot; 3.5 through the full path, where the g
 (2.9 ms, sim/world/imu.py) leaves the bank estimate integrated from lagged rates 0.1-0.2 degrees off
 the truth several seconds after the step (the Euler-rate kinematics of rates 2.9 ms late): a slow
 drift within the step's 8 s window that the linear loop, about hover, does not have, and that the
-metric counts as overshoot (3.3 % at Table 4, the step's transient itself peaking at 0.1 %). Rise times: each crossing is found on the same grid in
+metric counts as overshoot (3.3 % at Table 4, the step's transient itself peaking at 0.1 %). Rise times: each
+crossing is found on the same grid in
 both (one period either end) and the effects above move them by under 1 %: two periods plus 2 %.
 """
 from __future__ import annotations
@@ -260,7 +261,8 @@ def test_bad_input_is_one_line(capsys, argv, needle):
 
 def test_damping_is_the_least_damped_mode_the_margin_speaks_of():
     """Issue 17: Table 4 roll on the as-flown model with an 80 ms motor lag has a phase margin of a few
-    degrees (4 before hub damping and one Jp, 6.4 after), and `analyze` printed a damping of 1.000 (the mode with the largest share was real).
+    degrees (4 before hub damping and one Jp, 6.4 after), and `analyze` printed a damping of 1.000 (the mode with the
+    largest share was real).
     The damping is now that of the least damped closed-loop mode the step response sees: near the
     margin's own estimate (zeta ~ PM / 100 deg for small margins), checked here against the closed
     loop's eigenvalues computed apart; and negative for a loop that is unstable."""
