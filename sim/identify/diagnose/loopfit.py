@@ -18,7 +18,7 @@ controller (predict.py's `closed_loop`, whose controller the log gives); the con
 effectiveness b of each axis is the value whose closed-loop step best matches the measured one (the RMS
 step error, `steps.band_step` on the measured window and band), by a bounded search of its factor on the
 base model's own (FACTOR_RANGE, log-spaced grid then refined), at the base model's timing or the motor lag
-it stands in for (LAGS). The fit sees only the rows it is given (the first half in `held_out`,
+it stands in for (LAGS); only on an axis the direct fit does not already predict (predict.AGREE_ERROR). The fit sees only the rows it is given (the first half in `held_out`,
 the identifying log in `cross`): the rest is the check.
 
 What it cannot do: a controller term the log does not give (TPA, feed-forward of 3.2+, the battery
@@ -40,6 +40,9 @@ LAGS = (0.005, 0.01, 0.015, 0.02)                 # s: a small quad's motor time
 LAG_MARGIN = 0.01
 FACTOR_RANGE = (0.1, 300.0)                       # b against the base model's direct fit (module docstring)
 GRID = 36                                         # log-spaced factors before the refinement
+# An axis whose base model already predicts its identifying steps (step error under predict.AGREE_ERROR at
+# factor 1) keeps it: a quiet loop's direct fit is unbiased (the paper's vehicle in `flightctl sim`: eq. 25's
+# 2 l / J within 1 %), and the closed-loop fit would absorb the loop model's own errors into b.
 
 
 def _error(r: steps.Response, final: float):
@@ -91,8 +94,8 @@ def fit(vehicle, declared, table, ctrl: dict) -> dict:
         return {"axes": out, "timing": None, "what": "no axis with a measured step on the identifying rows"}
     grid = np.geomspace(*FACTOR_RANGE, GRID)
 
-    def best_factor(t, b0, err):
-        """(step error, factor) of the best b = factor b0 on the loop terms t."""
+    def best_factor(t, b0, err, free=True):
+        """(step error, factor) of the best b = factor b0 on the loop terms t (factor 1 unless `free`)."""
         Cr, Cy = predict.controller(t["_terms"], *t["_gains"])
         G = b0 * t["_terms"]["G"]
 
@@ -100,6 +103,8 @@ def fit(vehicle, declared, table, ctrl: dict) -> dict:
             H = t["_terms"]["Fr"] * x * G * Cr / (1.0 + x * G * Cy)
             H[t["_f"] == 0] = t["_dc"] if t["_dc"] is not None else H[1]
             return err(H)
+        if not free:
+            return e_of(1.0), 1.0
         errs = [e_of(x) for x in grid]
         j = int(np.argmin(errs))
         lo, hi = np.log(grid[max(j - 1, 0)]), np.log(grid[min(j + 1, grid.size - 1)])
@@ -108,16 +113,16 @@ def fit(vehicle, declared, table, ctrl: dict) -> dict:
         return (float(res.fun), float(np.exp(res.x))) if res.fun < errs[j] else (errs[j], float(grid[j]))
 
     tau = float(vehicle.identification["timing"]["value"])
+    direct = {}
+    for axis, (parts, b0, f, err, chain, resp) in axes.items():
+        direct[axis] = best_factor(_terms(parts, f, tau, 0.0, chain, resp), b0, err, free=False)[0]
+    free = {axis: not direct[axis] < predict.AGREE_ERROR for axis in axes}
     best = None
     for lag in (0.0,) + tuple(L for L in LAGS if L <= tau):
         for delay in (tau - lag,):
             total, per = 0.0, {}
             for axis, (parts, b0, f, err, chain, resp) in axes.items():
-                p = {**parts, "motor_lag_s": float(lag)}
-                terms = predict.loop_terms(f, float(delay), p, chain, resp)
-                t = {"_terms": terms, "_gains": (p["kp"], p["ki"], p["kd"], p.get("kf", 0.0)), "_f": f,
-                     "_dc": 1.0 if p["ki"] or p.get("loop") == "attitude" else None}
-                e_, x = best_factor(t, b0, err)
+                e_, x = best_factor(_terms(parts, f, float(delay), float(lag), chain, resp), b0, err, free[axis])
                 per[axis] = (e_, x)
                 total += e_
             if best is None or total < best[0] - LAG_MARGIN:
@@ -126,6 +131,7 @@ def fit(vehicle, declared, table, ctrl: dict) -> dict:
     for axis, (e_, x) in per.items():
         b0 = axes[axis][1]
         out[axis] = {"factor": round(x, 4), "b": round(x * b0, 3), "b_direct": round(b0, 3), "step_error": round(e_, 4),
+                     "step_error_direct": round(direct[axis], 4), "fitted": free[axis],
                      "at_bound": bool(x >= 0.99 * FACTOR_RANGE[1] or x <= 1.01 * FACTOR_RANGE[0])}
         if out[axis]["at_bound"]:
             out[axis]["why_bound"] = (f"the factor sits at the end of its range {FACTOR_RANGE[0]:g}-{FACTOR_RANGE[1]:g}: the "
@@ -135,6 +141,14 @@ def fit(vehicle, declared, table, ctrl: dict) -> dict:
             "what": "the closed loop's effectiveness per axis and timing fitted to the identifying rows' measured "
                     "steps with their own controller (loopfit.py, the indirect method): the direct regression of "
                     "base.py is biased toward zero by the loop's feedback"}
+
+
+def _terms(parts: dict, f, delay: float, lag: float, chain: str, resp: str) -> dict:
+    """predict.loop_terms at this timing with the axis' gains, for `fit`'s search."""
+    from flightctl.sim.identify.diagnose import predict
+    p = {**parts, "motor_lag_s": lag}
+    return {"_terms": predict.loop_terms(f, delay, p, chain, resp), "_gains": (p["kp"], p["ki"], p["kd"], p.get("kf", 0.0)),
+            "_f": f, "_dc": 1.0 if p["ki"] or p.get("loop") == "attitude" else None}
 
 
 def attach_fit(model, table, ctrl: dict):
