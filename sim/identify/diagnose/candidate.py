@@ -93,6 +93,8 @@ class Candidate:
     physical_check = ""      # what size is physical, and its source (docs/diagnose.md, "Physical checks")
     needs_yaw = False        # it is told from the others by the yaw channel alone: not judged on a vehicle
                              # whose yaw effectiveness the log cannot identify (base.yaw_identified)
+    needs_accelerometer = False  # it predicts the accelerometer's channels alone: not judged on a log without one
+                                 # (FileData.accel; its gain there would be exactly 0, not a verdict)
 
     def __init__(self, ds: DataSet):
         self.ds = ds
