@@ -7,7 +7,7 @@ gyro's noise through P and D) moves the gyro, and the controller's commands move
 milliseconds, so the commands are correlated with the regression's error and the slope is biased toward
 zero (the errors-in-variables and feedback bias of closed-loop identification; Ljung, System
 Identification, 2nd ed., section 13.4). The stiffer and noisier the loop, the worse: on PID-Analyzer's
-CS110 better tune the slope is 1/37 of what its own steps need (scripts/closed_loop_bias.py: an
+CS110 better tune the slope is 1/30-1/42 of what its own steps need (scripts/closed_loop_bias.py: an
 instrumental-variable estimate with the rate setpoint as the instrument, which the loop does not feed
 back, moves it 14-20x the same way; the instrument is weak there, first-stage R^2 0.02-0.06, so it stays
 biased toward the direct fit).
@@ -18,7 +18,8 @@ controller (predict.py's `closed_loop`, whose controller the log gives); the con
 effectiveness b of each axis is the value whose closed-loop step best matches the measured one (the RMS
 step error, `steps.band_step` on the measured window and band), by a bounded search of its factor on the
 base model's own (FACTOR_RANGE, log-spaced grid then refined), at the base model's timing or the motor lag
-it stands in for (LAGS); only on an axis the direct fit does not already predict (predict.AGREE_ERROR). The fit sees only the rows it is given (the first half in `held_out`,
+it stands in for (LAGS); only on an axis the direct fit does not already predict (predict.AGREE_ERROR).
+The fit sees only the rows it is given (the first half in `held_out`,
 the identifying log in `cross`): the rest is the check.
 
 What it cannot do: a controller term the log does not give (TPA, feed-forward of 3.2+, the battery
