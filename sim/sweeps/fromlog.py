@@ -323,8 +323,9 @@ def against(first, second, a, targets: Targets, draws: int = DRAWS, seed: int = 
     the second tune's gains (the check), the first tune's, the gains from the log (recommended, or the nearest
     candidate where none meets the targets). The first log's model, identified on the whole of it."""
     report = from_log(first, a, targets, second, draws, seed, progress)
+    from flightctl.sim.identify.diagnose import loopfit
     c1, c2 = ctl.of_table(first), ctl.of_table(second)
-    model = predict.base_model(first, a)
+    model = loopfit.attach_fit(predict.base_model(first, a), first, c1)    # the model `from_log`'s check took
     out = {"report": report, "axes": {}}
     for axis in steps.AXES:
         e = report["axes"].get(axis, {})
