@@ -118,6 +118,7 @@ class RotorDragFit(GridCandidate):
     (`gyro_drift`) tilts R by a growing error, which leaks a growing horizontal acceleration: two
     more (the two offsets). All four are free columns fitted with the offsets for each k on the
     training blocks."""
+    needs_accelerometer = True   # it predicts acc_x and acc_y only
     effect = RotorDrag
     explains = "reconstructed body velocity u (m/s)"
     physical_check = (f"k / M from {MIN_K_OVER_M:g} to {MAX_K_OVER_M:g} 1/s: measured quadrotors 0.3-0.6 1/s, momentum theory's ram "

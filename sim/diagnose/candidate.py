@@ -100,6 +100,8 @@ class Candidate:
     twin: str | None = None
     times_actuation = False
     lookalikes: tuple[str, ...] = ()
+    needs_accelerometer = False  # it predicts the accelerometer's channels alone: not judged on a log without one
+                                 # (FileData.accel; its gain there would be exactly 0, not a verdict)
 
     def __init__(self, ds: DataSet):
         self.ds = ds

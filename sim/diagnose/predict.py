@@ -123,7 +123,17 @@ def effectiveness(vehicle, declared, axis: str, parts: dict | None = None) -> fl
     mix = np.array(parts["mix"]) if "mix" in parts else loops.bf_mix(declared, axis)
     R = parts.get("R", P_RANGE)
     R = R(pm) if callable(R) else R
-    return float(2.0 * R * k * np.sum(np.array(vehicle.gains) * lever * mix) * (pm - h2))
+    factor = ((idn.get("loop_fit") or {}).get("axes", {}).get(axis) or {}).get("factor", 1.0)   # loopfit.py
+    return float(2.0 * R * k * factor * np.sum(np.array(vehicle.gains) * lever * mix) * (pm - h2))
+
+
+def timing(vehicle) -> tuple[float, float]:
+    """(delay, motor lag) in s of the loop: the loop fit's (loopfit.py) where it has one, else the base
+    model's pure delay (basemodel.py `_timing`) and no lag."""
+    fitted = (vehicle.identification.get("loop_fit") or {}).get("timing")
+    if fitted:
+        return fitted["delay_s"], fitted["lag_s"]
+    return float(vehicle.identification["timing"]["value"]), 0.0
 
 
 def loop_parts(ctrl: dict, meta: dict, axis: str, declared=None) -> tuple[dict | None, list[str]]:
@@ -159,6 +169,16 @@ def loop_parts(ctrl: dict, meta: dict, axis: str, declared=None) -> tuple[dict |
     return parts, missing
 
 
+def motor_lag(lag_s: float, T: float, z1: np.ndarray) -> np.ndarray | float:
+    """The motors' first-order lag of time constant `lag_s` on the command, once per loop period T:
+    m[n] = a m[n - 1] + (1 - a) u[n], a = exp(-T / lag_s) (the exact step of tau_m m' = u - m over a period,
+    taken at its end: half a period early against the lag held over it, 0.5 ms at 1 kHz); 1 without one."""
+    if not lag_s > 0:
+        return 1.0
+    a = math.exp(-T / lag_s)
+    return (1.0 - a) / (1.0 - a * z1)
+
+
 def loop_terms(f: np.ndarray, tau: float, parts: dict, loop_chain: str, response_chain: str) -> dict:
     """The module's loop at the frequencies f (Hz), per unit effectiveness and per unit gain, linear in the
     gains: the vehicle's `G` (b = 1), the response's filter `Fr`, and the controller u = Cr r - Cy omega with
@@ -179,11 +199,11 @@ def loop_terms(f: np.ndarray, tau: float, parts: dict, loop_chain: str, response
     Fp = _freq([_pt1(parts["p_lowpass_hz"], fs)], z1) if parts.get("p_lowpass_hz") else one
     I = T / (1.0 - z1)
     if parts.get("loop") == "attitude":
-        return {"G": np.exp(-s * tau) * A, "Fr": Fr * A, "rP": Fp, "rI": I, "rD": 0.0 * one, "rF": 0.0 * one,
+        return {"G": np.exp(-s * tau) * motor_lag(parts.get("motor_lag_s", 0.0), T, z1) * A, "Fr": Fr * A, "rP": Fp, "rI": I, "rD": 0.0 * one, "rF": 0.0 * one,
                 "yP": Fp * Fg * A, "yI": I * Fg * A, "yD": lp("tau_rate_hz") * Fg}
     D = lp("d_lowpass_hz") * (1.0 - z1) / T
     Ft, Fe = lp("target_lowpass_hz"), lp("error_lowpass_hz")
-    return {"G": np.exp(-s * tau) * A, "Fr": Fr, "rP": Fe * Ft * Fp, "rI": Fe * Ft * I,
+    return {"G": np.exp(-s * tau) * motor_lag(parts.get("motor_lag_s", 0.0), T, z1) * A, "Fr": Fr, "rP": Fe * Ft * Fp, "rI": Fe * Ft * I,
             "rD": parts["c"] * Fe * Ft * D, "rF": Ft, "yP": Fe * Fp * Fg, "yI": Fe * I * Fg,
             "yD": Fe * D * (one if parts.get("d_on_raw_gyro") else Fg)}
 
@@ -291,13 +311,24 @@ def predict(model, ctrl: dict, checked: Table, identified_on: str, checked_on: s
             out[axis] = {**head, "why": missing[0]}
             continue
         b = effectiveness(vehicle, declared, axis, parts)
-        tau = float(vehicle.identification["timing"]["value"])
+        if not b > 0:
+            out[axis] = {**head, "why": f"the model's effectiveness through the logged mix is {b:.3g}, not positive: the "
+                                        "mix's signs and the identified layout's disagree on this axis, no loop to close"}
+            continue
+        tau, lag = timing(vehicle)
+        parts = {**parts, "motor_lag_s": lag}
         loop_chain = parts.get("gyro_loop_chain") or checked.meta.get("gyro_loop_filter", checked.meta.get("gyro_filter", "none"))
         entry, pred = compare(curves[(loop, axis)],
                               lambda f: closed_loop(f, b, tau, parts, loop_chain, checked.meta.get("gyro_filter", "none")), e)
         shown = {k: (round(v(vehicle.identification["median_P"]["value"]), 6) if callable(v) else v) for k, v in parts.items()}
-        out[axis] = {**head, **entry, "effectiveness": {"value": round(b, 2), "unit": "rad/s^2 per unit of the controller's output"},
-                     "timing_s": tau, "controller": shown, "not_modelled": missing}
+        fitted = ((vehicle.identification.get("loop_fit") or {}).get("axes") or {}).get(axis, {})
+        if entry["points_to"] and "why" in fitted:
+            entry["points_to"] += f"; its b is the base model's direct fit, biased toward zero (loopfit.py): {fitted['why']}"
+        out[axis] = {**head, **entry, "effectiveness": {"value": round(b, 2), "unit": "rad/s^2 per unit of the controller's output",
+                                                        "direct": fitted.get("b_direct"), "closed_loop_factor": fitted.get("factor"),
+                                                        "source": "the loop fit (loopfit.py)" if "factor" in fitted else
+                                                        "the base model's direct fit (basemodel.py)" + (f": {fitted['why']}" if "why" in fitted else "")},
+                     "timing_s": tau, "motor_lag_s": lag, "controller": shown, "not_modelled": missing}
         drawn[axis] = (curves[(loop, axis)], pred)
     return out, drawn
 
@@ -310,7 +341,7 @@ def held_out(table: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple[dic
 def held_out_model(table: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple:
     """`held_out` with the model it checked: (the model or why not, per axis the entry, the curves)."""
     first, second, cut = halves(table)
-    model = _model(first, ctrl, table.meta, a, progress)
+    model = _model(first, ctrl, table.meta, a, progress, first, ctrl)
     return (model, *predict(model, ctrl, second, f"{table.path} before {cut:.1f} s", f"{table.path} from {cut:.1f} s"))
 
 
@@ -322,14 +353,22 @@ def cross(identify_on: Table, check: Table, ctrl: dict, a, progress=lambda *_: N
 
 def cross_model(identify_on: Table, check: Table, ctrl: dict, a, progress=lambda *_: None) -> tuple:
     """`cross` with the model it checked: (the model or why not, per axis the entry, the curves)."""
-    model = _model(identify_on, ctrl, check.meta, a, progress)
+    from flightctl.sim.logs import controller as logged
+    model = _model(identify_on, ctrl, check.meta, a, progress, identify_on, logged.of_table(identify_on))
     return (model, *predict(model, ctrl, check, identify_on.path, check.path))
 
 
-def _model(table: Table, ctrl: dict, meta: dict, a, progress):
-    """The base model of `table`, or, before any identification, why the checked log's controller cannot be closed."""
+def _model(table: Table, ctrl: dict, meta: dict, a, progress, fit_on: Table, fit_ctrl: dict):
+    """The base model of `table` with its loop fit on `fit_on` flown with `fit_ctrl` (loopfit.py), or, before any
+    identification, why the checked log's controller cannot be closed."""
+    from flightctl.sim.diagnose import loopfit
     parts, why = loop_parts(ctrl, meta, "x")
-    return base_model(table, a, progress) if parts is not None else why[0]
+    if parts is None:
+        return why[0]
+    model = base_model(table, a, progress)
+    if not isinstance(model, str) and loop_parts(fit_ctrl, fit_on.meta, "x")[0] is not None:
+        loopfit.attach_fit(model, fit_on, fit_ctrl)
+    return model
 
 
 def attach(reports: list[dict], curves: list, tables: list[Table], controllers: list[dict], a, progress) -> None:

@@ -319,6 +319,8 @@ def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str
             why = static_only
         if why is None and cand.needs_yaw and ds.vehicle.identified and not yaw_identified(ds.vehicle):
             why = f"{YAW_UNKNOWN}: too little yaw in the flight to tell its effectiveness from zero"
+        if why is None and cand.needs_accelerometer and not any(f.accel for f in ds.files):
+            why = "no accelerometer in the log: the drag on the accelerometer is not answered (its gain would be 0, not a verdict)"
         if why is not None:
             not_judged.append({"cause": cand.cause, "why": why})
             progress(f"{label}{cand.cause}: not judged ({why})")

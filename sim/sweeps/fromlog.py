@@ -87,7 +87,7 @@ def drawn_models(vehicle, declared, axis: str, n: int, rng: np.random.Generator)
     k, k_se = idn[key]["value"], idn[key]["stderr"]
     h2, h2_se, pm = idn["h2"]["value"], idn["h2"]["stderr"], idn["median_P"]["value"]
     g, g_se = np.array(vehicle.gains), np.array(idn["rotor_gain"]["stderr"], float)
-    tau = float(idn["timing"]["value"])
+    tau = predict.timing(vehicle)[0]          # the loop fit's delay where it has one (loopfit.py)
     if idn["timing"].get("stderr") is not None:
         lo, hi = tau - 1.7320508 * idn["timing"]["stderr"], tau + 1.7320508 * idn["timing"]["stderr"]  # same sd
     else:
@@ -299,6 +299,7 @@ def from_log(table, a, targets: Targets, check_on=None, draws: int = DRAWS, seed
             continue
         vehicle, declared = model
         parts, _ = predict.loop_parts(ctrl, table.meta, axis)
+        parts = {**parts, "motor_lag_s": predict.timing(vehicle)[1]}     # the loop fit's motor lag (loopfit.py)
         progress(f"{steps.NAMES[axis]}: the check agrees (step error {e['step_error']:.3g}); {draws} models drawn, "
                  f"{len(_grid(parts, targets.max_change))} candidates")
         b, tau = drawn_models(vehicle, declared, axis, draws, rng)
@@ -322,8 +323,9 @@ def against(first, second, a, targets: Targets, draws: int = DRAWS, seed: int = 
     the second tune's gains (the check), the first tune's, the gains from the log (recommended, or the nearest
     candidate where none meets the targets). The first log's model, identified on the whole of it."""
     report = from_log(first, a, targets, second, draws, seed, progress)
+    from flightctl.sim.diagnose import loopfit
     c1, c2 = ctl.of_table(first), ctl.of_table(second)
-    model = predict.base_model(first, a)
+    model = loopfit.attach_fit(predict.base_model(first, a), first, c1)    # the model `from_log`'s check took
     out = {"report": report, "axes": {}}
     for axis in steps.AXES:
         e = report["axes"].get(axis, {})

@@ -63,6 +63,10 @@ def test_a_zeroed_accelerometer_reaches_the_dynamic_tier_and_says_what_it_cannot
     assert any(NO_ACCELEROMETER in n for n in rep["notes"]), rep["notes"]
     assert rep["base_model"]["k_z"]["unanswered"]
     assert np.isfinite(rep["rmse_base"]) and rep["rmse_base"] > 0
+    # the drag on the accelerometer is not judged, not scored with a gain of 0 (issue 42 part 2)
+    why = {e["cause"]: e["why"] for e in rep["not_judged"]}
+    assert "no accelerometer" in why.get("rotor_drag", ""), rep["not_judged"]
+    assert "rotor_drag" not in {c["cause"] for c in rep["candidates"]}
 
 
 def test_a_blackbox_log_without_acc_fields_is_read_with_empty_accelerometer_columns(tmp_path):
