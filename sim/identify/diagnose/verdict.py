@@ -28,6 +28,7 @@ from flightctl.sim.identify.diagnose.rotorspeed import rotor_gain_check, rotor_s
 from flightctl.sim.identify.diagnose.scoring import (DM_CHANNEL_WINDOW_S, DM_WINDOW_S, MIN_CHANNEL_GAIN, MIN_GAIN,
                                                      T_CHANNEL, T_CRIT, geomean, heldout_linear, significance)
 from flightctl.sim.identify.static import StaticOnly, static_tier, tier_why
+from flightctl.sim.identify.static.centre import one as centre_of_mass
 
 # Causes that are one physical effect modelled two ways: once one is in the chain the other is not tried.
 TWINS = {"motor_lag": "motor_dynamics", "motor_dynamics": "motor_lag"}
@@ -201,6 +202,7 @@ class Diagnosis:
             "notes": list(dict.fromkeys(self.notes)),   # a note said twice (two passes) once
             "tier": "dynamic", "tier_why": tier_why(self.static), "static": self.static,
         }
+        out["centre_of_mass"] = centre_of_mass(out["base_model"], self.static)
         seen = set()
         out["not_physical"] = []
         for rnd in self.rounds:
