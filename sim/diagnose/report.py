@@ -11,6 +11,7 @@ from flightctl.sim.diagnose.candidate import Result
 from flightctl.sim.diagnose.dataset import CHANNELS, UNITS, C
 from flightctl.sim.diagnose.verdict import Diagnosis
 from flightctl.sim.diagnose.static import static_text, text as static_section
+from flightctl.sim.diagnose.static.centre import centre_text
 
 LB_LAGS = 10          # Ljung-Box lags, on the residual decimated to the low-pass bandwidth
 XCORR_MAX_S = 0.25    # cross-correlations are searched over lags within +-this
@@ -134,10 +135,8 @@ def text(d: Diagnosis, rep: dict | None = None) -> str:
     gains = rep.get("rotor_gain_check")
     if gains:
         L.append(f"  rotor gains: {gains['verdict']}: {gains['why']}")
-    com = rep["base_model"].get("com")
-    if com:
-        L.append(f"  centre of mass (base model): dx {com['dx']:+.4f} +- {com['stderr'][0]:.2g}, dy {com['dy']:+.4f} "
-                 f"+- {com['stderr'][1]:.2g} {com['unit']} from the thrust centre")
+    if com := rep.get("centre_of_mass"):
+        L.append(centre_text(com))
     val = rep.get("validation")
     if val:
         L.append(f"  validation on {', '.join(val['files'])} ({val['airborne_s']} s airborne), the model as fitted here: "

@@ -183,7 +183,7 @@ def yaw_trim_of_gains(gains, layout: Layout) -> tuple[float, float]:
     return 2.0 * a, (a * a * float(s @ s) / total if total > 0 else 0.0)
 
 
-def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None) -> dict:
+def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None, speed_com=None) -> dict:
     """What the pattern of the rotors' thrusts in hover is (`hover_gains`, with their jackknife standard
     errors): {"verdict", "why", "thrust_gain", "speed_thrust_gain", "com"}. A weak motor and a centre of
     mass off the middle leave the same pattern in hover; the log's rotor speeds tell them apart: the
@@ -194,7 +194,9 @@ def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None) -> di
     common curve, whatever its thrust in hover: a centre of mass may hide it there); "centre of
     mass" (what the speeds leave is a front/rear or left/right pattern); "yaw trim"; both; "rotor"
     (what the speeds leave is no centre of mass's pattern: a propeller that gives another thrust at its
-    speed); "not told apart" (a pattern, and no rotor speeds in the log)."""
+    speed); "not told apart" (a pattern, and no rotor speeds in the log). `speed_com`: (dx, dy) of the centre
+    of mass the rotor speeds give directly (static.centre.from_speeds), named in place of the one the
+    speeds' remainder stands for (the two agree to first order in the pattern)."""
     g = np.asarray(gains, float)
     sd = np.asarray(gains_sd, float)
     unit = "m" if layout.unit == "m" else "arm lengths"
@@ -206,6 +208,8 @@ def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None) -> di
     def com(r, what):
         """(the centre of mass's share, the yaw trim's share, the words for the larger)."""
         dx, dy, share = com_of_gains(r, layout)
+        if speed_com is not None and r is not g:
+            dx, dy = speed_com
         split, yaw = yaw_trim_of_gains(r, layout)
         out["com"] = {"dx": round(dx, 4), "dy": round(dy, 4), "share": round(share, 3), "unit": unit}
         out["yaw_trim"] = {"ccw_minus_cw": round(split, 4), "share": round(yaw, 3)}

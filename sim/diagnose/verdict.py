@@ -28,6 +28,7 @@ from flightctl.sim.diagnose.rotorspeed import rotor_gain_check, rotor_speed_lag,
 from flightctl.sim.diagnose.scoring import (DM_CHANNEL_WINDOW_S, DM_WINDOW_S, MIN_CHANNEL_GAIN, MIN_GAIN,
                                                      T_CHANNEL, T_CRIT, geomean, heldout_linear, significance)
 from flightctl.sim.diagnose.static import StaticOnly, static_tier, tier_why
+from flightctl.sim.diagnose.static.centre import one as centre_of_mass
 
 # Each cause's module declares its twin (one physical effect modelled two ways: once one is in the chain
 # the other is not tried), whether it times the actuation, and its look-alikes: which one of a cause and
@@ -198,6 +199,7 @@ class Diagnosis:
             "notes": list(dict.fromkeys(self.notes)),   # a note said twice (two passes) once
             "tier": "dynamic", "tier_why": tier_why(self.static), "static": self.static,
         }
+        out["centre_of_mass"] = centre_of_mass(out["base_model"], self.static)
         seen = set()
         out["not_physical"] = []
         for rnd in self.rounds:

@@ -16,6 +16,7 @@ import numpy as np
 from flightctl.sim.diagnose.data import BARO_CLIMB_M
 from flightctl.sim.diagnose.static.battery import battery
 from flightctl.sim.diagnose.static.blocks import MIN_HOVER_S, Blocks, body_z_force, hover_mask
+from flightctl.sim.diagnose.static.centre import centre_text, from_speeds, one as centre_of_mass
 from flightctl.sim.diagnose.static.curve import of_log, speed_curve
 from flightctl.sim.diagnose.static.hover import pattern, shares, speed_gains, throttle
 from flightctl.sim.diagnose.static.vibration import VIBE_COLUMNS, vibration
@@ -66,7 +67,7 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
         out["hover"] = throttle(hv, c, hv.rows([f.P for f in files]), hv.rows([z for z, _ in force])[0], curve)
         out["hover"]["acc_z_source"] = "; ".join(dict.fromkeys(w for _, w in force))
         out["motors"], m, _ = shares(hv, c)
-        out["pattern"] = pattern(hv, m, layout, speed_gains(files, hv, line))
+        out["pattern"] = pattern(hv, m, layout, speed_gains(files, hv, line), from_speeds(files, hv, layout))
         progress(f"static tier: hover {hv.seconds:.1f} s, thrust share {out['hover']['thrust_share']}, "
                  f"motor shares {out['motors']['share']}, pattern: {out['pattern']['verdict']}")
     else:
@@ -141,7 +142,8 @@ class StaticOnly:
                 "data": {"files": [f.path for f in self.files],
                          "airborne_s": round(sum(f.airborne.sum() * float(np.median(np.diff(f.t))) for f in self.files), 2),
                          "battery_v": None if v is None else [round(x, 2) for x in v]},
-                "static": self.static, "notes": list(dict.fromkeys(self.notes))}
+                "static": self.static, "centre_of_mass": centre_of_mass(None, self.static),
+                "notes": list(dict.fromkeys(self.notes))}
 
 
 def text(st: dict) -> str:
@@ -163,6 +165,9 @@ def text(st: dict) -> str:
         L.append(f"    pattern: {p['verdict']}: {p['why']}")
         if p["rotor_speeds"]:
             L.append(f"    with the rotor speeds: {p['rotor_speeds']['verdict']}: {p['rotor_speeds']['why']}")
+            if c := p["rotor_speeds"].get("com"):
+                L.append(f"    centre of mass by the rotor speeds (Omega^2 in hover): ({c['dx']:+.4f} +- {c['stderr'][0]:.2g}, "
+                         f"{c['dy']:+.4f} +- {c['stderr'][1]:.2g}) {c['unit']}")
         else:
             L.append(f"    {p['without_speeds']}")
     b = st.get("battery")
@@ -207,6 +212,9 @@ def summary(st: dict) -> str:
 def static_text(rep: dict) -> str:
     """The text report of a log that reached the static tier only."""
     L = [f"flightctl diagnose: {', '.join(rep['data']['files'])}", f"  tier: static ({rep['tier_why']})",
-         text(rep["static"]), "  verdict: none (no dynamic chain ran)"]
+         text(rep["static"])]
+    if rep.get("centre_of_mass"):
+        L.append(centre_text(rep["centre_of_mass"]))
+    L.append("  verdict: none (no dynamic chain ran)")
     L += [f"  note: {n}" for n in rep["notes"]]
     return "\n".join(L) + "\n"

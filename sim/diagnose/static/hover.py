@@ -167,8 +167,9 @@ def _gls(v: np.ndarray, W: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.nd
     return beta, np.sqrt(np.abs(np.diag(np.linalg.pinv(F)))), float(r @ W @ r)
 
 
-def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
-    """What the pattern of the shares in hover is (the module's docstring)."""
+def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None, speed_com: dict | None = None) -> dict:
+    """What the pattern of the shares in hover is (the module's docstring); `speed_com`: the centre of mass
+    the rotor speeds give (`centre.from_speeds`), the one the rotor speeds' finding names and carries."""
     unit = "m" if layout.unit == "m" else "arm lengths"
     stat = lambda v: v / v.mean()
     share, share_sd, jack = bl.jackknife(m, stat)
@@ -252,11 +253,12 @@ def pattern(bl: Blocks, m: np.ndarray, layout: Layout, speed_gain=None) -> dict:
                 out["why"] += "; " + ", ".join(alike) + " fit" + ("s" if len(alike) == 1 else "") + " as well"
         _bounds(out, float(np.hypot(dx, dy)), split, unit)
     if speed_gain is not None:
-        check = rotor_gain_check(g, g_sd, layout, {"speed_gain": speed_gain[0], "speed_gain_stderr": speed_gain[1]})
+        check = rotor_gain_check(g, g_sd, layout, {"speed_gain": speed_gain[0], "speed_gain_stderr": speed_gain[1]},
+                                 None if speed_com is None else (speed_com["dx"], speed_com["dy"]))
         out["rotor_speeds"] = {"verdict": check["verdict"], "why": check["why"],
                                "speed_thrust_gain": check["speed_thrust_gain"], "speed_gain": speed_gain[0],
                                "speed_gain_stderr": [float(f"{e:.2g}") for e in speed_gain[1]],
-                               "weak_motor": check.get("weak_motor")}
+                               "weak_motor": check.get("weak_motor"), "com": speed_com}
     else:
         out["rotor_speeds"] = None
         out["without_speeds"] = ("no rotor speeds in the log (ESC telemetry, one per motor): a weak motor is told from a "

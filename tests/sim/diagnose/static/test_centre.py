@@ -1,0 +1,64 @@
+"""One centre of mass per flight (sim/diagnose/static/centre.py, issue 45): on the INDIflight logs that
+measured their rotor speeds (../shared/data/real/flights/indiflight, omegaUnfiltered) the report names the
+rotor speeds' figure, which an independent computation from the same log's speeds reproduces, and keeps the
+base model's and the commands' as checks; the commands' figure, once each rotor's thrust per command from
+its speed is in it, agrees with the speeds' (on LOG00257 the commands alone put dy at 0.65x of it)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from flightctl.cli import main
+from flightctl.logfile import read_flight_log
+from flightctl.params import Airframe
+from flightctl.sim.diagnose.data import FOREIGN_COLUMNS, load_file
+from flightctl.sim.diagnose.static import centre
+from helpers.real import INDIFLIGHT, need
+
+pytest.importorskip("orangebox")
+
+
+def independent(csv) -> tuple[float, float]:
+    """d = sum_i mean(Omega_i^2) r_i / sum_i mean(Omega_i^2) over every airborne row with all four speeds: not
+    the report's hover blocks, not its jackknife, the layout's positions from their own mean."""
+    f = load_file(read_flight_log(str(csv), extra=FOREIGN_COLUMNS), Airframe())
+    w = f.omega[:, f.airborne].astype(float)
+    w = w[:, np.isfinite(w).all(axis=0)]
+    m = (w * w).mean(axis=1)
+    R = np.column_stack([f.layout.x, f.layout.y])
+    R = R - R.mean(axis=0)
+    d = m @ R / m.sum()
+    return float(d[0]), float(d[1])
+
+
+@pytest.mark.parametrize("name", ["LOG00230.BFL", "LOG00257.BFL"])
+def test_the_flights_one_centre_of_mass_is_its_rotor_speeds_and_an_independent_computation_agrees(tmp_path, name):
+    csv = tmp_path / "f.csv"
+    assert main(["log", "import", str(need(INDIFLIGHT / name)), str(csv), "--quiet"]) == 0
+    assert main(["diagnose", str(csv), "--json", str(tmp_path / "r.json"), "--quiet"]) in (0, 1)
+    com = json.loads((tmp_path / "r.json").read_text())["centre_of_mass"]
+    assert com["source"] == centre.SPEEDS and len(com["stderr"]) == 2
+    dx, dy = independent(csv)
+    for got, want, se in ((com["dx"], dx, com["stderr"][0]), (com["dy"], dy, com["stderr"][1])):
+        assert abs(got - want) <= 3 * se + 0.003, (name, com, (dx, dy))
+    checks = {c["source"]: c for c in com["checks"]}
+    assert set(checks) == {centre.BASE, centre.COMMANDS}
+    w = checks[centre.COMMANDS]["with_speeds"]      # the commands with each rotor's own thrust per command
+    assert abs(w["dx"] - com["dx"]) <= 0.003 and abs(w["dy"] - com["dy"]) <= 0.003, (w, com)
+
+
+def test_a_base_model_whose_h2_sits_at_its_bound_is_flagged_and_not_chosen():
+    rng = np.random.default_rng(45)
+    d = rng.uniform(-0.05, 0.05, (2, 2))
+    base = {"identified": True, "com": {"dx": d[0, 0], "dy": d[0, 1], "stderr": [0.002, 0.002], "unit": "arm lengths"},
+            "h2": {"value": -999.95, "at_bound": True}}
+    static = {"thrust_curve": "eq. 26 with h2 from the rotor speeds",
+              "pattern": {"com": {"dx": d[1, 0], "dy": d[1, 1], "stderr": [0.001, 0.001], "unit": "arm lengths"}}}
+    one = centre.one(base, static)
+    assert one["source"] == centre.COMMANDS and (one["dx"], one["dy"]) == (d[1, 0], d[1, 1])
+    (check,) = one["checks"]
+    assert check["source"] == centre.BASE and "at the end of its search" in check["flag"]
+    assert centre.one({**base, "h2": {"value": 40.0, "at_bound": False}}, static)["source"] == centre.BASE
+    assert centre.one(None, None) is None
