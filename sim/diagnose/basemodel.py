@@ -16,7 +16,8 @@ and one offset per accelerometer channel. Eq. 7's coupling a_p = (Jyy - Jzz) / J
 lets them stand in for whatever else the base model lacks (on the indiflight logs they came out of
 the physical range [-1, 1] with the wrong signs). A quadrotor is nearly flat, so the perpendicular-axis
 theorem, Jzz = Jxx + Jyy (the paper's Table 2 meets it within 4 %), gives a_p = -1, a_q = +1 and,
-with Jxx / Jyy = k_q / k_p for rotors at the declared positions, a_r = (k_q - k_p) / (k_q + k_p). Expanded, (P - h2)^2 = P^2 - 2 h2 P + h2^2, every channel is linear in its
+with Jxx / Jyy = k_q / k_p for rotors at the declared positions, a_r = (k_q - k_p) / (k_q + k_p). Expanded, (P -
+h2)^2 = P^2 - 2 h2 P + h2^2, every channel is linear in its
 coefficients on P^2 and P (the constant cancels in the torques of a symmetric layout and joins the
 accelerometer's offset in acc_z): one weighted least-squares fit (`scoring.solve`), and h2 from the
 thrust channel, h2 = -c_1 / (2 c_2). The result is an equivalent airframe (M = 1 kg, Jzz = 1 kg m^2,
@@ -28,7 +29,8 @@ of each fold (`DataSet.base_free`): the base model is identified on training dat
 gamma. Yaw rates large enough to show eq. 6's drag come in short bursts (a throw, a fast turn), so a
 gamma fitted without the block that holds them is noise and, extrapolated to it, ruins its
 prediction (on the indiflight logs a hover-only fit gave 25/rad against 0.3/rad, and 250 rad/s^2 of
-error in the held-out recovery): it is fitted once, with the curves, on all the data. Uncertainties: the delete-one-block jackknife over the scoring's blocks, which
+error in the held-out recovery): it is fitted once, with the curves, on all the data. Uncertainties: the
+delete-one-block jackknife over the scoring's blocks, which
 respects the residual's correlation in time.
 """
 from __future__ import annotations

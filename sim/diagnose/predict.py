@@ -199,7 +199,8 @@ def loop_terms(f: np.ndarray, tau: float, parts: dict, loop_chain: str, response
     Fp = _freq([_pt1(parts["p_lowpass_hz"], fs)], z1) if parts.get("p_lowpass_hz") else one
     I = T / (1.0 - z1)
     if parts.get("loop") == "attitude":
-        return {"G": np.exp(-s * tau) * motor_lag(parts.get("motor_lag_s", 0.0), T, z1) * A, "Fr": Fr * A, "rP": Fp, "rI": I, "rD": 0.0 * one, "rF": 0.0 * one,
+        return {"G": np.exp(-s * tau) * motor_lag(parts.get("motor_lag_s", 0.0), T, z1) * A, "Fr": Fr * A,
+                "rP": Fp, "rI": I, "rD": 0.0 * one, "rF": 0.0 * one,
                 "yP": Fp * Fg * A, "yI": I * Fg * A, "yD": lp("tau_rate_hz") * Fg}
     D = lp("d_lowpass_hz") * (1.0 - z1) / T
     Ft, Fe = lp("target_lowpass_hz"), lp("error_lowpass_hz")
@@ -327,7 +328,8 @@ def predict(model, ctrl: dict, checked: Table, identified_on: str, checked_on: s
         out[axis] = {**head, **entry, "effectiveness": {"value": round(b, 2), "unit": "rad/s^2 per unit of the controller's output",
                                                         "direct": fitted.get("b_direct"), "closed_loop_factor": fitted.get("factor"),
                                                         "source": "the loop fit (loopfit.py)" if "factor" in fitted else
-                                                        "the base model's direct fit (basemodel.py)" + (f": {fitted['why']}" if "why" in fitted else "")},
+                                                        "the base model's direct fit (basemodel.py)"
+                                                        + (f": {fitted['why']}" if "why" in fitted else "")},
                      "timing_s": tau, "motor_lag_s": lag, "controller": shown, "not_modelled": missing}
         drawn[axis] = (curves[(loop, axis)], pred)
     return out, drawn

@@ -73,7 +73,8 @@ def text(d: Diagnosis, rep: dict | None = None) -> str:
     ds = d.ds
     L = []
     L.append(f"flightctl diagnose: {', '.join(rep['data']['files'])}")
-    L.append(f"  {ds.seconds:.1f} s airborne, {ds.n} samples kept at {ds.fs_flat:.0f} Hz of the log's {ds.fs:.0f} Hz, {len(ds.stretches)} stretch(es)")
+    L.append(f"  {ds.seconds:.1f} s airborne, {ds.n} samples kept at {ds.fs_flat:.0f} Hz of the log's {ds.fs:.0f} Hz, "
+             f"{len(ds.stretches)} stretch(es)")
     L.append(f"  metric: {rep['metric']}")
     base = ", ".join(f"{e['cause']} {e['parameters']}" for e in d.carried)
     if ds.vehicle.identified:

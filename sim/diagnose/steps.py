@@ -345,7 +345,9 @@ def text(steps: list[dict]) -> str:
                     continue
                 def ms(k):
                     v, (lo, hi) = e[k]["value"], e[k]["spread"]
-                    return "-" if v is None else f"{1e3 * v:.0f} ms ({'-' if lo is None else f'{1e3 * lo:.0f}'}-{'-' if hi is None else f'{1e3 * hi:.0f}'})"
+                    lo_ms = "-" if lo is None else f"{1e3 * lo:.0f}"
+                    hi_ms = "-" if hi is None else f"{1e3 * hi:.0f}"
+                    return "-" if v is None else f"{1e3 * v:.0f} ms ({lo_ms}-{hi_ms})"
                 o = e["overshoot"]["value"]
                 L.append(f"  step response, {loop.name} {NAMES[a]}: delay {ms('delay_s')}, rise {ms('rise_s')}, "
                          f"overshoot {'-' if o is None else f'{100 * o:.0f} %'}, settling {ms('settling_s')}, final "

@@ -1,5 +1,5 @@
 """The tree passes `ruff check` with pyproject's rules ([tool.ruff]: syntax errors, undefined names,
-statements out of place): a new one fails here, in CI (the `test` extra installs ruff), with the
+statements out of place, lines over 140 characters): a new one fails here, in CI (the `test` extra installs ruff), with the
 file, line and rule of each."""
 from __future__ import annotations
 
@@ -11,7 +11,6 @@ from pathlib import Path
 
 import pytest
 from helpers.paths import ROOT
-
 
 
 def ruff() -> list[str]:

@@ -77,8 +77,8 @@ def battery(files: list[FileData], currents: list[np.ndarray | None]) -> dict | 
         out["resistance"] = None
         out["without_current"] = (f"no current sensor: the logged current does not move with the throttle ({amps:.2f} A "
                                   f"of it does, correlation {r:.2f} with the mean motor command; {MIN_CURRENT_A:g} A and "
-                                  f"{MIN_CURRENT_R:g} or more for a sensor: a constant or a noise is logged where none is fitted): the sag is "
-                                  "the voltage's range, no internal resistance")
+                                  f"{MIN_CURRENT_R:g} or more for a sensor: a constant or a noise is logged where none is "
+                                  "fitted): the sag is the voltage's range, no internal resistance")
         return out
     return {**out, **_resistance(rows, cells, V, rest)}
 
