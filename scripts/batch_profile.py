@@ -90,23 +90,23 @@ def _flight(n: int, seconds: float):
 
 def _phase_loops():
     """The phases' compiled loops: each calls one compiled copy the batch's loop inlines, REPS times per vehicle."""
-    from flightctl.sim.sweeps import twin_loop as fl
+    from flightctl.sim.sweeps import twin_world as tw
     from flightctl.sim.sweeps import twin_controller as ob
     from flightctl.sim.sweeps import pcg64
     from flightctl.sim.world import compiled, imu
     cc = compiled.compiled_copy
     plant = compiled.functions()
     o = ob.compiled_functions(cc)
-    held = cc(fl.held_command)
-    u = cc(fl.uniform)
+    held = cc(tw.held_command)
+    u = cc(tw.uniform)
     return {
         "rk4": cc(rk4_loop, allocates=True, work=plant["work"], rk4=plant["rk4"], held_command=held),
         "forces": cc(forces_loop, allocates=True, work=plant["work"], forces=plant["forces"], held_command=held),
-        "chip": cc(chip_loop, allocates=True, chip_words=imu.chip_frame_compiled(fl.put_word)),
+        "chip": cc(chip_loop, allocates=True, chip_words=imu.chip_frame_compiled(tw.put_word)),
         "vibration": cc(vibration_loop, vibration=cc(imu.vibration, remainder=cc(imu.remainder))),
-        "normals": cc(normals_loop, allocates=True, normals=cc(fl.normals, standard_normal=pcg64.compiled_normal(cc)),
+        "normals": cc(normals_loop, allocates=True, normals=cc(tw.normals, standard_normal=pcg64.compiled_normal(cc)),
                       normals_per_read=cc(imu.normals_per_read)),
-        "gauss": cc(gauss_loop, gauss=cc(fl.gauss, uniform=u)),
+        "gauss": cc(gauss_loop, gauss=cc(tw.gauss, uniform=u)),
         "controller": cc(controller_loop, allocates=True, ob_step=o["step"]),
     }
 
@@ -187,6 +187,7 @@ def controller_loop(E, KC, W, dt, reps):
 def _inner(n: int, seconds: float, out: str, batch_only: bool = False) -> None:
     from flightctl.sim.sweeps import batch
     from flightctl.sim.sweeps import twin_loop as fl
+    from flightctl.sim.sweeps import twin_world as tw
     params, plan, draws = _flight(n, seconds)
     run = fl.compiled_fly()
     kept = {}
@@ -209,11 +210,11 @@ def _inner(n: int, seconds: float, out: str, batch_only: bool = False) -> None:
     loops = _phase_loops()
     X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI = kept["args"][:14]
     k = kept["args"][16]
-    dt = float(k[fl.DT])
+    dt = float(k[tw.DT])
     nn = float(np.mean([normals_per_read(c) for c in CC]))
-    mag = 1.0 / fl.MAG_EVERY
+    mag = 1.0 / tw.MAG_EVERY
     rate = {"rk4": 1.0, "forces": 1.0, "chip": 1.0, "vibration": 1.0, "normals": (nn + 3 * mag) / nn,
-            "gauss": 1.0 * k[fl.INA_DRAWS] / k[fl.POWER_EVERY] + 1.0 / k[fl.SONAR_EVERY], "controller": 1.0}
+            "gauss": 1.0 * k[tw.INA_DRAWS] / k[tw.POWER_EVERY] + 1.0 / k[tw.SONAR_EVERY], "controller": 1.0}
     calls = {
         "rk4": lambda: loops["rk4"](X, W, Q, codes, dt, REPS),
         "forces": lambda: loops["forces"](X.copy(), W, Q, codes, REPS),

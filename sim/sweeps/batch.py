@@ -27,6 +27,7 @@ from flightctl.params import Gains, Params
 from flightctl.sim import engine
 from flightctl.plans.plan import Plan
 from flightctl.sim.sweeps import twin_loop as fl
+from flightctl.sim.sweeps import twin_world as tw
 from flightctl.sim.sweeps import twin_controller as ob
 from flightctl.sim.world.board import SIM_CALIBRATE_S
 
@@ -35,7 +36,7 @@ TASKS = 4            # the engine's tasks per worker (each several groups): few,
                      # trips and the jobs' pickling are few, enough that a worker slow to start is evened out
 CHUNK = 225          # loop periods flown per call of the compiled loop (the uniforms refilled between)
 SPARE = 8            # chunks' worth of uniforms each vehicle holds (refilled when less than one is left)
-WIDE = ("P1", "P2", "P3", "P4", "acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z", "alt")  # fl.N_WIDE's
+WIDE = ("P1", "P2", "P3", "P4", "acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z", "alt")  # tw.N_WIDE's
 LAND_MARGIN_S = 45.0   # s past the plan's end a loop's own landing may take (its ramp and slack)
 
 
@@ -94,15 +95,15 @@ def _template(params: Params) -> dict:
 def _world_constants(params: Params, plan: Plan, template: dict, dt: float) -> np.ndarray:
     from flightctl.sim.world.devices import SensorNoise
     noise, a = SensorNoise(), params.airframe
-    k = np.zeros(fl.N_WORLD)
-    k[fl.G_], k[fl.M_] = a.g, a.M
-    k[fl.SONAR_SIGMA], k[fl.DROPOUT], k[fl.MAG_SIGMA] = noise.sonar_sigma_us, noise.sonar_dropout, noise.mag_sigma
-    k[fl.A_SCALE], k[fl.G_SCALE] = template["a"], template["g"]
-    k[fl.WARM_RISE], k[fl.WARM_TAU] = noise.warmup_rise, noise.warmup_tau
-    k[fl.LANDS], k[fl.DURATION], k[fl.INA_DRAWS] = float(plan.lands()), plan.duration, template["per_read"]
-    k[fl.DT], k[fl.T_ARM] = dt, SIM_CALIBRATE_S
-    k[fl.TEMP_LO], k[fl.TEMP_HI] = template["temp"]
-    k[fl.POWER_EVERY], k[fl.SONAR_EVERY] = max(1, round(a.loop_hz / 10.0)), max(1, round(a.loop_hz / a.sonar_hz))
+    k = np.zeros(tw.N_WORLD)
+    k[tw.G_], k[tw.M_] = a.g, a.M
+    k[tw.SONAR_SIGMA], k[tw.DROPOUT], k[tw.MAG_SIGMA] = noise.sonar_sigma_us, noise.sonar_dropout, noise.mag_sigma
+    k[tw.A_SCALE], k[tw.G_SCALE] = template["a"], template["g"]
+    k[tw.WARM_RISE], k[tw.WARM_TAU] = noise.warmup_rise, noise.warmup_tau
+    k[tw.LANDS], k[tw.DURATION], k[tw.INA_DRAWS] = float(plan.lands()), plan.duration, template["per_read"]
+    k[tw.DT], k[tw.T_ARM] = dt, SIM_CALIBRATE_S
+    k[tw.TEMP_LO], k[tw.TEMP_HI] = template["temp"]
+    k[tw.POWER_EVERY], k[tw.SONAR_EVERY] = max(1, round(a.loop_hz / 10.0)), max(1, round(a.loop_hz / a.sonar_hz))
     return k
 
 
@@ -131,13 +132,13 @@ class _Vehicles:
         self.ring = np.zeros((n, int(self.nring.max()), 4))
         x0 = Model(a, with_draws(params, {})).initial_state((0.0, 0.0, 0.0, 0.0, a.battery_nominal_v))
         self.x = np.tile(np.asarray(x0, dtype=float), (n, 1))
-        self.w = np.zeros((n, fl.N_W))
-        self.w[:, fl.W_GROUND] = 1.0
-        self.w[:, [fl.W_T_STOP, fl.W_RISE, fl.W_T_TOUCH]] = -1.0
-        self.w[:, [fl.W_RISE_T, fl.W_FALL_T]] = np.inf
-        self.w[:, fl.W_Z_MAX] = -np.inf
-        self.w[:, fl.W_UAPP:fl.W_UAPP + 4] = np.nan       # no command applied yet
-        self.w[:, fl.W_LIFT_AT:fl.W_LIFT_AT + 4] = np.nan
+        self.w = np.zeros((n, tw.N_W))
+        self.w[:, tw.W_GROUND] = 1.0
+        self.w[:, [tw.W_T_STOP, tw.W_RISE, tw.W_T_TOUCH]] = -1.0
+        self.w[:, [tw.W_RISE_T, tw.W_FALL_T]] = np.inf
+        self.w[:, tw.W_Z_MAX] = -np.inf
+        self.w[:, tw.W_UAPP:tw.W_UAPP + 4] = np.nan       # no command applied yet
+        self.w[:, tw.W_LIFT_AT:tw.W_LIFT_AT + 4] = np.nan
         self.e = np.zeros((n, ob.N_E))
         self.e[:, ob.ALT_T] = -1.0
         self.kc = np.zeros((n, ob.N_K))
@@ -169,14 +170,14 @@ class _Vehicles:
         self.uni = uniforms_of(b"".join(raw), n, spare)
         self.cs[:], self.cc[:] = [d[0] for d in dies], [d[1] for d in dies]
         has = ~np.isnan(kept)                      # the vehicles whose gauss kept a second number
-        self.w[has, fl.W_GAUSS], self.w[has, fl.W_HAS_GAUSS] = kept[has], 1.0
+        self.w[has, tw.W_GAUSS], self.w[has, tw.W_HAS_GAUSS] = kept[has], 1.0
         vibration_constants(self.cc.T, vehicle_noise(noise, p.sensors), p.airframe)
         self.cc[:, template["registered"]] = template["values"]
 
     def refill(self) -> None:
         """For each vehicle with less than a chunk's uniforms left, those it used drawn anew behind the
         ones left."""
-        used = self.w[:, fl.W_U].astype(np.int64)
+        used = self.w[:, tw.W_U].astype(np.int64)
         m = self.uni.shape[1]
         if used.max() > m:
             raise RuntimeError("a vehicle drew more random numbers than the batch holds for it")
@@ -184,7 +185,7 @@ class _Vehicles:
             u = used[v]
             self.uni[v, :m - u] = self.uni[v, u:].copy()
             self.uni[v, m - u:] = uniforms(self.rng[v], u)
-            self.w[v, fl.W_U] = 0.0
+            self.w[v, tw.W_U] = 0.0
 
 
 def uniforms(r: random.Random, k: int) -> np.ndarray:
@@ -210,10 +211,10 @@ def uniforms_of(raw: bytes, n: int, k: int) -> np.ndarray:
 def _judge(w: np.ndarray, g: float) -> tuple[str, bool, bool]:
     """sim/flights/run.py's `judge` on the loop's figures: (outcome, crashed, flew)."""
     from flightctl.sim.flights.run import judge_figures
-    if w[fl.W_ROWS] == 0:
+    if w[tw.W_ROWS] == 0:
         return "never armed", False, False
-    stopped = f"tilt past {math.degrees(fl.CRASH_TILT):.0f} degrees" if w[fl.W_REASON] == fl.CRASH else None
-    return judge_figures(float(w[fl.W_Z_END]), float(w[fl.W_Z_MAX]), float(w[fl.W_TILT]), float(w[fl.W_TOUCHDOWN]),
+    stopped = f"tilt past {math.degrees(fl.CRASH_TILT):.0f} degrees" if w[tw.W_REASON] == tw.CRASH else None
+    return judge_figures(float(w[tw.W_Z_END]), float(w[tw.W_Z_MAX]), float(w[tw.W_TILT]), float(w[tw.W_TOUCHDOWN]),
                          stopped, g)
 
 
@@ -253,7 +254,7 @@ def _fly_group_now(job) -> tuple:
     i_end = i_arm + int(math.ceil(end_s / dt)) + 1
     # the most uniforms a vehicle takes in a chunk: the sonar's dropout and jitter at each trigger (a
     # gauss takes two), the power monitor's gausses at each read
-    most = 3 * -(-CHUNK // int(k[fl.SONAR_EVERY])) + 2 * template["per_read"] * -(-CHUNK // int(k[fl.POWER_EVERY])) + 2
+    most = 3 * -(-CHUNK // int(k[tw.SONAR_EVERY])) + 2 * template["per_read"] * -(-CHUNK // int(k[tw.POWER_EVERY])) + 2
     veh = _Vehicles(params, draws, gains, seeds, template, structure, most)
     plan.restart()
     sp = np.zeros((i_end + 1, 4))
@@ -261,18 +262,18 @@ def _fly_group_now(job) -> tuple:
         t = i * dt - SIM_CALIBRATE_S
         sp[i] = plan.at(t) if t <= plan.duration else plan.at(plan.duration)
     rows = int(round((record[1] - record[0]) / dt)) + 1 if record else 0
-    rec = np.full((veh.n, rows, fl.N_WIDE if wide else fl.N_REC), np.nan)
+    rec = np.full((veh.n, rows, tw.N_WIDE if wide else tw.N_REC), np.nan)
     run = fl.compiled_fly() or fl.fly
     i0 = 0
-    while i0 < i_end and not veh.w[:, fl.W_DONE].all():
+    while i0 < i_end and not veh.w[:, tw.W_DONE].all():
         n = min(CHUNK, i_end - i0)
         run(veh.x, veh.w, veh.e, veh.kc, veh.q, veh.codes, veh.ring, veh.nring, veh.frac, veh.words, veh.cs, veh.cc,
             veh.normal, veh.uni, np.ascontiguousarray(sp[i0 + 1:i0 + 1 + n]), rec, k, template["jump"],
             i0, n, i_arm, rec0)
         veh.refill()
         i0 += n
-    seconds = np.where(veh.w[:, fl.W_DONE] != 0.0, veh.w[:, fl.W_ROWS] * dt + i_arm * dt, i0 * dt)
-    judged = [_judge(w, a.g) if w[fl.W_DONE] != 0.0 else ("in the air", False, True) for w in veh.w]
+    seconds = np.where(veh.w[:, tw.W_DONE] != 0.0, veh.w[:, tw.W_ROWS] * dt + i_arm * dt, i0 * dt)
+    judged = [_judge(w, a.g) if w[tw.W_DONE] != 0.0 else ("in the air", False, True) for w in veh.w]
     steps = int(np.sum(np.minimum(seconds / dt, i0)))
     return judged, rec, steps, seconds
 

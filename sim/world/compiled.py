@@ -89,7 +89,7 @@ def source_digest() -> str:
     compiled_files = [Path(flightctl.physics.__file__), Path(flightctl.drivers.mpu9250_regs.__file__)]
     compiled_files += [here / name for name in ("model.py", "compiled.py", "imu.py")]
     compiled_files += [here.parent / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
-    compiled_files += [here.parent / "sweeps" / f"{name}.py" for name in ("twin_controller", "twin_loop", "pcg64")]
+    compiled_files += [here.parent / "sweeps" / f"{name}.py" for name in ("twin_controller", "twin_loop", "twin_world", "pcg64")]
     compiled_files += [Path(sys.modules["flightctl"].__file__).parent / name for name in (
         "control/estimator.py", "control/mixer.py", "control/landing.py", "control/controller.py", "loop.py",
         "safety.py", "drivers/hcsr04.py")]
