@@ -6,7 +6,7 @@ intercept per block; over the airborne rows diagnose uses (`data.load_file`), cu
 The regression is `flightctl.sim.diagnose.axischeck.regression` (its docstring: the method).
 Printed per axis: the slope's sign in each block, its R^2, and the block-jackknife t of the slope (the
 slope over the delete-one-block jackknife's standard error), beside the tool's t (the base model's
-effectiveness over its jackknife error, `base.identify`), or the tool's refusal.
+effectiveness over its jackknife error, `basemodel.identify`), or the tool's refusal.
 
     python scripts/axis_regression.py [LOG[#index] ...]     (default: the shared real flights and tests/data)
 """

@@ -343,7 +343,7 @@ def diagnose_rows() -> list[tuple[str, str, str]]:
 def fleet_rate(workers: int, logs: int = 6) -> float:
     """Logs per hour of `flightctl diagnose --corpus` on `workers` of the engine's local workers
     (sim/engine.py, Dask; in this process without it): `logs` simulated 21 s flights (the tests' quick
-    plan, tests/sim/diagnose/test_diagnose_cases.py, each its own seed), diagnosed end to end, the engine's start
+    plan, tests/helpers/diagnose_cases.py, each its own seed), diagnosed end to end, the engine's start
     and each worker's imports included (docs/fleet.md)."""
     import contextlib
     import io
@@ -351,8 +351,8 @@ def fleet_rate(workers: int, logs: int = 6) -> float:
     from flightctl.cli import main as cli
     from flightctl.sim import engine
     from flightctl.sim.diagnose.corpus import corpus
-    sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "tests" / s) for s in ("", "sim/diagnose")]
-    from test_diagnose_cases import quick_plan
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from helpers.diagnose_cases import quick_plan
     tmp = Path(tempfile.mkdtemp())
     folder = tmp / "logs"
     folder.mkdir()

@@ -1,5 +1,5 @@
 """Two effects hidden at once, many times (docs/diagnose.md, "Every cause"): pairs drawn exactly as
-tests/sim/diagnose/test_diagnose_chain.py draws them (one seeded generator per pair, seeds FIRST, FIRST+1, ...),
+tests/sim/diagnose/test_verdict_chain.py draws them (one seeded generator per pair, seeds FIRST, FIRST+1, ...),
 each flown on the tests' quick plan with `flightctl sim --effect` twice and diagnosed from the log
 alone. Prints, per pair, what was hidden and what the chain named, then the totals; `--doc` writes
 the summary between the markers of docs/diagnose.md.
@@ -23,14 +23,14 @@ from flightctl.sim import engine
 from flightctl.sim.progress import Progress
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT / "tests"), str(ROOT / "tests" / "sim" / "diagnose")]   # the tests' drawing and tolerances: one definition
+sys.path.insert(0, str(ROOT / "tests"))   # the tests' drawing and tolerances (helpers/diagnose_cases.py): one definition
 
 BEGIN, END = marked("diagnose_pairs")
 
 
 def judge(seed: int) -> dict:
     """One pair: {seed, hidden, named, verdict} where verdict is 'ok' or what went wrong."""
-    from test_diagnose_cases import close_enough, fly_pair   # (no pytest: the base install runs this)
+    from helpers.diagnose_cases import close_enough, fly_pair   # (no pytest: the base install runs this)
 
     with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
         truth, report = fly_pair(Path(tmp), np.random.default_rng(seed))   # the flights' own printing aside

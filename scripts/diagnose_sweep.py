@@ -1,6 +1,6 @@
 """One effect hidden at a time, every cause and none, three seeds each (docs/diagnose.md, "Results"):
 the flights of the slow hidden-effect test (`pytest tests/sim/diagnose/test_diagnose_hidden.py -m slow`), drawn,
-flown and diagnosed exactly as it does (its seeds, tests/sim/diagnose/test_diagnose_cases.py's drawing, the 48 s
+flown and diagnosed exactly as it does (its seeds, tests/helpers/diagnose_cases.py's drawing, the 48 s
 `excite` plan, `flightctl sim --effect` then `flightctl diagnose` on the log alone). Prints a row per
 flight (what was hidden, what was named and recovered, the held-out gain, the runner-up and what it
 did to `acc_z`), then the totals and how much of its tolerance each cause used; `--doc` writes them
@@ -23,7 +23,7 @@ import numpy as np
 from flightctl.sim.docs import marked, publish
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT / "tests"), str(ROOT / "tests" / "sim" / "diagnose")]   # the tests' drawing and tolerances: one definition
+sys.path.insert(0, str(ROOT / "tests"))   # the tests' drawing and tolerances (helpers/diagnose_cases.py): one definition
 sys.path.insert(0, str(ROOT / "scripts"))
 
 BEGIN, END = marked("diagnose_sweep")
@@ -31,14 +31,14 @@ BEGIN, END = marked("diagnose_sweep")
 
 def cases(seeds: int) -> list[tuple[str, int]]:
     """(cause, seed) as tests/sim/diagnose/test_diagnose_hidden.py's slow test numbers them."""
-    from test_diagnose_cases import CAUSES
+    from helpers.diagnose_cases import CAUSES
     every = ("none",) + CAUSES
     return [(cause, 100 + 10 * s + every.index(cause)) for s in range(seeds) for cause in every]
 
 
 def used(cause: str, truth: dict, got: dict) -> float:
     """The share of its tolerance the recovered size used (0: exact, 1: at the tolerance's edge)."""
-    from test_diagnose_cases import close_enough
+    from helpers.diagnose_cases import close_enough
     if cause == "none" or not got:
         return 0.0
     err = {k: got[k] - truth[k] for k in truth}
@@ -55,7 +55,7 @@ def used(cause: str, truth: dict, got: dict) -> float:
 
 
 def judge(case: tuple[str, int]) -> dict:
-    from test_diagnose_cases import close_enough, draw, run_case
+    from helpers.diagnose_cases import close_enough, draw, run_case
     cause, seed = case
     cause, truth = draw(np.random.default_rng(seed), cause)
     with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):

@@ -53,7 +53,7 @@ def peak_kib(pid: int) -> int:
 
 
 def descendants(pid: int) -> list[int]:
-    """The processes under `pid`: its children, theirs, ... (from /proc's parent links; tests/sim/diagnose/fleet/test_fleet.py
+    """The processes under `pid`: its children, theirs, ... (from /proc's parent links; tests/sim/diagnose/test_corpus.py
     uses it too)."""
     parent = {}
     for entry in Path("/proc").iterdir():

@@ -14,7 +14,7 @@ ignore it (`_workers_deaf_to_ctrl_c`) and are ended at once by this process (kil
 for); a Ctrl-C while they start is raised once they are up; a remote cluster's tasks are cancelled.
 A killed command leaves no workers either: Dask's worker process exits as soon as its nanny's pipe
 closes (distributed/process.py, `AsyncProcess._immediate_exit_when_closed`), and the fork server
-when this process's does (tests/sim/diagnose/fleet/test_fleet.py kills a command with SIGKILL and checks).
+when this process's does (tests/sim/diagnose/test_corpus.py kills a command with SIGKILL and checks).
 
 A worker that dies (a log that crashes it) fails its item with `WorkerDied`, not the run's other
 items: `run(..., died=...)` records it; without `died` it is raised. The local cluster marks an

@@ -7,7 +7,7 @@ anywhere else.
 
 The model is read from sysfs first: /proc/device-tree is only a symlink into it, and the service's
 sandbox (ProcSubset=pid in systemd/flightctl.service) mounts a procfs that has nothing but the process
-directories, so /proc/device-tree does not exist there (tests/onboard/boards/test_pi_sandbox.py). /proc/device-tree is
+directories, so /proc/device-tree does not exist there (tests/onboard/boards/test_detect_sandbox.py). /proc/device-tree is
 the fallback for a system whose sysfs is not mounted where it is expected.
 
 The RP1 I/O chip (its PWM, its GPIO) is on the Raspberry Pi 5, the Pi 500 and the Compute Module 5;

@@ -4,7 +4,7 @@ the simulator), `flightctl sim NAME` and the excitation flights of `flightctl di
 Take-offs and ordinary altitude changes follow smooth ramps, as a pilot would fly them; the steps of
 figures 13-16 are true steps, as the paper commanded them. The simulator measures the response to
 every step of a plan (`flightctl.sim.flights.scenarios`). Adding a plan: a function returning a `Plan` and
-one line in `PLANS`; tests/onboard/test_plan.py holds every named plan to the plan-file limits.
+one line in `PLANS`; tests/onboard/plans/test_plan.py holds every named plan to the plan-file limits.
 """
 from __future__ import annotations
 

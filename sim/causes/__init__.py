@@ -17,7 +17,7 @@ Adding a cause: a module here with its `Effect` and its `Candidate` (whose `effe
 line in `_FITS` below (or `register` for one defined elsewhere), a row in docs/diagnose.md's table of the causes
 beyond the contract (after the
 contract's, whose table is docs/measured-data.md's; tests/sim/causes/test_causes.py checks that the registry and the two
-tables agree), a unit test of the effect and a hidden-effect case (tests/sim/diagnose/test_diagnose_cases.py).
+tables agree), a unit test of the effect and a hidden-effect case (tests/helpers/diagnose_cases.py).
 Importing the registry costs no scipy (the fits import it when they run): `flightctl sim` starts fast.
 """
 from __future__ import annotations

@@ -129,7 +129,7 @@ def range_drift(t: np.ndarray, err: np.ndarray, ok: np.ndarray) -> np.ndarray:
     part. With z0 + c0 t + c1 t^2 / 2 alone (a constant bias) the speed on the 48 s `excite` plan was off
     by 0.085 m/s rms, 0.19 m/s at the take-off and the landing where the height is low, and a large
     hidden k's acc_z residual read as ground effect (issue 49, the slow sweep's seed 119); with the
-    spline 0.005 m/s (tests/sim/diagnose/test_climb_speed.py). The spline follows drifts slower than its knots; the
+    spline 0.005 m/s (tests/sim/causes/test_rotor_inflow_climb_speed.py). The spline follows drifts slower than its knots; the
     range and the accelerometer agree on what is faster."""
     from scipy.interpolate import BSpline      # here, not at the top: `flightctl sim` imports the causes
     T = float(t[-1])
@@ -146,7 +146,7 @@ def climb_speed(ds) -> list[np.ndarray]:
     integrated over each airborne stretch from rest at its start (the take-off); the vertical
     speed corrected by `range_drift`, the height's error against the levelled range; then w_b = z_b . v, horizontal part
     included: a vehicle that drifts at a few m/s with a tilt of tens of degrees has most of its w_b
-    from there (tests/sim/diagnose/test_diagnose_chain.py's offset centre of mass; the vertical part alone sized
+    from there (tests/sim/diagnose/test_verdict_chain.py's offset centre of mass; the vertical part alone sized
     the inflow 30 % low on acc_z there). The horizontal speed has no measurement to correct it: an
     accelerometer bias b drifts it by b t."""
     g = ds.a.g

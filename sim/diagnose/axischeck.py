@@ -8,7 +8,7 @@ diagnosis' 12 Hz (2nd-order Butterworth forward and back, per airborne stretch),
 N_BLOCKS contiguous blocks with an intercept each (a trim torque that drifts between blocks is not the
 axis' effectiveness). Reported: the slope's t over its delete-one-block jackknife error, in how many blocks
 alone the slope has the layout's sign, and R^2. A refusal that says a log does not show an axis gives these
-figures (base._refuse); scripts/axis_regression.py sets them beside the tool's t on every shipped log."""
+figures (basemodel._refuse); scripts/axis_regression.py sets them beside the tool's t on every shipped log."""
 from __future__ import annotations
 
 import numpy as np

@@ -92,7 +92,7 @@ class Candidate:
     dynamic = False          # it needs the commands logged faster than the dynamics it times (dataset.DYNAMIC_MIN_HZ)
     physical_check = ""      # what size is physical, and its source (docs/diagnose.md, "Physical checks")
     needs_yaw = False        # it is told from the others by the yaw channel alone: not judged on a vehicle
-                             # whose yaw effectiveness the log cannot identify (base.yaw_identified)
+                             # whose yaw effectiveness the log cannot identify (basemodel.yaw_identified)
     # the chain of causes (diagnose/verdict.py) reads these: `twin`, the cause that is the same physical
     # effect modelled another way (once one is in the chain the other is not tried); `times_actuation`, it
     # times the actuation (the gyro's timing of the report); `lookalikes`, the causes it is swapped with

@@ -201,7 +201,7 @@ def run_one(row: Row) -> Row:
     from flightctl.sim.logs import controller
     from flightctl.sim.diagnose.verdict import diagnose
     quiet = lambda *a: None   # noqa: E731
-    if os.environ.get(CRASH_ENV) == Path(row.path).name:    # tests/sim/diagnose/fleet/test_fleet.py: a log that kills its worker
+    if os.environ.get(CRASH_ENV) == Path(row.path).name:    # tests/sim/diagnose/test_corpus.py: a log that kills its worker
         os._exit(3)
     try:
         tables = read_logs([row.path], row.index, quiet)

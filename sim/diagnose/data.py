@@ -63,7 +63,7 @@ REST_ACC_MAX = 0.25      # m/s^2: the gyro then under REST_RATE REST_ACC / REST_
 REST_G = 0.1             # share of g
 # A barometer is too coarse to time a take-off (its noise and the rotors' wash move it by a few tenths
 # of a metre), but one that never rose this far above its level at rest while the motors ran says that
-# the vehicle may never have left the ground: said beside a refusal (base._shown), never a verdict.
+# the vehicle may never have left the ground: said beside a refusal (basemodel._shown), never a verdict.
 BARO_CLIMB_M = 0.5
 # The autopilots' landing detectors hold their checks this long before they declare a landing: PX4's LNDMC_TRIG_TIME
 # (default 1.0 s, its parameter reference), ArduCopter's LAND_DETECTOR_TRIGGER_SEC (1.0 s, ArduCopter/config.h)

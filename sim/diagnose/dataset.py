@@ -55,7 +55,7 @@ class Vehicle:
     layout: Layout
     coupling: tuple[float, float, float]
     identified: bool = False
-    identification: dict = field(default_factory=dict, compare=False)   # the report of `base.identify`
+    identification: dict = field(default_factory=dict, compare=False)   # the report of `basemodel.identify`
     gains: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)                     # each rotor's, of an identified vehicle
 
     @classmethod

@@ -355,7 +355,7 @@ def _round(ds: DataSet, skip: set[str], static_only: str | None, notes: list[str
 def quad_only(files) -> None:
     """InputError (the dynamic tier refused, the static tier answers) for a layout of other than four
     rotors: the dynamic tier's per-rotor parts are written for four (`DataSet.thrust_columns`, the hover
-    gains and the rotor speeds' checks of base.identify and rotorspeed, the per-motor causes'
+    gains and the rotor speeds' checks of basemodel.identify and rotorspeed, the per-motor causes'
     candidates), while its torques (`DataSet.predict_file`: eq. 25's sums over the layout) are not."""
     n = len(files[0].layout.x)
     if n != 4:

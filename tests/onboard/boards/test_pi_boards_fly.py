@@ -30,7 +30,7 @@ def flights(tmp_path_factory):
         d = tmp_path_factory.mktemp(board)
         (d / "hop.toml").write_text(PLAN)
         # the dead-man at 1 s: a busy machine may pause the simulated loop past the shipped 100 ms (the
-        # dead-man's own tests keep 100 ms: test_safety_boards, test_safety_pi5_stop)
+        # dead-man's own tests keep 100 ms: test_safety_boards, test_pwm_deadman)
         (d / "board.toml").write_text("[esc]\ndeadman_ms = 1000\n")
         with FakeQuad(params, board, d, seed=3) as quad:
             rc = main(["--board", board, "--board-file", str(d / "board.toml"), "--plan", str(d / "hop.toml"),

@@ -3,8 +3,8 @@ real pigpio client; the Pi 5 board: the fake sysfs PWM tree and GPIO chip): only
 commands the motors (another process changing the ESC output is seen disarmed and in flight), the
 dead-man stops the motors when the loop stalls, and the kill path (a stop request in the air) leaves the
 stop pulse on the ESCs. A channel or line another process holds at start-up is a refusal on the Pi 5
-(tests/onboard/boards/test_pi5_board.py, tests/onboard/drivers/test_pi5_pwm.py); on the Pi 3/4 pigpiod is flightctl's own and its
-start takes the wave engine over (tests/onboard/drivers/test_pi_esc.py)."""
+(tests/onboard/boards/test_pi5.py, tests/onboard/drivers/test_pwm_sysfs.py); on the Pi 3/4 pigpiod is flightctl's own and its
+start takes the wave engine over (tests/onboard/drivers/test_esc.py)."""
 from __future__ import annotations
 
 import argparse

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from flightctl.cli import main
-from test_diagnose_cases import quick_plan
+from helpers.diagnose_cases import quick_plan
 
 
 @pytest.fixture(scope="module")
@@ -16,7 +16,7 @@ def flight(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("diag")
     path = tmp / "flight.csv"
     main(["sim", "--plan", str(quick_plan(tmp)), "--log", str(path), "--seed", "5", "--no-plot", "--quiet",
-          "--effect", "com_offset:dx=0.01,dy=0"])   # 0, or 1 if it lands too fast (test_diagnose_cases.run_case)
+          "--effect", "com_offset:dx=0.01,dy=0"])   # 0, or 1 if it lands too fast (helpers.diagnose_cases.run_case)
     assert path.is_file()
     return path
 

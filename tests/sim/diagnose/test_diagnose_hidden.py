@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from test_diagnose_cases import CAUSES, close_enough, draw, run_case
+from helpers.diagnose_cases import CAUSES, close_enough, draw, run_case
 
 ALL = ("none",) + CAUSES
 TWINS = {"motor_dynamics": "motor_lag", "motor_lag": "motor_dynamics"}

@@ -10,14 +10,14 @@ import pytest
 
 from flightctl import params as paramfile
 from flightctl.cli import main
-from test_diagnose_cases import close_enough, draw
+from helpers.diagnose_cases import close_enough, draw
 
 AS_FLOWN = "paper-as-flown"
 
 
 def _fly(tmp, name, seed, *extra):
     log = tmp / f"{name}.csv"
-    # 0, or 1 if the landing touches the floor too fast (test_diagnose_cases.run_case)
+    # 0, or 1 if the landing touches the floor too fast (helpers.diagnose_cases.run_case)
     assert main(["sim", "hover_low", "--params", AS_FLOWN, "--log", str(log), "--seed", str(seed),
                  "--no-plot", "--quiet", *extra]) in (0, 1)
     assert log.is_file()

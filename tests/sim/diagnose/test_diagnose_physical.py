@@ -18,7 +18,7 @@ from flightctl.sim.diagnose.candidate import MAX_TIMING_S, Result
 from flightctl.sim.diagnose.data import FOREIGN_COLUMNS, load_file
 from flightctl.sim.diagnose.dataset import DataSet, Vehicle
 from helpers.real import FLIGHTS, need
-from test_diagnose_cases import draw
+from helpers.diagnose_cases import draw
 from test_diagnose_vehicle import fly, rewrite
 
 

@@ -19,7 +19,7 @@ import pytest
 from scipy import signal
 
 from flightctl.cli import main
-from test_diagnose_cases import close_enough, draw, quick_plan
+from helpers.diagnose_cases import close_enough, draw, quick_plan
 
 PLUS_ROTORS = "1 0 -1; 0 1 1; -1 0 -1; 0 -1 1"   # the paper's + layout in arm lengths, spins (conventions.md)
 MIN_AIRBORNE_S = 12.0

@@ -490,7 +490,7 @@ def test_a_log_that_opens_armed_is_read_on_its_other_sources(tmp_path, capsys):
     (EV 8, 25, 10 ARMED, 15 AUTO_ARMED, 28 NOT_LANDED) with its EV ARMED cut out, as such a log has it,
     is read on AUTO_ARMED, NOT_LANDED and its motor outputs, said in a note; with every EV cut out, as
     a log with neither ARM nor EV; with its outputs pinned too, on its barometer's climb and return
-(tests/sim/logs/test_dataflash_height.py has the logs refused as never armed)."""
+(tests/sim/logs/test_dfarming_height.py has the logs refused as never armed)."""
     data = CRASH.read_bytes()
     walked = list(_messages(data))
     assert sum(n for _, n, _ in walked) > 0.99 * len(data) and sum(name == "EV" for *_, name in walked) == 5

@@ -28,7 +28,7 @@ RENAMED = {"LOG00257.BFL": "c.BFL", "LOG00258.BFL": "b.BFL", "LOG00259.BFL": "a.
 
 def diagnose(folder: Path, report: Path, *extra: str) -> subprocess.CompletedProcess:
     """`flightctl diagnose --corpus FOLDER --fleet REPORT` in its own process, as a user runs it (-P: the
-    installed package, tests/sim/diagnose/fleet/test_fleet.py)."""
+    installed package, tests/sim/diagnose/test_corpus.py)."""
     return subprocess.run([sys.executable, "-P", "-m", "flightctl.cli", "diagnose", "--corpus", str(folder), "--fleet",
                            str(report), "--quiet", "--jobs", "2", *extra], capture_output=True, text=True,
                           env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})

@@ -80,7 +80,7 @@ def _noise(tmp_path, name, *args, params=()):
     import json
 
     from flightctl.cli import main
-    from test_diagnose_cases import quick_plan
+    from helpers.diagnose_cases import quick_plan
     log, out = tmp_path / f"{name}.csv", tmp_path / f"{name}.json"
     assert main(["sim", "--plan", str(quick_plan(tmp_path)), "--log", str(log), "--seed", "7", "--no-plot",
                  "--quiet", *args, *params]) in (0, 1)

@@ -20,7 +20,7 @@ from flightctl.sim.causes.rotor_inflow import climb_speed
 from flightctl.sim.diagnose.data import load_file
 from flightctl.sim.diagnose.dataset import DataSet, Vehicle
 
-from test_diagnose_cases import draw
+from helpers.diagnose_cases import draw
 
 
 def truth_columns(path) -> dict[str, np.ndarray]:

@@ -172,7 +172,7 @@ def test_stop_motors_without_the_pwm_chip_fails_loudly(tmp_path, caplog):
     assert "stop-motors: no PWM chips" in caplog.text
 
 
-# --- which board: the device tree's model (tests/onboard/boards/test_pi_sandbox.py: inside the unit's sandbox) -----
+# --- which board: the device tree's model (tests/onboard/boards/test_detect_sandbox.py: inside the unit's sandbox) -----
 @pytest.fixture
 def model(tmp_path, monkeypatch):
     path = tmp_path / "sys" / "firmware" / "devicetree" / "base" / "model"

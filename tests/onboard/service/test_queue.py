@@ -148,7 +148,7 @@ def test_a_plan_still_being_written_is_left_alone(q):
 
 
 def test_the_service_stays_up_disarmed_through_stale_and_bad_plans(tmp_path):
-    from test_service_run import Service
+    from test_run import Service
     queue, logs = tmp_path / "plans", tmp_path / "logs"
     queue.mkdir()
     put(queue, "yesterday.toml", GOOD, time.time() - 86400)      # queued while the service was down

@@ -22,7 +22,7 @@ from flightctl.service.queue import PlanQueue
 from flightctl.sim.world.devices import SensorNoise, World
 from flightctl.sim.world.imu import SimMpu9250
 from flightctl.sim.world.power import SimIna219, SimSMBus
-from test_service_run import Service
+from test_run import Service
 
 pytestmark = pytest.mark.flaky(reruns=2)
 

@@ -130,7 +130,7 @@ def run_case(tmp: Path, cause: str, parameters: dict, seed: int, quick: bool = F
     return json.loads(out.read_text())
 
 
-# Two effects at once (tests/sim/diagnose/test_diagnose_chain.py, scripts/diagnose_pairs.py: no pytest here, the
+# Two effects at once (tests/sim/diagnose/test_verdict_chain.py, scripts/diagnose_pairs.py: no pytest here, the
 # script imports this module). The pairs are of the contract's causes (docs/measured-data.md); an extension's
 # pairs are drawn in its own test (`partners`).
 TWINS = {frozenset(("motor_lag", "motor_dynamics"))}

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from test_diagnose_cases import CONTRACT, close_enough, fly_pair
+from helpers.diagnose_cases import CONTRACT, close_enough, fly_pair
 
 TIMING = ("motor_lag", "actuation_delay", "motor_dynamics")
 

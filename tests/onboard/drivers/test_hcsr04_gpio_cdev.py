@@ -14,7 +14,7 @@ import pytest
 from helpers.fakes.gpiochip import MIN_TRIGGER_NS, FakeGpioDevice
 from flightctl.drivers.gpio_cdev import CdevGpio, GpioBusy
 from flightctl.drivers.hcsr04 import US_PER_M, WATCHDOG_MS, HcSr04
-from test_pi_hcsr04 import measure      # the same measurement as on the pigpio board
+from test_hcsr04_pigpio import measure      # the same measurement as on the pigpio board
 
 TRIGGER, ECHO = 23, 24
 

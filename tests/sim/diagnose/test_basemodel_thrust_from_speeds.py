@@ -1,4 +1,4 @@
-"""The thrust effectiveness from the log's own rotor speeds (base.thrust_from_speeds, eq. 27: f = c1 Omega^2),
+"""The thrust effectiveness from the log's own rotor speeds (basemodel.thrust_from_speeds, eq. 27: f = c1 Omega^2),
 on the INDIflight logs that measured them (../shared/data/real/flights/indiflight, omegaUnfiltered):
 it agrees with the one the motor commands give where both are identified, and it is what identifies the
 thrust of a flight whose commands do not show it (the regression of issue 35: two Betaflight 4.5.1

@@ -1,7 +1,7 @@
 """The Pi 5's ESC driver (flightctl/drivers/pwm_sysfs.py) against the fake sysfs PWM tree, which enforces
 the kernel's rules on every write (tests/helpers/fakes/sysfs_pwm.py): export, period before duty cycle, the
 pulses it puts on the channels, the read-back that catches another process, the release at close and
-at ExecStopPost, and the dead-man process when the controller stalls (tests/onboard/boards/test_safety_pi5_stop.py: killed)."""
+at ExecStopPost, and the dead-man process when the controller stalls (tests/onboard/drivers/test_pwm_deadman.py: killed)."""
 from __future__ import annotations
 
 import errno

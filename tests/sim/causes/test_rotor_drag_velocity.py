@@ -17,7 +17,7 @@ from flightctl.params import load
 from flightctl.sim.causes import CAUSES
 from flightctl.sim.diagnose.data import load_file
 from flightctl.sim.diagnose.dataset import DataSet, Vehicle
-from test_diagnose_cases import close_enough, draw, quick_plan
+from helpers.diagnose_cases import close_enough, draw, quick_plan
 
 
 def fitted_k(table, a, offset=(0.0, 0.0)) -> float:
