@@ -40,7 +40,7 @@ NOISIER = 10.0
 
 
 def calibrate(seed: int) -> dict:
-    """The rows' noise (fleet_rows.Noise) from flown and diagnosed flights, and the weak motor read back."""
+    """The rows' noise (sim/sweeps/fleet_drawn.py's Noise) from flown and diagnosed flights, and the weak motor read back."""
     from flightctl.sim.sweeps.fleet_flown import simulate_fleet
     from flightctl.sim.sweeps.fleet_drawn import Noise
     from flightctl.sim.diagnose.fleet.report import build, share_scale

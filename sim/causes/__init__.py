@@ -14,10 +14,11 @@ compiled plant carries it (`compiled`, its `compiled_hook` and `compiled_q`: sim
 them).
 
 Adding a cause: a module here with its `Effect` and its `Candidate` (whose `effect` names it), one
-line in `_FITS` below (or `register` for one defined elsewhere), a row in docs/diagnose.md's table of the causes
-beyond the contract (after the
-contract's, whose table is docs/measured-data.md's; tests/sim/causes/test_causes.py checks that the registry and the two
-tables agree), a unit test of the effect and a hidden-effect case (tests/helpers/diagnose_cases.py).
+row in `_EXTENSION_FITS` below, the project's causes after the contract's `_FITS` (and the module on the
+import line; or `register` for one defined elsewhere), a row in docs/diagnose.md's table of the causes
+beyond the contract (the contract's table is docs/measured-data.md's; tests/sim/causes/test_causes.py
+checks that the registry and the two tables agree), a unit test of the effect and a hidden-effect case
+(`draw` in tests/helpers/diagnose_cases.py); docs/architecture.md, "Where to add".
 Importing the registry costs no scipy (the fits import it when they run): `flightctl sim` starts fast.
 """
 from __future__ import annotations

@@ -1,7 +1,8 @@
-"""The registry of causes (flightctl.sim.causes) against the contract's table of causes in
-measured-data.md, followed by the project's own extensions, each in the table of docs/diagnose.md
-("Causes beyond the contract"): the same names in the same order and the same parameter names (with
-their units), and each cause's effect and diagnose candidate consistent with each other."""
+"""The registry of causes (flightctl.sim.causes) against the contract's table of causes in the
+specification's measured-data.md (../shared/spec/ beside the checkout; docs/measured-data.md carries its
+text), followed by the project's own extensions, each in the table of docs/diagnose.md ("Causes beyond
+the contract"): the same names in the same order and the same parameter names (with their units), and
+each cause's effect and diagnose candidate consistent with each other."""
 from __future__ import annotations
 
 import re
