@@ -59,15 +59,9 @@ def run(n: int, n_off: int, seed: int, workers: int, terms=posterior.TERMS, cand
     return out
 
 
-def _arrays(result: dict):
-    draws = {tuple(k.split(".", 1)): np.array(v) for k, v in result["draws"].items()}
-    verdicts = {i: np.array([c == "1" for c in s]) for i, s in result["verdicts"].items()}
-    return draws, verdicts
-
-
 def analyse(result: dict) -> dict:
     """The figures the blocks show, from the JSON."""
-    draws, verdicts = _arrays(result)
+    draws, verdicts = posterior.stored(result)
     ok = evidence.passes(verdicts)
     n, k = len(ok), int(ok.sum())
     m = result["models"]

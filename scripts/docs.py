@@ -138,6 +138,8 @@ BLOCKS = (
           minutes=1.5),
     Block("retune-study", "docs/tune.md", *marked("retune study"),
           SCRIPT + ("scripts/retune_study.py", "--from", "docs/retune-study.json")),
+    Block("retune-study-readme", "README.md", *marked("retune study"),
+          SCRIPT + ("scripts/retune_study.py", "--from", "docs/retune-study.json", "--readme")),
     Block("steps-predicted", "docs/steps.md", *marked("steps predicted"), SCRIPT + ("scripts/steps_predicted.py",),
           minutes=2.5),
     analyze("analyze-base-table4", "analyze base table4", "--gains", "table4", "--estimator", "truth",

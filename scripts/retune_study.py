@@ -14,7 +14,8 @@ from 8 s to 36 s and only yaw and the altitude after `predict.SPLIT` of its time
 no roll or pitch step to check the model on; and where Table 4 crashed early its first half has no stretch in the
 air (an uncaught ValueError in DataSet, now a refusal). So each hidden vehicle also flies, with Table 4,
 tests/data/plans/steps-both-halves.toml (roll and pitch steps in both halves, `PLAN`), and that log is the one
-tuned from, read as the CLI reads it (`diagnose.cli.read_logs`). The judged flights are the paper flight's.
+tuned from, read as the CLI reads it (`diagnose.cli.read_logs`), a log that ends in a crash too (`tune --from-log`
+takes its rows before the crash, `predict.before_crash`). The judged flights are the paper flight's.
 """
 from __future__ import annotations
 
@@ -28,6 +29,10 @@ import numpy as np
 
 HIDDEN = ("motor_lag", "actuation_delay", "motor_weak")
 PLAN = Path(__file__).resolve().parents[1] / "tests" / "data" / "plans" / "steps-both-halves.toml"
+POSTERIOR = Path(__file__).resolve().parents[1] / "docs" / "as-flown-posterior.json"
+POPULATIONS = {"prior": "of paper-as-flown's ranges",
+               "posterior": "of the posterior (the draws of paper-as-flown's ranges that pass every observation of the "
+                            "paper's flights, docs/as-flown.md)"}
 
 
 def hidden(rng: np.random.Generator) -> str:
@@ -62,14 +67,33 @@ def why_refused(rep: dict) -> str:
         kinds.append("no measured step (the setpoint's coherence too low below 2 Hz)" if "coherence" in r else
                      "no measured step (no setpoint steps)" if "windows in the air" in r else
                      "the model does not predict the step" if "does not predict" in r else
-                     "no gains meet the targets" if "meet the targets" in r else r.split(":")[0])
+                     "no gains meet the targets" if "meet the targets" in r else
+                     "no base model: " + r.split("): ", 1)[1].split(" (")[0] if "no base model from" in r else r.split(":")[0])
     return "; ".join(sorted(set(kinds))) or rep.get("refused", "")
 
 
-def study(n: int, seed: int, share: float, progress=print, only=None) -> dict:
+def vehicles(base, n: int, seed: int, population: str) -> list[dict]:
+    """n hidden vehicles, each `montecarlo.one_draw`'s values: drawn from paper-as-flown's ranges (`prior`), or the
+    posterior's (the prior's draws of the stored run that pass every observation of the paper's flights:
+    docs/as-flown-posterior.json, sim/sweeps/posterior.py; the vehicle its flights say it was), in their order."""
+    from flightctl.sim.sweeps import evidence, posterior
+    from flightctl.sim.sweeps.montecarlo import draw, one_draw
+    if population == "prior":
+        draws = draw(base, n, seed)
+        return [one_draw(draws, k) for k in range(n)]
+    import json
+    draws, verdicts = posterior.stored(json.loads(POSTERIOR.read_text()))
+    ok = np.flatnonzero(evidence.passes(verdicts))
+    if n > ok.size:
+        raise SystemExit(f"retune_study: --vehicles {n}: the posterior ({POSTERIOR.name}) holds {ok.size} draws")
+    return [one_draw(draws, int(i)) for i in ok[:n]]
+
+
+def study(n: int, seed: int, share: float, progress=print, only=None, population: str = "prior") -> dict:
     """The study's rows (`only`: the vehicles of these indexes alone, of the same n drawn: a re-check)."""
     import time
     from flightctl import params as paramfile
+    from flightctl.errors import InputError
     from flightctl.plans.plan import read_plan_file
     from flightctl.sim.flights.scenarios import scenario
     from flightctl.sim.diagnose import steps
@@ -79,10 +103,10 @@ def study(n: int, seed: int, share: float, progress=print, only=None) -> dict:
     from flightctl.sim.flights.run import fly
     from flightctl.sim.flights.scenarios import SCENARIOS
     from flightctl.sim.sweeps import fromlog
-    from flightctl.sim.sweeps.montecarlo import draw, drawn_params, one_draw
+    from flightctl.sim.sweeps.montecarlo import drawn_params
     import dataclasses
     base = causes.load_vehicle("paper-as-flown")
-    draws = draw(base, n, seed)
+    hidden_vehicles = vehicles(base, n, seed, population)
     rng = np.random.default_rng(seed)
     a = paramfile.load(None).airframe
     rows = []
@@ -93,7 +117,7 @@ def study(n: int, seed: int, share: float, progress=print, only=None) -> dict:
             if only is not None and k not in only:
                 continue
             effects = [causes.parse(effect)] if effect else []
-            params = drawn_params(base, one_draw(draws, k))
+            params = drawn_params(base, hidden_vehicles[k])
             row = {"vehicle": k, "hidden": effect}
             log = Path(tmp) / "table4.csv"
             for name, g in (("table4", TABLE4), ("table6", TABLE6)):
@@ -102,11 +126,15 @@ def study(n: int, seed: int, share: float, progress=print, only=None) -> dict:
                                        seed=seed + k), sc)
             ident = fly(scenario(read_plan_file(PLAN)), dataclasses.replace(params, gains=TABLE4), log,
                         effects=effects, seed=seed + k)
-            if not (ident.flew and not ident.crashed):
-                row["from_log"] = {"refused": f"the identification flight ({PLAN.name}) crashed with Table 4"}
-            else:
-                table, = read_logs([str(log)], None, lambda m: None, extra=steps.LOOPS[0].setpoint)
-                rep = fromlog.from_log(table, a, fromlog.Targets(), draws=16, seed=seed + k)
+            if not ident.flew:
+                row["from_log"] = {"refused": f"the identification flight ({PLAN.name}) never left the ground with Table 4"}
+            else:                          # a crashed one too: from_log takes its rows before the crash
+                row["ident_crashed"] = bool(ident.crashed)
+                try:
+                    table, = read_logs([str(log)], None, lambda m: None, extra=steps.LOOPS[0].setpoint)
+                    rep = fromlog.from_log(table, a, fromlog.Targets(), draws=16, seed=seed + k)
+                except InputError as e:    # what the command says and exits 2 on: a crash too soon to read
+                    rep = {"refused": f"the log refused: {str(e).split(': ')[1]}", "axes": {}}
                 new = fromlog.recommended(rep)
                 row["from_log"] = {"refused": why_refused(rep)} if not new else None
             if row.get("from_log") is None:       # flightctl's attitude gains, eq. 24: kp_phi etc.
@@ -120,7 +148,8 @@ def study(n: int, seed: int, share: float, progress=print, only=None) -> dict:
                      f"{'holds' if row['table4']['holds'] else 'flies' if row['table4']['flies'] else 'crashes'}, "
                      f"Table 6 {'holds' if row['table6']['holds'] else 'flies' if row['table6']['flies'] else 'crashes'}, "
                      f"from the log: {'refused' if 'refused' in row['from_log'] else row['from_log']}")
-    return {"vehicles": n, "seed": seed, "hidden_share": share, "cpu_s": round(time.process_time() - t0), "rows": rows}
+    return {"vehicles": n, "seed": seed, "hidden_share": share, "population": population,
+            "cpu_s": round(time.process_time() - t0), "rows": rows}
 
 
 def _ring(rows, a: str, b: str) -> str:
@@ -134,7 +163,8 @@ def markdown(res: dict) -> str:
     rows = res["rows"]
     n = len(rows)
     L = [f"`python scripts/retune_study.py --vehicles {res['vehicles']} --seed {res['seed']} --hidden-share "
-         f"{res['hidden_share']:g}`: {n} hidden vehicles of paper-as-flown's ranges, "
+         f"{res['hidden_share']:g}" + (" --population posterior" if res.get("population") == "posterior" else "")
+         + f"`: {n} hidden vehicles {POPULATIONS[res.get('population', 'prior')]}, "
          f"{sum(r['hidden'] is not None for r in rows)} with a hidden effect; each judged on the paper flight.", "",
          "| gains | flies | holds | median score where it holds | worst ringing over Table 4's where both hold (vehicles) "
          "| no gains from the log |", "|---|---|---|---|---|---|"]
@@ -168,15 +198,23 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--hidden-share", type=float, default=0.5)
     ap.add_argument("--json", help="write the rows here (docs/retune-study.json: the docs block's table)")
     ap.add_argument("--from", dest="from_", help="the table of a stored run (its rows), not flown again")
+    ap.add_argument("--population", choices=tuple(POPULATIONS), default="prior",
+                    help="the hidden vehicles: of paper-as-flown's ranges, or of the posterior its flights leave")
+    ap.add_argument("--readme", action="store_true", help="the README's block: the command and the table alone")
     args = ap.parse_args(argv)
     import json
     if args.from_:
         res = json.loads(Path(args.from_).read_text())
     else:
-        res = study(args.vehicles, args.seed, args.hidden_share, lambda m: print(m, file=sys.stderr, flush=True))
+        res = study(args.vehicles, args.seed, args.hidden_share, lambda m: print(m, file=sys.stderr, flush=True),
+                    population=args.population)
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=1) + "\n")
-    print(markdown(res))
+    text = markdown(res)
+    if args.readme:                # the table, and where its reasons are
+        text = (text.split("\n\nNo gains from the log")[0] + "\n\nWhy the log gave no gains, by hidden effect, and what "
+                "it says: [docs/tune.md](docs/tune.md#the-papers-retuning-in-simulation).")
+    print(text)
     return 0
 
 

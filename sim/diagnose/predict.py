@@ -49,6 +49,7 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import Table
+from flightctl.safety import CRASH_TILT
 from flightctl.sim.diagnose import loops, steps
 from flightctl.sim.diagnose.basemodel import YAW_UNKNOWN, identify, yaw_identified
 from flightctl.sim.diagnose.data import load_file, parse_filters
@@ -64,6 +65,7 @@ POINTS_TO = {"rise_s": "the effectiveness (the gain from the commands to the ang
              "delay_s": "the timing (the commands' delay tau, the filters)",
              "overshoot": "the damping (the D term and its filters, the timing against the gains)"}
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+CRASH_MARGIN_S = 0.5        # s: a log that ends in a crash is taken to this long before its tilt passes the limit
 
 
 def _rows(table: Table, keep: np.ndarray, tag: str) -> Table:
@@ -76,6 +78,26 @@ def halves(table: Table, split: float = SPLIT) -> tuple[Table, Table, float]:
     t = table["t"]
     cut = float(t[0] + split * (t[-1] - t[0]))
     return (_rows(table, t < cut, f"to {cut:.1f} s"), _rows(table, t >= cut, f"from {cut:.1f} s"), cut)
+
+
+def before_crash(table: Table, margin_s: float = CRASH_MARGIN_S) -> tuple[Table, float | None]:
+    """The rows before a crash that ends the log: (the rows more than `margin_s` before the logged attitude
+    first tilts past the crash limit (flightctl.safety.CRASH_TILT, roll or pitch), the time of that tilt), or
+    (the table, None) where it never does. A log whose last row is tilted past half the limit ended over, not
+    landed (flightctl's loop stops at the limit before it logs the row past it; a firmware's log ends at its
+    disarm): its crash is that last row. The rows of the fall are no flight of the loop the log's gains
+    close; those before it are, an unstable loop's growing swing included."""
+    if "roll" not in table or "pitch" not in table or len(table["t"]) == 0:
+        return table, None
+    tilt = np.maximum(np.abs(table["roll"]), np.abs(table["pitch"]))
+    with np.errstate(invalid="ignore"):
+        over = np.flatnonzero(tilt > CRASH_TILT)
+        if over.size == 0 and tilt[-1] > 0.5 * CRASH_TILT:
+            over = np.array([tilt.size - 1])
+    if over.size == 0:
+        return table, None
+    t_c = float(table["t"][over[0]])
+    return _rows(table, table["t"] < t_c - margin_s, f"to {t_c - margin_s:.1f} s, before its crash"), t_c
 
 
 def base_model(table: Table, a, progress=lambda *_: None):
@@ -134,6 +156,13 @@ def timing(vehicle) -> tuple[float, float]:
     if fitted:
         return fitted["delay_s"], fitted["lag_s"]
     return float(vehicle.identification["timing"]["value"]), 0.0
+
+
+def chains(parts: dict, meta: dict) -> tuple[str, str]:
+    """(the gyro filter chain inside the loop, the chain of the logged gyro): the firmware's own loop chain where
+    loop_parts gives it (loops.py: PX4's and ArduPilot's LowPassFilter2p), else the log's header."""
+    return (parts.get("gyro_loop_chain") or meta.get("gyro_loop_filter", meta.get("gyro_filter", "none")),
+            meta.get("gyro_filter", "none"))
 
 
 def loop_parts(ctrl: dict, meta: dict, axis: str, declared=None) -> tuple[dict | None, list[str]]:
@@ -318,9 +347,8 @@ def predict(model, ctrl: dict, checked: Table, identified_on: str, checked_on: s
             continue
         tau, lag = timing(vehicle)
         parts = {**parts, "motor_lag_s": lag}
-        loop_chain = parts.get("gyro_loop_chain") or checked.meta.get("gyro_loop_filter", checked.meta.get("gyro_filter", "none"))
-        entry, pred = compare(curves[(loop, axis)],
-                              lambda f: closed_loop(f, b, tau, parts, loop_chain, checked.meta.get("gyro_filter", "none")), e)
+        loop_chain, response_chain = chains(parts, checked.meta)
+        entry, pred = compare(curves[(loop, axis)], lambda f: closed_loop(f, b, tau, parts, loop_chain, response_chain), e)
         shown = {k: (round(v(vehicle.identification["median_P"]["value"]), 6) if callable(v) else v) for k, v in parts.items()}
         fitted = ((vehicle.identification.get("loop_fit") or {}).get("axes") or {}).get(axis, {})
         if entry["points_to"] and "why" in fitted:

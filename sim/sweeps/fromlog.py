@@ -4,7 +4,9 @@ from a log").
 
 1. **The vehicle and its controller.** The base model diagnose identifies (`predict.base_model`, basemodel.py) on
    the log's first `predict.SPLIT` of time, and the firmware's rate controller as the log gives it
-   (sim/logs/controller.py, `predict.loop_parts`).
+   (sim/logs/controller.py, `predict.loop_parts`). A log that ends in a crash is taken to
+   `predict.CRASH_MARGIN_S` before its attitude passes the crash limit (`predict.before_crash`): the fall
+   is not the loop the gains close.
 2. **The check.** That model flying the logged controller predicts each rate axis's step on the rest of the
    log (`predict.held_out_model`), or, with `--check-on LOG2`, the model of the whole LOG predicts another log
    of the same vehicle flown with its own gains (`predict.cross_model`). An axis whose prediction does not
@@ -16,7 +18,8 @@ from a log").
    timing uniform over the identification's grid step either side of the value found (base.TIMING_DELAYS: the
    search's resolution, the only figure of its uncertainty the identification gives, or its `stderr` where it
    has one). Each draw's effectiveness b is predict.py's linearisation (`predict.effectiveness`) of the drawn
-   figures; the loop is predict.py's (`predict.loop_terms`), so a draw is the same loop the check checked.
+   figures through the log's firmware's own mix and range (`predict.loop_parts`), and the loop is predict.py's
+   (`predict.loop_terms`, its gyro chains `predict.chains`), so a draw is the same loop the check checked.
 4. **The search.** Per axis the logged P, I and D each times a factor on a log grid `GRID` over [1/m, m],
    m = `--max-change` (a bounded change per pass, the Betaflight App's 0.5-2x; D stays where the firmware has
    none). Each candidate on every drawn model: on the open loop L = b G Fg (kp P + ki I + kd D), over the
@@ -29,8 +32,9 @@ from a log").
    gain margin >= --target-gm, Ms <= --ms, overshoot <= --overshoot, every draw's step settling to its
    setpoint (`SETTLED`), and, with --rise-ms, its median rise no slower. Among those the fastest median rise
    wins; within `TIE` of it, the least change (the sum of |log factor|).
-   None meets them: the axis gets no recommendation and the report names the candidate nearest (the least
-   worst shortfall, each target's in its own scale) and which target fails.
+   None meets them: the axis gets no recommendation and the report names the candidate nearest (the fewest
+   drawn models on which it diverges, then the least worst shortfall, each target's in its own scale) and which
+   target fails.
 5. **The lines to paste** in the log's firmware's own terms (`paste`): Betaflight's CLI `set` lines (the
    integers of the header's rollPID etc.: the physical gain over PTERM/ITERM/DTERM_SCALE / PID_MIXER_SCALING,
    controller.py's constants, pid_init.c:274-276, pid.h:32, 44-46; the names and 0-200 range of the CLI's
@@ -79,9 +83,12 @@ class Targets:
     max_change: float = 2.0
 
 
-def drawn_models(vehicle, declared, axis: str, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def drawn_models(vehicle, declared, axis: str, n: int, rng: np.random.Generator,
+                 parts: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(b (n,), tau (n,)): the axis's effectiveness and the commands' timing of n plausible models (module
-    docstring, 3), b through predict.effectiveness of each drawn identification."""
+    docstring, 3), b through predict.effectiveness of each drawn identification with the log's firmware's mix
+    and range (`parts`, predict.loop_parts: the same b the check of the logged loop used; without it
+    Betaflight's, which scales another firmware's loop wrong)."""
     idn = vehicle.identification
     key = {"x": "k_p", "y": "k_q", "z": "k_r"}[axis]
     k, k_se = idn[key]["value"], idn[key]["stderr"]
@@ -99,7 +106,7 @@ def drawn_models(vehicle, declared, axis: str, n: int, rng: np.random.Generator)
              "h2": {**idn["h2"], "value": min(rng.normal(h2, h2_se), pm - 1.0)}}
         drawn = types.SimpleNamespace(identification=d, layout=vehicle.layout,
                                       gains=tuple(np.maximum(rng.normal(g, g_se), 0.05)))
-        b[i] = predict.effectiveness(drawn, declared, axis)
+        b[i] = predict.effectiveness(drawn, declared, axis, parts)
     return b, taus
 
 
@@ -219,6 +226,14 @@ def _shortfall(fig: dict, tg: Targets, rise_max: float) -> np.ndarray:
     return np.nan_to_num(s, nan=np.inf)
 
 
+def _nearest(fig: dict, short: np.ndarray) -> int:
+    """The candidate nearest the targets: the fewest drawn models on which its loop is unstable (a negative phase
+    margin: there the gain margin and Ms, finite, say nothing of a loop that diverges), then the least worst
+    shortfall (`_shortfall`)."""
+    unstable = (np.nan_to_num(fig["pm_deg"], nan=-1.0) < 0).sum(axis=0)
+    return int(np.lexsort((short.max(axis=1), unstable))[0])
+
+
 SHORT_NAMES = ("phase margin", "gain margin", "Ms", "overshoot", "rise (or a step that does not settle)")
 
 
@@ -236,7 +251,7 @@ def tune_axis(ax: Axis, tg: Targets) -> dict:
     if pool.size == 0:                 # none meets the margins: the nearest by its margins alone, with its steps
         short = _shortfall({**coarse, "rise_s": np.zeros_like(coarse["ms"]), "overshoot": np.zeros_like(coarse["ms"]),
                             "final": np.ones_like(coarse["ms"])}, tg, math.inf)
-        pool = np.array([int(np.argmin(short.max(axis=1)))])
+        pool = np.array([_nearest(coarse, short)])
     fig = ax.figures(grid[pool])
     short = _shortfall(fig, tg, rise_max)
     met = np.flatnonzero((short == 0).all(axis=1))
@@ -251,7 +266,7 @@ def tune_axis(ax: Axis, tg: Targets) -> dict:
         j = int(tie[np.argmin(change[tie])])
         out["recommended"] = True
     else:
-        j = int(np.argmin(short.max(axis=1)))
+        j = _nearest(fig, short)
         out["recommended"] = False
         out["why"] = ("no gains within x" + f"{tg.max_change:g} of the logged ones meet the targets on every drawn model: "
                       "nearest fails " + ", ".join(n for n, s in zip(SHORT_NAMES, short[j]) if s > 0))
@@ -263,10 +278,6 @@ def tune_axis(ax: Axis, tg: Targets) -> dict:
     return out
 
 
-def _loop_chain(meta: dict) -> tuple[str, str]:
-    return meta.get("gyro_loop_filter", meta.get("gyro_filter", "none")), meta.get("gyro_filter", "none")
-
-
 def from_log(table, a, targets: Targets, check_on=None, draws: int = DRAWS, seed: int = 0,
              progress=lambda *_: None) -> dict:
     """The module docstring's 1-4 on one log (`check_on`: another log of the vehicle, flown with its own
@@ -275,6 +286,11 @@ def from_log(table, a, targets: Targets, check_on=None, draws: int = DRAWS, seed
     parts0, why = predict.loop_parts(ctrl, table.meta, "x")
     report = {"log": table.path, "firmware": ctrl.get("firmware"), "targets": dataclasses.asdict(targets),
               "draws": draws, "seed": seed, "axes": {}}
+    table, crash_s = predict.before_crash(table)
+    if crash_s is not None:
+        report["crash_s"] = crash_s
+        progress(f"the log ends in a crash (the attitude past {math.degrees(predict.CRASH_TILT):.0f} deg at {crash_s:.1f} s): "
+                 f"its rows to {crash_s - predict.CRASH_MARGIN_S:.1f} s are taken")
     if parts0 is None:
         report["refused"] = why[0]
         return report
@@ -298,12 +314,12 @@ def from_log(table, a, targets: Targets, check_on=None, draws: int = DRAWS, seed
                                 + (e["points_to"] or "the step error alone"))
             continue
         vehicle, declared = model
-        parts, _ = predict.loop_parts(ctrl, table.meta, axis)
+        parts, _ = predict.loop_parts(ctrl, table.meta, axis, declared)   # the firmware's mix and range, as checked
         parts = {**parts, "motor_lag_s": predict.timing(vehicle)[1]}     # the loop fit's motor lag (loopfit.py)
         progress(f"{steps.NAMES[axis]}: the check agrees (step error {e['step_error']:.3g}); {draws} models drawn, "
                  f"{len(_grid(parts, targets.max_change))} candidates")
-        b, tau = drawn_models(vehicle, declared, axis, draws, rng)
-        entry.update(tune_axis(Axis(parts, b, tau, *_loop_chain(table.meta)), targets))
+        b, tau = drawn_models(vehicle, declared, axis, draws, rng, parts)
+        entry.update(tune_axis(Axis(parts, b, tau, *predict.chains(parts, table.meta)), targets))
         entry["not_modelled"] = e.get("not_modelled", [])
         band, fc = e.get("band_hz"), entry["logged"]["phase_crossover_hz"]
         if band and fc and fc > band:
@@ -404,6 +420,10 @@ def text(report: dict) -> str:
         r = s["rise_s"]
         return (f"PM {_f(s['pm_deg'])} deg, GM {_f(s['gm_db'])} dB, Ms {_f(s['ms'], 3)}, rise "
                 f"{_f(r, ms=True)} ms, overshoot {_f(s['overshoot'], pct=True)} %  (median / worst)")
+    if "crash_s" in report:
+        L.append(f"  the log ends in a crash (the attitude past {math.degrees(predict.CRASH_TILT):.0f} deg at "
+                 f"{report['crash_s']:.1f} s): identified and checked on its rows to "
+                 f"{report['crash_s'] - predict.CRASH_MARGIN_S:.1f} s")
     for ax, e in report["axes"].items():
         name = steps.NAMES[ax]
         c = e["check"]

@@ -84,6 +84,14 @@ def fly(params, n: int, seed: int, structure: str = "flight", workers: int = 1, 
     return {"draws": draws, "verdicts": verdicts, "passes": evidence.passes(verdicts)}
 
 
+def stored(result: dict) -> tuple[dict, dict[str, np.ndarray]]:
+    """A stored run's prior draws and verdicts (docs/as-flown-posterior.json: "cause.parameter" -> values, the
+    observation -> a string of 0/1) as `montecarlo.draw`'s arrays and `evidence.verdicts`' booleans."""
+    draws = {tuple(k.split(".", 1)): np.array(v) for k, v in result["draws"].items()}
+    verdicts = {i: np.array([c == "1" for c in s]) for i, s in result["verdicts"].items()}
+    return draws, verdicts
+
+
 def share(k: int, n: int) -> tuple[float, float]:
     """A binomial share and its Monte Carlo (standard) error."""
     p = k / n

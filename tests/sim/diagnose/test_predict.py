@@ -181,3 +181,33 @@ def test_the_linearised_effectiveness_is_what_a_plain_regression_sees(cs110):
         slope = min(fits)[1]
         model = predict.effectiveness(vehicle, declared, ax) / (4 * predict.P_RANGE)   # per P unit of the mix's sum
         assert model == pytest.approx(slope, rel=0.15), (ax, model, slope)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_log_that_ends_in_a_crash_is_taken_to_before_it(seed):
+    """A flight whose attitude swings ever wider (an unstable loop) until it tilts past the crash limit at a time
+    drawn at random, on roll or on pitch: the rows kept end CRASH_MARGIN_S before the first row past the limit,
+    the crash's time is that row's; a flight that never passes the limit is kept whole."""
+    from flightctl.logfile import Table
+    rng = np.random.default_rng(seed)
+    fs, t_c = 450.0, rng.uniform(5.0, 40.0)
+    t = np.arange(0.0, t_c + 3.0, 1.0 / fs)
+    grow = np.exp((t - t_c) * rng.uniform(0.5, 2.0))               # the swing's envelope: 1 at t_c
+    swing = predict.CRASH_TILT * grow * np.sin(2 * np.pi * rng.uniform(2.0, 8.0) * t)
+    axis, other = ("roll", "pitch") if rng.random() < 0.5 else ("pitch", "roll")
+    cols = {"t": t, axis: swing, other: 0.1 * rng.standard_normal(t.size)}
+    table = Table("f.csv", cols, {}, np.arange(t.size) + 10)
+    kept, crash = predict.before_crash(table)
+    first = t[np.flatnonzero(np.abs(swing) > predict.CRASH_TILT)[0]]
+    assert crash == first and t_c - 0.5 < crash <= t[-1]
+    assert kept["t"][-1] < crash - predict.CRASH_MARGIN_S <= kept["t"][-1] + 1.0 / fs + 1e-9
+    assert len(kept) == kept["t"].size and np.array_equal(kept[axis], swing[: kept["t"].size])
+    calm = Table("g.csv", {"t": t, "roll": 0.5 * swing / grow, "pitch": cols[other]}, {}, np.arange(t.size))
+    assert predict.before_crash(calm) == (calm, None)
+    stop = np.flatnonzero(np.abs(swing) > predict.CRASH_TILT)[0]          # a loop that stops itself at the limit
+    cut = Table("h.csv", {k: v[:stop] for k, v in cols.items()}, {}, np.arange(stop))
+    assert abs(swing[stop - 1]) > 0.5 * predict.CRASH_TILT                # its last row tilted: it ended over
+    kept, crash = predict.before_crash(cut)
+    assert crash == t[stop - 1] and kept["t"][-1] < crash - predict.CRASH_MARGIN_S
+    level = Table("l.csv", {k: v[:stop] * (0.4 if k == axis else 1.0) for k, v in cols.items()}, {}, np.arange(stop))
+    assert predict.before_crash(level)[1] is None                         # under half the limit: landed or flying

@@ -3,6 +3,7 @@ flown by a known vehicle whose recommended gains must meet the targets on that v
 check fails, the lines to paste read back by the readers, the CLI's bad input, and the CS110 pair."""
 import json
 import math
+import types
 from pathlib import Path
 
 import numpy as np
@@ -175,6 +176,55 @@ def test_recommended_gains_meet_the_targets_on_the_vehicle_that_flew(seed, capsy
         y = out["gyro"][j, int(0.5 * FS):] / sp[j, -1]
         assert float(y.max() - 1.0) <= tg.overshoot, (ax, float(y.max()), raw)
         assert abs(y[-int(0.2 * FS):].mean() - 1.0) < 0.05, ax
+
+
+def _flightctl_vehicle(rng):
+    """A flightctl log's controller (controller.flightctl, Table 4's roll) and an identified vehicle of the '+'
+    layout whose figures carry no spread (the draws are then the identification itself), drawn at random."""
+    flat = {f"gains.k{g}_{n}": v for n, (p, i, d) in zip(("phi", "theta", "psi"), ((17.1, 0, 1.3), (17.2, 0, 1.3), (7.7, 0, 2.7)))
+            for g, v in zip("pid", (p, i, d))}
+    h1, h2, pm = rng.uniform(1.3e-3, 5e-3), rng.uniform(114.5, 137.4), rng.uniform(160.0, 190.0)
+    ctrl = ctl.flightctl({**flat, "loop_hz": 450.0, "filters.tau_rate": 0.007, "h1": h1, "h2": h2})
+    lay = types.SimpleNamespace(x=(0.2475, 0.0, -0.2475, 0.0), y=(0.0, 0.2475, 0.0, -0.2475), spin=(1, -1, 1, -1))
+    zero = lambda v: {"value": v, "stderr": 0.0}
+    idn = {"k_p": zero(rng.uniform(0.12, 0.25)), "k_q": zero(0.2), "k_r": zero(0.01), "h2": zero(h2 - rng.uniform(0, 20)),
+           "median_P": {"value": pm}, "rotor_gain": {"stderr": [0.0] * 4}, "timing": {"value": 0.012, "stderr": None}}
+    return ctrl, types.SimpleNamespace(identification=idn, layout=lay, gains=(1.0, 1.0, 1.0, 1.0))
+
+
+def test_drawn_models_are_the_checked_loop_of_the_logs_firmware():
+    """Each drawn model's effectiveness goes through the log's firmware's own mix and range (predict.loop_parts),
+    the b its check used: with no spread in the identification every draw is that b. Betaflight's range in their
+    place, what the draws once took for every firmware, is another b by a factor the test sees."""
+    rng = np.random.default_rng(47)
+    for _ in range(3):
+        ctrl, vehicle = _flightctl_vehicle(rng)
+        parts, _ = predict.loop_parts(ctrl, {}, "x", vehicle.layout)
+        checked = predict.effectiveness(vehicle, vehicle.layout, "x", parts)
+        b, tau = fromlog.drawn_models(vehicle, vehicle.layout, "x", 8, rng, parts)
+        assert b == pytest.approx(np.full(8, checked), rel=1e-12)
+        betaflight = predict.effectiveness(vehicle, vehicle.layout, "x")
+        assert abs(math.log(betaflight / checked)) > 0.5, (betaflight, checked)
+        assert np.all(tau > 0)
+
+
+def test_the_nearest_to_a_loop_that_diverges_is_one_that_does_not():
+    """Logged gains that the drawn models say diverge (a negative phase margin: a limit cycle the motors' range
+    bounds, as a vehicle in the paper's ranges rings with Table 4) and no candidate within x2 meeting the targets:
+    the nearest candidate named is stable on every draw where the grid has one (the gain margin and Ms of a loop
+    that diverges are finite and say nothing), and it lowers the gains."""
+    rng = np.random.default_rng(48)
+    ctrl, vehicle = _flightctl_vehicle(rng)
+    parts, _ = predict.loop_parts(ctrl, {}, "x", vehicle.layout)
+    b = predict.effectiveness(vehicle, vehicle.layout, "x", parts) * rng.uniform(0.9, 1.1, 6)
+    ax = fromlog.Axis({**parts, "motor_lag_s": 0.02}, b, rng.uniform(0.006, 0.010, 6), "pt1 55", "pt1 55")
+    tg = fromlog.Targets()
+    out = fromlog.tune_axis(ax, tg)
+    assert out["logged"]["pm_deg"]["median"] < 0 and not out["recommended"]
+    coarse = ax.figures(fromlog._grid(ax.parts, tg.max_change), with_steps=False)
+    assert (coarse["pm_deg"].min(axis=0) > 0).any()                # the grid holds a stable candidate
+    assert out["new"]["pm_deg"]["worst"] > 0, out["new"]
+    assert out["new"]["factors"]["kp"] < 1 and out["new"]["factors"]["kd"] < 1
 
 
 def test_loop_margins_of_a_known_loop():
