@@ -36,7 +36,7 @@ POPULATIONS = {"prior": "of paper-as-flown's ranges",
 
 
 def hidden(rng: np.random.Generator) -> str:
-    """One effect and its size (the ranges of tests/sim/diagnose/test_diagnose_cases.py's `draw`)."""
+    """One effect and its size (the ranges of tests/helpers/diagnose_cases.py's `draw`)."""
     cause = str(rng.choice(HIDDEN))
     if cause == "motor_lag":
         return f"motor_lag:tau={rng.uniform(0.02, 0.1):.4f}"

@@ -1,5 +1,5 @@
 """The prediction, checked (docs/steps.md, "Predicted and measured"): the base model identified on one part
-of a flight (`base.identify`, diagnose's own) flying the firmware's controller as the log gives it
+of a flight (`basemodel.identify`, diagnose's own) flying the firmware's controller as the log gives it
 (sim/logs/controller.py; PX4's, ArduPilot's, INAV's and flightctl's attitude loop and mix in loops.py, whose
 terms the closed loop below takes: target and error low-passes, FF, D on the raw gyro, the attitude loop's
 angle) predicts each axis's step response of the loop it closes; it is set beside the step measured
@@ -101,7 +101,7 @@ def before_crash(table: Table, margin_s: float = CRASH_MARGIN_S) -> tuple[Table,
 
 
 def base_model(table: Table, a, progress=lambda *_: None):
-    """The base model diagnose identifies (`base.identify`) from `table`'s rows, or why not."""
+    """The base model diagnose identifies (`basemodel.identify`) from `table`'s rows, or why not."""
     try:
         rate = float(table.meta.get("motor_rate_hz", "inf"))
         if rate < DYNAMIC_MIN_HZ:

@@ -15,7 +15,7 @@ from a log").
 3. **The plausible models.** The identification's own uncertainty, drawn (`DRAWS` models, `--seed`): the
    axis's effectiveness k (k_p, k_q, k_r), h2 and each rotor's gain each from a normal with its jackknife
    standard error (basemodel.py), truncated to the physical side (k > 0, h2 below the median command); the commands'
-   timing uniform over the identification's grid step either side of the value found (base.TIMING_DELAYS: the
+   timing uniform over the identification's grid step either side of the value found (basemodel.TIMING_DELAYS: the
    search's resolution, the only figure of its uncertainty the identification gives, or its `stderr` where it
    has one). Each draw's effectiveness b is predict.py's linearisation (`predict.effectiveness`) of the drawn
    figures through the log's firmware's own mix and range (`predict.loop_parts`), and the loop is predict.py's
