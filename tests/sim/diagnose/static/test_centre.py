@@ -6,6 +6,7 @@ its speed is in it, agrees with the speeds' (on LOG00257 the commands alone put 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +20,24 @@ from flightctl.sim.diagnose.static import centre
 from helpers.real import INDIFLIGHT, need
 
 pytest.importorskip("orangebox")
+
+
+DOC = Path(__file__).resolve().parents[4] / "docs" / "diagnose.md"
+
+
+def doc_row(name: str, com: dict) -> str:
+    """The row of docs/diagnose.md's "Centre of mass" table for this report's `centre_of_mass`: the one
+    figure, then each check (in `SOURCES` order) with its agreement."""
+    def cell(c):
+        return f"{c['dx']:+.4f} ± {c['stderr'][0]:.2g}, {c['dy']:+.4f} ± {c['stderr'][1]:.2g}"
+    checks = {c["source"]: c for c in com["checks"]}
+    cells = [f"{com['source']}: {cell(com)}"]
+    for src in (centre.BASE, centre.GAINS, centre.COMMANDS):
+        c = checks[src]
+        cells.append(f"{cell(c)}: {'agrees' if c['agree'] else 'disagrees'} ({c['sigmas'][0]:g}, {c['sigmas'][1]:g} σ)")
+    w = checks[centre.COMMANDS]["with_speeds"]
+    cells.append(f"{w['dx']:+.4f}, {w['dy']:+.4f}")
+    return f"| indiflight/{name} | " + " | ".join(cells) + " |"
 
 
 def independent(csv) -> tuple[float, float]:
@@ -54,6 +73,8 @@ def test_the_flights_one_centre_of_mass_is_its_rotor_speeds_and_an_independent_c
     assert gains["agree"] and all(e > 0 for e in gains["stderr"]), gains
     w = checks[centre.COMMANDS]["with_speeds"]      # the commands with each rotor's own thrust per command
     assert abs(w["dx"] - com["dx"]) <= 0.003 and abs(w["dy"] - com["dy"]) <= 0.003, (w, com)
+    section = DOC.read_text().split("### Centre of mass", 1)[1].split("\n## ", 1)[0]
+    assert doc_row(name, com) in section, f"docs/diagnose.md, Centre of mass: the row is now\n{doc_row(name, com)}"
 
 
 def test_a_base_model_whose_h2_sits_at_its_bound_is_flagged_and_not_chosen():
