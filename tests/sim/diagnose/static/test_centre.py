@@ -6,6 +6,7 @@ its speed is in it, agrees with the speeds' (on LOG00257 the commands alone put 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -35,22 +36,26 @@ def doc_row(name: str, com: dict) -> str:
     for src in (centre.BASE, centre.GAINS, centre.COMMANDS):
         c = checks[src]
         cells.append(f"{cell(c)}: {'agrees' if c['agree'] else 'disagrees'} ({c['sigmas'][0]:g}, {c['sigmas'][1]:g} σ)")
+    assert "flag" not in checks[centre.COMMANDS], checks[centre.COMMANDS]
     w = checks[centre.COMMANDS]["with_speeds"]
     cells.append(f"{w['dx']:+.4f}, {w['dy']:+.4f}")
     return f"| indiflight/{name} | " + " | ".join(cells) + " |"
 
 
-def independent(csv) -> tuple[float, float]:
-    """d = sum_i mean(Omega_i^2) r_i / sum_i mean(Omega_i^2) over every airborne row with all four speeds: not
-    the report's hover blocks, not its jackknife, the layout's positions from their own mean."""
+def independent(csv) -> tuple[float, float, float]:
+    """(dx, dy, h2): d = sum_i mean(Omega_i^2) r_i / sum_i mean(Omega_i^2) over every airborne row with all four
+    speeds (not the report's hover blocks, not its jackknife, the layout's positions from their own mean), and
+    the median over the rotors of the command at which each rotor's straight line Omega_i(P_i) (numpy's polyfit
+    on the same rows) reaches zero: eq. 26's h2 as the speeds give it."""
     f = load_file(read_flight_log(str(csv), extra=FOREIGN_COLUMNS), Airframe())
-    w = f.omega[:, f.airborne].astype(float)
-    w = w[:, np.isfinite(w).all(axis=0)]
+    ok = f.airborne & np.isfinite(f.omega).all(axis=0)
+    w = f.omega[:, ok].astype(float)
     m = (w * w).mean(axis=1)
     R = np.column_stack([f.layout.x, f.layout.y])
     R = R - R.mean(axis=0)
     d = m @ R / m.sum()
-    return float(d[0]), float(d[1])
+    lines = [np.polyfit(np.asarray(f.P, float)[i, ok], w[i], 1) for i in range(4)]
+    return float(d[0]), float(d[1]), float(np.median([-b / a for a, b in lines]))
 
 
 @pytest.mark.parametrize("name", ["LOG00230.BFL", "LOG00257.BFL"])
@@ -58,9 +63,13 @@ def test_the_flights_one_centre_of_mass_is_its_rotor_speeds_and_an_independent_c
     csv = tmp_path / "f.csv"
     assert main(["log", "import", str(need(INDIFLIGHT / name)), str(csv), "--quiet"]) == 0
     assert main(["diagnose", str(csv), "--json", str(tmp_path / "r.json"), "--quiet"]) in (0, 1)
-    com = json.loads((tmp_path / "r.json").read_text())["centre_of_mass"]
+    rep = json.loads((tmp_path / "r.json").read_text())
+    com = rep["centre_of_mass"]
     assert com["source"] == centre.SPEEDS and len(com["stderr"]) == 2
-    dx, dy = independent(csv)
+    dx, dy, h2 = independent(csv)
+    # the static tier reads the commands through the speeds' curve, not an assumed h2 = 0 (issue 45)
+    got = re.match(r"eq\. 26 with h2 = (-?[\d.]+) of the log's rotor speeds", rep["static"]["thrust_curve"])
+    assert got and abs(float(got[1]) - h2) <= 0.1 and h2 < -0.1 * 255, (rep["static"]["thrust_curve"], h2)
     for got, want, se in ((com["dx"], dx, com["stderr"][0]), (com["dy"], dy, com["stderr"][1])):
         assert abs(got - want) <= 3 * se + 0.003, (name, com, (dx, dy))
     checks = {c["source"]: c for c in com["checks"]}
