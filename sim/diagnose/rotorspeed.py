@@ -170,6 +170,17 @@ def com_of_gains(gains, layout: Layout) -> tuple[float, float, float]:
     return float(d[0]), float(d[1]), share
 
 
+def com_of_gains_stderr(gains_sd, layout: Layout) -> tuple[float, float]:
+    """(dx, dy): the standard errors of `com_of_gains`'s centre of mass, the gains' standard errors
+    `gains_sd` carried through its linear map (d = T^+ (g - mean g), T the `trim_pattern`) as independent:
+    a first-order figure (the gains' normalisation to mean 1 and their covariance left out)."""
+    T = trim_pattern(layout)
+    n = T.shape[0]
+    J = np.linalg.pinv(T) @ (np.eye(n) - 1.0 / n)
+    sd = np.sqrt((J * J) @ np.square(np.asarray(gains_sd, float)))
+    return float(sd[0]), float(sd[1])
+
+
 def yaw_trim_of_gains(gains, layout: Layout) -> tuple[float, float]:
     """(split, share): how much more thrust (a share of the mean) the counter-clockwise rotors give in hover
     than the clockwise ones, and the share of the gains' pattern it explains. The yaw loop holds a yaw
@@ -185,7 +196,9 @@ def yaw_trim_of_gains(gains, layout: Layout) -> tuple[float, float]:
 
 def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None, speed_com=None) -> dict:
     """What the pattern of the rotors' thrusts in hover is (`hover_gains`, with their jackknife standard
-    errors): {"verdict", "why", "thrust_gain", "speed_thrust_gain", "com"}. A weak motor and a centre of
+    errors): {"verdict", "why", "thrust_gain", "speed_thrust_gain", "com"} (com: the centre of mass the pattern,
+    or what the speeds leave of it, stands for, with its first-order standard errors, `com_of_gains_stderr`;
+    static/centre.py weighs it against the flight's other figures). A weak motor and a centre of
     mass off the middle leave the same pattern in hover; the log's rotor speeds tell them apart: the
     thrust each rotor's speed gives (eq. 27) is its motor's part, the rest of the pattern is the centre
     of mass's (linear in the rotors' positions), a yaw trim's (a pattern of the spins,
@@ -205,13 +218,15 @@ def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None, speed
     def pattern(r):
         return bool(np.any((np.abs(r - 1.0) > GAIN_TOL) & (np.abs(r - 1.0) > 2.0 * sd)))
 
-    def com(r, what):
+    def com(r, r_sd, what):
         """(the centre of mass's share, the yaw trim's share, the words for the larger)."""
         dx, dy, share = com_of_gains(r, layout)
-        if speed_com is not None and r is not g:
+        named = speed_com is not None and r is not g
+        if named:
             dx, dy = speed_com
+        out["com"] = {"dx": round(dx, 4), "dy": round(dy, 4), "share": round(share, 3), "unit": unit,
+                      **({} if named else {"stderr": [float(f"{e:.2g}") for e in com_of_gains_stderr(r_sd, layout)]})}
         split, yaw = yaw_trim_of_gains(r, layout)
-        out["com"] = {"dx": round(dx, 4), "dy": round(dy, 4), "share": round(share, 3), "unit": unit}
         out["yaw_trim"] = {"ccw_minus_cw": round(split, 4), "share": round(yaw, 3)}
         if yaw > share:
             more = "more" if split > 0 else "less"
@@ -224,7 +239,7 @@ def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None, speed
                             f"{unit} ({100 * share:.0f} % of it)")
 
     if speeds is None or speeds.get("speed_gain") is None:
-        _, yaw, text = com(g, "the thrusts in hover are")
+        _, yaw, text = com(g, sd, "the thrusts in hover are")
         if not pattern(g):
             out.update(verdict="none", why=f"every rotor's thrust in hover is the mean's within {GAIN_TOL:g} or two "
                                            "of its standard errors")
@@ -256,8 +271,9 @@ def rotor_gain_check(gains, gains_sd, layout: Layout, speeds: dict | None, speed
                    f"of their thrust for its command; in hover it gives {100 * (1 - g[m]):+.0f} % less than the mean): "
                    "a weak motor")
     rest = g / q
+    rest_sd = rest * np.hypot(sd / g, q_sd / q) / rest.mean()   # first order, the two independent
     rest = rest / rest.mean()
-    share, yaw, text = com(rest, "what the speeds leave is")
+    share, yaw, text = com(rest, rest_sd, "what the speeds leave is")
     if pattern(rest):
         if share >= 0.5:
             found.append("centre of mass")

@@ -199,7 +199,7 @@ class Diagnosis:
             "notes": list(dict.fromkeys(self.notes)),   # a note said twice (two passes) once
             "tier": "dynamic", "tier_why": tier_why(self.static), "static": self.static,
         }
-        out["centre_of_mass"] = centre_of_mass(out["base_model"], self.static)
+        out["centre_of_mass"] = centre_of_mass(out["base_model"], self.static, self.rotor_gain_check)
         seen = set()
         out["not_physical"] = []
         for rnd in self.rounds:

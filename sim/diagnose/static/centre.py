@@ -1,6 +1,6 @@
 """One centre of mass per flight (docs/diagnose.md, "Centre of mass").
 
-A flight's log can give its centre of mass three ways, and the report names one (`one`), keeping the
+A flight's log can give its centre of mass four ways, and the report names one (`one`), keeping the
 others as checks beside it:
 
 - **the rotor speeds** (`from_speeds`), where the log measured them (ESC telemetry, eRPM; omega1..N):
@@ -14,6 +14,13 @@ others as checks beside it:
   rotor's gain apart, through the fitted curve (eq. 26's h2). Chosen without rotor speeds, unless its h2
   sits at the end of its search (`base_model.h2.at_bound`): then the flight did not show the curve's
   shape, the torques' lever arms are the search's, and the figure is a check only, flagged.
+- **the dynamic tier's hover gains** (`rotor_gain_check.com`): the base model's thrusts in hover
+  (`base_model.hover_gain`, each rotor's gain and the centre of mass's trim together), with each rotor's
+  own thrust per command from its speed (eq. 27) taken out where the log has speeds, read as the trim of
+  a centre of mass (`rotorspeed.com_of_gains`: the part of the pattern linear in the rotors' positions),
+  its standard errors the hover gains' carried through to first order. The same flight's torques as the
+  base model's, balanced in hover rather than fitted with the gains apart: a check only, never the one
+  named, flagged as the base model's is.
 - **the static tier's commands** (`static.pattern.com`): the hover shares of the commanded thrust through
   the curve (`curve`); a rotor's own thrust per command (a weak or strong motor, its ESC) is in them too,
   so they are chosen last, said so.
@@ -34,6 +41,7 @@ AGREE_ABS = 0.005      # ... or within this (arm lengths, or m on a layout in m)
 
 SPEEDS = "the rotor speeds"
 BASE = "the base model"
+GAINS = "the dynamic tier's hover gains"
 COMMANDS = "the static tier's commands"
 WHY = {SPEEDS: "each rotor's thrust in hover measured by its speed, c1 Omega^2 (eq. 27): free of the thrust curve "
                "and of any motor's thrust per command",
@@ -103,9 +111,10 @@ def _commands_with_speeds(static: dict, speeds: dict) -> dict:
                     "differences taken out"}
 
 
-def one(base_model: dict | None, static: dict | None) -> dict | None:
+def one(base_model: dict | None, static: dict | None, gain_check: dict | None = None) -> dict | None:
     """The report's `centre_of_mass`: the one figure (source, why) and the others as checks, each with its
-    difference from it (`agree`), or None when no tier gave one."""
+    difference from it (`agree`), or None when no tier gave one. `gain_check`: the dynamic tier's
+    `rotor_gain_check` (its `com`, a check only)."""
     cands = []
     speeds = ((static or {}).get("pattern") or {}).get("rotor_speeds") or {}
     if speeds.get("com"):
@@ -116,6 +125,8 @@ def one(base_model: dict | None, static: dict | None) -> dict | None:
                 "the thrust curve's shape, so the torques' lever arms are the search's: a check only"
                 if h2.get("at_bound") else None)
         cands.append(_entry(BASE, base_model["com"], flag))
+        if gain_check and (g := gain_check.get("com")) and g.get("stderr"):
+            cands.append({**_entry(GAINS, g, flag), "check_only": True})
     pattern = (static or {}).get("pattern") or {}
     if pattern.get("com"):
         flag = None if (static or {}).get("thrust_curve", "").startswith("eq. 26 with") else \
@@ -123,7 +134,8 @@ def one(base_model: dict | None, static: dict | None) -> dict | None:
         cands.append(_entry(COMMANDS, pattern["com"], flag))
     if not cands:
         return None
-    chosen = next((c for c in cands if "flag" not in c), cands[0])
+    named = [c for c in cands if not c.pop("check_only", False)]
+    chosen = next((c for c in named if "flag" not in c), named[0])
     checks = []
     for c in cands:
         if c is chosen:
@@ -141,7 +153,8 @@ def one(base_model: dict | None, static: dict | None) -> dict | None:
     return {**{k: chosen[k] for k in ("source", "dx", "dy", "stderr", "unit")}, "why": why, "checks": checks,
             "what": "the one centre of mass of the flight off the thrust centre (x forward, y left): from the rotor "
                     "speeds where the log has them, else the base model's, else the static tier's commands "
-                    f"(sim/diagnose/static/centre.py); checks: the others, agreeing within {AGREE_SIGMA:g} combined "
+                    "(sim/diagnose/static/centre.py); checks: the others (and the dynamic tier's hover gains', a check "
+                    f"only), agreeing within {AGREE_SIGMA:g} combined "
                     f"standard errors or {AGREE_ABS:g} {chosen['unit']}"}
 
 

@@ -122,6 +122,30 @@ def test_every_shipped_log_is_diagnosed_or_refused_as_the_docs_table_says(tmp_pa
     assert _corpus([need(INDIFLIGHT.parent), ARDUPILOT.parent], tmp_path) == _doc_table()
 
 
+# What a refusal of an airborne multirotor flight may say (issue 45, "Done when"): its motors or its attitude
+# (or gyro) not logged, or logged under the static tier's 5 Hz
+NOT_LOGGED = ("were not logged", "was not logged", "were logged at")
+
+
+def test_every_airborne_multirotor_flight_of_the_shipped_corpus_with_its_motors_and_attitude_gets_a_tier():
+    """Issue 45's "Done when", on the docs table the slow test above recomputes from the shipped logs: every row
+    the corpus counts as an airborne multirotor flight (`corpus.flew`: not refused as holding no flight, nor as
+    another vehicle) gets the static tier at least (a dynamic row has the static tier too), unless its refusal
+    says its motors or its attitude were not logged (or too slowly); and the headline counts those rows."""
+    from flightctl.sim.diagnose.corpus import NO_FLIGHT
+    from flightctl.sim.logs.frames import NOT_MULTIROTOR
+    lines = _doc_table()
+    rows = [r.split(" | ") for r in lines if r.startswith("| flights/") or r.startswith("| data/")]
+    flights = [r for r in rows if r[4] != "refused" or not any(w in r[-1] for w in NO_FLIGHT + (NOT_MULTIROTOR,))]
+    assert flights and len(rows) > len(flights)
+    for r in flights:
+        if r[4] == "refused":
+            assert any(w in r[-1] for w in NOT_LOGGED), (r[0], r[-1])
+        else:
+            assert r[4] in ("static", "dynamic (static too)") and r[5], (r[0], r[4], r[5])
+    assert _headline(lines) == (sum(r[4] != "refused" for r in flights), len(flights))
+
+
 def _refusal(capsys, log, tmp_path, *index) -> str:
     capsys.readouterr()
     out = tmp_path / "r.json"

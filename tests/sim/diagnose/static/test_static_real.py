@@ -20,7 +20,9 @@ each finding is judged against the untouched log's own finding plus what was hid
 - the hover figures on the shipped log that vibrates most (LOG00230) are those of its accelerometer
   low-passed, and a vibration of drawn size added does not move them (ratios of means);
 - a yaw split beyond a trim is "not physical" inside a mix of causes too;
-- a logged current that does not follow the throttle is no current sensor (no resistance fitted).
+- a logged current that does not follow the throttle is no current sensor (no resistance fitted);
+- an ArduCopter quad V (log171.bin with its FRAME set to 2) gets both tiers, its frame said, the static
+  figures those of its positions.
 """
 from __future__ import annotations
 
@@ -407,3 +409,32 @@ def test_a_weak_motor_masked_by_a_centre_of_mass_is_named_by_its_speed_per_comma
     w = speeds["weak_motor"]
     assert w["motor"] == motor
     assert w["thrust_scale"] / own == pytest.approx(scale, abs=max(0.03, 3 * w["stderr"])), (scale, own, w)
+
+
+def test_a_quad_v_is_diagnosed_by_both_tiers_its_frame_said_and_its_static_figures_those_of_its_positions(tmp):
+    """ArduCopter's quad V (FRAME 2: X's positions, AP_MotorsMatrix's yaw factors +-0.7981 and +-1) was refused
+    whole as a geometry not taken (issue 45). log171.bin (QUAD/X, FRAME 1) with its FRAME set to 2: both tiers
+    answer, the report says the V and its yaw factors, and the static tier's shares and pattern are the X's
+    (they need no yaw factor: the rotors' positions and spins are the same)."""
+    import struct
+    from helpers.paths import DATA
+    from flightctl.sim.logs import read_foreign
+    src = DATA / "ardupilot" / "log171.bin"
+    data = src.read_bytes()
+    k = data.find(b"FRAME".ljust(16, b"\0"))
+    assert k > 0 and struct.unpack_from("<f", data, k + 16)[0] == 1.0
+    v = tmp / "quad_v.bin"
+    v.write_bytes(data[:k + 16] + struct.pack("<f", 2.0) + data[k + 20:])
+    static = []
+    for path in (src, v):
+        (table,) = read_foreign(str(path))
+        static.append(static_tier([table], [load_file(table, Airframe())], Airframe()))
+    x_st, v_st = static
+    assert "QUAD/X" in x_st["layout"]["source"] and "QUAD/V" in v_st["layout"]["source"], v_st["layout"]["source"]
+    assert "+0.7981" in v_st["layout"]["source"] and v_st["layout"]["spin"] == x_st["layout"]["spin"]
+    assert v_st["motors"] == x_st["motors"] and v_st["pattern"] == x_st["pattern"] and v_st["hover"] == x_st["hover"]
+    out = tmp / "quad_v.json"
+    assert main(["diagnose", str(v), "--json", str(out), "--quiet"]) == 0
+    rep = json.loads(out.read_text())
+    assert rep["tier"] == "dynamic" and rep["base_model"]["identified"] and rep["static"] == v_st, rep["tier_why"]
+    assert "QUAD/V" in rep["base_model"]["layout"]["source"]
