@@ -14,7 +14,7 @@ import io
 import math
 import re
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -252,6 +252,14 @@ def flight_text(imp: Imported, progress=None) -> str:
         imp.notes.append(backward_note(t, keep, f"{what} samples"))
     t = t[keep]
     own = base.values[:, keep]                           # the time base's own samples, as they are
+    dropped = []
+    for name, s in list(imp.streams.items()):           # the other streams' clocks jumped back with it
+        if s is not base and s.t.size > 1 and (np.diff(s.t) < 0).any():
+            ok = forward(s.t)
+            imp.streams[name] = replace(s, t=s.t[ok], values=s.values[:, ok])
+            dropped.append(f"{name} {int((~ok).sum())}")
+    if dropped:
+        imp.notes.append("the other streams' samples with a repeated or backward time dropped too: " + ", ".join(dropped))
     if t.size < MIN_ROWS:
         imp.fail(f"{t.size} {what} samples: too short to be a flight log")
     island = _islands(t, imp.notes)
