@@ -88,7 +88,9 @@ def source_digest() -> str:
     here = Path(__file__).parent
     compiled_files = [Path(flightctl.physics.__file__), Path(flightctl.drivers.mpu9250_regs.__file__)]
     compiled_files += [here / name for name in ("model.py", "compiled.py", "imu.py")]
-    compiled_files += [here.parent / "causes" / f"{name}.py" for name in ("motor_dynamics", "rotor_drag", "rotor_inflow")]
+    from flightctl.sim.causes import CAUSES      # the causes whose wrench the compiled plant carries (their hooks)
+    compiled_files += sorted(Path(sys.modules[c.effect.__module__].__file__) for c in CAUSES.values()
+                             if c.effect.compiled and c.effect.compiled_hook is not None)
     compiled_files += [here.parent / "sweeps" / f"{name}.py" for name in ("twin_controller", "twin_loop", "twin_world", "pcg64")]
     compiled_files += [Path(sys.modules["flightctl"].__file__).parent / name for name in (
         "control/estimator.py", "control/mixer.py", "control/landing.py", "control/controller.py", "loop.py",
