@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 HIDDEN = ("motor_lag", "actuation_delay", "motor_weak")
+PASSES = 2                  # tune --from-log passes: the Table 4 log's, then the log of the gains it gave (a step)
 PLAN = Path(__file__).resolve().parents[1] / "tests" / "data" / "plans" / "steps-both-halves.toml"
 POSTERIOR = Path(__file__).resolve().parents[1] / "docs" / "as-flown-posterior.json"
 POPULATIONS = {"prior": "of paper-as-flown's ranges",
@@ -68,7 +69,8 @@ def why_refused(rep: dict) -> str:
                      "no measured step (no setpoint steps)" if "windows in the air" in r else
                      "the model does not predict the step" if "does not predict" in r else
                      "no gains meet the targets" if "meet the targets" in r else
-                     "no base model: " + r.split("): ", 1)[1].split(" (")[0] if "no base model from" in r else r.split(":")[0])
+                     "no base model: " + r.split("): ", 1)[1].split(" (")[0].split(":")[0] if "no base model from" in r
+                     else r.split(":")[0])
     return "; ".join(sorted(set(kinds))) or rep.get("refused", "")
 
 
@@ -124,25 +126,34 @@ def study(n: int, seed: int, share: float, progress=print, only=None, population
                 sc = SCENARIOS["paper"]()
                 row[name] = judged(fly(sc, dataclasses.replace(params, gains=g), os.devnull, effects=effects,
                                        seed=seed + k), sc)
-            ident = fly(scenario(read_plan_file(PLAN)), dataclasses.replace(params, gains=TABLE4), log,
-                        effects=effects, seed=seed + k)
-            if not ident.flew:
-                row["from_log"] = {"refused": f"the identification flight ({PLAN.name}) never left the ground with Table 4"}
-            else:                          # a crashed one too: from_log takes its rows before the crash
-                row["ident_crashed"] = bool(ident.crashed)
-                try:
-                    table, = read_logs([str(log)], None, lambda m: None, extra=steps.LOOPS[0].setpoint)
-                    rep = fromlog.from_log(table, a, fromlog.Targets(), draws=16, seed=seed + k)
-                except InputError as e:    # what the command says and exits 2 on: a crash too soon to read
-                    rep = {"refused": f"the log refused: {str(e).split(': ')[1]}", "axes": {}}
-                new = fromlog.recommended(rep)
-                row["from_log"] = {"refused": why_refused(rep)} if not new else None
-            if row.get("from_log") is None:       # flightctl's attitude gains, eq. 24: kp_phi etc.
-                name_of = {"x": "phi", "y": "theta", "z": "psi"}
-                g = dataclasses.replace(TABLE4, **{f"{kk}_{name_of[ax]}": v for ax, gg in new.items() for kk, v in gg.items()})
+            name_of = {"x": "phi", "y": "theta", "z": "psi"}     # flightctl's attitude gains, eq. 24: kp_phi etc.
+            gains, first, passes = TABLE4, None, []
+            for p in range(PASSES):      # each pass: the plan flown with the gains so far, tuned from its log
+                ident = fly(scenario(read_plan_file(PLAN)), dataclasses.replace(params, gains=gains), log,
+                            effects=effects, seed=seed + k + 1000 * p)
+                if not ident.flew:
+                    rep = {"refused": f"the identification flight ({PLAN.name}) never left the ground", "axes": {}}
+                else:                    # a crashed one too: from_log takes its rows before the crash
+                    try:
+                        table, = read_logs([str(log)], None, lambda m: None, extra=steps.LOOPS[0].setpoint)
+                        rep = fromlog.from_log(table, a, fromlog.Targets(), draws=16, seed=seed + k + 1000 * p)
+                    except InputError as e:    # what the command says and exits 2 on: a crash too soon to read
+                        rep = {"refused": f"the log refused: {str(e).split(': ')[1]}", "axes": {}}
+                new, step = fromlog.recommended(rep), fromlog.next_pass(rep)
+                first = first or why_refused(rep)
+                if not step:
+                    break
+                gains = dataclasses.replace(gains, **{f"{kk}_{name_of[ax]}": v for ax, gg in step.items()
+                                                      for kk, v in gg.items()})
+                passes.append("recommended" if new == step else "step")
+                if new == step:
+                    break
+            if not passes:
+                row["from_log"] = {"refused": first}
+            else:
                 sc = SCENARIOS["paper"]()
-                row["from_log"] = judged(fly(sc, dataclasses.replace(params, gains=g), os.devnull, effects=effects,
-                                             seed=seed + k), sc)
+                row["from_log"] = {**judged(fly(sc, dataclasses.replace(params, gains=gains), os.devnull, effects=effects,
+                                                seed=seed + k), sc), "passes": passes}
             rows.append(row)
             progress(f"vehicle {k + 1}/{n} ({time.process_time() - t0:.0f} s CPU){' (' + effect + ')' if effect else ''}: Table 4 "
                      f"{'holds' if row['table4']['holds'] else 'flies' if row['table4']['flies'] else 'crashes'}, "
@@ -174,6 +185,16 @@ def markdown(res: dict) -> str:
         L.append(f"| {name} | {sum(g['flies'] for g in got)} of {len(got)} | {sum(g['holds'] for g in got)} of {len(got)} | "
                  + (f"{np.median(scores):.2f}" if scores else "-") + " | "
                  + ("x1" if key == "table4" else _ring(rows, "table4", key)) + f" | {n - len(got)} |")
+    got = [r["from_log"] for r in rows if "refused" not in r["from_log"]]
+    if got:
+        kinds = {}
+        for g in got:
+            key = " then ".join(g.get("passes", ["recommended"]))
+            kinds[key] = kinds.get(key, []) + [g]
+        L += ["", f"The gains from the log ({PASSES} passes at most: the Table 4 log's, then the log of the gains it "
+              "gave where they were a step toward the targets, not gains that meet them): "
+              + "; ".join(f"{k}: {len(v)} (hold {sum(g['holds'] for g in v)}, fly {sum(g['flies'] for g in v)})"
+                          for k, v in sorted(kinds.items()))]
     reasons = {}
     for r in rows:
         if "refused" in r["from_log"]:

@@ -34,7 +34,11 @@ from a log").
    wins; within `TIE` of it, the least change (the sum of |log factor|).
    None meets them: the axis gets no recommendation and the report names the candidate nearest (the fewest
    drawn models on which it diverges, then the least worst shortfall, each target's in its own scale) and which
-   target fails.
+   target fails. Where that nearest is stable on every drawn model and nearer than the logged gains on every
+   target (no worst shortfall larger, one smaller; or the logged gains diverge on some model), it is a
+   **step**: a pass toward the targets, written to paste with a line saying so; flown, its log is tuned
+   from again (the bound per pass is the Betaflight App's; a pilot makes several passes). The exit stays 1
+   without a recommendation.
 5. **The lines to paste** in the log's firmware's own terms (`paste`): Betaflight's CLI `set` lines (the
    integers of the header's rollPID etc.: the physical gain over PTERM/ITERM/DTERM_SCALE / PID_MIXER_SCALING,
    controller.py's constants, pid_init.c:274-276, pid.h:32, 44-46; the names and 0-200 range of the CLI's
@@ -270,6 +274,12 @@ def tune_axis(ax: Axis, tg: Targets) -> dict:
         out["recommended"] = False
         out["why"] = ("no gains within x" + f"{tg.max_change:g} of the logged ones meet the targets on every drawn model: "
                       "nearest fails " + ", ".join(n for n, s in zip(SHORT_NAMES, short[j]) if s > 0))
+        was = _shortfall(logged, tg, rise_max)[0]
+        nearer = np.all(short[j] <= was) and np.any(short[j] < was)
+        if np.nanmin(fig["pm_deg"][:, j]) > 0 and (nearer or not np.nanmin(logged["pm_deg"][:, 0]) > 0):
+            out["step"] = True          # a pass toward the targets (module docstring, 4)
+            out["why"] += ("; it is stable on every drawn model and nearer than the logged gains on every target (or they "
+                           "diverge on some): a pass toward them (fly it, then tune again from its log)")
     g = ax.gains(grid[pool[j]][None])[0]
     keys = GAIN_KEYS if ax.parts["kd"] else GAIN_KEYS[:2]        # no D in this loop (3.1's yaw): none written
     out["new"] = {"gains": {k: float(f"{v:.6g}") for k, v in zip(GAIN_KEYS, g) if k in keys},
@@ -409,6 +419,11 @@ def recommended(report: dict) -> dict[str, dict[str, float]]:
     return {ax: e["new"]["gains"] for ax, e in report["axes"].items() if e.get("recommended")}
 
 
+def next_pass(report: dict) -> dict[str, dict[str, float]]:
+    """The gains to fly next: each axis's recommendation, or its step toward the targets (`step`)."""
+    return {ax: e["new"]["gains"] for ax, e in report["axes"].items() if e.get("recommended") or e.get("step")}
+
+
 def text(report: dict) -> str:
     """The printed report."""
     L = [f"flightctl tune --from-log {report['log']} ({report['firmware']}): {report['draws']} plausible models per "
@@ -435,7 +450,7 @@ def text(report: dict) -> str:
         lg, nw = e["logged"], e["new"]
         L.append(f"  {name} logged   P {lg['gains']['kp']:.4g} I {lg['gains']['ki']:.4g} D {lg['gains']['kd']:.4g}: "
                  + fig(lg))
-        tag = "new     " if e["recommended"] else "nearest "
+        tag = "new     " if e["recommended"] else "step    " if e.get("step") else "nearest "
         L.append(f"  {name} {tag} " + " ".join(f"{k[1].upper()} {v:.4g}" for k, v in nw["gains"].items()) + " ("
                  + ", ".join(f"x{v:.3g}" for v in nw["factors"].values()) + "): " + fig(nw))
         if not e["recommended"]:
@@ -479,8 +494,12 @@ def main(args, a) -> int:
     report["cpu_s"] = round(time.process_time() - t0, 1)
     sys.stdout.write(text(report))
     new = recommended(report)
-    if new:
-        suffix, lines = paste(ctl.of_table(table), new)
+    step = next_pass(report)
+    if step:
+        suffix, lines = paste(ctl.of_table(table), step)
+        if step != new:
+            lines = ("# a pass toward the targets, not gains that meet them: fly these, then tune again from the log "
+                     f"(the axes: {', '.join(steps.NAMES[ax] for ax in step if ax not in new)})\n") + lines
         sys.stdout.write(lines)
         if args.out:
             write_atomic(args.out, lines)

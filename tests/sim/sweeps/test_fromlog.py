@@ -225,6 +225,36 @@ def test_the_nearest_to_a_loop_that_diverges_is_one_that_does_not():
     assert (coarse["pm_deg"].min(axis=0) > 0).any()                # the grid holds a stable candidate
     assert out["new"]["pm_deg"]["worst"] > 0, out["new"]
     assert out["new"]["factors"]["kp"] < 1 and out["new"]["factors"]["kd"] < 1
+    assert out["step"] and fromlog.next_pass({"axes": {"x": out}}) == {"x": out["new"]["gains"]}   # a pass toward it
+    assert fromlog.recommended({"axes": {"x": out}}) == {}
+
+
+def test_a_step_is_nearer_on_every_target_and_a_recommendation_is_no_step():
+    """One vehicle's loop at latencies from one that meets the targets to one that diverges: a recommendation is
+    no step; without one, the nearest within x2 is a step exactly where it is stable on every model and nearer
+    than the logged gains on every target's worst shortfall (recomputed here from the figures) or the logged
+    gains diverge, and a step's worst phase margin is above the logged gains' (a better loop to fly next)."""
+    rng = np.random.default_rng(49)
+    ctrl, vehicle = _flightctl_vehicle(rng)
+    parts, _ = predict.loop_parts(ctrl, {}, "x", vehicle.layout)
+    b = predict.effectiveness(vehicle, vehicle.layout, "x", parts) * rng.uniform(0.95, 1.05, 4)
+    tg, seen = fromlog.Targets(), set()
+    for lag, delay in ((0.0, 0.001), (0.005, 0.002), (0.01, 0.006), (0.02, 0.01)):
+        ax = fromlog.Axis({**parts, "motor_lag_s": lag}, b, np.full(4, delay), "pt1 55", "pt1 55")
+        out = fromlog.tune_axis(ax, tg)
+        if out["recommended"]:
+            assert "step" not in out
+            seen.add("recommended")
+            continue
+        f = np.array([[out["new"]["factors"].get(k, 1.0) for k in fromlog.GAIN_KEYS]])
+        logged, new = ax.figures(np.ones((1, 3))), ax.figures(f)
+        was, now = fromlog._shortfall(logged, tg, math.inf)[0], fromlog._shortfall(new, tg, math.inf)[0]
+        rule = new["pm_deg"].min() > 0 and ((np.all(now <= was) and np.any(now < was)) or not logged["pm_deg"].min() > 0)
+        assert out.get("step", False) == rule, (lag, delay, was, now)
+        if rule:
+            assert out["new"]["pm_deg"]["worst"] > out["logged"]["pm_deg"]["worst"]
+            seen.add("step")
+    assert seen == {"recommended", "step"}
 
 
 def test_loop_margins_of_a_known_loop():
