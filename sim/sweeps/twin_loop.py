@@ -46,7 +46,7 @@ from flightctl.control.estimator import tilt_from_accel
 from flightctl.loop import LAND_LEVEL_S, LAND_SLACK_S, LAND_SPEED, LOST_ALT_S, MAX_BAD_IMU_FRAMES, TOUCHDOWN_ALT, TOUCHDOWN_S
 from flightctl.safety import CRASH_TILT, LEFT_GROUND_ALT
 from flightctl.sim.sweeps import twin_controller as ob
-from flightctl.sim.world.imu import (_C_A_DELAY, _C_G_DELAY, _C_PERIOD, AMBIENT_C, normals_per_read)
+from flightctl.sim.world.imu import _C_PERIOD, AMBIENT_C, normals_per_read, read_gains
 from flightctl.sim.world.compiled import work
 from flightctl.sim.world.model import PHI, PSI, THETA, Z
 from flightctl.sim.world.plant import floor_brake, floor_spin, time_weighted
@@ -110,7 +110,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI, SP, R
     wk = work(X.shape[1])
     e9 = np.empty(15)                        # a read's normals: the chip's nine or twelve, the magnetometer's three
     held, temp = np.empty(n), np.empty(n)    # each period's, the same for every vehicle: found once
-    gains = np.empty((n, 3))
+    gains = np.empty((n, 5))                 # each period's interval and its `read_gains`
     power, sonar = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.bool_)   # the periods of their reads
     for step in range(n):
         power[step] = (i0 + step + 1) % int(k[POWER_EVERY]) == 0
@@ -119,7 +119,7 @@ def fly(X, W, E, KC, Q, codes, RING, NRING, FRAC, WORDS, CS, CC, GEN, UNI, SP, R
         held[step] = t % CC[0, _C_PERIOD]
         h = t - (i0 + step) * dt
         gains[step, 0] = h
-        gains[step, 1], gains[step, 2] = 1.0 - exp(-h / CC[0, _C_A_DELAY]), 1.0 - exp(-h / CC[0, _C_G_DELAY])
+        gains[step, 1], gains[step, 2], gains[step, 3], gains[step, 4] = read_gains(CC[0], h)
         rise = k[WARM_RISE]
         temp[step] = AMBIENT_C if rise == 0.0 else AMBIENT_C + rise * (1.0 - exp((0.0 - t) / k[WARM_TAU]))
     for v in range(X.shape[0]):
@@ -349,14 +349,15 @@ def compiled_fly():
     at = plant["forces"]
     held = cc(held_command)
     landed = cc(land, ob_landing_start=o["landing_start"])
-    read = cc(chip_read, forces=at, held_command=held, chip_words=imu.chip_frame_compiled(put_word),
+    gains = cc(imu.read_gains)
+    read = cc(chip_read, forces=at, held_command=held, chip_words=imu.chip_frame_compiled(put_word), read_gains=gains,
               rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],
               i16=cc(i16, _i16=cc(imu._i16)))
     sensed = cc(sense, normals=cc(normals, standard_normal=pcg64.compiled_normal(cc)), chip_read=read, gauss=g,
                 sonar_trigger=cc(sonar_trigger, uniform=u, gauss=g))
     flown = cc(armed, ob_step=o["step"], ob_on_range=o["on_range"], checks=cc(checks, land=landed),
                touchdown=cc(touchdown, ob_touchdown=o["touchdown"]))
-    return cc(fly, allocates=True, work=plant["work"], normals_per_read=cc(imu.normals_per_read),
+    return cc(fly, allocates=True, work=plant["work"], normals_per_read=cc(imu.normals_per_read), read_gains=gains,
               plant_period=cc(plant_period, forces=at, rk4=plant["rk4"], commanded=plant["commanded"], held_command=held,
                               time_weighted=cc(time_weighted), floor_spin=cc(floor_spin), floor_brake=cc(floor_brake)),
               sonar_edges=cc(sonar_edges), sense=sensed,

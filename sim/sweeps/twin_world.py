@@ -6,15 +6,14 @@ the floor, one RK4 step), the chip's burst decoded as the driver decodes it, the
 Plain Python on arrays: sim/world/compiled.py compiles each function (`twin_loop.compiled_fly` binds them)."""
 from __future__ import annotations
 
-from math import copysign, cos, exp, inf, log, nan, pi, sin, sqrt
+from math import copysign, cos, inf, log, nan, pi, sin, sqrt
 
 
 from flightctl.drivers import mpu9250_regs as reg
 from flightctl.drivers.hcsr04 import MAX_RANGE_M, MIN_RANGE_M, US_PER_M, WATCHDOG_MS
 from flightctl.loop import PHASES
 from flightctl.sim.world.devices import EARTH_FIELD_T, NoisePool, SimGpio
-from flightctl.sim.world.imu import (_BURST, _C_A_DELAY, _C_G_DELAY, _C_KA, _C_KG, SimMpu9250,
-                                    _i16, chip_frame)
+from flightctl.sim.world.imu import _BURST, _C_BBA, _C_BBQ, _C_KA, _C_KG, SimMpu9250, _i16, chip_frame, read_gains
 from flightctl.sim.world.compiled import attitude_trig, commanded, forces, rebound, rk4
 from flightctl.sim.world.model import N_RIGID, P, PHI, PSI, Q, R, THETA, VX, VY, VZ, Z, rotation_from_trig
 from flightctl.sim.world.compiled import _B, _L, _RIGID
@@ -243,9 +242,9 @@ def chip_read(x, w, q, codes, burst, cs, cc, e, ie: int, im: int, jump, k, t: fl
     if dt > 0.0 and dt != w[W_KDT]:
         w[W_KDT] = dt
         if dt == gains[0]:                # the period's interval, whose gains `fly` found for every vehicle
-            cc[_C_KA], cc[_C_KG] = gains[1], gains[2]
+            cc[_C_KA], cc[_C_KG], cc[_C_BBA], cc[_C_BBQ] = gains[1], gains[2], gains[3], gains[4]
         else:
-            cc[_C_KA], cc[_C_KG] = 1.0 - exp(-dt / cc[_C_A_DELAY]), 1.0 - exp(-dt / cc[_C_G_DELAY])
+            cc[_C_KA], cc[_C_KG], cc[_C_BBA], cc[_C_BBQ] = read_gains(cc, dt)
     chip_words(burst, cs, cc, e, ie, fx, fy, fz, x[P], x[Q], x[R], f[0], f[1], f[2], f[3], rw[0], rw[1], rw[2], rw[3],
                held, dt, temp, w[W_READS] > 0.0)
     w[W_READS] += 1.0

@@ -109,7 +109,7 @@ class SimMpu9250:
         self._g_delay = reg.GYRO_DLPF[cfg][1]
         g_tc = 1.0 / (_TAU * g_bw)
         c[_C_TCG2], c[_C_G_DELAY] = g_tc * g_tc, self._g_delay
-        self._k_dt = None   # the read interval of the DLPF stage's gains (c[_C_KA], c[_C_KG])
+        self._k_dt = None   # the read interval of `read_gains`
         # SAMPLE_RATE = 1 kHz / (1 + SMPLRT_DIV) when 0 < DLPF_CFG < 7, else the gyro's 8 kHz (RM, register 25)
         c[_C_PERIOD] = (1 + rg[reg.SMPLRT_DIV]) / 1000.0 if 0 < cfg < 7 else 1.0 / 8000.0
 
@@ -163,9 +163,10 @@ class SimMpu9250:
         fx, fy, fz = plant.specific_force()
         p, q, r = plant.rates
         dt, self._t_last = t - self._t_last, t
-        if dt > 0.0 and dt != self._k_dt:   # the DLPF stage's gains for this read interval (the loop period)
+        if dt > 0.0 and dt != self._k_dt:   # the gains for this read interval (the loop period)
             self._k_dt = dt
-            self._c[_C_KA], self._c[_C_KG] = 1.0 - math.exp(-dt / self._a_delay), 1.0 - math.exp(-dt / self._g_delay)
+            c = self._c
+            c[_C_KA], c[_C_KG], c[_C_BBA], c[_C_BBQ] = read_gains(c, dt)
         (f1, f2, f3, f4), (w1, w2, w3, w4) = (rotors := plant.forces()).f, rotors.w
         normal = w.normal
         i = normal.index(normals_per_read(self._c))
@@ -197,11 +198,11 @@ _S_WALK, _S_PHASE, _S_BB, _S_BBG, N_CHIP_STATE = 6, 9, 13, 16, 17
 # its temperature slope, the zero-rate offset and its slope; per arm the cosine and sine of its bending;
 # then the gyro's vibration per newton, its DLPF's time constant squared and delay, the 2/rev and 3/rev
 # lines over the 1/rev, the gyro's broadband noise per newton of the total thrust, its yaw share, the
-# yaw share of the rotor lines
+# yaw share of the rotor lines; then the broadband high-pass's pole a and sqrt((1 + a) / 2) for the read interval
 (_C_KA, _C_KG, _C_A_LSB, _C_G_LSB, _C_SA, _C_SG, _C_WALK, _C_KV, _C_TC2, _C_PERIOD, _C_A_DELAY,
  _C_A0, _C_AC, _C_G0, _C_GC, _C_ZC, _C_ZS, _C_KVG, _C_TCG2, _C_G_DELAY, _C_H2, _C_H3, _C_BB, _C_YAW,
- _C_YAWL, N_CHIP_CONST) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14, 17, 20, 23, 27, 31, 32, 33, 34, 35, 36, 37,
-                           38, 39)
+ _C_YAWL, _C_BBA, _C_BBQ, N_CHIP_CONST) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14, 17, 20, 23, 27, 31, 32, 33, 34, 35,
+                                          36, 37, 38, 39, 40, 41)
 _BURST = reg.ACCEL_XOUT_H
 _GYRO_WORDS = struct.Struct(">3h")   # the gyro's three words in the burst, from _BURST + 8
 
@@ -248,6 +249,16 @@ def normals_per_read(c) -> int:
     return 12 if c[_C_BB] != 0.0 else 9
 
 
+def read_gains(c, dt: float) -> tuple[float, float, float, float]:
+    """`chip_frame`'s gains for a read interval dt, with the chip's constants c: the DLPF stage's, 1 - exp(-dt /
+    delay) of the accelerometer and of the gyro (c[_C_KA], c[_C_KG]), the broadband noise's high-pass pole a =
+    exp(-2 pi BROADBAND_HP_HZ dt) and sqrt((1 + a) / 2) (c[_C_BBA], c[_C_BBQ]). Its caller finds them once for
+    each interval (a loop's reads share one or two): their exponentials cost more than the rest of the frame's
+    noise."""
+    a = math.exp(-_TAU * BROADBAND_HP_HZ * dt)
+    return 1.0 - math.exp(-dt / c[_C_A_DELAY]), 1.0 - math.exp(-dt / c[_C_G_DELAY]), a, math.sqrt(0.5 * (1.0 + a))
+
+
 def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, held, dt, temp, started):
     """The MPU-9250's burst registers (ACCEL_XOUT_H on, big-endian int16) for the true specific force
     (fx, fy, fz) and rates (p, q, r) at time t, dt after the last read, `held` = t % c[_C_PERIOD] s after
@@ -256,7 +267,8 @@ def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3
     (`SimMpu9250`; `started`: not the first read) and `normals_per_read(c)` standard normal numbers
     from e[i]:
 
-    - the DLPF's first-order stage on the rigid-body signals (gains c[_C_KA], c[_C_KG] for dt);
+    - the DLPF's first-order stage on the rigid-body signals (gains c[_C_KA], c[_C_KG] for dt: the caller's
+      `read_gains`, as the broadband high-pass's c[_C_BBA], c[_C_BBQ]);
     - the zero-rate offset's random walk, variance K^2 dt over the time since the last sample;
     - the offsets and their temperature slopes, the chip's white noise per sample, the rotors'
       vibration, and on the gyro the frame's broadband noise in proportion to the rotors' thrust,
@@ -286,8 +298,8 @@ def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3
         fx, fy, fz, p, q, r = fx + vx, fy + vy, fz + vz, p + vp, q + vq, r + vr
     a_lsb, g_lsb, sa, sg = c[_C_A_LSB], c[_C_G_LSB], c[_C_SA], c[_C_SG]
     if c[_C_BB] != 0.0 and dt > 0.0:          # the frame's broadband rate noise, rms per read, high-passed
-        a = math.exp(-_TAU * BROADBAND_HP_HZ * dt)
-        gain = math.sqrt(0.5 * (1.0 + a)) / a
+        a, root = c[_C_BBA], c[_C_BBQ]       # (`read_gains` of dt)
+        gain = root / a
         if gain != s[_S_BBG]:   # another read interval (a late or stalled loop): the low-pass part held
             if s[_S_BBG] != 0.0:    # in the new gain's units, or a gap of many periods (gain ~ 1/a) would
                 k = gain / s[_S_BBG]   # leave it 1/a too large, and the next read's noise at full scale
@@ -295,7 +307,7 @@ def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3
                 s[_S_BB + 1] *= k
                 s[_S_BB + 2] *= k
             s[_S_BBG] = gain
-        bb = c[_C_BB] * (f1 + f2 + f3 + f4) * math.sqrt(0.5 * (1.0 + a)) / a
+        bb = c[_C_BB] * (f1 + f2 + f3 + f4) * root / a
         b = 1.0 - a
         x = bb * e[i + 9]
         s[_S_BB] = a * s[_S_BB] + b * x
@@ -339,7 +351,7 @@ def vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, held, dt):
                 if k0 == 0.0:
                     continue
                 a = th - om * (back_a if sensor == 0 else back_g)
-                c1, s1 = math.cos(a), math.sin(a)
+                s1, c1 = sincos(a)
                 c2, s2 = 2.0 * c1 * c1 - 1.0, 2.0 * s1 * c1          # the 2/rev and 3/rev angles
                 c3, s3 = c1 * c2 - s1 * s2, s1 * c2 + c1 * s2
                 wt = om * om * t2
@@ -360,6 +372,38 @@ def vibration(s, c, f1, f2, f3, f4, w1, w2, w3, w4, held, dt):
     return vx, vy, vz, vp, vq, vr
 
 
+# `sincos`'s constants, fdlibm's (Sun Microsystems, 1993: "permission to use, copy, modify, and distribute this
+# software is freely granted"; as in musl's src/math/__sin.c, __cos.c, __rem_pio2.c): the minimax polynomials of
+# sin and cos on [-pi/4, pi/4]; 2/pi; pi/2 in two parts, its first 33 bits (n pi/2 exact for |n| < 2^20) and the rest
+_S1, _S2, _S3, _S4, _S5, _S6 = (-1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04,
+                                2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10)
+_K1, _K2, _K3, _K4, _K5, _K6 = (4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05,
+                                -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11)
+_INV_PIO2, _PIO2_HI, _PIO2_LO = 6.36619772367581382433e-01, 1.57079632673412561417e+00, 6.07710050650619224932e-11
+
+
+def sincos(x: float) -> tuple[float, float]:
+    """(sin x, cos x) of a rotor line's angle, within 2^-52 of libm's for |x| < 1e5 (tests/sim/world/test_compiled.py),
+    in arithmetic alone: fdlibm's scheme, x less the nearest multiple n of pi/2 (Cody and Waite), the
+    polynomials there, n's quadrant choosing and signing them without a branch. The vibration's eight
+    angles a read (up to tens of radians, each quadrant a coin toss for a branch predictor) took a fifth of
+    the batched simulator's time through libm's calls (docs/batch.md); the plant's attitude, small
+    angles, keeps libm's."""
+    if not abs(x) < 1e5:                  # (n pi/2's parts no longer exact; an infinity, a NaN): libm's
+        return math.sin(x), math.cos(x)
+    n = math.floor(x * _INV_PIO2 + 0.5)
+    y = (x - n * _PIO2_HI) - n * _PIO2_LO
+    z = y * y
+    s = y + z * y * (_S1 + z * (_S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))))
+    hz = 0.5 * z
+    w = 1.0 - hz
+    c = w + (((1.0 - w) - hz) + z * z * (_K1 + z * (_K2 + z * (_K3 + z * (_K4 + z * (_K5 + z * _K6))))))
+    q = int(n) & 3
+    o = float(q & 1)                      # an odd quadrant swaps the two (a product by 0 or 1 is exact)
+    e = 1.0 - o
+    return (1.0 - 2.0 * (q >> 1)) * (s * e + c * o), (1.0 - 2.0 * (((q + 1) >> 1) & 1)) * (c * e + s * o)
+
+
 def put16(regs, at: int, v: float) -> None:
     """v rounded to a big-endian int16 (`_i16`) at regs[at], regs[at + 1]."""
     v = _i16(v) & 0xFFFF
@@ -376,7 +420,7 @@ def chip_frame_compiled(put=None):
     if not compiled.enabled():
         return None
     c = compiled.compiled_copy
-    frame = c(chip_frame, vibration=c(vibration, remainder=c(remainder)), put16=c(put or put16, _i16=c(_i16)))
+    frame = c(chip_frame, vibration=c(vibration, remainder=c(remainder), sincos=c(sincos)), put16=c(put or put16, _i16=c(_i16)))
     if put is not None:
         return frame
     # compiled (or loaded from the cache) now, not at a first read that a simulation paced by the wall

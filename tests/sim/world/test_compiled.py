@@ -83,9 +83,9 @@ def test_the_compiled_step_and_forces_equal_the_plain_ones():
 
 @needs_numba
 def test_the_compiled_sines_and_cosines_are_maths():
-    """LLVM turns a sine and a cosine of one angle into libm's `sincos` (`attitude_trig`, the chip's
-    vibration lines): the same bits as `math.sin` and `math.cos`, which the plain plant calls apart,
-    from the attitude's angles through rotor phases to the largest doubles."""
+    """LLVM turns a sine and a cosine of one angle into libm's `sincos` (`attitude_trig`): the same bits as
+    `math.sin` and `math.cos`, which the plain plant calls apart, from the attitude's angles through rotor
+    phases to the largest doubles."""
     import math
     trig = compiled.functions()["attitude_trig"]
     rng = np.random.default_rng(5)
@@ -100,6 +100,31 @@ def test_the_compiled_sines_and_cosines_are_maths():
         x[6:9] = phi, theta, psi
         got = trig(x, 0, wk)
         assert got == (math.sin(phi), math.cos(phi), math.sin(theta), math.cos(theta), math.sin(psi), math.cos(psi))
+
+
+def test_the_vibration_lines_sines_and_cosines_are_within_an_ulp_of_libms():
+    """`imu.sincos` (the chip's rotor lines, arithmetic alone): within 2^-52 of libm's sine and cosine over
+    the lines' angles and beyond, the same bits compiled and plain, sin^2 + cos^2 = 1 to an ulp, and libm's
+    own values where its reduction would no longer be exact (|x| >= 1e5, a NaN)."""
+    import math
+    rng = np.random.default_rng(8)
+    angles = np.concatenate([rng.uniform(-1.6, 1.6, 20000), rng.uniform(-40.0, 40.0, 40000),
+                             rng.uniform(-1e5, 1e5, 5000), np.arange(-400, 401) * (math.pi / 4),
+                             np.sign(rng.uniform(-1, 1, 2000)) * 10.0 ** rng.uniform(-300, 0, 2000),
+                             [0.0, -0.0, 5e-324, math.pi, 99999.99, 1e5, 1e22]]).tolist()
+    fast = compiled.compiled_copy(imu.sincos) if compiled.enabled() else None
+    worst = 0.0
+    for x in angles:
+        s, c = imu.sincos(x)
+        if fast is not None:
+            assert fast(x) == (s, c), x
+        if abs(x) >= 1e5:
+            assert (s, c) == (math.sin(x), math.cos(x))
+            continue
+        worst = max(worst, abs(s - math.sin(x)), abs(c - math.cos(x)))
+        assert abs(s * s + c * c - 1.0) <= 4e-16, x
+    assert 0.0 < worst <= 2.0 ** -52
+    assert all(v != v for v in imu.sincos(math.nan))
 
 
 @needs_numba
@@ -120,6 +145,7 @@ def test_the_compiled_chip_writes_the_plain_ones_registers():
         c[imu._C_KV] = rng.choice([0.0, rng.uniform(0.0, 0.01)])
         c[imu._C_KVG] = rng.choice([0.0, rng.uniform(0.0, 0.01)])
         c[[imu._C_BB, imu._C_H2, imu._C_H3, imu._C_YAW]] = rng.uniform(0.0, 1.0, 4)
+        c[[imu._C_BBA, imu._C_BBQ]] = imu.read_gains(c, float(rng.uniform(1e-4, 5e-3)))[2:]
         truth = list(rng.uniform(-20.0, 20.0, 6))
         if k % 10 == 0:
             truth[k % 6] = rng.choice([1e5, -1e5, 1e30, -1e30, np.inf])
