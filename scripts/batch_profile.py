@@ -55,7 +55,7 @@ STAMP = ("Measured by `python scripts/batch_profile.py --markdown` on {date}: {m
          "valgrind's callgrind, inside numba's compiled calls.")
 PHASES = (("rk4", "the plant's RK4 step (four evaluations: the rotors, the effects, the rigid body, 3 sines and cosines each)"),
           ("forces", "the plant's forces once more, at the chip's read"),
-          ("vibration", "the rotors' vibration lines (`imu.vibration`: 8 sines and cosines, 24 roots, 24 divisions)"),
+          ("vibration", "the rotors' vibration lines (`imu.vibration`: 8 sines and cosines of `imu.sincos`, 24 roots, 24 divisions)"),
           ("chip", "the chip's registers but the lines (`imu.chip_frame`: the DLPF, the bias walk, the broadband, the rounding)"),
           ("normals", "the chip's normals (`flight.normals`: NumPy's ziggurat on PCG64, sim/sweeps/pcg64.py, NumPy's numbers)"),
           ("gauss", "CPython's gauss on the Mersenne Twister's uniforms (the sonar's jitter, the power monitor)"),
@@ -103,7 +103,7 @@ def _phase_loops():
         "rk4": cc(rk4_loop, allocates=True, work=plant["work"], rk4=plant["rk4"], held_command=held),
         "forces": cc(forces_loop, allocates=True, work=plant["work"], forces=plant["forces"], held_command=held),
         "chip": cc(chip_loop, allocates=True, chip_words=imu.chip_frame_compiled(tw.put_word)),
-        "vibration": cc(vibration_loop, vibration=cc(imu.vibration, remainder=cc(imu.remainder))),
+        "vibration": cc(vibration_loop, vibration=cc(imu.vibration, remainder=cc(imu.remainder), sincos=cc(imu.sincos))),
         "normals": cc(normals_loop, allocates=True, normals=cc(tw.normals, standard_normal=pcg64.compiled_normal(cc)),
                       normals_per_read=cc(imu.normals_per_read)),
         "gauss": cc(gauss_loop, gauss=cc(tw.gauss, uniform=u)),
