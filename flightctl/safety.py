@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 CRASH_TILT = math.radians(60)       # rad, roll or pitch
 CRASH_TOUCHDOWN_SPEED = 1.0         # m/s, vertical speed at contact with the floor
 LEFT_GROUND_ALT = 0.10              # m: below this the vehicle never flew
@@ -23,3 +25,11 @@ def crash_reason(tilt: float, touchdown_speed: float) -> str | None:
     if not abs(tilt) <= CRASH_TILT:
         return f"tilted {math.degrees(abs(tilt)):.0f} deg (past {math.degrees(CRASH_TILT):.0f} deg)"
     return None
+
+
+def first_tilt_past(roll, pitch, limit: float = CRASH_TILT) -> int | None:
+    """The index of a log's first row whose roll or pitch (arrays, rad) is past `limit` (a NaN is not), or None:
+    where a logged crash begins (sim/plots.py `crash_times`, sim/diagnose/predict.py `before_crash`)."""
+    with np.errstate(invalid="ignore"):
+        over = np.flatnonzero(np.maximum(np.abs(np.asarray(roll, float)), np.abs(np.asarray(pitch, float))) > limit)
+    return int(over[0]) if over.size else None

@@ -25,7 +25,7 @@ matplotlib_home()
 from matplotlib.figure import Figure  # noqa: E402  (after its folders are set)
 
 from flightctl.logfile import Table
-from flightctl.safety import CRASH_TILT, CRASH_TOUCHDOWN_SPEED
+from flightctl.safety import CRASH_TILT, CRASH_TOUCHDOWN_SPEED, first_tilt_past
 
 DPI = 90
 
@@ -73,9 +73,9 @@ def crash_times(log: Table, crash_tilt: float = CRASH_TILT, hard_touchdown: floa
     t = log["t"]
     roll, pitch = ((log["true_roll"], log["true_pitch"]) if "true_roll" in log else (log["roll"], log["pitch"]))
     out = []
-    over = np.flatnonzero(np.maximum(np.abs(roll), np.abs(pitch)) > crash_tilt)
-    if over.size:
-        out.append((float(t[over[0]]), f"tilt past {math.degrees(crash_tilt):.0f} deg"))
+    first = first_tilt_past(roll, pitch, crash_tilt)
+    if first is not None:
+        out.append((float(t[first]), f"tilt past {math.degrees(crash_tilt):.0f} deg"))
     if "true_z" in log and len(t) > 2:
         z = log["true_z"]
         vz = np.gradient(z, t)

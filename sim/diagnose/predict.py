@@ -49,7 +49,7 @@ import numpy as np
 
 from flightctl.errors import InputError
 from flightctl.logfile import Table
-from flightctl.safety import CRASH_TILT
+from flightctl.safety import CRASH_TILT, first_tilt_past
 from flightctl.sim.diagnose import loops, steps
 from flightctl.sim.diagnose.basemodel import YAW_UNKNOWN, identify, yaw_identified
 from flightctl.sim.diagnose.data import load_file, parse_filters
@@ -89,14 +89,12 @@ def before_crash(table: Table, margin_s: float = CRASH_MARGIN_S) -> tuple[Table,
     close; those before it are, an unstable loop's growing swing included."""
     if "roll" not in table or "pitch" not in table or len(table["t"]) == 0:
         return table, None
-    tilt = np.maximum(np.abs(table["roll"]), np.abs(table["pitch"]))
-    with np.errstate(invalid="ignore"):
-        over = np.flatnonzero(tilt > CRASH_TILT)
-        if over.size == 0 and tilt[-1] > 0.5 * CRASH_TILT:
-            over = np.array([tilt.size - 1])
-    if over.size == 0:
+    first = first_tilt_past(table["roll"], table["pitch"])
+    if first is None and first_tilt_past(table["roll"][-1:], table["pitch"][-1:], 0.5 * CRASH_TILT) is not None:
+        first = len(table["t"]) - 1
+    if first is None:
         return table, None
-    t_c = float(table["t"][over[0]])
+    t_c = float(table["t"][first])
     return _rows(table, table["t"] < t_c - margin_s, f"to {t_c - margin_s:.1f} s, before its crash"), t_c
 
 

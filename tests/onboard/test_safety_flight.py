@@ -20,7 +20,7 @@ from flightctl.logfile import MAG_COLUMNS, FlightLogWriter, read_flight_log
 from flightctl.loop import TOUCHDOWN_S, FlightLoop
 from flightctl.params import load
 from flightctl.plans.plan import Move, Plan
-from flightctl.safety import CRASH_TILT, CRASH_TOUCHDOWN_SPEED, crash_reason
+from flightctl.safety import CRASH_TILT, CRASH_TOUCHDOWN_SPEED, crash_reason, first_tilt_past
 from flightctl.service.sdnotify import Notifier
 from flightctl.sim.world.board import SIM_CALIBRATE_S, TRUTH_COLUMNS, sim_board, truth_row
 from flightctl.sim.cli import main as sim_main
@@ -184,6 +184,24 @@ def test_one_definition_of_a_crash():
     assert "m/s" in crash_reason(0.0, CRASH_TOUCHDOWN_SPEED * 1.1)
     assert "tilted" in crash_reason(CRASH_TILT * 1.01, 0.0)
     assert crash_reason(math.nan, 0.0) is not None
+
+
+def test_a_logs_first_tilt_past_the_limit_is_found_where_it_was_drawn():
+    """`first_tilt_past`, the one reading of a log's crash (the plots' crash times, diagnose's rows before
+    it): the first row past the limit on either axis, a NaN row never one, a level log none."""
+    rng = np.random.default_rng(17)
+    for _ in range(20):
+        n = int(rng.integers(50, 500))
+        roll, pitch = rng.uniform(-0.9, 0.9, n) * CRASH_TILT, rng.uniform(-0.9, 0.9, n) * CRASH_TILT
+        assert first_tilt_past(roll, pitch) is None
+        k = int(rng.integers(1, n))
+        roll[rng.integers(0, k)] = np.nan
+        axis = roll if rng.random() < 0.5 else pitch
+        axis[k] = float(rng.choice([-1.0, 1.0]) * rng.uniform(1.001, 2.0) * CRASH_TILT)
+        axis[rng.integers(k, n):] = 3.0
+        assert first_tilt_past(roll, pitch) == k
+        with np.errstate(invalid="ignore"):
+            assert first_tilt_past(roll, pitch, 2.0 * CRASH_TILT) == int(np.flatnonzero(np.abs(axis) > 2 * CRASH_TILT)[0])
 
 
 def test_a_hard_touchdown_is_a_crash_and_exits_non_zero(tmp_path, capsys):
