@@ -60,17 +60,23 @@ def judged(flight, sc) -> dict:
             "ringing_deg": max(ring) if ring else None, "summary": s}
 
 
+# the refusals' kinds by a phrase of their text (sim/sweeps/fromlog.py's), in the order they are tried
+REFUSALS = (("coherence", "no measured step (the setpoint's coherence too low below 2 Hz)"),
+            ("windows in the air", "no measured step (no setpoint steps)"),
+            ("does not predict", "the model does not predict the step"),
+            ("meet the targets", "no gains meet the targets"))
+
+
 def why_refused(rep: dict) -> str:
-    """The refusal's kind, short (the table's line; the full text is in the report): per axis the first clause."""
+    """The refusal's kind, short (the table's line; the full text is in the report): per axis the first clause,
+    a base model's refusal by its reason."""
     kinds = []
     for e in rep.get("axes", {}).values():
         r = e.get("refused") or e.get("why") or ""
-        kinds.append("no measured step (the setpoint's coherence too low below 2 Hz)" if "coherence" in r else
-                     "no measured step (no setpoint steps)" if "windows in the air" in r else
-                     "the model does not predict the step" if "does not predict" in r else
-                     "no gains meet the targets" if "meet the targets" in r else
-                     "no base model: " + r.split("): ", 1)[1].split(" (")[0].split(":")[0] if "no base model from" in r
-                     else r.split(":")[0])
+        kind = next((k for phrase, k in REFUSALS if phrase in r), None)
+        if kind is None and "no base model from" in r:
+            kind = "no base model: " + r.split("): ", 1)[1].split(" (")[0].split(":")[0]
+        kinds.append(kind or r.split(":")[0])
     return "; ".join(sorted(set(kinds))) or rep.get("refused", "")
 
 
