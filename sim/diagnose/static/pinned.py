@@ -93,8 +93,8 @@ def spans(f, table, motor_hz: float) -> tuple[list[dict], dict]:
         return [], level
     ok = np.isfinite(P).all(axis=0) & (f.t >= f.t[f.airborne][0])
     air = f.t[f.airborne]
-    near = np.abs(f.t - air[np.clip(np.searchsorted(air, f.t), 0, air.size - 1)]) <= START_S
-    near |= np.abs(f.t - air[np.clip(np.searchsorted(air, f.t) - 1, 0, air.size - 1)]) <= START_S
+    j = np.searchsorted(air, f.t)          # each row's distance to the nearest airborne row's time
+    near = np.minimum(np.abs(f.t - air[np.minimum(j, air.size - 1)]), np.abs(f.t - air[np.maximum(j - 1, 0)])) <= START_S
     hi = float(P[:, ok].max())
     running = ok & f.running
     lo = float(P[:, running].min()) if running.any() else 0.0
@@ -144,7 +144,7 @@ def spans(f, table, motor_hz: float) -> tuple[list[dict], dict]:
                           "share_at_ceiling": round(float(np.mean(top[i, k0:k1 + 1][window])), 2),
                           "toward_deg": round(math.degrees(toward), 1), "words": _words(u[i]),
                           "opposite": opposite + 1, "opposite_at_floor": round(at_floor, 2),
-                          "tumbling": bool(before.any() and np.nanmax(tilt[before]) > TUMBLE_RAD),
+                          "tumbling": bool(np.any(tilt[before] > TUMBLE_RAD)),
                           "long": held >= MIN_PINNED_S, "attitude": what})
     found.sort(key=lambda s: s["start_s"])
     return found, level
