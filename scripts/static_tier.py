@@ -1,7 +1,8 @@
 """The static tier of `flightctl diagnose` (docs/diagnose.md, "Static tier") on every real log the project
 reads: tests/data/ardupilot and the shared real flights (../shared/data/real/flights), each log of a file
 of many on its own. One row per log: what the static tier found (hover throttle and thrust margin, each
-motor's share of the hover thrust, the pattern's verdict, the pack's internal resistance, the vibration),
+motor's share of the hover thrust, the pattern's verdict, the pack's internal resistance, a motor at full
+command while the vehicle tips toward it, the vibration),
 each with its standard error, or why it was not reached. The static tier alone runs here (on the logs as
 diagnose reads them, at their full rate); `flightctl diagnose` runs the dynamic tier beside it.
 
@@ -26,7 +27,7 @@ from flightctl.sim.logs import each_log, reason
 ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = (ROOT / "tests" / "data" / "ardupilot", ROOT / ".." / "shared" / "data" / "real" / "flights")
 COLUMNS = ("log", "rates (sensors, motors)", "hover", "motor shares of the hover thrust", "pattern",
-           "internal resistance", "vibration")
+           "internal resistance", "motor at full command", "vibration")
 
 
 def _pm(v, e, scale=1.0, digits=3) -> str:
@@ -35,7 +36,7 @@ def _pm(v, e, scale=1.0, digits=3) -> str:
 
 def row(name: str, st: dict | None, why: str | None) -> list[str]:
     if st is None:
-        return [name, "", "", "", "", "", f"not reached: {why}"]
+        return [name, "", "", "", "", "", "", f"not reached: {why}"]
     cells = [name, f"{st['rates']['sensors_hz']:g}, {st['rates']['motors_hz']:g} Hz"]
     if h := st.get("hover"):
         cells.append(f"{_pm(h['thrust_share'], h['thrust_share_stderr'], 100)} % of full thrust, T/W "
@@ -55,10 +56,23 @@ def row(name: str, st: dict | None, why: str | None) -> list[str]:
     r = b.get("resistance") if b else None
     cells.append(f"{_pm(r['ohm'], r['stderr'], 1e3)} mΩ, check " + ("passed" if r["passed"] else "failed")
                  if r else ("no current" if b else "no battery"))
+    cells.append(_full(st["motor_at_full"]))
     v = st.get("vibration")
     cells.append(("VIBE " if v["clips"] is not None else "acc spread ") + "/".join(f"{v['mean'][a]:.2g}" for a in "xyz")
                  + " m/s²" + (f", {v['clips']} clips" if v["clips"] is not None else "") if v else "")
     return cells
+
+
+def _full(full: dict) -> str:
+    """The motor at full command: the motor named, from when, for how long (in how many samples below 20 Hz), and
+    how many spans followed."""
+    s = next((x for x in full["spans"] if x["motor"] == full["named"] and not x["tumbling"]), None)
+    if s is None:
+        return "none" if not full["spans"] else f"none named ({len(full['spans'])} spans, all while tumbling)"
+    held = f"{s['held_s']:.1f} s" if s["long"] else f"{s['samples']} samples of {full['motor_hz']:g} Hz"
+    later = [x for x in full["spans"] if x is not s]
+    return (f"motor {s['motor']} from {s['start_s']:.2f} s ({held}), toward it {s['toward_deg']:.0f}°"
+            + (f"; {len(later)} later spans, {sum(x['tumbling'] for x in later)} while tumbling" if later else ""))
 
 
 def logs() -> list[Path]:

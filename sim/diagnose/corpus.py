@@ -52,15 +52,22 @@ class Row:
     report_file: str | None = None   # where the report is kept once the row is `stored`
     _cells: list[str] | None = None
     _tier: str | None = None
+    _about: bool | None = None
 
     def stored(self, report_file: str | None) -> None:
         """The report is in `report_file` (the results table's): keep only the table's cells and the
         tier, so that a corpus of many logs is not held in memory until the end."""
-        self._cells, self._tier = self.cells(), self.tier()
+        self._cells, self._tier, self._about = self.cells(), self.tier(), self.diagnosed()
         self.report_file, self.report = report_file, None
 
     def tier(self) -> str | None:
         return self.report.get("tier") if self.report is not None else self._tier
+
+    def diagnosed(self) -> bool:
+        """A tier answered about the vehicle itself (`about_the_vehicle`): what the headline counts as diagnosed."""
+        if self.report is None:
+            return bool(self._about)
+        return self.status == "diagnosed" and about_the_vehicle(self.report)
 
     def full_report(self) -> dict | None:
         """The report, read back from its file when the row was `stored`."""
@@ -224,6 +231,19 @@ def run_one(row: Row) -> Row:
 NO_FLIGHT = ("header only", "never armed", "too short to judge", "may never have left the ground")
 
 
+def about_the_vehicle(report: dict) -> bool:
+    """The report says something of the vehicle itself, what "diagnosed" means in the corpus' headline: the
+    dynamic tier ran (its base model and chain of causes, or its refusals of each cause, on the vehicle's
+    motion), or the static tier found the hover (thrust margin, the motors' shares, their pattern), the
+    vibration or a motor at full command while the vehicle tipped toward it. The battery's voltage and
+    resistance alone are the pack's: a log answered on them only (btfl_all.bbl #12: 3.7 s in the air, too
+    little hover for the shares) is a flight with no diagnosis of its vehicle."""
+    if report.get("tier", "dynamic") != "static":
+        return True
+    st = report.get("static") or {}
+    return any(k in st for k in ("hover", "vibration")) or bool((st.get("motor_at_full") or {}).get("spans"))
+
+
 def other_vehicle(row: Row) -> bool:
     """The log is of a vehicle that is no multirotor (a plane, a VTOL, a helicopter, a rover: the readers'
     refusals say `frames.NOT_MULTIROTOR`): not one of the airborne multirotor flights of the headline."""
@@ -239,18 +259,22 @@ def flew(row: Row) -> bool:
 
 
 def headline(rows: list[Row]) -> str:
-    """The share of the airborne multirotor flights that get a diagnosis, and of which tier; the logs of
+    """The share of the airborne multirotor flights that get a diagnosis (`about_the_vehicle`), and of which tier;
+    those answered on their battery alone said apart; the logs of
     other vehicles and those of no flight counted apart; a byte-identical copy of another file counted
     once (its own line)."""
     copies = sum(r.status == "duplicate" for r in rows)
     logs = len(rows) - copies
     others = sum(other_vehicle(r) for r in rows)
     flights = [r for r in rows if flew(r)]
-    done = [r for r in flights if r.status == "diagnosed"]
+    done = [r for r in flights if r.diagnosed()]
+    battery = sum(r.status == "diagnosed" and not r.diagnosed() for r in flights)
     static_only = sum(r.tier() == "static" for r in done)
     share = f"{100 * len(done) / len(flights):.0f} %" if flights else "-"
     return (f"**{len(done)} of {len(flights)} airborne multirotor flights get a diagnosis ({share})**: "
-            f"{len(done) - static_only} the dynamic tier, {static_only} the static tier only; "
+            f"{len(done) - static_only} the dynamic tier, {static_only} the static tier only"
+            + (f", {battery} {'gets' if battery == 1 else 'get'} the battery's figures alone (no finding of the "
+               "vehicle: not counted as diagnosed)" if battery else "") + "; "
             f"{logs - len(flights) - others} of the {logs} logs hold no flight (header only, never armed, "
             "too short or idle, or by its barometer never off the ground)"
             + (f"; {others} {'is a log' if others == 1 else 'are logs'} of another vehicle (a plane, a VTOL, a "

@@ -6,26 +6,29 @@ One module per finding, each importing only those before it: `curve` (the thrust
 read through, and which one), `blocks` (the hover rows and their blocks: jackknife and drift), `hover`
 (hover throttle and thrust margin, each motor's share and its drift, centre of mass against weak motor
 against yaw trim), `battery` (sag and internal resistance), `vibration` (VIBE and clips, or the
-accelerometer's spread in hover). Every finding carries its size, its uncertainty and its physical
-check. This module runs them on the logs diagnose has read (`static_tier`) and holds the report of a
-log that reached the static tier only (`StaticOnly`)."""
+accelerometer's spread in hover), `pinned` (a motor at full command while the vehicle tips toward it).
+Every finding carries its size, its uncertainty and its physical check. This module runs them on the logs
+diagnose has read (`static_tier`) and holds the report of a log that reached the static tier only (`StaticOnly`)."""
 from __future__ import annotations
 
 import numpy as np
 
 from flightctl.sim.diagnose.data import BARO_CLIMB_M
+from flightctl.sim.diagnose.rates import faster
 from flightctl.sim.diagnose.static.battery import battery
 from flightctl.sim.diagnose.static.blocks import MIN_HOVER_S, Blocks, body_z_force, hover_mask
 from flightctl.sim.diagnose.static.centre import centre_text, from_speeds, one as centre_of_mass
 from flightctl.sim.diagnose.static.curve import of_log, speed_curve
 from flightctl.sim.diagnose.static.hover import pattern, shares, speed_gains, throttle
+from flightctl.sim.diagnose.static.pinned import motor_at_full
 from flightctl.sim.diagnose.static.vibration import VIBE_COLUMNS, vibration
 
 STATIC_MIN_HZ = 5.0           # the attitude and the motor outputs at this rate or more (docs/measured-data.md)
 STATIC_COLUMNS = VIBE_COLUMNS  # the columns the static tier reads beside the contract's and `current`
 WHAT = ("the static tier: what the flight's hover and battery show at any rate of 5 Hz or more (hover throttle and "
         "thrust margin, each motor's share of the hover thrust and its drift, centre of mass against weak motor "
-        "against yaw trim, battery sag and internal resistance, vibration), each with its size, its block-jackknife "
+        "against yaw trim, battery sag and internal resistance, vibration, a motor at full command while the vehicle "
+        "tips toward it), each with its size, its block-jackknife "
         "standard error and its physical check")
 
 
@@ -89,7 +92,9 @@ def static_tier(tables, files, a, progress=lambda *x: None) -> dict | None:
                                           all(f.imu for f in files) else "neither VIBE nor an accelerometer in the log")
     else:
         out["vibration"] = vib
-    if not any(k in out for k in ("hover", "battery", "vibration")):
+    out["motor_at_full"] = full = motor_at_full(files, tabs, rates["motors_hz"], faster(tabs))
+    progress(f"static tier: motor at full command: {full['verdict']}")
+    if not any(k in out for k in ("hover", "battery", "vibration")) and not full["spans"]:
         return None
     return _finite(out)
 
@@ -184,6 +189,8 @@ def text(st: dict) -> str:
     if v:
         L.append(f"    vibration ({v['source']}): " + ", ".join(f"{a} {v['mean'][a]:.3g} +- {v['stderr'][a]:.2g}"
                                                              for a in "xyz") + f" m/s^2; {v['check']}")
+    if full := st.get("motor_at_full"):
+        L.append(f"    motor at full command: {full['verdict']}" + (f"; {full['rate']}" if full["rate"] else ""))
     for k, why in st["not_judged"].items():
         L.append(f"    {k}: not judged: {why}")
     return "\n".join(L)
@@ -206,6 +213,9 @@ def summary(st: dict) -> str:
         out.append(("VIBE" if v["clips"] is not None else "acc spread") + " "
                    + "/".join(f"{v['mean'][a]:.3g}" for a in "xyz") + " m/s^2"
                    + (f", {v['clips']} clips" if v["clips"] is not None else ""))
+    if (full := st.get("motor_at_full")) and full["named"]:
+        s = next(x for x in full["spans"] if x["motor"] == full["named"] and not x["tumbling"])
+        out.append(f"motor {s['motor']} at full command from {s['start_s']:.1f} s while it tipped toward it (lost?)")
     return "; ".join(out)
 
 

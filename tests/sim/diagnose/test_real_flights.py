@@ -143,7 +143,29 @@ def test_every_airborne_multirotor_flight_of_the_shipped_corpus_with_its_motors_
             assert any(w in r[-1] for w in NOT_LOGGED), (r[0], r[-1])
         else:
             assert r[4] in ("static", "dynamic (static too)") and r[5], (r[0], r[4], r[5])
-    assert _headline(lines) == (sum(r[4] != "refused" for r in flights), len(flights))
+    # diagnosed: a tier with a finding of the vehicle, not a static cell of the battery's figures alone
+    battery = [r for r in flights if r[4] == "static" and all(p.startswith(("battery ", "R ")) for p in r[5].split("; "))]
+    assert _headline(lines) == (sum(r[4] != "refused" for r in flights) - len(battery), len(flights)), battery
+    assert all("btfl_all.bbl #12" in r[0] for r in battery) and f"{len(battery)} gets the battery's figures alone" in lines[0]
+
+
+def test_a_flight_answered_on_its_battery_alone_is_not_counted_as_diagnosed():
+    """btfl_all.bbl #12 (3.7 s in the air: too little hover for the shares, no vibration, no motor at full command)
+    gets the static tier with its battery's voltage only: a flight without a diagnosis of its vehicle in the
+    headline, said apart; a flight whose static tier finds its hover (mechanical_fail.log) is diagnosed."""
+    from flightctl.sim.diagnose.corpus import Row, headline, run_one
+    row = run_one(Row("btfl_all.bbl #12", str(need(FLIGHTS / "betaflight" / "btfl_all.bbl")), 12))
+    st = row.report["static"]
+    assert row.status == "diagnosed" and row.tier() == "static" and "battery" in st, row.reason
+    assert not any(k in st for k in ("hover", "vibration")) and st["motor_at_full"]["spans"] == [], st
+    other = run_one(Row("mechanical_fail.log", str(ARDUPILOT / "mechanical_fail.log"), None))
+    assert other.tier() == "static" and "hover" in other.report["static"] and other.diagnosed()
+    assert not row.diagnosed()
+    line = headline([row, other])
+    assert line.startswith("**1 of 2 airborne multirotor flights get a diagnosis (50 %)**: 0 the dynamic tier, 1 the "
+                           "static tier only, 1 gets the battery's figures alone"), line
+    row.stored(None)                     # as the corpus keeps a finished row (the results table): the count holds
+    assert not row.diagnosed() and headline([row, other]) == line
 
 
 def _refusal(capsys, log, tmp_path, *index) -> str:
