@@ -349,7 +349,7 @@ def compiled_fly():
     at = plant["forces"]
     held = cc(held_command)
     landed = cc(land, ob_landing_start=o["landing_start"])
-    gains = cc(imu.read_gains)
+    gains = cc(imu.read_gains, broadband_gains=cc(imu.broadband_gains))
     read = cc(chip_read, forces=at, held_command=held, chip_words=imu.chip_frame_compiled(put_word), read_gains=gains,
               rotation_from_trig=plant["rotation_from_trig"], attitude_trig=plant["attitude_trig"],
               i16=cc(i16, _i16=cc(imu._i16)))

@@ -255,8 +255,15 @@ def read_gains(c, dt: float) -> tuple[float, float, float, float]:
     exp(-2 pi BROADBAND_HP_HZ dt) and sqrt((1 + a) / 2) (c[_C_BBA], c[_C_BBQ]). Its caller finds them once for
     each interval (a loop's reads share one or two): their exponentials cost more than the rest of the frame's
     noise."""
+    a, root = broadband_gains(dt)
+    return 1.0 - math.exp(-dt / c[_C_A_DELAY]), 1.0 - math.exp(-dt / c[_C_G_DELAY]), a, root
+
+
+def broadband_gains(dt: float) -> tuple[float, float]:
+    """The broadband noise's high-pass over a read interval dt: its pole a = exp(-2 pi BROADBAND_HP_HZ dt) and
+    sqrt((1 + a) / 2) (`read_gains`' last two)."""
     a = math.exp(-_TAU * BROADBAND_HP_HZ * dt)
-    return 1.0 - math.exp(-dt / c[_C_A_DELAY]), 1.0 - math.exp(-dt / c[_C_G_DELAY]), a, math.sqrt(0.5 * (1.0 + a))
+    return a, math.sqrt(0.5 * (1.0 + a))
 
 
 def chip_frame(regs, s, c, e, i, fx, fy, fz, p, q, r, f1, f2, f3, f4, w1, w2, w3, w4, held, dt, temp, started):

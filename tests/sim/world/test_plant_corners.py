@@ -27,8 +27,8 @@ from flightctl.sim.flights.run import fly
 from flightctl.sim.flights.scenarios import SCENARIOS
 from flightctl.sim.world import compiled, faults
 from flightctl.sim.world.devices import SensorNoise
-from flightctl.sim.world.imu import (_BURST, _C_A_LSB, _C_G_LSB, _C_PERIOD, BROADBAND_HP_HZ, chip_die, chip_frame,
-                                    normals_per_read)
+from flightctl.sim.world.imu import (_BURST, _C_A_LSB, _C_BBA, _C_BBQ, _C_G_LSB, _C_PERIOD, BROADBAND_HP_HZ,
+                                    broadband_gains, chip_die, chip_frame, normals_per_read)
 from flightctl.sim.world.model import PSI, R, VZ, Z, Model, angular_acceleration
 from flightctl.sim.world.plant import FEET_MU, Plant
 from helpers.script import load as load_script
@@ -42,6 +42,7 @@ def _chip(noise: SensorNoise, seed: int):
     """A chip with only `noise`, read in plain Python (`chip_frame`) at the loop's rate."""
     s, c = chip_die(noise, Airframe(), random.Random(seed))
     c[_C_G_LSB], c[_C_A_LSB], c[_C_PERIOD] = G_LSB, 100.0, 1e-3
+    c[_C_BBA], c[_C_BBQ] = broadband_gains(DT)       # (the caller's `read_gains`, as SimMpu9250 finds them)
     return s, c
 
 
